@@ -1,0 +1,56 @@
+"""The ``buoymon`` command line: one subcommand per job, each defined in its own module.
+
+Each command module exposes ``register(subparsers)`` which adds its parser and sets
+``func=<callable(args) -> int>``; the callable's return value is the exit status.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import Sequence
+
+# command name -> module that registers it (imported lazily so `buoymon --help` stays fast)
+COMMANDS: dict[str, str] = {
+    "simulate": "replay.cmd_simulate",
+    "import": "replay.cmd_import",
+    "replay": "replay.cmd_replay",
+    "demo": "replay.cmd_demo",
+    "run": "monitor.cmd_run",
+    "check-config": "monitor.cmd_check_config",
+    "record": "monitor.cmd_record",
+    "alerts": "monitor.alerts.cmd_alerts",
+    "report": "monitor.viz.cmd_report",
+}
+
+
+def build_parser(argv: Sequence[str]) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="buoymon", description="Mooring-cable fatigue monitoring for moored buoys."
+    )
+    parser.add_argument(
+        "--log-level", default="info", choices=["debug", "info", "warning", "error"],
+        help="logging verbosity (structured JSON logs go to stderr)",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    wanted = next((a for a in argv if a in COMMANDS), None)
+    for name, module in COMMANDS.items():
+        if wanted is None or name == wanted:
+            importlib.import_module(module).register(sub)
+        else:
+            sub.add_parser(name, help=f"see `buoymon {name} --help`")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser(argv).parse_args(argv)
+    from monitor.logs import setup_logging
+
+    setup_logging(args.log_level)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,75 @@
+"""What the pipeline core emits after each block, and the sink interface that receives it.
+
+The data flow is: source -> decode -> :class:`~monitor.blocks.SampleBlock` -> pipeline core
+(validate -> load -> stress -> rainflow -> damage -> alerts) -> :class:`StepResult` -> sinks.
+Sinks (Rerun, MCAP recorder, Zenoh publisher, report builder) only read these objects; they
+never change pipeline state, so adding or removing a sink cannot change damage or alerts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class ComponentStep:
+    """One fatigue component (e.g. the conductors with a given lay) after one step.
+
+    ``stress_Pa`` is the stress series computed from this step's load samples; ``ranges_Pa``,
+    ``means_Pa`` and ``counts`` are the rainflow cycles CLOSED by this step (counts 1.0 or 0.5).
+    Damage figures are totals after the step.
+    """
+
+    name: str
+    stress_Pa: np.ndarray
+    ranges_Pa: np.ndarray
+    means_Pa: np.ndarray
+    counts: np.ndarray
+    damage: float
+    damage_committed: float
+    damage_rate_per_day: float
+    remaining_life_days: float
+    max_stress_Pa: float
+
+
+@dataclass(frozen=True, eq=False)
+class StepResult:
+    """Everything one processed block produced.
+
+    Attributes:
+        buoy_id: the buoy.
+        sensor: the stream the block came from.
+        now_ns: sensor time the pipeline has reached after this step.
+        t_ns: times of the load samples used for fatigue in this step (may be empty, e.g. for a
+            GNSS block while the measured tension is the load source).
+        tension_N: load samples used for fatigue (measured or estimated), same length as t_ns.
+        load_source: ``"measured"``, ``"estimated"`` or ``"none"``.
+        measured_tension_N / estimated_tension_N: latest values (NaN when unavailable).
+        components: per-component results, keyed by component name.
+        accepted / rejected: samples of this block accepted, and rejected by reason.
+        alerts: alert transitions raised by this step (see :mod:`monitor.alerts`).
+    """
+
+    buoy_id: str
+    sensor: str
+    now_ns: int
+    t_ns: np.ndarray
+    tension_N: np.ndarray
+    load_source: str
+    measured_tension_N: float
+    estimated_tension_N: float
+    components: Mapping[str, ComponentStep]
+    accepted: int
+    rejected: Mapping[str, int]
+    alerts: list[Any] = field(default_factory=list)
+
+
+class Sink(Protocol):
+    """Receives pipeline output. Must not raise on ordinary data; must not block for long."""
+
+    def on_step(self, step: StepResult) -> None: ...
+
+    def close(self) -> None: ...
