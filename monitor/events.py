@@ -73,3 +73,51 @@ class Sink(Protocol):
     def on_step(self, step: StepResult) -> None: ...
 
     def close(self) -> None: ...
+
+
+@dataclass(frozen=True, eq=False)
+class ComponentObs:
+    """One component's fatigue figures at the end of an alert-evaluation tick."""
+
+    damage: float
+    damage_committed: float
+    damage_rate_per_day: float
+    remaining_life_days: float
+    max_stress_Pa: float  # maximum conductor stress within the tick (NaN if no samples)
+
+
+@dataclass(frozen=True, eq=False)
+class StreamObs:
+    """Health of one sensor stream at the end of a tick (counters are totals since start)."""
+
+    last_t_ns: int  # sensor time of the newest accepted sample, 0 if none yet
+    stale: bool  # no accepted sample for longer than the stream's stale_after_s
+    accepted: int
+    rejected: Mapping[str, int]  # reason -> count
+    rejected_in_tick: int
+    received_in_tick: int
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """Input of one alert evaluation.
+
+    The pipeline evaluates alerts on a fixed sensor-time grid (ticks at whole multiples of
+    ``[alerts] eval_interval_s`` since the epoch), whatever the block sizes: a tick is
+    evaluated once every stream's data up to its end has been processed. So live ingest in
+    1-s blocks and replay in large blocks give the same alert history.
+
+    ``t_ns`` is the tick's end. ``load_t_ns``/``tension_N`` are the load samples used for
+    fatigue inside the tick (measured or estimated, in time order).
+    """
+
+    buoy_id: str
+    t_ns: int
+    tick_s: float
+    load_source: str
+    load_t_ns: np.ndarray
+    tension_N: np.ndarray
+    measured_tension_N: float  # mean of measured tension in the tick (NaN if none)
+    estimated_tension_N: float  # mean of the motion estimate in the tick (NaN if none)
+    components: Mapping[str, ComponentObs]
+    streams: Mapping[str, StreamObs]
