@@ -278,3 +278,17 @@ class OutboxSink:
 
     def close(self) -> None:
         self.outbox.close()
+
+
+def peer_config(listen: Iterable[str] = ("tcp/127.0.0.1:0",),
+                connect: Iterable[str] = ()) -> zenoh.Config:
+    """A Zenoh peer config that talks only to explicit endpoints: listen where given, connect
+    where given, multicast scouting and gossip off (the library default would listen on all
+    interfaces and scout the LAN)."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    return conf
