@@ -9,7 +9,6 @@ import threading
 import time
 
 import numpy as np
-import pytest
 import zenoh
 
 from monitor.alerts.delivery import ZenohAlertSink, peer_config

@@ -9,6 +9,7 @@ import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
+import numpy as np
 import pytest
 
 from monitor.alerts.config import AlertsConfig
@@ -16,8 +17,6 @@ from monitor.alerts.delivery import EmailSender, OutboxSink, WebhookSender
 from monitor.alerts.engine import AlertEngine
 from monitor.alerts.outbox import Outbox
 from monitor.events import ComponentObs, Observation
-
-import numpy as np
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS

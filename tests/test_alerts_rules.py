@@ -10,9 +10,9 @@ import json
 import math
 
 import numpy as np
-import pytest
 
 from monitor.alerts.engine import AlertEngine
+from monitor.alerts.records import ALERT_JSON_SCHEMA
 from monitor.events import ComponentObs, Observation, StreamObs
 
 NS = 1_000_000_000
@@ -200,6 +200,8 @@ def test_record_json_and_alertmanager_shape():
     rec = eng.evaluate(obs(1, {"left": comp(rate=0.5)}))[0]
     d = json.loads(json.dumps(rec.to_dict(), allow_nan=False))
     assert type(rec).from_dict(d) == rec
+    assert sorted(d) == sorted(ALERT_JSON_SCHEMA["required"]) == sorted(
+        ALERT_JSON_SCHEMA["properties"])
     am = rec.to_alertmanager()
     assert am["status"] == "firing" and am["endsAt"] == "0001-01-01T00:00:00Z"
     assert am["startsAt"] == "2023-11-14T22:13:30.000000Z"  # T0 = 1.7e9 s, + 10 s

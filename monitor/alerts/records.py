@@ -31,6 +31,38 @@ EVENTS = ("fire", "resend", "clear", "reset")
 _ZERO_TIME = "0001-01-01T00:00:00Z"
 
 
+_NUMBER = {"oneOf": [{"type": "number"}, {"enum": ["inf", "-inf", "nan"]}]}
+_STRING = {"type": "string"}
+_INT = {"type": "integer"}
+
+# JSON Schema of :meth:`AlertRecord.to_dict`: the MCAP channel schema (encoding "jsonschema")
+# of ``buoy/<id>/monitor/alert/...`` messages, and the Zenoh payload.
+ALERT_JSON_SCHEMA: dict[str, Any] = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "buoymon alert record",
+    "type": "object",
+    "properties": {
+        "fingerprint": _STRING, "rule": _STRING, "kind": _STRING,
+        "severity": {"enum": list(SEVERITIES)}, "state": {"enum": list(STATES)},
+        "event": {"enum": list(EVENTS)},
+        "labels": {"type": "object", "properties": {"buoy": _STRING, "component": _STRING,
+                                                    "rule": _STRING},
+                   "required": ["buoy", "component", "rule"]},
+        "annotations": {"type": "object", "properties": {"value": _STRING,
+                                                         "threshold": _STRING,
+                                                         "summary": _STRING},
+                        "required": ["value", "threshold", "summary"]},
+        "starts_at_ns": _INT, "ends_at_ns": _INT, "at_ns": _INT,
+        "value": _NUMBER, "threshold": _NUMBER, "unit": _STRING, "summary": _STRING,
+        "acked_by": _STRING, "ack_reason": _STRING,
+    },
+    "required": ["fingerprint", "rule", "kind", "severity", "state", "event", "labels",
+                 "annotations", "starts_at_ns", "ends_at_ns", "at_ns", "value", "threshold",
+                 "unit", "summary", "acked_by", "ack_reason"],
+    "additionalProperties": False,
+}
+
+
 def fingerprint(labels: Mapping[str, str]) -> str:
     """Stable 16-hex-digit fingerprint of a label set (order-independent).
 
