@@ -152,6 +152,8 @@ class Outbox:
 
     def _loop(self) -> None:
         while not self._stop.is_set():
+            # clear before looking, so an enqueue during run_once still wakes the wait below
+            self._wake.clear()
             try:
                 next_due = self.run_once()
             except sqlite3.Error:
@@ -159,7 +161,6 @@ class Outbox:
                 next_due = self.clock() + self.retry_base_s
             wait = 3600.0 if next_due is None else max(0.0, next_due - self.clock())
             self._wake.wait(wait)
-            self._wake.clear()
 
     def stop(self, timeout: float = 10.0) -> None:
         """Stop the sender thread (pending messages stay stored for the next start)."""
