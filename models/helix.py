@@ -34,11 +34,14 @@ Public API
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
 
 import numpy as np
+
+from models._jit import compile_loop
 
 Lay = Literal["left", "right"]
 
@@ -131,7 +134,10 @@ def _check_lay(lay: str, what: str = "lay") -> None:
 
 
 def _as_tension(tension_N: np.ndarray | float) -> np.ndarray:
-    t = np.asarray(tension_N, dtype=np.float64)
+    return _check_finite(np.asarray(tension_N, dtype=np.float64))
+
+
+def _check_finite(t: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(t)):
         raise ValueError("tension_N contains NaN or inf")
     return t
@@ -154,22 +160,47 @@ def _lay_sign(lay: str, cable: HelixCable) -> float:
 
 
 def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay = "left",
-                     combined: bool = False) -> np.ndarray:
+                     combined: bool = False, backend: Literal["auto", "numba", "numpy"] = "auto") -> np.ndarray:
     """Conductor stress [Pa] for cable tension(s) ``tension_N`` [N] (seed 004 App. 4).
 
     ``lay`` is the conductor lay hand; it tightens the helix when equal to
     ``cable.core_twist_hand``. ``combined=False`` returns the axial (Knapp) stress,
     ``combined=True`` the ductile combination sqrt((sa + sb)^2 + 3 tau^2).
-    Vectorised: returns an array of the shape of ``tension_N``.
+    Vectorised: returns a float64 array of the shape of ``tension_N``. The axial path
+    runs as one compiled loop when numba is available (``backend``), else as numpy;
+    both evaluate the same expression in the same order.
     """
     sign = _lay_sign(lay, cable)
-    t = _as_tension(tension_N)
+    t = np.asarray(tension_N, dtype=np.float64)
     if combined or cable.core_compressibility != 0.0:
-        return _stress_general(t, cable, sign, cable.pitch_m, cable.helix_radius_m, combined)
+        return _stress_general(_check_finite(t), cable, sign, cable.pitch_m, cable.helix_radius_m, combined)
     k, tan_a, cos_a, rg = cable._axial_coefficients
-    # E |cos a * hypot(1 + e_c, C'/P) - 1|: the hot path, a handful of ufuncs
+    if backend != "numpy" and _axial_compiled is not None:
+        flat = t.reshape(-1)
+        out = np.empty(flat.size)
+        bad = _axial_compiled(flat, k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa, out)
+        if bad >= 0:
+            raise ValueError(f"tension_N contains NaN or inf (index {bad})")
+        return out.reshape(t.shape)
+    if backend not in ("auto", "numpy"):
+        raise ValueError(f"backend {backend!r} is not available")
+    t = _check_finite(t)
+    # E |cos a * hypot(1 + e_c, C'/P) - 1|
     hyp = np.hypot(1.0 + k * t, tan_a + (sign * rg) * t)
-    return np.abs(hyp * cos_a - 1.0) * cable.conductor_modulus_Pa
+    return np.abs(cos_a * hyp - 1.0) * cable.conductor_modulus_Pa
+
+
+def _axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
+    """Compiled twin of the numpy axial expression; returns the first bad index or -1."""
+    for i in range(t.shape[0]):
+        v = t[i]
+        if not math.isfinite(v):
+            return i
+        out[i] = abs(cos_a * math.hypot(1.0 + k * v, tan_a + rg_signed * v) - 1.0) * e_mod
+    return -1
+
+
+_axial_compiled = compile_loop(_axial_loop)
 
 
 def _stress_general(t: np.ndarray, cable: HelixCable, sign: float, pitch, radius,

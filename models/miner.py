@@ -35,56 +35,59 @@ import numpy as np
 
 from models.sn_curve import SNCurve
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from models._jit import compile_loop
 
 _DAY_S = 86400.0
 _STATE_VERSION = 1
 
 
-def _commit_loop(ranges, counts, scale, seg_m, seg_coef, bounds, cutoff, committed, edges, hist):
-    """Damage of each cycle added in order; histogram updated. Returns (committed, added, bad).
+def _commit_loop(ranges, counts, params, table, committed):
+    """Add each cycle's damage in order and bin it. Returns (committed, added, cycles, bad).
 
-    ``bad`` is -1, or the index of the first invalid cycle (nothing is changed then).
-    Range S (MPa) = range * scale; damage = count * coef_i * S**m_i on segment i.
+    ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., coef_0.., bounds_0..]
+    (segment i: damage = count * coef_i * S**m_i; bounds ascending, MPa); ``table`` row 0
+    holds the histogram edges, row 1 the counts (last = overflow). ``bad`` is -1, or the
+    index of the first invalid cycle, in which case nothing has been changed.
     """
     n = ranges.shape[0]
     for i in range(n):
         if not (ranges[i] >= 0.0 and math.isfinite(ranges[i]) and counts[i] >= 0.0 and math.isfinite(counts[i])):
-            return committed, 0.0, i
-    nseg = seg_m.shape[0]
-    nb = edges.shape[0]
+            return committed, 0.0, 0.0, i
+    scale = params[0]
+    cutoff = params[1]
+    nseg = int(params[2])
+    nb = table.shape[1]
+    top = table[0, nb - 1]
     start = committed
+    cycles = 0.0
     for i in range(n):
         s = ranges[i] * scale
         seg = nseg - 1
-        for j in range(bounds.shape[0]):  # a handful of knees: a linear scan is fastest
-            if s >= bounds[j]:
+        for j in range(nseg - 1):  # a handful of knees: a linear scan is fastest
+            if s >= params[3 + 2 * nseg + j]:
                 seg -= 1
         d = 0.0
         if s >= cutoff:
-            d = counts[i] * (seg_coef[seg] * s ** seg_m[seg])
+            d = counts[i] * (params[3 + nseg + seg] * s ** params[3 + seg])
         committed += d
+        cycles += counts[i]
         r = ranges[i]
-        if r >= edges[nb - 1]:
-            hist[nb - 1] += counts[i]
-        else:
+        if r >= top:
+            table[1, nb - 1] += counts[i]
+        elif r >= table[0, 0]:
             lo = 0
             hi = nb - 1
-            while hi - lo > 1:
+            while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
                 mid = (lo + hi) >> 1
-                if r >= edges[mid]:
+                if r >= table[0, mid]:
                     lo = mid
                 else:
                     hi = mid
-            if r >= edges[0]:
-                hist[lo] += counts[i]
-    return committed, committed - start, -1
+            table[1, lo] += counts[i]
+    return committed, committed - start, cycles, -1
 
 
-_commit_compiled = numba.njit(cache=True, nogil=True)(_commit_loop) if numba is not None else None
+_commit_compiled = compile_loop(_commit_loop)
 
 
 class MinerAccumulator:
@@ -114,9 +117,9 @@ class MinerAccumulator:
         self.rate_window_s = float(rate_window_s)
         self.rate_buckets = int(rate_buckets)
         self.reference_cycles = float(reference_cycles)
-        self._edges = edges
-        # bins between edges, then one overflow bin (ranges >= last edge)
-        self._hist = np.zeros(edges.size)
+        # row 0: edges; row 1: counts of the bins between edges, then the overflow bin
+        self._table = np.zeros((2, edges.size))
+        self._table[0] = edges
         self._committed = 0.0
         self._provisional = 0.0
         self._cycles = 0.0
@@ -126,15 +129,24 @@ class MinerAccumulator:
         self._setup_kernel()
 
     def _setup_kernel(self) -> None:
-        m, log_a, bounds = self.sn_curve._segments
         c = self.sn_curve
+        m, log_a, bounds = c._segments
         self._seg_m = m
         self._seg_coef = c.dff * 10.0 ** -log_a
         self._bounds = bounds
         self._cutoff = float(c.endurance_MPa) if c.low_stress == "cutoff" else 0.0
-        # mean-free curves go straight to the compiled loop with this range scale
+        # mean-free curves scale the raw ranges straight to the curve's MPa
         self._scale = c.scf * c.derating / 1e6
         self._needs_means = c.mean_correction != "none"
+        self._params = np.concatenate(([self._scale, self._cutoff, m.size], m, self._seg_coef, bounds))
+
+    @property
+    def _edges(self) -> np.ndarray:
+        return self._table[0]
+
+    @property
+    def _hist(self) -> np.ndarray:
+        return self._table[1]
 
     # ------------------------------------------------------------------ updating
     def add_cycles(self, ranges_Pa, counts, means_Pa=None, time_s: float | None = None) -> float:
@@ -144,44 +156,40 @@ class MinerAccumulator:
         if n.shape != r.shape:
             n = np.broadcast_to(n, r.shape)
         if time_s is not None:
-            self._check_time(time_s)
+            time_s = float(time_s)
+            if not math.isfinite(time_s) or (self._t_last is not None and time_s < self._t_last):
+                raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
         if r.size == 0:
-            if time_s is not None:
-                self._date(0.0, float(time_s))
-            return 0.0
-        if self._needs_means:
+            added = 0.0
+        elif self._needs_means:
             if means_Pa is None:
                 raise ValueError(f"the S-N curve's mean_correction={self.sn_curve.mean_correction!r} needs means_Pa")
-            # mean-corrected effective ranges replace the ranges; the histogram keeps the raw ones
-            eff = self.sn_curve.effective_range_MPa(r, means_Pa) / self._scale
-            added = self._commit(eff, n, r)
+            # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
+            added = self._commit_numpy(r, n, self.sn_curve.effective_range_MPa(r, means_Pa))
+        elif self.backend == "numba":
+            committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._committed)
+            if bad >= 0:
+                raise ValueError(f"cycle {bad} has an invalid range or count ({r[bad]!r}, {n[bad]!r})")
+            self._committed = committed
+            self._cycles += cycles
         else:
-            added = self._commit(r, n, r)
-        self._cycles += float(np.sum(n))
+            added = self._commit_numpy(r, n, r * self._scale)
         if time_s is not None:
-            self._date(added, float(time_s))
+            self._date(added, time_s)
         return added
 
-    def _commit(self, eff: np.ndarray, n: np.ndarray, raw: np.ndarray) -> float:
-        if self.backend == "numba" and eff is raw:
-            committed, added, bad = _commit_compiled(eff, n, self._scale, self._seg_m, self._seg_coef,
-                                                     self._bounds, self._cutoff, self._committed,
-                                                     self._edges, self._hist)
-            if bad >= 0:
-                raise ValueError(f"cycle {bad} has an invalid range or count ({raw[bad]!r}, {n[bad]!r})")
-            self._committed = committed
-            return added
+    def _commit_numpy(self, raw: np.ndarray, n: np.ndarray, s: np.ndarray) -> float:
+        """numpy twin of the compiled loop; ``s`` are the curve's ranges in MPa."""
         bad = np.flatnonzero(~((raw >= 0) & np.isfinite(raw) & (n >= 0) & np.isfinite(n)))
         if bad.size:
             raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
-        s = eff * self._scale
         seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
         d = n * (self._seg_coef[seg] * np.power(s, self._seg_m[seg]))
-        if self._cutoff > 0:
-            d = np.where(s >= self._cutoff, d, 0.0)
+        d = np.where(s >= self._cutoff, d, 0.0)
         start = self._committed
         # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
         self._committed = float(np.cumsum(np.concatenate(([start], d)))[-1])
+        self._cycles += float(np.cumsum(np.concatenate(([0.0], n)))[-1])
         idx = np.searchsorted(self._edges, raw, side="right") - 1
         inside = idx >= 0
         np.add.at(self._hist, idx[inside], n[inside])
@@ -193,12 +201,6 @@ class MinerAccumulator:
                                            np.asarray(counts, dtype=np.float64), means_Pa)
         self._provisional = float(np.sum(d))
         return self._provisional
-
-    def _check_time(self, time_s: float) -> None:
-        if not math.isfinite(time_s):
-            raise ValueError(f"time_s must be finite, got {time_s!r}")
-        if self._t_last is not None and time_s < self._t_last:
-            raise ValueError(f"time_s went backwards: {time_s!r} < {self._t_last!r}")
 
     def _date(self, added: float, t: float) -> None:
         if self._t_first is None:
@@ -266,8 +268,8 @@ class MinerAccumulator:
         return {
             "version": _STATE_VERSION,
             "sn_curve": self.sn_curve.to_dict(),
-            "histogram_edges_Pa": [float(v) for v in self._edges],
-            "histogram_counts": [float(v) for v in self._hist],
+            "histogram_edges_Pa": [float(v) for v in self._table[0]],
+            "histogram_counts": [float(v) for v in self._table[1]],
             "rate_window_s": self.rate_window_s,
             "rate_buckets": self.rate_buckets,
             "reference_cycles": self.reference_cycles,
@@ -287,9 +289,9 @@ class MinerAccumulator:
                   rate_window_s=state["rate_window_s"], rate_buckets=state["rate_buckets"],
                   reference_cycles=state["reference_cycles"], backend=backend)
         hist = np.asarray(state["histogram_counts"], dtype=np.float64)
-        if hist.shape != acc._hist.shape:
+        if hist.shape != acc._table[1].shape:
             raise ValueError("histogram_counts does not match histogram_edges_Pa")
-        acc._hist[:] = hist
+        acc._table[1] = hist
         acc._committed = float(state["committed"])
         acc._provisional = float(state["provisional"])
         acc._cycles = float(state["cycles"])

@@ -37,10 +37,7 @@ from typing import Literal
 
 import numpy as np
 
-try:  # numba is a declared dependency; the numpy path keeps the model usable without it
-    import numba
-except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+from models._jit import compile_loop
 
 Backend = Literal["auto", "numba", "numpy"]
 
@@ -116,7 +113,7 @@ def _feed_loop(st, x):
     return out[:, :k], i
 
 
-_feed_compiled = numba.njit(cache=True, nogil=True)(_feed_loop) if numba is not None else None
+_feed_compiled = compile_loop(_feed_loop)
 
 
 def _run_ends(x: np.ndarray, st: np.ndarray) -> np.ndarray:

@@ -153,3 +153,16 @@ def test_bad_input():
         dataclasses.replace(cable, pitch_m=-1.0)
     with pytest.raises(ValueError, match="stress_Pa"):
         tension_for_stress(-1.0, cable)
+
+
+def test_compiled_and_numpy_paths_identical():
+    cable = HelixCable.vaps_biw()
+    t = np.random.default_rng(0).uniform(0, 45e3, 5000).reshape(50, 100)
+    for lay in ("left", "right"):
+        a = conductor_stress(t, cable, lay, backend="numba")
+        b = conductor_stress(t, cable, lay, backend="numpy")
+        assert a.shape == t.shape
+        np.testing.assert_array_equal(a, b)
+    assert conductor_stress(10e3, cable).shape == ()
+    with pytest.raises(ValueError, match="index 3"):
+        conductor_stress(np.array([1.0, 2.0, 3.0, np.inf]), cable)

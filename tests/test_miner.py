@@ -114,7 +114,7 @@ def test_rate_and_remaining_life():
     miner.add_cycles(np.array([]), np.array([]), time_s=49 * 3600.0 + 1.5 * DAY)
     assert miner.damage_rate_per_day == 0.0
     assert miner.remaining_life_days == np.inf
-    with pytest.raises(ValueError, match="backwards"):
+    with pytest.raises(ValueError, match="non-decreasing"):
         miner.add_cycles(np.array([1e6]), np.array([1.0]), time_s=0.0)
 
 
