@@ -86,11 +86,23 @@ def piece(h: float, vt: float, w: float, length: float, c: float):
 def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joint_v):
     """Residuals (span, height), Jacobian d(span, height)/d(H, VF) and end forces.
 
-    Fills joint_h/joint_v (tension components just above each joint, in the upper segment).
-    Returns rx, rz, jxh, jxv, jzh, jzv, h_anchor, v_anchor, grounded_length, regime, valid;
-    valid is False when a buoyant element would have to lie on the seabed.
+    Seabed contact is modelled on the heavy part of the line next to the anchor (all segments
+    and joint loads from the anchor up to the touchdown weigh >= 0), where V < 0 at the anchor
+    means the line would dig in. Fills joint_h/joint_v (tension components just above each
+    joint, in the upper segment). Returns rx, rz, jxh, jxv, jzh, jzv, h_anchor, v_anchor,
+    grounded_length, regime, valid; valid is False when the configuration is not physical on
+    this seabed: a buoyant anchor segment pulled down into it, or a mid-line sag (V changing
+    sign in a heavy segment) below it.
     """
     n = seg_l.shape[0]
+    n_heavy = 0  # segments 0..n_heavy-1 may lie on the seabed
+    if seabed:
+        for k in range(n):
+            if seg_w[k] <= 0.0:
+                break
+            n_heavy = k + 1
+            if k < n - 1 and joint_p[k] < 0.0:
+                break
     sx = 0.0
     sz = 0.0
     jxh = 0.0
@@ -104,10 +116,17 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
     for k in range(n - 1, -1, -1):
         w = seg_w[k]
         vb = vt - w * seg_l[k]
-        if seabed and vb < 0.0 and w > 0.0:
+        if k < n_heavy and vb < 0.0:
             k_td = k
             l_susp = vt / w if vt > 0.0 else 0.0
             break
+        if seabed and w > 0.0 and vt > 0.0 and vb < 0.0:
+            # lowest point of a mid-line sag: it must stay above the seabed
+            a = vt / h
+            sa = math.hypot(1.0, a)
+            z_low = z - sz - (vt * a / (w * (sa + 1.0)) + 0.5 * seg_c[k] * vt * vt / w)
+            if z_low < -1e-9 * (abs(z) + seg_l[k]):
+                valid = False
         dx, dz, a1, a2, a3, a4 = piece(h, vt, w, seg_l[k], seg_c[k])
         sx += dx
         sz += dz
@@ -120,10 +139,10 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
             joint_v[k - 1] = vb
             vt = vb - joint_p[k - 1]
     if k_td < 0:
-        if seabed and vt - seg_w[0] * seg_l[0] < 0.0:
+        va = vt - seg_w[0] * seg_l[0]
+        if seabed and va < 0.0:
             valid = False  # a buoyant anchor segment pulled down into the seabed
-        return (sx - x, sz - z, jxh, jxv, jzh, jzv, h, vt - seg_w[0] * seg_l[0], 0.0,
-                SUSPENDED, valid)
+        return sx - x, sz - z, jxh, jxv, jzh, jzv, h, va, 0.0, SUSPENDED, valid
     # suspended piece of the touchdown segment, from the touchdown point (V = 0) up
     w = seg_w[k_td]
     c = seg_c[k_td]
@@ -145,8 +164,6 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
     for k in range(k_td, -1, -1):
         if k < k_td:
             p = joint_p[k]
-            if p < 0.0 or seg_w[k] < 0.0:
-                valid = False
             joint_h[k] = t
             joint_v[k] = 0.0
             t = max(t - mu * p, 0.0)
