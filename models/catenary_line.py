@@ -381,7 +381,7 @@ def _profile(sol: LineSolution, n: int) -> Profile:
 
     x_td = grounded_x(gl) if gl > 0.0 else 0.0
     for i, si in enumerate(s):
-        if si <= gl:
+        if gl > 0.0 and si <= gl:
             xs[i] = grounded_x(si)
             zs[i] = 0.0
             ts[i] = grounded_t(si)
