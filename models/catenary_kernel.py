@@ -192,29 +192,39 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
 
 
 @numba.njit(cache=True)
-def _phi_from_ratio(r: float) -> float:
-    """Solve sinh(phi)/phi = r (r > 1) for phi > 0 (seed 003's transcendental equation)."""
-    if r < 1.0 + 1e-12:
-        return 1e-6
-    if r < 3.0:
-        p = math.sqrt(6.0 * (r - 1.0))
+def _sinhc_minus_one(p: float) -> float:
+    """sinh(p)/p - 1 without cancellation for small p."""
+    if p < 1e-3:
+        p2 = p * p
+        return p2 / 6.0 * (1.0 + p2 / 20.0)
+    return math.sinh(p) / p - 1.0
+
+
+@numba.njit(cache=True)
+def _phi_from_excess(q: float) -> float:
+    """Solve sinh(phi)/phi = 1 + q (q > 0) for phi > 0 (seed 003's transcendental equation,
+    with q = r - 1 passed directly so that near-taut lines keep their precision)."""
+    if q <= 0.0:
+        return 1e-12
+    if q < 2.0:
+        p = math.sqrt(6.0 * q)
     else:
+        r = 1.0 + q
         p = math.log(2.0 * r) + math.log(math.log(2.0 * r) + 1.0)
+    lq = math.log1p(q)
     for _ in range(60):
-        # f = ln(sinh p / p) - ln r, Newton on the log keeps the step sane for large r
+        # Newton on ln(sinh p / p) = ln(1 + q): well scaled from tiny to huge p
         if p > 700.0:
-            f = p - math.log(2.0 * p) - math.log(r)
+            f = p - math.log(2.0 * p) - lq
             fp = 1.0 - 1.0 / p
         else:
-            f = math.log(math.sinh(p) / p) - math.log(r)
-            fp = 1.0 / math.tanh(p) - 1.0 / p
-        dp = -f / fp
-        p_new = p + dp
+            f = math.log1p(_sinhc_minus_one(p)) - lq
+            fp = p / 3.0 * (1.0 - p * p / 15.0) if p < 1e-3 else 1.0 / math.tanh(p) - 1.0 / p
+        p_new = p - f / fp
         if p_new <= 0.0:
             p_new = 0.5 * p
-        if abs(p_new - p) <= 1e-14 * p:
-            p = p_new
-            break
+        if abs(p_new - p) <= 1e-15 * p:
+            return p_new
         p = p_new
     return p
 
@@ -271,9 +281,13 @@ def _guess(x, z, seg_l, seg_w, seg_c, joint_p, attempt):
     if wabs == 0.0:
         wabs = 1.0
     d = math.hypot(x, z)
-    if ltot > d * (1.0 + 1e-9):
-        r = math.sqrt(ltot * ltot - z * z) / max(x, 1e-12 * ltot)
-        phi = _phi_from_ratio(r)
+    if ltot > d:
+        # inextensible homogeneous catenary through both ends (exact for such a line):
+        # sinh(phi)/phi = sqrt(L^2 - z^2)/x = 1 + q
+        xe = max(x, 1e-12 * ltot)
+        sq = math.sqrt((ltot - z) * (ltot + z))
+        q = (ltot - d) * (ltot + d) / (xe * (sq + xe))
+        phi = _phi_from_excess(q)
         weff = wtot / ltot
         if abs(wtot) < 0.05 * wabs:
             weff = wabs / ltot
