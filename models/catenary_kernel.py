@@ -31,6 +31,7 @@ ON_SEABED = 4  # fairlead on the seabed, the whole line lies on it
 
 OK = 0
 NOT_CONVERGED = 1
+OFF_SEABED_MODEL = 2  # equilibrium found, but it would need seabed contact not modelled
 
 _SMALL = 1e-6
 
@@ -83,6 +84,20 @@ def piece(h: float, vt: float, w: float, length: float, c: float):
 
 
 @numba.njit(cache=True)
+def _heavy_prefix(seg_w, joint_p) -> int:
+    """Number of segments from the anchor that may lie on the seabed: all heavy, with no float
+    at the joints between them (segments 0 .. n-1)."""
+    n_heavy = 0
+    for k in range(seg_w.shape[0]):
+        if seg_w[k] <= 0.0:
+            break
+        n_heavy = k + 1
+        if k < seg_w.shape[0] - 1 and joint_p[k] < 0.0:
+            break
+    return n_heavy
+
+
+@numba.njit(cache=True)
 def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joint_v):
     """Residuals (span, height), Jacobian d(span, height)/d(H, VF) and end forces.
 
@@ -95,14 +110,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
     sign in a heavy segment) below it.
     """
     n = seg_l.shape[0]
-    n_heavy = 0  # segments 0..n_heavy-1 may lie on the seabed
-    if seabed:
-        for k in range(n):
-            if seg_w[k] <= 0.0:
-                break
-            n_heavy = k + 1
-            if k < n - 1 and joint_p[k] < 0.0:
-                break
+    n_heavy = _heavy_prefix(seg_w, joint_p) if seabed else 0
     sx = 0.0
     sz = 0.0
     jxh = 0.0
@@ -156,8 +164,12 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
         jxv += 1.0 / (w * sa) + c * h / w
         jzh += -(a * a / (sa + 1.0)) / (w * sa)
         jzv += a / (w * sa) + c * vt / w
-    # grounded part: march from the touchdown to the anchor, friction lowering the tension
-    t = h
+    # grounded part: march from the touchdown to the anchor, friction lowering the tension.
+    # vt < 0: the touchdown is pinned at the joint above segment k_td, whose point load the
+    # seabed carries in part (reaction -vt, with its own friction); the grounded length then
+    # does not move with VF
+    pinned = vt < 0.0
+    t = max(h + mu * vt, 0.0) if pinned else h
     grounded = seg_l[k_td] - l_susp
     stretch = 0.0
     pos_c = 0.0  # sum of c * length over the grounded material under tension
@@ -186,7 +198,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
             t = 0.0
     sx += grounded + stretch
     jxh += pos_c
-    jxv += -1.0 / w - c * h / w + mu * pos_c
+    jxv += mu * pos_c if pinned else -1.0 / w - c * h / w + mu * pos_c
     regime = GROUNDED if t > 0.0 else GROUNDED_SLACK_ANCHOR
     return sx - x, sz - z, jxh, jxv, jzh, jzv, t, 0.0, grounded, regime, valid
 
@@ -230,38 +242,117 @@ def _phi_from_excess(q: float) -> float:
 
 
 @numba.njit(cache=True)
-def hanging(z, seg_l, seg_w, seg_c, joint_p):
-    """Unstretched length and weight of the vertical part hanging from the fairlead down to
-    the seabed at height 0 when H = 0 (all elements on the way must be heavy); -1 if the
-    whole line cannot reach down."""
+def _rise(v0: float, w: float, length: float, c: float) -> float:
+    """Height gained along a vertical (H = 0) piece whose vertical tension runs from v0 to
+    v0 + w length: the integral of sign(V) (1 + c |V|) ds (V < 0: the piece hangs down)."""
+    v1 = v0 + w * length
+    if v0 >= 0.0 and v1 >= 0.0:
+        return length * (1.0 + 0.5 * c * (v0 + v1))
+    if v0 <= 0.0 and v1 <= 0.0:
+        return -length * (1.0 - 0.5 * c * (v0 + v1))
+    s1 = -v0 / w  # where V changes sign
+    s2 = length - s1
+    return (math.copysign(s1 * (1.0 + 0.5 * c * abs(v0)), v0)
+            + math.copysign(s2 * (1.0 + 0.5 * c * abs(v1)), v1))
+
+
+@numba.njit(cache=True)
+def _column(lb, seg_l, seg_w, seg_c, joint_p):
+    """Vertical (H = 0) line above a touchdown at unstretched distance lb from the anchor:
+    returns (height of the fairlead, VF, lowest height reached, segment of the touchdown)."""
     n = seg_l.shape[0]
-    remaining = z
-    length = 0.0
-    weight = 0.0
-    for k in range(n - 1, -1, -1):
+    start = 0.0
+    z = 0.0
+    z_min = 0.0
+    v = 0.0
+    k_td = -1
+    for k in range(n):
+        end = start + seg_l[k]
+        if end <= lb and k < n - 1:
+            start = end
+            continue
+        if k_td < 0:
+            k_td = k
+            ell = end - lb
+        else:
+            v += joint_p[k - 1]
+            ell = seg_l[k]
         w = seg_w[k]
-        if w <= 0.0:
-            return -1.0, 0.0
-        c = seg_c[k]
-        # height spanned by the whole segment hanging below tension `weight` at its bottom...
-        # solve for the hanging length l: l + c (weight l + w l^2/2) = remaining
-        full = seg_l[k] + c * seg_l[k] * (weight + 0.5 * w * seg_l[k])
-        if full >= remaining:
-            qa = 0.5 * c * w
-            qb = 1.0 + c * weight
-            if qa > 0.0:
-                lh = 2.0 * remaining / (qb + math.sqrt(qb * qb + 4.0 * qa * remaining))
-            else:
-                lh = remaining / qb
-            return length + lh, weight + w * lh
-        remaining -= full
-        length += seg_l[k]
-        weight += w * seg_l[k]
-        if k > 0:
-            if joint_p[k - 1] < 0.0:
-                return -1.0, 0.0
-            weight += joint_p[k - 1]
-    return -1.0, 0.0
+        if ell > 0.0:
+            v1 = v + w * ell
+            if v < 0.0 < v1:  # a trough inside the piece
+                s1 = -v / w
+                z_min = min(z_min, z - s1 * (1.0 - 0.5 * seg_c[k] * v))
+            z += _rise(v, w, ell, seg_c[k])
+            v = v1
+            z_min = min(z_min, z)
+        start = end
+    return z, v, z_min, k_td
+
+
+@numba.njit(cache=True)
+def slack_piled(x, z, seg_l, seg_w, seg_c, joint_p, n_heavy, joint_h, joint_v, out) -> bool:
+    """H = 0 configuration: the heavy part next to the anchor lies slack on the seabed (longer
+    than the span, so it piles up) and the rest stands vertically under the fairlead, folding
+    where buoyant parts turn its vertical tension negative. Fills out[0:11] and returns True
+    if this is the equilibrium, i.e. if a catenary with H > 0 cannot reach this close."""
+    if n_heavy == 0:
+        return False
+    lmax = 0.0
+    for k in range(n_heavy):
+        lmax += seg_l[k]
+    if x > lmax:
+        return False
+    # the column height falls as the grounded length lb grows; piled needs lb >= x
+    if _column(x, seg_l, seg_w, seg_c, joint_p)[0] < z:
+        return False
+    if _column(lmax, seg_l, seg_w, seg_c, joint_p)[0] > z:
+        return False
+    lo = x
+    hi = lmax
+    if _column(lmax, seg_l, seg_w, seg_c, joint_p)[0] == z:
+        lo = lmax  # e.g. a fairlead on the seabed with the whole heavy part lying flat
+    for _ in range(200 if lo < hi else 0):
+        mid = 0.5 * (lo + hi)
+        if _column(mid, seg_l, seg_w, seg_c, joint_p)[0] >= z:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-15 * lmax:
+            break
+    lb = 0.5 * (lo + hi) if lo < hi else lmax
+    zc, vf, z_min, k_td = _column(lb, seg_l, seg_w, seg_c, joint_p)
+    ltot = seg_l.sum()
+    d = 1e-7 * ltot
+    dz_dlb = (_column(min(lb + d, lmax), seg_l, seg_w, seg_c, joint_p)[0]
+              - _column(max(lb - d, 0.0), seg_l, seg_w, seg_c, joint_p)[0]) \
+        / (min(lb + d, lmax) - max(lb - d, 0.0))
+    out[0] = 0.0
+    out[1] = vf
+    out[2] = 0.0
+    out[3] = 0.0
+    out[4] = lb
+    out[5] = SLACK_PILED if z > 0.0 else ON_SEABED
+    out[6] = OK if z_min >= -1e-9 * ltot else OFF_SEABED_MODEL
+    # no horizontal restoring force; lifting the fairlead lifts material off the touchdown
+    out[7] = 0.0
+    out[8] = 0.0
+    out[9] = 0.0
+    out[10] = -seg_w[k_td] / dz_dlb if dz_dlb < 0.0 else math.inf
+    v = 0.0
+    start = 0.0
+    for k in range(seg_l.shape[0] - 1):
+        end = start + seg_l[k]
+        if end > lb:
+            v += seg_w[k] * (end - max(start, lb))
+            joint_h[k] = 0.0
+            joint_v[k] = v
+            v += joint_p[k]
+        else:
+            joint_h[k] = 0.0
+            joint_v[k] = 0.0
+        start = end
+    return True
 
 
 @numba.njit(cache=True)
@@ -328,33 +419,9 @@ def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, join
     if wabs == 0.0:
         wabs = 1.0
     scale = ltot + abs(x) + abs(z)
-    # slack line piled on the seabed: no catenary with H > 0 reaches this close
-    if seabed:
-        lh, wh = hanging(z, seg_l, seg_w, seg_c, joint_p)
-        if lh >= 0.0 and x <= ltot - lh:
-            out[0] = 0.0
-            out[1] = wh
-            out[2] = 0.0
-            out[3] = 0.0
-            out[4] = ltot - lh
-            out[5] = SLACK_PILED if z > 0.0 else ON_SEABED
-            out[6] = OK
-            # vertical stiffness of the hanging part; no horizontal restoring force
-            out[7] = 0.0
-            out[8] = 0.0
-            out[9] = 0.0
-            k_top = n - 1
-            acc = 0.0
-            for k in range(n - 1, -1, -1):
-                acc += seg_l[k]
-                if acc >= lh:
-                    k_top = k
-                    break
-            out[10] = seg_w[k_top] / (1.0 + seg_c[k_top] * wh)
-            for j in range(n - 1):
-                joint_h[j] = 0.0
-                joint_v[j] = 0.0
-            return
+    if seabed and slack_piled(x, z, seg_l, seg_w, seg_c, joint_p, _heavy_prefix(seg_w, joint_p),
+                              joint_h, joint_v, out):
+        return
     xs = max(x, 1e-9 * ltot)  # a vertical line is the limit H -> 0+
     on_bed = seabed and z <= 1e-9 * ltot
     if on_bed:
@@ -433,8 +500,10 @@ def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, join
     out[3] = va
     out[4] = gl
     out[5] = reg
-    ok = abs(rx) + abs(rz) <= 100.0 * tol * scale and valid
-    out[6] = OK if ok else NOT_CONVERGED
+    if abs(rx) + abs(rz) > 100.0 * tol * scale:
+        out[6] = NOT_CONVERGED
+    else:
+        out[6] = OK if valid else OFF_SEABED_MODEL
     if on_bed:
         # lifting a fairlead that lies on the seabed: V ~ sqrt(2 w H dz), unbounded slope
         out[7] = 1.0 / jxh

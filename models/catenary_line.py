@@ -258,14 +258,25 @@ def _solve_scalar(line: Line, x: float, z: float) -> LineSolution:
     _k.solve_one(x, z, seg_l, seg_w, seg_c, joint_p, line.seabed_friction, line.seabed, _TOL,
                  jh, jv, o)
     if o[6] != _k.OK:
-        raise ValueError(f"no static equilibrium found for span={x!r}, height={z!r}; a "
-                         f"buoyant element may be pressed onto the seabed")
+        raise ValueError(_failure(line, o[6], x, z))
     f = np.float64
     return LineSolution(line, f(x), f(z), f(o[0]), f(o[1]), f(o[2]), f(o[3]), f(o[4]),
                         np.int8(o[5]), o[7:11].reshape(2, 2), jh, jv)
 
 
 _SCALARS = (float, int, np.floating, np.integer)
+
+
+def _failure(line: Line, status: float, x: float, z: float) -> str:
+    if status == _k.OFF_SEABED_MODEL:
+        return (f"span={x!r}, height={z!r}: the equilibrium needs seabed contact that is not "
+                f"modelled (a buoyant part pressed onto the seabed, or a mid-line sag below it)")
+    msg = f"no static equilibrium found for span={x!r}, height={z!r}"
+    _, w, _, p = line._arrays
+    if line.seabed and (np.any(w <= 0.0) or np.any(p < 0.0)):
+        msg += ("; with floats or buoyant segments on a seabed the equilibrium may need seabed "
+                "contact away from the anchor's heavy part, which is not modelled")
+    return msg
 
 
 def solve(line: Line, span, height) -> LineSolution:
@@ -286,10 +297,9 @@ def solve(line: Line, span, height) -> LineSolution:
                   _TOL, out, jh, jv)
     failed = out[:, 6] != _k.OK
     if np.any(failed):
-        i = np.flatnonzero(failed)[0]
-        raise ValueError(f"no static equilibrium found for span={xf[i]!r}, height={zf[i]!r} "
-                         f"({int(failed.sum())} of {xf.size} failed); a buoyant element may be "
-                         f"pressed onto the seabed")
+        i = int(np.flatnonzero(failed)[0])
+        raise ValueError(_failure(line, out[i, 6], xf[i], zf[i]) +
+                         f" ({int(failed.sum())} of {xf.size} positions failed)")
     o = out.reshape(shape + (11,))
     return LineSolution(
         line=line, span=x, height=z, h=o[..., 0], v_top=o[..., 1], h_anchor=o[..., 2],
@@ -336,19 +346,21 @@ def _profile(sol: LineSolution, n: int) -> Profile:
     zs = np.empty(n)
     ts = np.empty(n)
     if regime in (_k.SLACK_PILED, _k.ON_SEABED) and h == 0.0:
-        # slack along the seabed up to below the fairlead, then hanging vertically
+        # slack along the seabed up to below the fairlead, then a vertical column
         span = float(sol.span)
         for i, si in enumerate(s):
             if si <= gl:
                 xs[i], zs[i], ts[i] = min(si, span), 0.0, 0.0
-            else:
-                k = min(np.searchsorted(starts, si, side="right") - 1, seg_l.size - 1)
-                r = si - max(starts[k], gl)
-                v0 = 0.0 if starts[k] <= gl else max(vb[k], 0.0)
-                z0 = _hanging_z(gl, starts[k], seg_l, seg_w, seg_c, joint_p, vb)
-                xs[i] = span
-                zs[i] = z0 + r + seg_c[k] * (v0 * r + 0.5 * seg_w[k] * r * r)
-                ts[i] = v0 + seg_w[k] * r
+                continue
+            z, v = 0.0, 0.0
+            for k in range(seg_l.size):
+                lo, hi = max(starts[k], gl), min(starts[k + 1], si)
+                if k > 0 and starts[k] > gl and starts[k] < si:
+                    v += joint_p[k - 1]
+                if hi > lo:
+                    z += _k._rise(v, seg_w[k], hi - lo, seg_c[k])
+                    v += seg_w[k] * (hi - lo)
+            xs[i], zs[i], ts[i] = span, z, abs(v)
         return Profile(s, xs, zs, ts)
     # grounded tension profile: from the touchdown (tension h) down to the anchor
     def grounded_t(si: float) -> float:
@@ -413,17 +425,3 @@ def _piece_xz(h: float, vt: float, w: float, length: float, c: float) -> tuple[f
         raise ValueError("profile of a suspended piece needs H > 0")
     dx, dz, *_ = _k.piece(h, vt, w, length, c)
     return dx, dz
-
-
-def _hanging_z(gl, start_k, seg_l, seg_w, seg_c, joint_p, vb) -> float:
-    """Height of the start of a hanging segment (above the piled part) in the H = 0 case."""
-    z = 0.0
-    for k in range(seg_l.size):
-        lo, hi = max(seg_l[:k].sum(), gl), seg_l[:k + 1].sum()
-        if seg_l[:k].sum() >= start_k:
-            break
-        if hi > lo:
-            r = hi - lo
-            v0 = max(vb[k], 0.0) if seg_l[:k].sum() >= gl else 0.0
-            z += r + seg_c[k] * (v0 * r + 0.5 * seg_w[k] * r * r)
-    return z
