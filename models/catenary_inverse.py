@@ -13,7 +13,7 @@ import numpy as np
 from models.catenary_line import Line, LineSolution, solve
 
 
-def span_from_top_tension(line: Line, t_top, height, rtol: float = 1e-10,
+def span_from_top_tension(line: Line, t_top, height, rtol: float = 1e-12,
                           max_iter: int = 100) -> LineSolution:
     """Fairlead span giving top tension `t_top` (N) at `height` (m); vectorised. Returns the
     solved line there: `.span` is the offset, `.top_angle` the line angle at the fairlead.
