@@ -304,23 +304,38 @@ def slack_piled(x, z, seg_l, seg_w, seg_c, joint_p, n_heavy, joint_h, joint_v, o
     if x > lmax:
         return False
     # the column height falls as the grounded length lb grows; piled needs lb >= x
-    if _column(x, seg_l, seg_w, seg_c, joint_p)[0] < z:
-        return False
-    if _column(lmax, seg_l, seg_w, seg_c, joint_p)[0] > z:
-        return False
     lo = x
     hi = lmax
-    if _column(lmax, seg_l, seg_w, seg_c, joint_p)[0] == z:
-        lo = lmax  # e.g. a fairlead on the seabed with the whole heavy part lying flat
-    for _ in range(200 if lo < hi else 0):
-        mid = 0.5 * (lo + hi)
-        if _column(mid, seg_l, seg_w, seg_c, joint_p)[0] >= z:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-15 * lmax:
+    f_lo = _column(lo, seg_l, seg_w, seg_c, joint_p)[0] - z
+    if f_lo < 0.0:
+        return False
+    f_hi = _column(hi, seg_l, seg_w, seg_c, joint_p)[0] - z
+    if f_hi > 0.0:
+        return False
+    # Illinois (modified regula falsi) on f(lb) = column height - z, bracketed in [x, lmax]
+    lb = hi if f_hi == 0.0 else lo
+    side = 0
+    for _ in range(200 if f_hi != 0.0 and f_lo != 0.0 else 0):
+        lb = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        if not lo < lb < hi:
+            lb = 0.5 * (lo + hi)
+        f = _column(lb, seg_l, seg_w, seg_c, joint_p)[0] - z
+        if f == 0.0 or hi - lo <= 1e-14 * lmax:
             break
-    lb = 0.5 * (lo + hi) if lo < hi else lmax
+        if f > 0.0:  # column too high: more on the seabed
+            lo = lb
+            f_lo = f
+            if side == 1:
+                f_hi *= 0.5
+            side = 1
+        else:
+            hi = lb
+            f_hi = f
+            if side == -1:
+                f_lo *= 0.5
+            side = -1
+        if abs(f) <= 1e-14 * (lmax + abs(z)):
+            break
     zc, vf, z_min, k_td = _column(lb, seg_l, seg_w, seg_c, joint_p)
     ltot = seg_l.sum()
     d = 1e-7 * ltot
@@ -404,8 +419,10 @@ def _guess(x, z, seg_l, seg_w, seg_c, joint_p, attempt):
 
 
 @numba.njit(cache=True)
-def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, joint_v, out):
-    """Solve one fairlead position; results into out[0:11]:
+def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, joint_v, out,
+              h_warm=0.0, v_warm=0.0):
+    """Solve one fairlead position, trying (h_warm, v_warm) first if h_warm > 0 (the previous
+    sample's answer in a stream); results into out[0:11]:
     H, VF, H_anchor, V_anchor, grounded, regime, status, kxx, kxz, kzx, kzz
     (stiffness k.. = d(H or VF)/d(x or z) at the fairlead)."""
     n = seg_l.shape[0]
@@ -431,12 +448,15 @@ def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, join
     best_h = 0.0
     best_v = 0.0
     best_err = 1e300
-    for attempt in range(4):
-        h, vf = _guess(xs, z, seg_l, seg_w, seg_c, joint_p, attempt)
+    for attempt in range(-1 if h_warm > 0.0 else 0, 4):
+        if attempt < 0:
+            h, vf = h_warm, v_warm
+        else:
+            h, vf = _guess(xs, z, seg_l, seg_w, seg_c, joint_p, attempt)
         if on_bed:
             vf = 0.0
         converged = False
-        for it in range(200):
+        for it in range(30 if attempt < 0 else 200):
             rx, rz, jxh, jxv, jzh, jzv, ha, va, gl, reg, valid = evaluate(
                 h, vf, xs, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joint_v)
             err = abs(rx) + abs(rz)
@@ -520,6 +540,13 @@ def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, join
 
 @numba.njit(cache=True)
 def solve_many(xs, zs, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, out, joints_h, joints_v):
+    """Solve a sequence of fairlead positions; each warm-starts from the previous answer
+    (samples of a motion record are close to each other)."""
+    h_prev = 0.0
+    v_prev = 0.0
     for i in range(xs.shape[0]):
         solve_one(xs[i], zs[i], seg_l, seg_w, seg_c, joint_p, mu, seabed, tol,
-                  joints_h[i], joints_v[i], out[i])
+                  joints_h[i], joints_v[i], out[i], h_prev, v_prev)
+        ok = out[i, 6] == OK and out[i, 0] > 0.0
+        h_prev = out[i, 0] if ok else 0.0
+        v_prev = out[i, 1] if ok else 0.0
