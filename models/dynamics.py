@@ -189,15 +189,26 @@ class ElasticDragCord:
         return self.tension_coefficient * v * np.abs(v)
 
 
+@numba.njit(cache=True, inline="always")
+def jerk_step(y: float, vz: float, b: float) -> float:
+    """One implicit-Euler step of y' = (V_z - sign(y) sqrt|y|) / mu, b = dt / mu (inf: mu = 0).
+
+    Solves y_new + b sign(y_new) sqrt|y_new| = y + b V_z exactly: s = sqrt|y_new| is the
+    positive root of s^2 + b s = |c|, c = y + b V_z, in a form that stays exact as b -> inf.
+    """
+    if math.isinf(b):
+        return vz * abs(vz)
+    c = y + b * vz
+    ac = abs(c)
+    s = 2.0 * ac / (b + math.sqrt(b * b + 4.0 * ac))
+    return s * s if c >= 0.0 else -s * s
+
+
 @numba.njit(cache=True)
 def _jerk_steps(vz: np.ndarray, b: float, y0: float, out: np.ndarray) -> float:
     y = y0
     for i in range(vz.size):
-        c = y + b * vz[i]
-        ac = abs(c)
-        # s = sqrt|y_new| solves s^2 + b s = |c|; this root form is exact for b -> inf.
-        s = 2.0 * ac / (b + math.sqrt(b * b + 4.0 * ac))
-        y = s * s if c >= 0.0 else -s * s
+        y = jerk_step(y, vz[i], b)
         out[i] = y
     return y
 
@@ -208,9 +219,8 @@ def jerk_form_speed_squared(
     """Integrate V + mu d(V|V|)/dt = V_z(t) for y = V|V| by implicit Euler (seed 001, eq 49).
 
     ``support_speed`` V_z at t = dt, 2 dt, ...; ``y0`` the state at t = 0. Returns (y at each
-    step, final y) so a stream can be continued block by block. Unconditionally stable: each
-    step solves y_new + (dt/mu) sign(y_new) sqrt|y_new| = y + (dt/mu) V_z exactly.
-    mu = 0 (inextensible) gives y = V_z |V_z|.
+    step, final y) so a stream can be continued block by block. Unconditionally stable (see
+    :func:`jerk_step`). mu = 0 (inextensible) gives y = V_z |V_z| (eq 45).
     """
     vz = np.ascontiguousarray(_finite("support_speed", support_speed), dtype=float)
     _pos("dt", dt)
@@ -218,11 +228,8 @@ def jerk_form_speed_squared(
         raise ValueError(f"mu must be finite and >= 0, got {mu!r}")
     if not math.isfinite(y0):
         raise ValueError(f"y0 must be finite, got {y0!r}")
-    if mu == 0.0:
-        y = vz * np.abs(vz)
-        return y, float(y[-1]) if y.size else float(y0)
     out = np.empty_like(vz)
-    last = _jerk_steps(vz, dt / mu, float(y0), out)
+    last = _jerk_steps(vz, dt / mu if mu > 0 else math.inf, float(y0), out)
     return out, float(last)
 
 

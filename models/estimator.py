@@ -32,10 +32,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from models.dynamics import ElasticDragCord, axial_impedance, finite_line_added_mass, jerk_form_speed_squared
+from models.dynamics import ElasticDragCord, axial_impedance, finite_line_added_mass, jerk_step
 from models.imu import DisplacementIntegrator
 
 
@@ -104,6 +105,30 @@ class LinearisedQuasiStatic:
         return np.hypot(h, v), h, v, flags
 
 
+@numba.njit(cache=True)
+def _bilinear(x, z, x0, dx, z0, dz, hs, vs, fs, out_t, out_h, out_v, out_f, range_bit):
+    nx, nz = hs.shape
+    for k in range(x.size):
+        fx = (x[k] - x0) / dx
+        fz = (z[k] - z0) / dz
+        flag = 0
+        if fx < 0.0 or fx > nx - 1.0 or fz < 0.0 or fz > nz - 1.0:
+            flag = range_bit
+        fx = min(max(fx, 0.0), nx - 1.0)
+        fz = min(max(fz, 0.0), nz - 1.0)
+        i = min(int(fx), nx - 2)
+        j = min(int(fz), nz - 2)
+        u = fx - i
+        w = fz - j
+        a, b, c, d = (1 - u) * (1 - w), u * (1 - w), (1 - u) * w, u * w
+        h = a * hs[i, j] + b * hs[i + 1, j] + c * hs[i, j + 1] + d * hs[i + 1, j + 1]
+        v = a * vs[i, j] + b * vs[i + 1, j] + c * vs[i, j + 1] + d * vs[i + 1, j + 1]
+        out_h[k] = h
+        out_v[k] = v
+        out_t[k] = math.sqrt(h * h + v * v)
+        out_f[k] = flag | fs[i, j] | fs[i + 1, j] | fs[i, j + 1] | fs[i + 1, j + 1]
+
+
 @dataclass(frozen=True)
 class QuasiStaticGrid:
     """A quasi-static model tabulated on a regular (x_offset, z) grid, bilinear in between.
@@ -141,25 +166,13 @@ class QuasiStaticGrid:
         )
 
     def __call__(self, x: NDArray[np.float64], z: NDArray[np.float64]):
-        dx = self.x[1] - self.x[0]
-        dz = self.z[1] - self.z[0]
-        nx, nz = self.x.size, self.z.size
-        fx = np.clip((x - self.x[0]) / dx, 0.0, nx - 1.0)
-        fz = np.clip((z - self.z[0]) / dz, 0.0, nz - 1.0)
-        i = np.minimum(fx.astype(np.intp), nx - 2)
-        j = np.minimum(fz.astype(np.intp), nz - 2)
-        u = fx - i
-        w = fz - j
-        w00, w10, w01, w11 = (1 - u) * (1 - w), u * (1 - w), (1 - u) * w, u * w
-
-        def interp(tab):
-            return w00 * tab[i, j] + w10 * tab[i + 1, j] + w01 * tab[i, j + 1] + w11 * tab[i + 1, j + 1]
-
-        f = self.flags
-        flags = f[i, j] | f[i + 1, j] | f[i, j + 1] | f[i + 1, j + 1]
-        flags |= _range_flags(x, z, (self.x[0], self.x[-1]), (self.z[0], self.z[-1]))
-        h, v = interp(self.h), interp(self.v)
-        return np.hypot(h, v), h, v, flags
+        x = np.ascontiguousarray(x, dtype=float)
+        z = np.ascontiguousarray(z, dtype=float)
+        n = x.size
+        t, h, v, f = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.uint8)
+        _bilinear(x, z, self.x[0], self.x[1] - self.x[0], self.z[0], self.z[1] - self.z[0],
+                  self.h, self.v, self.flags, t, h, v, f, np.uint8(Flag.OUT_OF_RANGE))
+        return t, h, v, f
 
 
 @dataclass(frozen=True)
@@ -248,27 +261,103 @@ def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]
     return arr
 
 
+_AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
+
+
+@numba.njit(cache=True)
+def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain, drag_on,
+                  drag_k, drag_b, y0, tan_flat, total, axial, drag, angle):
+    """Per-sample dynamic increments (see the module docstring); returns the jerk state.
+
+    p: (3, n + 2) surge, sway, heave with the two previous samples first.
+    """
+    inv_dt = 1.0 / dt
+    y = y0
+    xs = span + p[0, 1]
+    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
+    for i in range(t_qs.size):
+        j = i + 2
+        xs = span + p[0, j]
+        ys = p[1, j]
+        hor = math.sqrt(xs * xs + ys * ys)
+        tq, hi, vi = t_qs[i], h[i], v[i]
+        f = flags[i]
+        a_i = 0.0
+        if axial_mode != 0:
+            if axial_mode == 1:  # short line: inertia of a third of the line, acceleration
+                s0 = (p[0, j] - 2.0 * p[0, j - 1] + p[0, j - 2]) * inv_dt * inv_dt
+                s1 = (p[1, j] - 2.0 * p[1, j - 1] + p[1, j - 2]) * inv_dt * inv_dt
+                s2 = (p[2, j] - 2.0 * p[2, j - 1] + p[2, j - 2]) * inv_dt * inv_dt
+            else:  # non-reflecting line: impedance, velocity
+                s0 = (p[0, j] - p[0, j - 1]) * inv_dt
+                s1 = (p[1, j] - p[1, j - 1]) * inv_dt
+                s2 = (p[2, j] - p[2, j - 1]) * inv_dt
+            if tq > 0.0 and hor > 0.0:
+                a_i = axial_gain * ((hi / tq) * (xs * s0 + ys * s1) / hor + (vi / tq) * s2)
+        d_i = 0.0
+        if drag_on:
+            zc = height + p[2, j]
+            chord = math.sqrt(hor * hor + zc * zc)
+            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
+            chord_prev = chord
+            d_i = drag_k * y
+            if vi > tan_flat * hi:
+                f |= 4  # Flag.FLAT_CORD
+        tot = tq + a_i + d_i
+        if tot <= 0.0:
+            tot = 0.0
+            f |= 1  # Flag.SLACK
+        total[i] = tot
+        axial[i] = a_i
+        drag[i] = d_i
+        angle[i] = math.atan2(vi, hi)
+        flags[i] = f
+    return y
+
+
 class MotionTensionEstimator:
     """Streaming motion -> tension estimator; feed blocks, save and restore its state.
 
     >>> est = MotionTensionEstimator(config, quasi_static)
     >>> out = est.update(heave, surge, sway)          # displacements (m)
     >>> out = est.update_accel(ax, ay, az)            # or IMU accelerations (m/s^2)
-    >>> saved = est.state.to_dict(); est2 = MotionTensionEstimator(config, qs, EstimatorState.from_dict(saved))
+    >>> saved = est.state.to_dict()                   # JSON-ready
+    >>> est2 = MotionTensionEstimator(config, quasi_static, EstimatorState.from_dict(saved))
     """
 
     def __init__(self, config: EstimatorConfig, quasi_static: QuasiStatic, state: EstimatorState | None = None):
         self.config = config
         self.quasi_static = quasi_static
-        self.state = state if state is not None else EstimatorState()
-        c = config
-        self._axial_gain = {
-            "finite": finite_line_added_mass(c.mass_per_length, c.line_length),
-            "infinite": axial_impedance(c.ea, c.mass_per_length),
-            "none": 0.0,
-        }[c.axial_model]
-        self._tan_flat = math.tan(math.radians(c.flat_cord_max_deg))
+        st = state if state is not None else EstimatorState()
+        self._hist = None if st.history is None else np.asarray(st.history, dtype=float).T.copy()
+        self._jerk_y = float(st.jerk_y)
+        self._seen = int(st.samples_seen)
+        self._imu_saved = st.imu
         self._imu: DisplacementIntegrator | None = None
+        c = config
+        self._axial_mode = _AXIAL_MODES[c.axial_model]
+        if c.axial_model == "finite":
+            self._axial_gain = finite_line_added_mass(c.mass_per_length, c.line_length)
+        elif c.axial_model == "infinite":
+            self._axial_gain = axial_impedance(c.ea, c.mass_per_length)
+        else:
+            self._axial_gain = 0.0
+        self._tan_flat = math.tan(math.radians(c.flat_cord_max_deg))
+        if c.drag is None:
+            self._drag_k, self._drag_b = 0.0, math.inf
+        else:
+            self._drag_k = c.drag.tension_coefficient
+            self._drag_b = c.dt / c.drag.mu if c.drag.mu > 0 else math.inf
+
+    @property
+    def state(self) -> EstimatorState:
+        """A snapshot of the stream state (history, jerk ODE, IMU filter memory)."""
+        return EstimatorState(
+            history=None if self._hist is None else self._hist.T.tolist(),
+            jerk_y=self._jerk_y,
+            samples_seen=self._seen,
+            imu=self._imu.state() if self._imu is not None else self._imu_saved,
+        )
 
     # ------------------------------------------------------------------ inputs
     def update(
@@ -288,11 +377,7 @@ class MotionTensionEstimator:
         x = _as_block("surge", surge, z.size)
         y = _as_block("sway", sway, z.size)
         if heading_deg is not None:
-            hd = np.asarray(heading_deg, dtype=float)
-            if not np.all(np.isfinite(hd)) or hd.ndim > 1 or (hd.ndim == 1 and hd.size != z.size):
-                raise ValueError("heading_deg must be finite, a scalar or one value per sample")
-            ch, sh = np.cos(np.radians(hd)), np.sin(np.radians(hd))
-            x, y = ch * x - sh * y, sh * x + ch * y
+            x, y = _rotate(x, y, heading_deg, z.size)
         return self._estimate(x, y, z, settling=None)
 
     def update_accel(
@@ -306,80 +391,60 @@ class MotionTensionEstimator:
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
         Samples before the integrator has settled are flagged SETTLING."""
         az = _as_block("accel_z", accel_z, None)
-        a = np.vstack([_as_block("accel_x", accel_x, az.size), _as_block("accel_y", accel_y, az.size), az])
+        a = np.empty((3, az.size))
+        a[0] = _as_block("accel_x", accel_x, az.size)
+        a[1] = _as_block("accel_y", accel_y, az.size)
+        a[2] = az
         if self._imu is None:
             self._imu = DisplacementIntegrator(self.config.dt, self.config.imu_f_cut, channels=3)
-            if self.state.imu is not None:
-                self._imu.load_state(self.state.imu)
+            if self._imu_saved is not None:
+                self._imu.load_state(self._imu_saved)
         start = self._imu.samples_seen
         d = self._imu.update(a)
-        self.state.imu = self._imu.state()
         settle_n = int(self._imu.settle_time_s / self.config.dt)
         settling = (start + np.arange(az.size)) < settle_n
+        x, y = d[0], d[1]
         if heading_deg is not None:
-            return self._with_settling(self.update(d[2], d[0], d[1], heading_deg), settling)
-        return self._estimate(d[0], d[1], d[2], settling)
-
-    @staticmethod
-    def _with_settling(est: Estimate, settling: NDArray[np.bool_]) -> Estimate:
-        flags = est.flags | (settling.astype(np.uint8) * np.uint8(Flag.SETTLING))
-        return Estimate(est.tension, est.quasi_static, est.axial, est.drag, est.top_angle, flags)
+            x, y = _rotate(x, y, heading_deg, az.size)
+        return self._estimate(x, y, d[2], settling)
 
     # ------------------------------------------------------------------ core
     def _estimate(self, x, y, z, settling) -> Estimate:
-        c, st = self.config, self.state
+        c = self.config
         n = z.size
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
         p = np.empty((3, n + 2))
         p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
-        fresh = st.history is None
+        fresh = self._hist is None
+        p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
+        x_off = np.hypot(c.span + x, y) - c.span
+        t_qs, h, v, qflags = self.quasi_static(x_off, z)
+        flags = np.array(qflags, dtype=np.uint8)
+        total, axial, drag, angle = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        self._jerk_y = _dynamic_core(
+            p, c.span, c.height, c.dt,
+            np.ascontiguousarray(t_qs, dtype=float), np.ascontiguousarray(h, dtype=float),
+            np.ascontiguousarray(v, dtype=float), flags,
+            self._axial_mode, self._axial_gain, c.drag is not None, self._drag_k, self._drag_b,
+            self._jerk_y, self._tan_flat, total, axial, drag, angle,
+        )
+        if settling is not None:
+            flags[settling] |= np.uint8(Flag.SETTLING)
         if fresh:
-            p[:, :2] = p[:, 2:3]  # start at rest
-        else:
-            p[:, :2] = np.asarray(st.history).T
-        inv_dt = 1.0 / c.dt
-        vel = (p[:, 2:] - p[:, 1:-1]) * inv_dt
-        acc = (p[:, 2:] - 2.0 * p[:, 1:-1] + p[:, :-2]) * (inv_dt * inv_dt)
+            flags[:2] |= np.uint8(Flag.SETTLING)
+        self._hist = p[:, -2:].copy()
+        self._seen += n
+        return Estimate(total, np.asarray(t_qs, dtype=float), axial, drag, angle, flags)
 
-        xs = c.span + p[0]
-        hor = np.hypot(xs, p[1])  # anchor -> fairlead horizontal distance, n + 2 values
-        hor_b = hor[2:]
-        t_qs, h, v, flags = self.quasi_static(hor_b - c.span, z)
-        flags = np.asarray(flags, dtype=np.uint8).copy()
-        t_safe = np.where(t_qs > 0.0, t_qs, 1.0)
-        cos_t, sin_t = h / t_safe, v / t_safe
-        # Horizontal unit vector anchor -> fairlead dotted with the fairlead velocity.
-        inv_hor = 1.0 / np.where(hor_b > 0.0, hor_b, 1.0)
-        ex, ey = xs[2:] * inv_hor, p[1, 2:] * inv_hor
-        axial = np.zeros(n)
-        if self._axial_gain:
-            src = acc if c.axial_model == "finite" else vel
-            tang = cos_t * (ex * src[0] + ey * src[1]) + sin_t * src[2]
-            axial = self._axial_gain * tang
 
-        drag = np.zeros(n)
-        if c.drag is not None:
-            chord = np.hypot(hor, c.height + p[2])
-            vz = (chord[2:] - chord[1:-1]) * inv_dt
-            yv, st.jerk_y = jerk_form_speed_squared(vz, c.dt, c.drag.mu, st.jerk_y)
-            drag = c.drag.tension_coefficient * yv
-            steep = v > self._tan_flat * h
-            flags |= steep.astype(np.uint8) * np.uint8(Flag.FLAT_CORD)
-
-        total = t_qs + axial + drag
-        slack = total <= 0.0
-        flags |= slack.astype(np.uint8) * np.uint8(Flag.SLACK)
-        total = np.where(slack, 0.0, total)
-        warm = np.zeros(n, dtype=bool) if settling is None else settling
-        if fresh:
-            warm[: min(2, n)] = True
-        flags |= warm.astype(np.uint8) * np.uint8(Flag.SETTLING)
-
-        st.history = p[:, -2:].T.tolist()
-        st.samples_seen += n
-        return Estimate(total, t_qs, axial, drag, np.arctan2(v, h), flags)
+def _rotate(x, y, heading_deg, n):
+    hd = np.asarray(heading_deg, dtype=float)
+    if not np.all(np.isfinite(hd)) or hd.ndim > 1 or (hd.ndim == 1 and hd.size != n):
+        raise ValueError("heading_deg must be finite, a scalar or one value per sample")
+    ch, sh = np.cos(np.radians(hd)), np.sin(np.radians(hd))
+    return ch * x - sh * y, sh * x + ch * y
 
 
 def simulate_tension(

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from models import imu, waves
 
@@ -42,6 +43,9 @@ def test_streaming_blocks_with_bias_and_drift(motion):
     # Blocks equal one call; state round-trip continues identically.
     one = imu.DisplacementIntegrator(0.05, f_cut=0.03).update(a)
     np.testing.assert_allclose(got, one, rtol=0, atol=1e-12)
+    # The filter kernel is scipy's sosfilt (same sections, same state layout).
+    integ = imu.DisplacementIntegrator(0.05, f_cut=0.03)
+    np.testing.assert_allclose(one, signal.sosfilt(integ._sos, a), rtol=1e-10, atol=1e-12)
     s1 = imu.DisplacementIntegrator(0.05, 0.03, channels=3)
     s1.update(np.vstack([a[:500]] * 3))
     s2 = imu.DisplacementIntegrator(0.05, 0.03, channels=3)
