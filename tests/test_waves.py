@@ -142,3 +142,18 @@ def test_buoy_motion_frame_and_accelerations():
     # Heave RAO: a long-period component passes unchanged; at resonance the response is 1/(2 zeta).
     assert abs(waves.heave_rao(np.array([1e-4]), 3.0, 0.2)[0]) == pytest.approx(1.0, rel=1e-6)
     assert abs(waves.heave_rao(np.array([2 * math.pi / 3.0]), 3.0, 0.2)[0]) == pytest.approx(2.5)
+
+
+def test_tz_agrees_with_qats_zero_crossings():
+    qsig = pytest.importorskip("qats.signal")
+    t, eta = waves.random_phase_series(lambda f: waves.jonswap(f, 2.0, 8.0), 3 * 3600.0, 0.25, 9)
+    ss = waves.sea_state_from_heave(eta, 0.25, f_max=1.0)
+    assert ss.tz == pytest.approx(1.0 / qsig.average_frequency(t, eta, up=True), rel=0.05)
+
+
+@pytest.mark.skipif(SHARED is None, reason="../shared absent")
+def test_sea_state_of_real_waverider_record():
+    raw = np.loadtxt(SHARED / "realdata/cdip_datawell_raw/cdip.raw", delimiter=",")
+    ss = waves.sea_state_from_heave(raw[:, 1] / 100.0, 1 / 1.28)
+    assert ss.hs == pytest.approx(1.84, abs=0.05)  # the record's documented Hm0
+    assert 5.0 < ss.tz < ss.tp < 20.0
