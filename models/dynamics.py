@@ -189,6 +189,26 @@ class ElasticDragCord:
         return self.tension_coefficient * v * np.abs(v)
 
 
+def form_parameter(x: ArrayLike, z: ArrayLike) -> tuple[float, float]:
+    """(alpha, chord) of a cable shape: alpha = the largest distance of the shape from its
+    chord, divided by the chord length (seed 001's "form parameter" y_max / l of a flat cord,
+    measured perpendicular to the chord so that it also applies to inclined cords).
+
+    ``x``, ``z``: points along the suspended part (m), e.g. a catenary profile from the
+    touchdown point to the fairlead.
+    """
+    xx = _finite("x", x)
+    zz = _finite("z", z)
+    if xx.shape != zz.shape or xx.ndim != 1 or xx.size < 3:
+        raise ValueError("x and z must be 1-D arrays of the same length >= 3")
+    dx, dz = xx[-1] - xx[0], zz[-1] - zz[0]
+    chord = math.hypot(dx, dz)
+    if chord <= 0:
+        raise ValueError("the shape's end points coincide")
+    dist = np.abs((xx - xx[0]) * dz - (zz - zz[0]) * dx) / chord
+    return float(dist.max() / chord), chord
+
+
 @numba.njit(cache=True, inline="always")
 def jerk_step(y: float, vz: float, b: float) -> float:
     """One implicit-Euler step of y' = (V_z - sign(y) sqrt|y|) / mu, b = dt / mu (inf: mu = 0).

@@ -140,3 +140,16 @@ def test_resonance_screen_hand_values():
     assert dyn.dynamic_amplification(3.0, 3.0, 0.05) == pytest.approx(10.0)
     with pytest.raises(ValueError, match="tension"):
         dyn.transverse_natural_periods(-1.0, 2.0, 40.0)
+
+
+def test_form_parameter():
+    # Level parabola with sag 5 m over 100 m: alpha = 0.05 exactly.
+    x = np.linspace(0, 100, 1001)
+    alpha, chord = dyn.form_parameter(x, -4 * 5.0 * x * (100 - x) / 100**2)
+    assert alpha == pytest.approx(0.05, rel=1e-9) and chord == pytest.approx(100.0)
+    # Seed 001's chain (a = 120 m, 80 m rise from the touchdown): alpha = 0.119 by this
+    # definition; the paper's 1/7.85 = 0.127 is its own (unstated) estimate.
+    xs = 120 * np.arccosh(1 + 80 / 120)
+    x = np.linspace(0, xs, 20001)
+    alpha, _ = dyn.form_parameter(x, 120 * (np.cosh(x / 120) - 1))
+    assert alpha == pytest.approx(0.1191, abs=2e-4)
