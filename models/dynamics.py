@@ -127,7 +127,8 @@ def hydrodynamic_constant(
     weight_per_length: float, cd: float, diameter: float, rho: float = 1025.0
 ) -> float:
     """Zajac's H = sqrt(2 w / (C_D rho d)) (m/s): the towing speed scale of a heavy cable."""
-    return math.sqrt(2.0 * _pos("weight_per_length", weight_per_length) / (_pos("cd", cd) * _pos("rho", rho) * _pos("diameter", diameter)))
+    w = _pos("weight_per_length", weight_per_length)
+    return math.sqrt(2.0 * w / (_pos("cd", cd) * _pos("rho", rho) * _pos("diameter", diameter)))
 
 
 def critical_angle(speed: ArrayLike, hydro_constant: float) -> NDArray[np.float64]:

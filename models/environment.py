@@ -210,8 +210,9 @@ def load_cycles(
         p = exceed[:-1] - exceed[1:]
         p[-1] += exceed[-1]
         # E[r^2 | bin] for the Rayleigh law, so that sum p r^2 = E[r^2] = 1/2 exactly.
-        r2 = (np.exp(-2 * r[:-1] ** 2) * (r[:-1] ** 2 + 0.5) - np.exp(-2 * r[1:] ** 2) * (r[1:] ** 2 + 0.5))
-        r2[-1] += exceed[-1] * (r[-1] ** 2 + 0.5)
+        moment = np.exp(-2.0 * r**2) * (r**2 + 0.5)  # integral of r^2 dP from r to infinity
+        r2 = moment[:-1] - moment[1:]
+        r2[-1] += moment[-1]
         r_rep = np.sqrt(r2 / p)
         h = (table.height[live][:, None] * r_rep[None, :]).ravel()
         t = np.repeat(tz[live], n_heights)
@@ -277,7 +278,9 @@ def damage(
         return np.where(np.isinf(n_fail), 0.0, cycles.counts / n_fail)
 
 
-def damage_per_row(cycles: LoadCycles, per_cycle_damage: NDArray[np.float64], n_rows: int) -> NDArray[np.float64]:
+def damage_per_row(
+    cycles: LoadCycles, per_cycle_damage: NDArray[np.float64], n_rows: int
+) -> NDArray[np.float64]:
     """Damage per sea-state row (e.g. per storm) from :func:`damage`'s per-entry values."""
     return np.bincount(cycles.row, weights=per_cycle_damage, minlength=n_rows)
 

@@ -63,7 +63,9 @@ def _check_range(name: str, rng: tuple[float, float]) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def _range_flags(x: NDArray, z: NDArray, xr: tuple[float, float], zr: tuple[float, float]) -> NDArray[np.uint8]:
+def _range_flags(
+    x: NDArray, z: NDArray, xr: tuple[float, float], zr: tuple[float, float]
+) -> NDArray[np.uint8]:
     out = (x < xr[0]) | (x > xr[1]) | (z < zr[0]) | (z > zr[1])
     return out.astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
 
@@ -147,7 +149,9 @@ class QuasiStaticGrid:
     flags: NDArray[np.uint8]
 
     @classmethod
-    def from_function(cls, quasi_static: QuasiStatic, x: ArrayLike, z: ArrayLike) -> QuasiStaticGrid:
+    def from_function(
+        cls, quasi_static: QuasiStatic, x: ArrayLike, z: ArrayLike
+    ) -> QuasiStaticGrid:
         xg = np.asarray(x, dtype=float)
         zg = np.asarray(z, dtype=float)
         for name, g in (("x", xg), ("z", zg)):
@@ -203,9 +207,15 @@ class EstimatorConfig:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"EstimatorConfig.{name} must be finite and > 0, got {v!r}")
         if self.axial_model not in ("finite", "infinite", "none"):
-            raise ValueError(f"EstimatorConfig.axial_model must be finite|infinite|none, got {self.axial_model!r}")
+            raise ValueError(
+                "EstimatorConfig.axial_model must be finite|infinite|none, "
+                f"got {self.axial_model!r}"
+            )
         if not 0 < self.flat_cord_max_deg <= 90:
-            raise ValueError(f"EstimatorConfig.flat_cord_max_deg must be in (0, 90], got {self.flat_cord_max_deg!r}")
+            raise ValueError(
+                "EstimatorConfig.flat_cord_max_deg must be in (0, 90], "
+                f"got {self.flat_cord_max_deg!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -234,7 +244,12 @@ class EstimatorState:
     imu: dict | None = field(default=None)
 
     def to_dict(self) -> dict:
-        return {"history": self.history, "jerk_y": self.jerk_y, "samples_seen": self.samples_seen, "imu": self.imu}
+        return {
+            "history": self.history,
+            "jerk_y": self.jerk_y,
+            "samples_seen": self.samples_seen,
+            "imu": self.imu,
+        }
 
     @classmethod
     def from_dict(cls, d: dict) -> EstimatorState:
@@ -242,12 +257,15 @@ class EstimatorState:
         if hist is not None:
             arr = np.asarray(hist, dtype=float)
             if arr.shape != (2, 3) or not np.all(np.isfinite(arr)):
-                raise ValueError("estimator state history must be 2 finite (surge, sway, heave) rows")
+                raise ValueError(
+                    "estimator state history must be 2 finite (surge, sway, heave) rows"
+                )
             hist = arr.tolist()
         y = float(d.get("jerk_y", 0.0))
         if not math.isfinite(y):
             raise ValueError(f"estimator state jerk_y must be finite, got {y!r}")
-        return cls(history=hist, jerk_y=y, samples_seen=int(d.get("samples_seen", 0)), imu=d.get("imu"))
+        seen = int(d.get("samples_seen", 0))
+        return cls(history=hist, jerk_y=y, samples_seen=seen, imu=d.get("imu"))
 
 
 def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]:
@@ -325,7 +343,12 @@ class MotionTensionEstimator:
     >>> est2 = MotionTensionEstimator(config, quasi_static, EstimatorState.from_dict(saved))
     """
 
-    def __init__(self, config: EstimatorConfig, quasi_static: QuasiStatic, state: EstimatorState | None = None):
+    def __init__(
+        self,
+        config: EstimatorConfig,
+        quasi_static: QuasiStatic,
+        state: EstimatorState | None = None,
+    ):
         self.config = config
         self.quasi_static = quasi_static
         st = state if state is not None else EstimatorState()

@@ -47,7 +47,7 @@ class WavforBuoy:
 
 @dataclass(frozen=True)
 class WaveForce:
-    """Horizontal and vertical force (N), their resultant (N) and its angle above horizontal (deg)."""
+    """Horizontal and vertical force (N); resultant (N) and its angle above horizontal (deg)."""
 
     horizontal: NDArray[np.float64]
     vertical: NDArray[np.float64]
