@@ -31,6 +31,15 @@ REGIMES = {
 }
 
 
+def _number(value, name: str) -> float:
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be a number, got {value!r}") from err
+
+
 @dataclass(frozen=True)
 class Segment:
     """Homogeneous piece of line: unstretched length (m), submerged weight (N/m, negative =
@@ -42,6 +51,8 @@ class Segment:
     name: str = ""
 
     def __post_init__(self) -> None:
+        for name in ("length", "weight", "ea"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"segment {name}"))
         if not (math.isfinite(self.length) and self.length > 0.0):
             raise ValueError(f"segment length must be finite and > 0, got {self.length!r}")
         if not math.isfinite(self.weight):
@@ -60,6 +71,8 @@ class Joint:
     name: str = ""
 
     def __post_init__(self) -> None:
+        for name in ("weight", "mass"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"joint {name}"))
         if not math.isfinite(self.weight):
             raise ValueError(f"joint weight must be finite, got {self.weight!r}")
         if not (math.isfinite(self.mass) and self.mass >= 0.0):
@@ -89,7 +102,7 @@ class Line:
         if len(joints) != len(segs) - 1 or not all(isinstance(j, Joint) for j in joints):
             raise ValueError(f"need {len(segs) - 1} Joint objects between {len(segs)} segments, "
                              f"got {len(joints)}")
-        mu = float(self.seabed_friction)
+        mu = _number(self.seabed_friction, "seabed_friction")
         if not (math.isfinite(mu) and mu >= 0.0):
             raise ValueError(f"seabed_friction must be finite and >= 0, got {mu!r}")
         object.__setattr__(self, "segments", segs)
@@ -205,8 +218,21 @@ class LineSolution:
         return _profile(self, int(n))
 
 
+def _as_float_array(value, name: str) -> np.ndarray:
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be numeric, got {value!r}") from err
+
+
 def _check_inputs(line: Line, span, height) -> tuple[np.ndarray, np.ndarray]:
-    x, z = np.broadcast_arrays(np.asarray(span, dtype=float), np.asarray(height, dtype=float))
+    try:
+        x, z = np.broadcast_arrays(_as_float_array(span, "span"),
+                                   _as_float_array(height, "height"))
+    except ValueError as err:
+        if "numeric" in str(err):
+            raise
+        raise ValueError(f"span and height do not broadcast together: {err}") from err
     if not np.all(np.isfinite(x)):
         raise ValueError("span must be finite (got NaN or inf)")
     if not np.all(np.isfinite(z)):
@@ -314,8 +340,9 @@ def solve_line(span, height, length: float, weight: float, ea: float = math.inf,
     submerged `weight` (N/m, negative = buoyant), axial stiffness `ea` (N, inf =
     inextensible), flat seabed at the anchor with Coulomb `seabed_friction`, or
     `seabed=False` for a free line that may dip below the anchor (seed 003)."""
-    return solve(_homogeneous(float(length), float(weight), float(ea), bool(seabed),
-                              float(seabed_friction)), span, height)
+    return solve(_homogeneous(_number(length, "length"), _number(weight, "weight"),
+                              _number(ea, "ea"), bool(seabed),
+                              _number(seabed_friction, "seabed_friction")), span, height)
 
 
 @functools.lru_cache(maxsize=64)
