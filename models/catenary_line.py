@@ -7,6 +7,14 @@ suspended part and the vertical tension grows by the submerged weight of every e
 On the seabed (flat, at the anchor's level) the grounded part carries a tension that friction
 lowers by mu * w per metre from the touchdown point towards the anchor (never below zero).
 
+Regimes (LineSolution.regime, names in REGIMES): fully suspended (including near-taut and
+vertical lines: span 0 is solved as the limit span = 1e-9 L, H -> 0), grounded with and without
+tension at the anchor, slack (H = 0: the heavy part piles on the seabed under a vertical column
+that may fold over buoyant parts), and lying on the seabed. Limits: the seabed is flat at the
+anchor's level and only the heavy part next to the anchor (no floats in it) may touch it; a
+configuration that needs contact elsewhere (a mid-line sag or a float pressed down) is a clear
+ValueError. An inextensible line that cannot reach the fairlead is a ValueError.
+
 Conventions: x horizontal from the anchor towards the fairlead, z up from the anchor; weights
 are SUBMERGED weights per unit length (N/m, negative = buoyant); tensions in N; stiffness
 entries are derivatives of the fairlead force (H, V) with respect to fairlead motion (x, z).
@@ -225,14 +233,22 @@ def _as_float_array(value, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be numeric, got {value!r}") from err
 
 
-def _check_inputs(line: Line, span, height) -> tuple[np.ndarray, np.ndarray]:
+def broadcast_pair(a, b, names: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """Two inputs as float arrays of their common shape (real copies where broadcasting
+    expands them, so the compiled kernels get ordinary contiguous arrays)."""
+    x = _as_float_array(a, names[0])
+    z = _as_float_array(b, names[1])
     try:
-        x, z = np.broadcast_arrays(_as_float_array(span, "span"),
-                                   _as_float_array(height, "height"))
+        shape = np.broadcast_shapes(x.shape, z.shape)
     except ValueError as err:
-        if "numeric" in str(err):
-            raise
-        raise ValueError(f"span and height do not broadcast together: {err}") from err
+        raise ValueError(f"{names[0]} and {names[1]} do not broadcast together: {err}") from err
+    x = np.require(x if x.shape == shape else np.broadcast_to(x, shape).copy(), requirements="C")
+    z = np.require(z if z.shape == shape else np.broadcast_to(z, shape).copy(), requirements="C")
+    return x, z
+
+
+def _check_inputs(line: Line, span, height) -> tuple[np.ndarray, np.ndarray]:
+    x, z = broadcast_pair(span, height, ("span", "height"))
     if not np.all(np.isfinite(x)):
         raise ValueError("span must be finite (got NaN or inf)")
     if not np.all(np.isfinite(z)):
