@@ -253,16 +253,19 @@ def encode_block(block: SampleBlock) -> bytes:
 
 @numba.njit(cache=True, inline="always")
 def _read_varint(buf, p, end):
-    """(value, next position); next position -1 when the varint runs past ``end``."""
-    result = np.uint64(0)
-    shift = np.uint64(0)
+    """(value as int64 bit pattern, next position); next position -1 past ``end`` or overlong.
+
+    Plain int64 arithmetic on purpose: mixing uint64 and int64 makes numba go through floats.
+    """
+    result = 0
+    shift = 0
     while p < end:
-        b = np.uint64(buf[p])
+        b = np.int64(buf[p])
         p += 1
-        result |= (b & np.uint64(0x7F)) << shift
+        result |= (b & 0x7F) << shift
         if b < 0x80:
             return result, p
-        shift += np.uint64(7)
+        shift += 7
         if shift >= 70:
             return result, -1
     return result, -1
@@ -270,10 +273,10 @@ def _read_varint(buf, p, end):
 
 @numba.njit(cache=True, inline="always")
 def _read_i64(buf, p):
-    v = np.uint64(0)
+    v = 0
     for i in range(8):
-        v |= np.uint64(buf[p + i]) << np.uint64(8 * i)
-    return np.int64(v)
+        v |= np.int64(buf[p + i]) << (8 * i)
+    return v
 
 
 @numba.njit(cache=True)
@@ -288,9 +291,9 @@ def _skip(buf, p, end, wt):
         return p + 4 if p + 4 <= end else -1
     if wt == 2:
         ln, p = _read_varint(buf, p, end)
-        if p < 0 or p + np.int64(ln) > end:
+        if p < 0 or p + ln > end:
             return -1
-        return p + np.int64(ln)
+        return p + ln
     return -1
 
 
@@ -316,8 +319,8 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
             if p < 0:
                 st = 1
                 break
-            fnum = np.int64(tag >> np.uint64(3))
-            wt = np.int64(tag & np.uint64(7))
+            fnum = tag >> 3
+            wt = tag & 7
             j = -1
             for q in range(nf):
                 if fn_vals[q] == fnum:
@@ -331,13 +334,13 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
                 p += 8
             elif fnum == fn_period and wt == 0:
                 v, p = _read_varint(buf, p, end)
-                periods[k] = np.int64(v)
+                periods[k] = v
             elif fnum == fn_off and wt == 2:
                 ln, p = _read_varint(buf, p, end)
-                if p < 0 or p + np.int64(ln) > end:
+                if p < 0 or p + ln > end:
                     st = 1
                     break
-                e2 = p + np.int64(ln)
+                e2 = p + ln
                 while p < e2:
                     _, p = _read_varint(buf, p, e2)
                     if p < 0:
@@ -351,11 +354,11 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
                 noff += 1
             elif j >= 0 and wt == 2:
                 ln, p = _read_varint(buf, p, end)
-                if p < 0 or p + np.int64(ln) > end or np.int64(ln) % 8 != 0:
+                if p < 0 or p + ln > end or ln % 8 != 0:
                     st = 1
                     break
-                cnt[j] += np.int64(ln) // 8
-                p += np.int64(ln)
+                cnt[j] += ln // 8
+                p += ln
             elif j >= 0 and wt == 1:
                 if p + 8 > end:
                     st = 1
@@ -401,8 +404,8 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
         noff = 0
         while p < end:
             tag, p = _read_varint(buf, p, end)
-            fnum = np.int64(tag >> np.uint64(3))
-            wt = np.int64(tag & np.uint64(7))
+            fnum = tag >> 3
+            wt = tag & 7
             j = -1
             for q in range(nf):
                 if fn_vals[q] == fnum:
@@ -411,19 +414,17 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
                 e2 = p + 1  # one varint for the unpacked form
                 if wt == 2:
                     ln, p = _read_varint(buf, p, end)
-                    e2 = p + np.int64(ln)
+                    e2 = p + ln
                 while p < e2:
                     z, p = _read_varint(buf, p, end)
-                    t[pos + noff] = np.int64(z >> np.uint64(1)) ^ -np.int64(z & np.uint64(1))
+                    t[pos + noff] = ((z >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(z & 1)
                     noff += 1
             elif j >= 0 and (wt == 2 or wt == 1):
-                ln = np.int64(8)
+                ln = 8
                 if wt == 2:
-                    l2, p = _read_varint(buf, p, end)
-                    ln = np.int64(l2)
+                    ln, p = _read_varint(buf, p, end)
                 base = (pos + fill[j]) * 8
-                for b in range(ln):
-                    vb[j, base + b] = buf[p + b]
+                vb[j, base:base + ln] = buf[p:p + ln]
                 fill[j] += ln // 8
                 p += ln
             else:

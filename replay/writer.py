@@ -172,13 +172,14 @@ class LogWriter:
     Args:
         path: output file (created or truncated).
         chunk_size: target uncompressed chunk size in bytes.
-        zstd_level: zstd compression level of the chunks.
+        zstd_level: zstd compression level of the chunks (1: noisy float samples barely
+            compress at any level, and level 1 is the fastest).
 
     Use as a context manager or call :meth:`close`; a writer that is never closed leaves a
     file without footer, which :mod:`replay.reader` still reads up to the last closed chunk.
     """
 
-    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 1 << 20, zstd_level: int = 3):
+    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 1 << 20, zstd_level: int = 1):
         if chunk_size < 1024:
             raise ValueError(f"chunk_size = {chunk_size}: must be at least 1024 bytes")
         self.path = Path(path)
