@@ -219,6 +219,17 @@ def _gather_index(start: np.ndarray, n: np.ndarray) -> np.ndarray:
     return np.repeat(start - first, n) + np.arange(total)
 
 
+def _take(t: np.ndarray, v: np.ndarray, start: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Samples of messages (start, n) in that order: views when they are contiguous (usual)."""
+    if start.shape[0] == 0:
+        return t[:0], v[:, :0]
+    if np.array_equal(start[1:], start[:-1] + n[:-1]):
+        a, b = int(start[0]), int(start[-1] + n[-1])
+        return t[a:b], v[:, a:b]
+    idx = _gather_index(start, n)
+    return t[idx], v[:, idx]
+
+
 _COLS = ("stream", "pub", "log", "start", "n", "seq", "file")
 
 
@@ -475,9 +486,9 @@ class LogReader:
         for s, (t, v) in stores.items():
             stream = self._streams[s]
             mine = keep["stream"] == s
-            idx = _gather_index(keep["start"][mine], keep["n"][mine])
-            stream.t_parts, stream.v_parts = [t[idx]], [v[:, idx]]
-            stream.length = idx.shape[0]
+            kt, kv = _take(t, v, keep["start"][mine], keep["n"][mine])
+            stream.t_parts, stream.v_parts = [kt], [kv]
+            stream.length = kt.shape[0]
             keep["start"][mine] = np.cumsum(keep["n"][mine]) - keep["n"][mine]
         self._pending = [keep] if keep["pub"].shape[0] else []
         yield from blocks
@@ -516,8 +527,7 @@ class LogReader:
             t, v = stores[s]
             names = list(SENSOR_FIELDS[stream.sensor])
             if self.coalesce:
-                idx = _gather_index(rel["start"][mine], rel["n"][mine])
-                tt, vv = t[idx], v[:, idx]
+                tt, vv = _take(t, v, rel["start"][mine], rel["n"][mine])
                 blk = SampleBlock(stream.buoy_id, stream.sensor, tt,
                                   {f: vv[q] for q, f in enumerate(names)}, int(rel["log"][mine].max()))
                 out.append((int(rel["pub"][mine[0]]), int(rank[s]), int(mine[0]), blk))
