@@ -16,7 +16,9 @@ Salvage (what is recovered, what is reported lost, see :class:`FileStats`):
 * a file cut inside a chunk: every complete message record of the decompressible prefix of the
   chunk is recovered, the rest is reported lost (count unknown);
 * a missing footer/summary is only noted (``complete = False``): nothing is lost by it;
-* a corrupt record header (impossible opcode) ends the file's reading there (lost tail);
+* a corrupt record header (impossible opcode or length) is reported and reading resumes at
+  the next chunk found by its signature (a chunk whose length field alone is corrupt is
+  still read whole when its CRC verifies);
 * a payload that is not a valid block is dropped and counted in ``bad_payloads``.
 Nothing raises on a damaged file; a file where nothing could be read has ``error`` set and
 ``messages == 0``; :attr:`LogReader.ok` is False when no file delivered any message.
@@ -176,6 +178,35 @@ def _scan_records(buf):
     return ch[:m], log[:m], pub[:m], doff[:m], dlen[:m], oop[:o], ooff[:o], olen[:o], p, status
 
 
+_MAX_CUT_CHUNK = 64 << 20  # bytes read for a chunk whose length runs past the end of file
+_CHUNK_SIGNATURES = (b"\x04\x00\x00\x00zstd", b"\x03\x00\x00\x00lz4")
+_SIG_AT = 37  # opcode, length, start, end, uncompressed size, CRC: then the compression string
+
+
+def _find_chunk(f, start: int, size: int) -> int | None:
+    """Offset of the first plausible compressed Chunk record at or after ``start``, else None."""
+    block = 1 << 20
+    at = start
+    while at < size:
+        f.seek(at)
+        buf = f.read(block + 64)
+        hits = []
+        for sig in _CHUNK_SIGNATURES:
+            i = buf.find(sig)
+            while i >= 0:
+                s = at + i - _SIG_AT
+                if s >= start and i >= _SIG_AT and buf[i - _SIG_AT] == OP_CHUNK:
+                    (ln,) = struct.unpack_from("<Q", buf, i - _SIG_AT + 1)
+                    if 0 < ln <= size - s - 9:
+                        hits.append(s)
+                        break
+                i = buf.find(sig, i + 1)
+        if hits:
+            return min(hits)
+        at += block
+    return None
+
+
 def _str_at(b: bytes | memoryview, p: int) -> tuple[str, int]:
     (n,) = struct.unpack_from("<I", b, p)
     return bytes(b[p + 4:p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
@@ -302,10 +333,21 @@ class LogReader:
                         st.lost.append(LostRange("file cut inside a record header", pos))
                     break
                 op, ln = struct.unpack("<BQ", head)
-                if op == 0:
-                    st.lost.append(LostRange(f"corrupt record (opcode 0) at byte {pos}", pos))
-                    break
                 cut = ln > size - pos - 9
+                if op == 0 or 0x10 <= op < 0x80 or (cut and op != OP_CHUNK):
+                    # an impossible record header: skip to the next chunk if there is one
+                    why = "file cut inside a record" if cut and op else f"corrupt record (opcode {op})"
+                    nxt = _find_chunk(f, pos + 1, size)
+                    tail = "" if nxt is None else f"; skipped {nxt - pos} bytes to the next chunk"
+                    # a cut index/summary record holds no messages; a corrupt header may hide some
+                    known_empty = cut and 0 < op < 0x10 and op != OP_MESSAGE
+                    st.lost.append(LostRange(f"{why} at byte {pos}{tail}", pos,
+                                             messages=0 if known_empty else None))
+                    if nxt is None:
+                        break
+                    f.seek(nxt)
+                    pos = nxt
+                    continue
                 if op == OP_MESSAGE and not cut:
                     loose.append(head + f.read(ln))
                     if len(loose) >= 4096:
@@ -321,12 +363,16 @@ class LogReader:
                 if awaiting is not None and op != OP_MESSAGE_INDEX:
                     awaiting = None
                 if op == OP_CHUNK:
-                    content = f.read(ln)
+                    content = f.read(min(ln, _MAX_CUT_CHUNK) if cut else ln)
                     awaiting = self._chunk(content, pos, cut, ctx, st)
                     yield
-                elif cut:
-                    st.lost.append(LostRange("file cut inside a record", pos))
-                    break
+                    if cut:  # a truncated file, or a corrupt length: look for a next chunk
+                        nxt = _find_chunk(f, pos + 1, size)
+                        if nxt is None:
+                            break
+                        f.seek(nxt)
+                        pos = nxt
+                        continue
                 elif op in (OP_SCHEMA, OP_CHANNEL):
                     ctx.definition(op, f.read(ln), self, st)
                 elif op == OP_MESSAGE_INDEX and awaiting is not None:
@@ -386,6 +432,8 @@ class LogReader:
                 st.bad_chunks += 1
                 return None
             return lose(f"chunk does not decompress: {e}")
+        if cut and len(raw) == usize and crc != 0 and zlib.crc32(raw) == crc:
+            cut = False  # the whole chunk is there and verified (its length field was wrong)
         if cut:
             n = self._records(np.frombuffer(raw, np.uint8), ctx, st)
             st.bad_chunks += 1

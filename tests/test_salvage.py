@@ -70,6 +70,17 @@ def test_missing_footer_loses_nothing(log, tmp_path):
             list(make_reader(f).iter_messages())
 
 
+def test_cut_inside_the_index_after_the_last_chunk_loses_no_message(log, tmp_path):
+    path, data, chunks = log
+    last = chunks[-1]
+    cut = tmp_path / "cutindex.mcap"
+    cut.write_bytes(data[:last.chunk_start_offset + last.chunk_length + 20])
+    _, st, values = _read(cut)
+    assert np.array_equal(values, np.arange(N_SECONDS * 20.0))
+    (lost,) = st.lost
+    assert lost.messages == 0 and "file cut inside a record" in lost.reason
+
+
 def test_cut_mid_chunk_recovers_every_complete_message(tmp_path):
     # noisy values in a 600 kB chunk: several zstd blocks, so a prefix of it decompresses
     path = tmp_path / "big.mcap"
@@ -148,7 +159,7 @@ def test_missing_file_is_reported(tmp_path):
     assert not reader.ok and "cannot open" in st.error
 
 
-def test_corrupt_record_header_ends_the_file_there(log, tmp_path):
+def test_corrupt_record_header_skips_to_the_next_chunk(log, tmp_path):
     path, data, chunks = log
     victim = chunks[4]
     bad = bytearray(data)
@@ -156,8 +167,23 @@ def test_corrupt_record_header_ends_the_file_there(log, tmp_path):
     p = tmp_path / "opcode.mcap"
     p.write_bytes(bytes(bad))
     reader, st, values = _read(p)
-    assert values.shape[0] == sum(_messages_in(path, c) for c in chunks[:4]) * 20
-    assert "corrupt record" in st.lost[0].reason and reader.ok
+    first_lost = sum(_messages_in(path, c) for c in chunks[:4]) * 20
+    n_lost = _messages_in(path, victim) * 20
+    assert np.array_equal(values, np.delete(np.arange(N_SECONDS * 20.0), np.s_[first_lost:first_lost + n_lost]))
+    (lost,) = st.lost
+    assert lost.reason.startswith("corrupt record (opcode 0)") and lost.offset == victim.chunk_start_offset
+    assert "next chunk" in lost.reason and st.complete
+
+
+def test_corrupt_chunk_length_loses_nothing_when_the_crc_verifies(log, tmp_path):
+    path, data, chunks = log
+    bad = bytearray(data)
+    struct.pack_into("<Q", bad, chunks[2].chunk_start_offset + 1, 10**12)
+    p = tmp_path / "length.mcap"
+    p.write_bytes(bytes(bad))
+    _, st, values = _read(p)
+    assert np.array_equal(values, np.arange(N_SECONDS * 20.0))
+    assert not st.lost and st.complete
 
 
 def test_one_damaged_file_among_good_ones(log, tmp_path):
