@@ -60,7 +60,7 @@ from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
 from replay import codec
 from replay.writer import (
     MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, OP_MESSAGE_INDEX,
-    OP_SCHEMA,
+    OP_SCHEMA, OP_STATISTICS,
 )
 
 
@@ -95,6 +95,8 @@ class FileStats:
     late: int = 0
     bad_payloads: int = 0
     skipped: dict[str, int] = field(default_factory=dict)  # non-sensor / undecodable channels
+    first_ns: int | None = None  # earliest / latest publish time of the sensor messages read
+    last_ns: int | None = None
     lost: list[LostRange] = field(default_factory=list)
     error: str | None = None
 
@@ -482,6 +484,10 @@ class LogReader:
             st.messages_by_topic[topic] = st.messages_by_topic.get(topic, 0) + sel.shape[0]
             st.messages += sel.shape[0]
             st.samples += int(n.sum())
+            if sel.shape[0]:
+                lo, hi = int(pub[sel].min()), int(pub[sel].max())
+                st.first_ns = lo if st.first_ns is None else min(st.first_ns, lo)
+                st.last_ns = hi if st.last_ns is None else max(st.last_ns, hi)
             parts.append({"stream": np.full(sel.shape[0], sidx, np.int64), "pub": pub[sel],
                           "log": log[sel], "start": start, "n": n, "seq": seq[sel],
                           "file": np.full(sel.shape[0], ctx.fidx, np.int64)})
@@ -627,6 +633,46 @@ class _FileContext:
             self.channels[cid] = f"{topic} (undecodable schema: {e})"
             return
         self.channels[cid] = (sidx, numbers)
+
+
+def time_span(paths: Sequence[str | PathLike] | str | PathLike) -> tuple[int, int] | None:
+    """(first, last) message log time over the files, from their summary Statistics records.
+
+    Cheap (reads only the ends of the files), for progress bars; files without a readable
+    footer/summary are left out, and None is returned when no file has one.
+    """
+    if isinstance(paths, (str, PathLike)):
+        paths = [paths]
+    lo = hi = None
+    for path in expand_paths(paths):
+        try:
+            with open(path, "rb") as f:
+                f.seek(0, 2)
+                size = f.tell()
+                if size < 8 + 37 + 8:
+                    continue
+                f.seek(size - 8 - 29)
+                tail = f.read(29 + 8)
+                if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
+                    continue
+                summary_start, offsets_start = struct.unpack_from("<QQ", tail, 9)
+                if not 0 < summary_start < size:
+                    continue
+                f.seek(summary_start)
+                summary = f.read((offsets_start or size - 37 - 8) - summary_start)
+        except OSError:
+            continue
+        p = 0
+        while p + 9 <= len(summary):
+            op, ln = struct.unpack_from("<BQ", summary, p)
+            if op == OP_STATISTICS and p + 9 + 42 <= len(summary):
+                t0, t1 = struct.unpack_from("<QQ", summary, p + 9 + 26)
+                if t1 >= t0 > 0:
+                    lo = t0 if lo is None else min(lo, t0)
+                    hi = t1 if hi is None else max(hi, t1)
+                break
+            p += 9 + ln
+    return None if lo is None else (lo, hi)
 
 
 def iter_blocks(paths: Sequence[str | PathLike] | str | PathLike, coalesce: bool = True,

@@ -11,7 +11,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
-from replay.reader import LogReader, iter_blocks, reference_blocks
+from replay.reader import LogReader, iter_blocks, reference_blocks, time_span
 from replay.writer import LogWriter, Series, alert_topic, status_topic
 
 T0 = 1_750_000_000 * 10**9
@@ -228,3 +228,18 @@ def test_foreign_mcap_unchunked_and_lz4_files_are_read(tmp_path):
             w.finish()
         got = list(LogReader(path, coalesce=False))
         assert len(got) == 12 and all(_same(a, b) for a, b in zip(got, blocks))
+
+
+def test_time_span_from_the_summary_and_first_last_in_stats(mixed_log, tmp_path):
+    path, _ = mixed_log
+    with open(path, "rb") as f:
+        stats = make_reader(f).get_summary().statistics
+    assert time_span(path) == (stats.message_start_time, stats.message_end_time)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:-100])
+    assert time_span(cut) is None and time_span([cut, path]) == time_span(path)
+    with open(path, "rb") as f:
+        pubs = [m.publish_time for _, c, m in make_reader(f).iter_messages() if "/sensor/" in c.topic]
+    reader = LogReader(path)
+    list(reader)
+    assert (reader.stats[0].first_ns, reader.stats[0].last_ns) == (min(pubs), max(pubs)) == (T0, max(pubs))
