@@ -1,0 +1,477 @@
+"""The pipeline core shared by ``buoymon replay`` and the daemon.
+
+``Pipeline.process(block)`` takes :class:`~monitor.blocks.SampleBlock` objects of one buoy in
+any interleaving and block size and runs, on sensor time only::
+
+    ordering (watermark slabs) -> validate -> motion estimate -> load source ->
+    stress per component -> streaming rainflow -> Miner damage (per alert tick) ->
+    alert rules on the fixed tick grid -> StepResult to the sinks
+
+Determinism: every stage is a function of the samples in time order with its memory carried
+across blocks (see monitor.ordering, monitor.validate, monitor.load_source,
+monitor.components), so the same samples give the same committed damage and alert history
+whichever driver cuts them into blocks. ``state()`` is complete and JSON-serialisable;
+``Pipeline(config, state=s)`` continues exactly where ``s`` was taken.
+
+Alert ticks: tick ``k`` covers sensor time ``((k-1) I, k I]`` with ``I = [alerts]
+eval_interval_s``. A tick is evaluated once the ordering watermark has passed its end (or, at
+``flush()``, once the slowest stream's data has); the trailing partial tick of a log waits for
+data that would complete it, so a log replayed in parts gives the same history as one pass.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Iterable, Mapping, Protocol, Sequence
+
+import numpy as np
+
+from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.components import Component, build_cable
+from monitor.config import Config
+from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
+from monitor.load_source import ESTIMATED, MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
+from monitor.ordering import SENSOR_ORDER, ReorderBuffer
+from monitor.validate import REASONS, StreamValidator
+
+STATE_VERSION = 1
+ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
+_NEVER = np.iinfo(np.int64).min
+
+
+class AlertEngineLike(Protocol):
+    """What the pipeline needs from monitor.alerts.engine.AlertEngine."""
+
+    def evaluate(self, obs: Observation) -> list[Any]: ...
+
+    def state(self) -> dict[str, Any]: ...
+
+
+class NullAlertEngine:
+    """Used when monitor.alerts is not installed: no rules, no alerts."""
+
+    def evaluate(self, obs: Observation) -> list[Any]:
+        return []
+
+    def state(self) -> dict[str, Any]:
+        return {}
+
+
+def build_alert_engine(config: Config, buoy_id: str, components: Sequence[str],
+                       state: Mapping[str, Any] | None) -> AlertEngineLike:
+    try:
+        from monitor.alerts.engine import AlertEngine
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("monitor.alerts", "monitor.alerts.engine"):
+            raise
+        return NullAlertEngine()
+    if state:
+        return AlertEngine.from_state(state, config=config, buoy_id=buoy_id,
+                                      components=list(components))
+    return AlertEngine.from_config(config, buoy_id, list(components))
+
+
+def alert_to_dict(record: Any) -> dict[str, Any]:
+    if hasattr(record, "to_dict"):
+        return record.to_dict()
+    if dataclasses.is_dataclass(record):
+        return dataclasses.asdict(record)
+    return dict(record)
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+class _TensionStats:
+    """Streaming min/mean/max/p99 of the fatigue load on a fixed histogram (flat memory)."""
+
+    BINS = 65536
+
+    def __init__(self, lo: float, hi: float, state: Mapping[str, Any] | None = None) -> None:
+        self.lo, self.hi = lo, hi
+        self.width = (hi - lo) / self.BINS
+        self.hist = np.zeros(self.BINS, dtype=np.int64)
+        self.n = {"measured": 0, "estimated": 0}
+        self.total = 0.0
+        self.min = math.inf
+        self.max = -math.inf
+        if state is not None:
+            idx, counts = state["hist"]
+            self.hist[np.array(idx, dtype=np.int64)] = np.array(counts, dtype=np.int64)
+            self.n = dict(state["n"])
+            self.total = float(state["total"])
+            self.min = math.inf if state["min"] is None else float(state["min"])
+            self.max = -math.inf if state["max"] is None else float(state["max"])
+
+    def add(self, v: np.ndarray, src: np.ndarray) -> None:
+        if v.shape[0] == 0:
+            return
+        bins = np.clip(((v - self.lo) / self.width).astype(np.int64), 0, self.BINS - 1)
+        self.hist += np.bincount(bins, minlength=self.BINS)
+        n_meas = int(np.count_nonzero(src == MEASURED))
+        self.n["measured"] += n_meas
+        self.n["estimated"] += v.shape[0] - n_meas
+        self.total += float(v.sum())
+        self.min = min(self.min, float(v.min()))
+        self.max = max(self.max, float(v.max()))
+
+    def summary(self) -> dict[str, Any]:
+        count = self.n["measured"] + self.n["estimated"]
+        if count == 0:
+            return {"min": None, "mean": None, "max": None, "p99": None,
+                    "samples_measured": 0, "samples_estimated": 0}
+        k = int(np.searchsorted(np.cumsum(self.hist), math.ceil(0.99 * count)))
+        p99 = min(max(self.lo + (k + 0.5) * self.width, self.min), self.max)
+        return {"min": self.min, "mean": self.total / count, "max": self.max, "p99": p99,
+                "samples_measured": self.n["measured"], "samples_estimated": self.n["estimated"]}
+
+    def state(self) -> dict[str, Any]:
+        idx = np.flatnonzero(self.hist)
+        return {"hist": [idx.tolist(), self.hist[idx].tolist()], "n": dict(self.n),
+                "total": self.total, "min": _finite_or_none(self.min),
+                "max": _finite_or_none(self.max)}
+
+
+class _StreamSlab:
+    """One stream's share of a slab with its verdicts, for per-tick counters and totals."""
+
+    def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray, accepted: int,
+                 rejected: Mapping[str, int], has_last: bool, last_t: int) -> None:
+        self.t, self.codes = t, codes
+        ok = codes == 0
+        self.acc_t, self.acc_values = t[ok], values[:, ok]
+        self.rej_t = t[~ok]
+        self._before = (accepted, dict(rejected), has_last, last_t)
+        self._cum: np.ndarray | None = None
+
+    @staticmethod
+    def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
+        return v.accepted, dict(v.rejected), v.has_last, v.last_t_ns
+
+    def counts_between(self, lo: int, hi: int | None) -> tuple[int, int]:
+        """Samples received and rejected with time in ``(lo, hi]`` (``hi`` None = to the end)."""
+        hi_i = self.t.shape[0] if hi is None else int(np.searchsorted(self.t, hi, side="right"))
+        lo_i = int(np.searchsorted(self.t, lo, side="right"))
+        hi_j = self.rej_t.shape[0] if hi is None else int(np.searchsorted(self.rej_t, hi, side="right"))
+        lo_j = int(np.searchsorted(self.rej_t, lo, side="right"))
+        return hi_i - lo_i, hi_j - lo_j
+
+    def totals_at(self, now: int) -> tuple[bool, int, int, dict[str, int]]:
+        """(has_last, last accepted time, accepted, rejected by reason) counting samples <= now."""
+        accepted, rejected, has_last, last_t = self._before
+        if self._cum is None:
+            one_hot = self.codes[None, :] == np.arange(len(REASONS) + 1, dtype=np.int8)[:, None]
+            self._cum = np.concatenate(
+                [np.zeros((len(REASONS) + 1, 1), np.int64), np.cumsum(one_hot, axis=1)], axis=1)
+        cut = int(np.searchsorted(self.t, now, side="right"))
+        counts = self._cum[:, cut]
+        k = int(np.searchsorted(self.acc_t, now, side="right"))
+        if k:
+            has_last, last_t = True, int(self.acc_t[k - 1])
+        return (has_last, last_t, accepted + int(counts[0]),
+                {r: rejected[r] + int(counts[i]) for i, r in enumerate(REASONS, start=1)})
+
+
+
+class Pipeline:
+    """The fatigue-monitoring core for one buoy. See the module docstring."""
+
+    def __init__(self, config: Config, sinks: Iterable[Sink] = (),
+                 state: Mapping[str, Any] | None = None, *, horizon_s: float | None = None) -> None:
+        if state is not None and state.get("version") != STATE_VERSION:
+            raise ValueError(f"pipeline state version {state.get('version')!r} is not "
+                             f"{STATE_VERSION}; cannot restore")
+        st = state or {}
+        self.config = config
+        self.buoy_id = config.buoy.id
+        self.sinks = list(sinks)
+        self.tick_ns = int(round(config.alerts.eval_interval_s * 1e9))
+        cable = build_cable(config)
+        self.components = {
+            c.name: Component(c, cable, config.fatigue, st.get("components", {}).get(c.name))
+            for c in config.components
+        }
+        self.validators = {
+            s: StreamValidator(s, config.validate[s], st.get("validators", {}).get(s))
+            for s in SENSOR_ORDER
+        }
+        self.selector = LoadSelector(config.load, st.get("load"))
+        self.motion_sensor = config.load.motion_sensor
+        self.estimator = (build_estimator(config, st.get("estimator"))
+                          if config.load.source != "measured" else None)
+        gating = []
+        if config.load.source != "estimated":
+            gating.append("tension")
+        if self.estimator is not None:
+            gating.append(self.motion_sensor)
+        horizon = config.ordering.horizon_s if horizon_s is None else horizon_s
+        self.reorder = ReorderBuffer(gating or ["tension"], int(round(horizon * 1e9)),
+                                     st.get("reorder"))
+        self.alerts = build_alert_engine(config, self.buoy_id, list(self.components),
+                                         st.get("alerts"))
+        lim = config.validate["tension"].fields["tension_N"]
+        self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
+        self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
+        self.next_tick_ns: int | None = st.get("next_tick_ns")
+        # per-stream counts in the tick being filled: {sensor: [received, rejected]}
+        self.tick_counts: dict[str, list[int]] = {s: list(v) for s, v in st.get("tick_counts", {}).items()}
+        self.last = dict(st.get("last", {"measured_N": None, "estimated_N": None,
+                                          "source": "none", "now_ns": 0,
+                                          "load_t_ns": None, "load_src": 0,
+                                          "time_start_ns": None, "time_end_ns": None}))
+        self.new_alerts: list[Any] = []
+        self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
+
+    # ------------------------------------------------------------------ driving
+    @classmethod
+    def from_state(cls, config: Config, state: Mapping[str, Any], sinks: Iterable[Sink] = (),
+                   **kwargs: Any) -> "Pipeline":
+        return cls(config, sinks, state, **kwargs)
+
+    def process(self, block: SampleBlock) -> StepResult:
+        """Buffer one block and process everything the ordering watermark now allows."""
+        if block.buoy_id != self.buoy_id:
+            raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
+                             f"{self.buoy_id!r}")
+        self.reorder.push(block)
+        upto = self.reorder.watermark()
+        return self._advance(block.sensor, upto, upto)
+
+    def flush(self) -> StepResult:
+        """End of input: process every buffered sample; evaluate ticks the data completes."""
+        return self._advance("flush", None, self.reorder.end_of_data())
+
+    def close(self) -> None:
+        for sink in self.sinks:
+            sink.close()
+
+    # ------------------------------------------------------------------ core step
+    def _advance(self, sensor: str, upto: int | None, tick_limit: int | None) -> StepResult:
+        slab = self.reorder.take(upto)
+        streams: dict[str, _StreamSlab] = {}
+        n_acc = 0
+        rejected = dict.fromkeys(REASONS, 0)
+        for s, (t, values) in slab.items():
+            validator = self.validators[s]
+            before = _StreamSlab.before(validator)
+            codes = validator.check(t, values, self.taken_upto.get(s, _NEVER))
+            self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER),
+                                     int(t[-1]) if upto is None else upto)
+            streams[s] = info = _StreamSlab(t, values, codes, *before)
+            n_acc += info.acc_t.shape[0]
+            for i, reason in enumerate(REASONS, start=1):
+                rejected[reason] += int(np.count_nonzero(codes == i))
+            if info.acc_t.shape[0]:
+                first, last = int(info.acc_t[0]), int(info.acc_t[-1])
+                start = self.last["time_start_ns"]
+                self.last["time_start_ns"] = first if start is None else min(start, first)
+                end = self.last["time_end_ns"]
+                self.last["time_end_ns"] = last if end is None else max(end, last)
+        m_t, m_v = np.zeros(0, np.int64), np.zeros(0)
+        if "tension" in streams:
+            m_t, m_v = streams["tension"].acc_t, streams["tension"].acc_values[0]
+        e_t, e_v = np.zeros(0, np.int64), np.zeros(0)
+        if self.estimator is not None and self.motion_sensor in streams:
+            info = streams[self.motion_sensor]
+            if info.acc_t.shape[0]:
+                fields = dict(zip(SENSOR_FIELDS[self.motion_sensor], info.acc_values))
+                e_t, e_v = self.estimator.feed(info.acc_t, fields)
+        t, v, src = self.selector.select(m_t, m_v, e_t, e_v)
+        self.stats.add(v, src)
+        if m_t.shape[0]:
+            self.last["measured_N"] = float(m_v[-1])
+        if e_t.shape[0]:
+            self.last["estimated_N"] = float(e_v[-1])
+        stresses = {name: c.stress(v) for name, c in self.components.items()}
+        self.new_alerts = []
+        closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit)
+        if t.shape[0]:
+            self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
+        now = upto if upto is not None else tick_limit
+        if now is not None:
+            self.last["now_ns"] = max(self.last["now_ns"], now)
+        self.last["source"] = self._source_at(self.last["now_ns"])
+        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected)
+        for sink in self.sinks:
+            sink.on_step(step)
+        return step
+
+    def _source_at(self, now: int) -> str:
+        """The load source of the newest load sample, "none" once it is older than stale_after_s."""
+        t = self.last["load_t_ns"]
+        if t is None or now - t > self.selector.stale_ns:
+            return "none"
+        return SOURCE_NAMES[self.last["load_src"]]
+
+    def _feed_by_tick(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                      stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
+                      tick_limit: int | None) -> dict[str, list[np.ndarray]]:
+        """Feed the rainflow tick by tick, committing damage and evaluating alerts at tick ends."""
+        closed: dict[str, list[list[np.ndarray]]] = {n: [[], [], []] for n in self.components}
+        if self.next_tick_ns is None and streams:
+            first = min(int(x.t[0]) for x in streams.values())
+            self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
+        ends: np.ndarray = np.zeros(0, np.int64)
+        if (tick_limit is not None and self.next_tick_ns is not None
+                and tick_limit >= self.next_tick_ns):
+            k = (tick_limit - self.next_tick_ns) // self.tick_ns
+            ends = self.next_tick_ns + self.tick_ns * np.arange(k + 1, dtype=np.int64)
+        cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
+        evaluate = not isinstance(self.alerts, NullAlertEngine)
+        start, prev_end = 0, _NEVER
+        for k in range(ends.shape[0] + 1):
+            stop = int(cuts[k])
+            for name, comp in self.components.items():
+                for acc, part in zip(closed[name], comp.feed(stresses[name][start:stop])):
+                    acc.append(part)
+            if k == ends.shape[0]:
+                break
+            end = int(ends[k])
+            for comp in self.components.values():
+                comp.commit(end)
+            if t[start:stop].shape[0]:
+                self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
+            if evaluate:
+                self._evaluate(end, t[start:stop], v[start:stop], src[start:stop],
+                               {n: stresses[n][start:stop] for n in self.components},
+                               streams, prev_end)
+            start, prev_end = stop, end
+        if ends.shape[0]:
+            self.next_tick_ns = int(ends[-1]) + self.tick_ns
+            self.tick_counts = {}
+        for s, info in streams.items():
+            # what this slab adds to the tick still open
+            received, rej = info.counts_between(prev_end, None)
+            counts = self.tick_counts.setdefault(s, [0, 0])
+            counts[0] += received
+            counts[1] += rej
+        return {n: [np.concatenate(c) if c else np.zeros(0) for c in v3]
+                for n, v3 in closed.items()}
+
+    def _evaluate(self, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                  stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
+                  prev_end: int) -> None:
+        comps = {}
+        for name, comp in self.components.items():
+            f = comp.figures()
+            s = stresses[name]
+            comps[name] = ComponentObs(f["damage"], f["damage_committed"],
+                                       f["damage_rate_per_day"], f["remaining_life_days"],
+                                       float(s.max()) if s.shape[0] else math.nan)
+        meas, est = v[src == MEASURED], v[src == ESTIMATED]
+        obs = Observation(
+            buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
+            load_source=self._source_at(end), load_t_ns=t, tension_N=v,
+            measured_tension_N=float(meas.mean()) if meas.shape[0] else math.nan,
+            estimated_tension_N=float(est.mean()) if est.shape[0] else math.nan,
+            components=comps, streams=self._stream_obs(end, streams, prev_end),
+        )
+        for rec in self.alerts.evaluate(obs):
+            self.new_alerts.append(rec)
+            self.alert_history.append(alert_to_dict(rec))
+        del self.alert_history[:-ALERT_HISTORY_LIMIT]
+
+    def _stream_obs(self, now: int, streams: Mapping[str, "_StreamSlab"] | None = None,
+                    prev_end: int = _NEVER) -> dict[str, StreamObs]:
+        """Stream health at ``now``: totals up to ``now``; counts of this slab's samples in
+        ``(prev_end, now]`` plus those of earlier slabs in the same tick."""
+        out = {}
+        for s, val in self.validators.items():
+            info = (streams or {}).get(s)
+            if info is None:
+                has_last, last_t = val.has_last, val.last_t_ns
+                accepted, rejected = val.accepted, dict(val.rejected)
+                received_tick, rejected_tick = 0, 0
+            else:
+                has_last, last_t, accepted, rejected = info.totals_at(now)
+                received_tick, rejected_tick = info.counts_between(prev_end, now)
+            open_counts = self.tick_counts.pop(s, None) if streams is not None else None
+            if open_counts is not None:
+                received_tick += open_counts[0]
+                rejected_tick += open_counts[1]
+            out[s] = StreamObs(
+                last_t_ns=last_t if has_last else 0,
+                stale=not has_last or now - last_t > self.config.validate[s].stale_after_s * 1e9,
+                accepted=accepted, rejected=rejected,
+                rejected_in_tick=rejected_tick, received_in_tick=received_tick,
+            )
+        return out
+
+    def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
+              stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],
+              n_acc: int, rejected: Mapping[str, int]) -> StepResult:
+        comps = {}
+        for name, comp in self.components.items():
+            f = comp.figures()
+            r, m, c = closed[name]
+            comps[name] = ComponentStep(
+                name=name, stress_Pa=stresses[name], ranges_Pa=r, means_Pa=m, counts=c,
+                damage=f["damage"], damage_committed=f["damage_committed"],
+                damage_rate_per_day=f["damage_rate_per_day"],
+                remaining_life_days=f["remaining_life_days"], max_stress_Pa=f["max_stress_Pa"],
+            )
+        nan = math.nan
+        return StepResult(
+            buoy_id=self.buoy_id, sensor=sensor, now_ns=self.last["now_ns"], t_ns=t, tension_N=v,
+            load_source=self.last["source"],
+            measured_tension_N=nan if self.last["measured_N"] is None else self.last["measured_N"],
+            estimated_tension_N=nan if self.last["estimated_N"] is None else self.last["estimated_N"],
+            components=comps, accepted=n_acc, rejected=dict(rejected),
+            alerts=list(self.new_alerts),
+        )
+
+    # ------------------------------------------------------------------ outputs
+    def status(self) -> dict[str, Any]:
+        """Current figures for the daemon's periodic status message (JSON-serialisable)."""
+        now = self.last["now_ns"]
+        return {
+            "buoy_id": self.buoy_id,
+            "now_ns": now,
+            "load_source": self.last["source"],
+            "measured_tension_N": self.last["measured_N"],
+            "estimated_tension_N": self.last["estimated_N"],
+            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+                           for n, c in self.components.items()},
+            "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,
+                            "rejected": dict(o.rejected)}
+                        for s, o in self._stream_obs(now).items()},
+            "buffered_samples": self.reorder.buffered(),
+            "next_tick_ns": self.next_tick_ns,
+        }
+
+    def report(self) -> dict[str, Any]:
+        """The replay report's pipeline part (see replay.report for the full contract)."""
+        return {
+            "buoy_id": self.buoy_id,
+            "time_start_ns": self.last["time_start_ns"],
+            "time_end_ns": self.last["time_end_ns"],
+            "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected)}
+                        for s, val in self.validators.items()
+                        if val.accepted or any(val.rejected.values())},
+            "tension_N": self.stats.summary(),
+            "load_source": self.last["source"],
+            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+                           for n, c in self.components.items()},
+            "alerts": list(self.alert_history),
+        }
+
+    def state(self) -> dict[str, Any]:
+        """Everything needed to continue exactly from here (JSON-serialisable)."""
+        return {
+            "version": STATE_VERSION,
+            "buoy_id": self.buoy_id,
+            "components": {n: c.state() for n, c in self.components.items()},
+            "validators": {s: v.state() for s, v in self.validators.items()},
+            "load": self.selector.state(),
+            "estimator": self.estimator.state() if self.estimator is not None else None,
+            "reorder": self.reorder.state(),
+            "alerts": self.alerts.state(),
+            "stats": self.stats.state(),
+            "taken_upto": dict(self.taken_upto),
+            "next_tick_ns": self.next_tick_ns,
+            "tick_counts": {s: list(c) for s, c in self.tick_counts.items()},
+            "last": dict(self.last),
+            "alert_history": list(self.alert_history),
+        }
