@@ -24,17 +24,37 @@ from monitor.config import ComponentConfig, Config, FatigueConfig
 
 
 def build_sn_curve(cfg: ComponentConfig) -> Any:
-    """The component's S-N curve with its derating, SCF and DFF applied."""
+    """The component's S-N curve with its derating, SCF, DFF and mean-stress rule applied.
+
+    ``sn_curve`` names an ``SNCurve`` constructor, with colon-separated arguments for those
+    that take them: ``"vaps_copper"``, ``"dnv_chain_studless"``, ``"dnv_rp_c203:D:seawater_cp"``.
+    """
     sn = cfg.sn_curve
     if sn.preset is not None:
-        factory = getattr(fatigue.SNCurve, sn.preset, None)
-        if factory is None:
-            raise ValueError(f"config error: component {cfg.name!r}: sn_curve = {sn.preset!r} "
-                             "is not a models.fatigue.SNCurve preset")
-        curve = factory()
+        name, *args = sn.preset.split(":")
+        factory = getattr(fatigue.SNCurve, name, None) if not name.startswith("_") else None
+        if factory is None or name in ("tabulated", "basquin", "multi_slope", "from_dict"):
+            raise ValueError(f"config error: component {cfg.name!r}: sn_curve = {sn.preset!r}: "
+                             "not an SNCurve preset (vaps_copper, dnv_rp_c203:<detail>:<env>, "
+                             "dnv_chain_studless)")
+        try:
+            curve = factory(*args)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"config error: component {cfg.name!r}: sn_curve = "
+                             f"{sn.preset!r}: {exc}") from None
     else:
-        curve = fatigue.SNCurve.tabulated(sn.stress_range_Pa, sn.cycles)
-    return dataclasses.replace(curve, derating=cfg.derating, scf=cfg.scf, dff=cfg.dff)
+        curve = fatigue.SNCurve.tabulated(np.array(sn.stress_range_Pa) / 1e6, sn.cycles)
+    return curve.with_factors(derating=cfg.derating, scf=cfg.scf, dff=cfg.dff,
+                              mean_correction=cfg.mean_stress, ultimate_Pa=cfg.ultimate_Pa)
+
+
+def endurance_stress_Pa(cfg: ComponentConfig, curve: Any) -> float | None:
+    """Conductor stress at which the derated curve's endurance is reached (alert threshold)."""
+    if cfg.kind != "conductor":
+        return None
+    if curve.endurance_MPa is None:
+        return float(curve.stress_range_at(1e7))
+    return float(curve.endurance_MPa * 1e6 / (curve.scf * curve.derating))
 
 
 def build_cable(config: Config) -> Any:
@@ -63,15 +83,14 @@ class Component:
         if state is None:
             self.rainflow = fatigue.StreamingRainflow(hysteresis=cfg.hysteresis_Pa)
             self.miner = fatigue.MinerAccumulator(
-                self.sn_curve, rate_window_s=fcfg.rate_window_s,
-                histogram_edges=np.array(fcfg.histogram_edges_Pa),
-                reference_cycles=fcfg.reference_cycles,
+                self.sn_curve, histogram_edges_Pa=np.array(fcfg.histogram_edges_Pa),
+                rate_window_s=fcfg.rate_window_s, reference_cycles=fcfg.reference_cycles,
             )
             self._pending: list[np.ndarray] = [_EMPTY, _EMPTY, _EMPTY]
             self.max_stress_Pa = -math.inf
         else:
             self.rainflow = fatigue.StreamingRainflow.from_state(state["rainflow"])
-            self.miner = fatigue.MinerAccumulator.from_state(state["miner"], self.sn_curve)
+            self.miner = fatigue.MinerAccumulator.from_state(state["miner"])
             self._pending = [np.array(v, dtype=np.float64) for v in state["pending"]]
             peak = state["max_stress_Pa"]
             self.max_stress_Pa = -math.inf if peak is None else float(peak)
@@ -93,8 +112,14 @@ class Component:
 
     def commit(self, tick_end_ns: int) -> None:
         """End of an alert tick: add the pending cycles to the Miner sum in one step."""
-        self.miner.add(*self._pending, t_ns=tick_end_ns)
+        ranges, means, counts = self._pending
+        self.miner.add_cycles(ranges, counts, means, time_s=tick_end_ns / 1e9)
         self._pending = [_EMPTY, _EMPTY, _EMPTY]
+
+    def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
+        if ranges.shape[0] == 0:
+            return 0.0
+        return float(np.sum(self.sn_curve.damage_per_cycle(ranges, counts, means)))
 
     def figures(self) -> dict[str, float]:
         """damage (with pending cycles and the open residue as half cycles), committed, rate, life.
@@ -102,15 +127,15 @@ class Component:
         ``damage_committed`` includes cycles closed since the last tick, computed fresh here
         and not accumulated, so reading figures never changes the state.
         """
-        pending = self.miner.provisional(*self._pending) if len(self._pending[0]) else 0.0
-        residue = self.miner.provisional(*self.rainflow.residue_half_cycles())
-        committed = self.miner.committed + pending
+        committed = self.miner.damage_committed + self._damage(*self._pending)
+        damage = committed + self._damage(*self.rainflow.residue_half_cycles())
+        rate = float(self.miner.damage_rate_per_day)
         return {
-            "damage": committed + residue,
+            "damage": damage,
             "damage_committed": committed,
-            "damage_rate_per_day": float(self.miner.damage_rate_per_day()),
-            "remaining_life_days": float(self.miner.remaining_life_days()),
-            "cycles": float(self.miner.cycles + float(np.sum(self._pending[2]))),
+            "damage_rate_per_day": rate,
+            "remaining_life_days": max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf,
+            "cycles": float(self.miner.total_cycles + float(np.sum(self._pending[2]))),
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
         }
 

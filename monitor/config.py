@@ -22,17 +22,17 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 
 DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
 
-# Top-level sections parsed by other modules: name -> "module:callable(config) -> object".
-# The callable receives the whole Config and raises ConfigError on a bad value. A module that
-# is not installed yet leaves its section unchecked (check-config says so).
+# Top-level sections parsed by other modules: name -> "module:attribute.path", a callable
+# taking the section's raw table and raising ValueError on a bad value. A module that is not
+# installed yet leaves its section unchecked (check-config says so).
 SECTION_PARSERS: dict[str, str] = {
-    "alerts": "monitor.alerts.engine:parse_alerts_config",
+    "alerts": "monitor.alerts.config:AlertsConfig.from_dict",
     "zenoh": "monitor.zenoh_io:parse_zenoh_config",
     "state": "monitor.checkpoint:parse_state_config",
     "record": "monitor.recorder:parse_record_config",
@@ -393,7 +393,7 @@ def _parse_component(r: SectionReader) -> ComponentConfig:
         mean_stress=r.str("mean_stress", "none",
                           choices=("none", "goodman", "gerber", "walker", "swt")),
         ultimate_Pa=r.float("ultimate_Pa", gt=0) if r.has("ultimate_Pa") else None,
-        derating=r.float("derating", 1.0, gt=0, le=1),
+        derating=r.float("derating", 1.0, gt=0),
         scf=r.float("scf", 1.0, gt=0),
         dff=r.float("dff", 1.0, gt=0),
         hysteresis_Pa=r.float("hysteresis_Pa", 0.0, ge=0),
@@ -548,10 +548,18 @@ def run_section_parsers(config: Config) -> dict[str, str]:
                 results[name] = f"not checked: {module_name} is not installed"
                 continue
             raise
-        parser: Callable[[Config], Any] | None = getattr(module, func_name, None)
-        if parser is None:
+        parser: Any = module
+        for attr in func_name.split("."):
+            parser = getattr(parser, attr, None)
+        if not callable(parser):
             results[name] = f"not checked: {module_name} has no {func_name}"
             continue
-        parser(config)
+        try:
+            parser(config.section(name))
+        except ConfigError:
+            raise
+        except ValueError as exc:
+            msg = str(exc)
+            raise ConfigError(msg if msg.startswith("config error") else f"config error: {msg}") from None
         results[name] = "ok"
     return results

@@ -28,7 +28,7 @@ from typing import Any, Iterable, Mapping, Protocol, Sequence
 import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
-from monitor.components import Component, build_cable
+from monitor.components import Component, build_cable, endurance_stress_Pa
 from monitor.config import Config
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.load_source import ESTIMATED, MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
@@ -58,18 +58,22 @@ class NullAlertEngine:
         return {}
 
 
-def build_alert_engine(config: Config, buoy_id: str, components: Sequence[str],
+def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, float | None],
                        state: Mapping[str, Any] | None) -> AlertEngineLike:
+    """The ``[alerts]`` rules engine (monitor.alerts), or a no-op one if that is not installed.
+
+    ``endurance_Pa`` maps each component to its derated endurance stress (None if it has none).
+    """
     try:
         from monitor.alerts.engine import AlertEngine
     except ModuleNotFoundError as exc:
         if exc.name not in ("monitor.alerts", "monitor.alerts.engine"):
             raise
         return NullAlertEngine()
+    components = {name: {"endurance_stress_Pa": e} for name, e in endurance_Pa.items()}
     if state:
-        return AlertEngine.from_state(state, config=config, buoy_id=buoy_id,
-                                      components=list(components))
-    return AlertEngine.from_config(config, buoy_id, list(components))
+        return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
+    return AlertEngine.from_config(config.section("alerts"), buoy_id, components)
 
 
 def alert_to_dict(record: Any) -> dict[str, Any]:
@@ -209,8 +213,10 @@ class Pipeline:
         horizon = config.ordering.horizon_s if horizon_s is None else horizon_s
         self.reorder = ReorderBuffer(gating or ["tension"], int(round(horizon * 1e9)),
                                      st.get("reorder"))
-        self.alerts = build_alert_engine(config, self.buoy_id, list(self.components),
-                                         st.get("alerts"))
+        self.alerts = build_alert_engine(
+            config, self.buoy_id,
+            {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
+            st.get("alerts"))
         lim = config.validate["tension"].fields["tension_N"]
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}

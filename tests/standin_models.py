@@ -43,24 +43,30 @@ def conductor_stress(tension_N, cable: HelixCable, lay: str = "left"):
 
 @dataclass(frozen=True)
 class SNCurve:
-    stress_range_Pa: tuple
+    stress_MPa: tuple
     cycles: tuple
+    endurance_MPa: float | None = None
     derating: float = 1.0
     scf: float = 1.0
     dff: float = 1.0
+    mean_correction: str = "none"
+    ultimate_Pa: float | None = None
 
     @classmethod
     def vaps_copper(cls) -> "SNCurve":
-        s = [75.2e6, 78e6, 90e6, 106e6, 130e6]
-        return cls(tuple(v * 0.42 for v in s), (1e7, 1e6, 1e5, 2.5e4, 1e4))
+        s = [75.2, 78.0, 90.0, 106.0, 130.0]
+        return cls.tabulated(tuple(v * 0.42 for v in s), (1e7, 1e6, 1e5, 2.5e4, 1e4))
 
     @classmethod
-    def tabulated(cls, stress_range_Pa, cycles) -> "SNCurve":
-        return cls(tuple(stress_range_Pa), tuple(cycles))
+    def tabulated(cls, stress_MPa, cycles) -> "SNCurve":
+        return cls(tuple(stress_MPa), tuple(cycles), endurance_MPa=float(min(stress_MPa)))
 
-    def cycles_to_failure(self, ranges):
-        s = np.log10(np.asarray(ranges, float) * self.scf / self.derating)
-        ls = np.log10(np.array(self.stress_range_Pa))
+    def with_factors(self, **changes) -> "SNCurve":
+        return replace(self, **changes)
+
+    def cycles_to_failure(self, range_Pa, mean_Pa=None):
+        s = np.log10(np.asarray(range_Pa, float) / 1e6 * self.scf * self.derating)
+        ls = np.log10(np.array(self.stress_MPa))
         ln = np.log10(np.array(self.cycles))
         order = np.argsort(ls)
         ls, ln = ls[order], ln[order]
@@ -68,11 +74,12 @@ class SNCurve:
         n = np.where(s > ls[-1], ln[-1] + slope * (s - ls[-1]), np.interp(s, ls, ln))
         return np.where(s < ls[0], np.inf, 10.0 ** n)
 
-    def damage(self, ranges, counts):
-        r = np.asarray(ranges, float)
-        if r.size == 0:
-            return 0.0
-        return float(np.sum(np.asarray(counts) / self.cycles_to_failure(r))) * self.dff
+    def damage_per_cycle(self, range_Pa, counts=1.0, mean_Pa=None):
+        return np.asarray(counts, float) / self.cycles_to_failure(range_Pa) * self.dff
+
+    def stress_range_at(self, cycles):
+        return 1e6 * float(np.interp(np.log10(cycles), np.log10(self.cycles[::-1]),
+                                     np.array(self.stress_MPa[::-1])))
 
 
 class StreamingRainflow:
@@ -120,43 +127,43 @@ class StreamingRainflow:
 
 
 class MinerAccumulator:
-    def __init__(self, sn_curve: SNCurve, rate_window_s: float = 3600.0, **_):
+    def __init__(self, sn_curve: SNCurve, histogram_edges_Pa=None, rate_window_s: float = 86400.0,
+                 reference_cycles: float = 1e7):
         self.sn_curve = sn_curve
         self.rate_window_s = rate_window_s
-        self.committed = 0.0
-        self.cycles = 0.0
-        self.history: list[tuple[int, float]] = []
+        self.damage_committed = 0.0
+        self.total_cycles = 0.0
+        self.history: list[tuple[float, float]] = []
 
-    def add(self, ranges, means, counts, t_ns: int) -> None:
-        self.committed += self.sn_curve.damage(ranges, counts)
-        self.cycles += float(np.sum(counts)) if len(counts) else 0.0
-        self.history.append((int(t_ns), self.committed))
-        cutoff = int(t_ns) - int(self.rate_window_s * 1e9)
-        while len(self.history) > 1 and self.history[1][0] <= cutoff:
-            self.history.pop(0)
+    def add_cycles(self, ranges, counts, means=None, time_s=None) -> float:
+        d = self.sn_curve.damage_per_cycle(ranges, counts)
+        start = self.damage_committed
+        for x in d.tolist():  # sequential sum in closure order, as the real accumulator
+            self.damage_committed += x
+        self.total_cycles += float(np.sum(counts))
+        if time_s is not None:
+            self.history.append((float(time_s), self.damage_committed))
+            while len(self.history) > 1 and self.history[1][0] <= time_s - self.rate_window_s:
+                self.history.pop(0)
+        return self.damage_committed - start
 
-    def provisional(self, ranges, means, counts) -> float:
-        return self.sn_curve.damage(ranges, counts)
-
+    @property
     def damage_rate_per_day(self) -> float:
         if len(self.history) < 2:
             return 0.0
         (t0, d0), (t1, d1) = self.history[0], self.history[-1]
-        return (d1 - d0) / ((t1 - t0) / 86400e9) if t1 > t0 else 0.0
-
-    def remaining_life_days(self) -> float:
-        rate = self.damage_rate_per_day()
-        return (1.0 - self.committed) / rate if rate > 0 else math.inf
+        return (d1 - d0) / ((t1 - t0) / 86400.0) if t1 > t0 else 0.0
 
     def state(self):
-        return {"committed": self.committed, "cycles": self.cycles,
-                "history": [list(h) for h in self.history], "rate_window_s": self.rate_window_s}
+        return {"committed": self.damage_committed, "cycles": self.total_cycles,
+                "history": [list(h) for h in self.history], "rate_window_s": self.rate_window_s,
+                "sn_curve": {k: getattr(self.sn_curve, k) for k in self.sn_curve.__dataclass_fields__}}
 
     @classmethod
-    def from_state(cls, state, sn_curve):
-        obj = cls(sn_curve, state["rate_window_s"])
-        obj.committed = state["committed"]
-        obj.cycles = state["cycles"]
+    def from_state(cls, state):
+        obj = cls(SNCurve(**state["sn_curve"]), rate_window_s=state["rate_window_s"])
+        obj.damage_committed = state["committed"]
+        obj.total_cycles = state["cycles"]
         obj.history = [tuple(h) for h in state["history"]]
         return obj
 
