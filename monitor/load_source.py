@@ -76,9 +76,12 @@ class LoadSelector:
             return measured
         # latest accepted tension time at or before each estimated sample
         idx = np.searchsorted(m_t, e_t, side="right") - 1
-        latest = np.where(idx >= 0, m_t[np.maximum(idx, 0)],
-                          np.int64(prev) if prev is not None else np.iinfo(np.int64).min)
-        use = (latest == np.iinfo(np.int64).min) | (e_t - latest > self.stale_ns)
+        never = idx < 0
+        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
+        if prev is not None:
+            latest = np.where(never, np.int64(prev), latest)
+            never[:] = False
+        use = never | (e_t - latest > self.stale_ns)
         if not use.any():
             return measured
         t = np.concatenate([m_t, e_t[use]])
@@ -125,9 +128,12 @@ class LoadSelector:
             return measured
         # latest accepted tension time at or before each estimated sample
         idx = np.searchsorted(m_t, e_t, side="right") - 1
-        latest = np.where(idx >= 0, m_t[np.maximum(idx, 0)],
-                          np.int64(prev) if prev is not None else np.iinfo(np.int64).min)
-        use = (latest == np.iinfo(np.int64).min) | (e_t - latest > self.stale_ns)
+        never = idx < 0
+        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
+        if prev is not None:
+            latest = np.where(never, np.int64(prev), latest)
+            never[:] = False
+        use = never | (e_t - latest > self.stale_ns)
         if not use.any():
             return measured
         t = np.concatenate([m_t, e_t[use]])

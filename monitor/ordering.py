@@ -1,22 +1,27 @@
 """Multi-stream ordering: turn blocks arriving in any interleaving into sensor-time slabs.
 
-The rule (why live and replay agree): the pipeline never processes a sample before it knows
-every GATING stream (the streams that feed the fatigue load: tension and/or the motion stream)
-up to that sample's time. Each stream has a watermark::
+The rule (why live and replay agree): the pipeline processes sensor time in slabs ``(W', W]``
+and never processes a sample before every GATING stream is known up to that sample's time.
+Each stream has a watermark::
 
-    watermark(s) = max(newest sample time received on s, newest time received on ANY stream - horizon)
+    newest  = newest sample time received on any stream
+    wm(s)   = max(newest time received on s, newest - horizon)
 
-and the pipeline watermark is ``W = min(watermark(s) for s in gating streams)``. All buffered
-samples of ALL streams with ``t <= W`` are released together as one slab, each stream's samples
-sorted by time (stable, so duplicates stay adjacent and the later copy is the one rejected).
-Everything downstream is a function of the samples in time order, so the result does not
-depend on how the samples were cut into blocks or interleaved, provided no stream lags the
-newest data by more than ``horizon``: a silent stream (a dead sensor) is passed by after the
-horizon instead of stalling everything, and samples that then arrive late, at or before the
-processed time, are rejected as ``time_backwards``. Live ingest uses ``[ordering] horizon_s``;
-replay, whose log blocks are coalesced per channel, uses ``replay_horizon_s``. Memory is
-bounded by the horizon. Non-gating streams (gnss, waves, a motion stream the estimator does not
-use) are released with the same slabs but never hold them back.
+and ``W = min(wm(s) for s in gating streams)``. All buffered samples of ALL streams with
+``t <= W`` are released as one slab, each stream's samples sorted by time (stable, so a
+duplicate stays behind its original and is the copy rejected). Everything downstream is a
+function of the samples in time order, so the results do not depend on how samples were cut
+into blocks or interleaved, as long as no stream lags the newest data by more than
+``horizon``: a silent stream (a dead sensor) is passed by after the horizon instead of stalling
+everything, and samples that then arrive, at or before the processed time, are rejected as
+``time_backwards``. Memory is bounded by the horizon.
+
+Gating streams: the LOAD streams (tension, and the motion stream when the estimator is used)
+always gate, even before their first sample. Other streams (gnss, waves, ...) gate in replay
+(``gate_all``: the log holds them all, coalesced per channel, with ``[ordering]
+replay_horizon_s``). Live (``[ordering] horizon_s``), they gate only while active (newest
+sample within the horizon), so a low-rate or absent stream never delays the fatigue chain;
+their health figures then reflect what had arrived when a tick was evaluated.
 """
 
 from __future__ import annotations
@@ -39,10 +44,11 @@ class Slab(dict):
 class ReorderBuffer:
     """Per-stream buffers of received samples and the watermark rule above."""
 
-    def __init__(self, gating: Sequence[str], horizon_ns: int,
+    def __init__(self, load_streams: Sequence[str], horizon_ns: int, gate_all: bool = False,
                  state: Mapping[str, Any] | None = None) -> None:
-        self.gating = tuple(gating)
+        self.load_streams = tuple(load_streams)
         self.horizon_ns = int(horizon_ns)
+        self.gate_all = gate_all
         self._pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {s: [] for s in SENSOR_ORDER}
         self.received_max: dict[str, int] = {}
         if state is not None:
@@ -71,11 +77,18 @@ class ReorderBuffer:
         if newest is None:
             return None
         floor = newest - self.horizon_ns
-        return min(max(self.received_max.get(s, _NEVER), floor) for s in self.gating)
+        marks = [newest]
+        for s in SENSOR_ORDER:
+            received = self.received_max.get(s)
+            if s in self.load_streams or self.gate_all:
+                marks.append(max(_NEVER if received is None else received, floor))
+            elif received is not None and received >= floor:
+                marks.append(received)
+        return min(marks)
 
     def end_of_data(self) -> int | None:
-        """Newest time of the slowest gating stream that has delivered data (for a final flush)."""
-        seen = [self.received_max[s] for s in self.gating if s in self.received_max]
+        """Newest time of the slowest load stream that has delivered data (for a final flush)."""
+        seen = [self.received_max[s] for s in self.load_streams if s in self.received_max]
         if seen:
             return min(seen)
         return self.newest_ns

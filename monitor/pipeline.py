@@ -84,6 +84,10 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
     return dict(record)
 
 
+def _empty_load() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8)
+
+
 def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -98,14 +102,14 @@ class _TensionStats:
         self.width = (hi - lo) / self.BINS
         self.hist = np.zeros(self.BINS, dtype=np.int64)
         self.n = {"measured": 0, "estimated": 0}
-        self.total = 0.0
+        self.total_mN = 0  # exact integer sum (millinewtons): the mean is split-invariant
         self.min = math.inf
         self.max = -math.inf
         if state is not None:
             idx, counts = state["hist"]
             self.hist[np.array(idx, dtype=np.int64)] = np.array(counts, dtype=np.int64)
             self.n = dict(state["n"])
-            self.total = float(state["total"])
+            self.total_mN = int(state["total_mN"])
             self.min = math.inf if state["min"] is None else float(state["min"])
             self.max = -math.inf if state["max"] is None else float(state["max"])
 
@@ -117,7 +121,7 @@ class _TensionStats:
         n_meas = int(np.count_nonzero(src == MEASURED))
         self.n["measured"] += n_meas
         self.n["estimated"] += v.shape[0] - n_meas
-        self.total += float(v.sum())
+        self.total_mN += int(np.rint(v * 1e3).astype(np.int64).sum())
         self.min = min(self.min, float(v.min()))
         self.max = max(self.max, float(v.max()))
 
@@ -128,13 +132,13 @@ class _TensionStats:
                     "samples_measured": 0, "samples_estimated": 0}
         k = int(np.searchsorted(np.cumsum(self.hist), math.ceil(0.99 * count)))
         p99 = min(max(self.lo + (k + 0.5) * self.width, self.min), self.max)
-        return {"min": self.min, "mean": self.total / count, "max": self.max, "p99": p99,
+        return {"min": self.min, "mean": self.total_mN / 1e3 / count, "max": self.max, "p99": p99,
                 "samples_measured": self.n["measured"], "samples_estimated": self.n["estimated"]}
 
     def state(self) -> dict[str, Any]:
         idx = np.flatnonzero(self.hist)
         return {"hist": [idx.tolist(), self.hist[idx].tolist()], "n": dict(self.n),
-                "total": self.total, "min": _finite_or_none(self.min),
+                "total_mN": self.total_mN, "min": _finite_or_none(self.min),
                 "max": _finite_or_none(self.max)}
 
 
@@ -183,7 +187,8 @@ class Pipeline:
     """The fatigue-monitoring core for one buoy. See the module docstring."""
 
     def __init__(self, config: Config, sinks: Iterable[Sink] = (),
-                 state: Mapping[str, Any] | None = None, *, horizon_s: float | None = None) -> None:
+                 state: Mapping[str, Any] | None = None, *, horizon_s: float | None = None,
+                 gate_all: bool = False) -> None:
         if state is not None and state.get("version") != STATE_VERSION:
             raise ValueError(f"pipeline state version {state.get('version')!r} is not "
                              f"{STATE_VERSION}; cannot restore")
@@ -205,14 +210,16 @@ class Pipeline:
         self.motion_sensor = config.load.motion_sensor
         self.estimator = (build_estimator(config, st.get("estimator"))
                           if config.load.source != "measured" else None)
-        gating = []
+        load_streams = []
         if config.load.source != "estimated":
-            gating.append("tension")
+            load_streams.append("tension")
         if self.estimator is not None:
-            gating.append(self.motion_sensor)
+            load_streams.append(self.motion_sensor)
         horizon = config.ordering.horizon_s if horizon_s is None else horizon_s
-        self.reorder = ReorderBuffer(gating or ["tension"], int(round(horizon * 1e9)),
-                                     st.get("reorder"))
+        self.reorder = ReorderBuffer(load_streams or ["tension"], int(round(horizon * 1e9)),
+                                     gate_all, st.get("reorder"))
+        # sensor time processed so far by watermark (not by flush): older samples are late
+        self.processed_ns = int(st.get("processed_ns", _NEVER))
         self.alerts = build_alert_engine(
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
@@ -228,6 +235,10 @@ class Pipeline:
                                           "load_t_ns": None, "load_src": 0,
                                           "time_start_ns": None, "time_end_ns": None}))
         self.new_alerts: list[Any] = []
+        # load samples of the tick not yet evaluated: (t_ns, tension_N, source)
+        self.open_tick = _empty_load() if "open_tick" not in st else (
+            np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
+            np.array(st["open_tick"][2], np.int8))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
 
     # ------------------------------------------------------------------ driving
@@ -262,9 +273,8 @@ class Pipeline:
         for s, (t, values) in slab.items():
             validator = self.validators[s]
             before = _StreamSlab.before(validator)
-            codes = validator.check(t, values, self.taken_upto.get(s, _NEVER))
-            self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER),
-                                     int(t[-1]) if upto is None else upto)
+            codes = validator.check(t, values, max(self.processed_ns, self.taken_upto.get(s, _NEVER)))
+            self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
             streams[s] = info = _StreamSlab(t, values, codes, *before)
             n_acc += info.acc_t.shape[0]
             for i, reason in enumerate(REASONS, start=1):
@@ -295,6 +305,8 @@ class Pipeline:
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit)
         if t.shape[0]:
             self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
+        if upto is not None:
+            self.processed_ns = max(self.processed_ns, upto)
         now = upto if upto is not None else tick_limit
         if now is not None:
             self.last["now_ns"] = max(self.last["now_ns"], now)
@@ -340,13 +352,20 @@ class Pipeline:
             if t[start:stop].shape[0]:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
             if evaluate:
-                self._evaluate(end, t[start:stop], v[start:stop], src[start:stop],
-                               {n: stresses[n][start:stop] for n in self.components},
-                               streams, prev_end)
+                tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
+                ss = {n: stresses[n][start:stop] for n in self.components}
+                if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
+                    tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
+                    ss = {n: c.stress(tv) for n, c in self.components.items()}
+                self._evaluate(end, tt, tv, ts, ss, streams, prev_end)
+            self.open_tick = _empty_load()
             start, prev_end = stop, end
         if ends.shape[0]:
             self.next_tick_ns = int(ends[-1]) + self.tick_ns
             self.tick_counts = {}
+        if stop > start:
+            self.open_tick = tuple(np.concatenate([o, x[start:]])
+                                   for o, x in zip(self.open_tick, (t, v, src)))
         for s, info in streams.items():
             # what this slab adds to the tick still open
             received, rej = info.counts_between(prev_end, None)
@@ -476,8 +495,10 @@ class Pipeline:
             "alerts": self.alerts.state(),
             "stats": self.stats.state(),
             "taken_upto": dict(self.taken_upto),
+            "processed_ns": self.processed_ns,
             "next_tick_ns": self.next_tick_ns,
             "tick_counts": {s: list(c) for s, c in self.tick_counts.items()},
+            "open_tick": [a.tolist() for a in self.open_tick],
             "last": dict(self.last),
             "alert_history": list(self.alert_history),
         }

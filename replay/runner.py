@@ -106,6 +106,13 @@ def _pace(block: SampleBlock, speed: float, origin: list[float]) -> None:
         time.sleep(delay)
 
 
+def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | None = None
+                    ) -> Pipeline:
+    """A pipeline set up for logs: every stream gates, with the replay horizon."""
+    return Pipeline(config, sinks, state, horizon_s=config.ordering.replay_horizon_s,
+                    gate_all=True)
+
+
 def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | None = None,
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None) -> tuple[Pipeline, ReplayResult]:
@@ -123,7 +130,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
                 log.warning("log is for buoy %r, config for %r: replaying as %r",
                             block.buoy_id, config.buoy.id, block.buoy_id)
                 config = config_with(config, buoy={**config.section("buoy"), "id": block.buoy_id})
-            pipeline = Pipeline(config, sinks, state, horizon_s=config.ordering.replay_horizon_s)
+            pipeline = replay_pipeline(config, sinks, state)
         if block.buoy_id != pipeline.buoy_id:
             ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
             continue
@@ -135,7 +142,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         if progress is not None:
             progress.update(block.t_last_ns, n_samples)
     if pipeline is None:
-        pipeline = Pipeline(config, sinks, state, horizon_s=config.ordering.replay_horizon_s)
+        pipeline = replay_pipeline(config, sinks, state)
     pipeline.flush()
     if progress is not None and n_samples:
         progress.update(pipeline.last["now_ns"], n_samples, force=True)
