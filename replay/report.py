@@ -136,7 +136,13 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"{'-' if life is None else format(life, '.3g') + ' d':>11s}"
         )
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)")
-    lost = {k: v for k, v in report["inputs"]["read"].items() if v and "lost" in k}
-    if lost:
-        lines.append("  damaged input: " + ", ".join(f"{k} {v}" for k, v in lost.items()))
+    read = report["inputs"]["read"]
+    damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
+                                       "bad_payloads", "late", "duplicates")}
+    damage = {k: v for k, v in damage.items() if v}
+    if damage or read.get("incomplete_files"):
+        lines.append("  damaged input: " + ", ".join(f"{k.replace('_', ' ')} {v}"
+                                                    for k, v in damage.items())
+                     + (f"; {len(read['incomplete_files'])} file(s) without footer"
+                        if read.get("incomplete_files") else ""))
     return "\n".join(lines)

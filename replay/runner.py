@@ -167,24 +167,41 @@ def _span_ns(paths: Sequence[Path]) -> int | None:
         return None
 
 
+def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
+    """Totals over the reader's per-file statistics, plus the per-file details."""
+    files = [st.as_dict() for st in stats]
+    lost = [r for st in stats for r in st.lost]
+    return {
+        "messages": sum(st.messages for st in stats),
+        "samples": sum(st.samples for st in stats),
+        "duplicates": sum(st.duplicates for st in stats),
+        "late": sum(st.late for st in stats),
+        "bad_chunks": sum(st.bad_chunks for st in stats),
+        "bad_payloads": sum(st.bad_payloads for st in stats),
+        "lost_ranges": len(lost),
+        "lost_messages_known": sum(r.messages or 0 for r in lost),
+        "incomplete_files": [st.path for st in stats if not st.complete],
+        "unreadable_files": [st.path for st in stats if st.error],
+        "files": files,
+    }
+
+
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
                 sinks: Sequence[Sink] = (), speed: float | None = None,
                 show_progress: bool | None = None) -> ReplayResult:
     """Replay MCAP logs (files or directories) through the pipeline; return the report."""
-    from replay import reader
+    from replay.reader import LogReader
 
     files = collect_logs(paths)
     state = load_state(state_path)
     if show_progress is None:
         show_progress = sys.stderr.isatty()
     progress = Progress(sys.stderr, _span_ns(files) if show_progress else None, show_progress)
-    source = reader.iter_blocks(files)
+    source = LogReader(files)
     pipeline, result = run_blocks(config, source, state=state, sinks=sinks, speed=speed,
                                   progress=progress)
-    stats = getattr(source, "stats", None)
-    read_stats = stats.as_dict() if hasattr(stats, "as_dict") else dict(stats or {})
     result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
-                                 read_stats)
+                                 read_summary(source.stats))
     if result.ignored_blocks:
         result.report["inputs"]["ignored_blocks_of_other_buoys"] = result.ignored_blocks
     if state_path is not None:
