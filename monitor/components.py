@@ -106,8 +106,12 @@ class Component:
             return _EMPTY, _EMPTY, _EMPTY
         self.max_stress_Pa = max(self.max_stress_Pa, float(stress_Pa.max()))
         ranges, means, counts = self.rainflow.feed(stress_Pa)
-        if len(ranges):
-            self._pending = [np.concatenate([p, c]) for p, c in zip(self._pending, (ranges, means, counts))]
+        if ranges.shape[0]:
+            if self._pending[0].shape[0]:
+                self._pending = [np.concatenate([p, c])
+                                 for p, c in zip(self._pending, (ranges, means, counts))]
+            else:
+                self._pending = [ranges, means, counts]
         return ranges, means, counts
 
     def commit(self, tick_end_ns: int) -> None:

@@ -143,44 +143,77 @@ class _TensionStats:
 
 
 class _StreamSlab:
-    """One stream's share of a slab with its verdicts, for per-tick counters and totals."""
+    """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
-    def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray, accepted: int,
-                 rejected: Mapping[str, int], has_last: bool, last_t: int) -> None:
+    def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
+                 validator_before: tuple[int, dict[str, int], bool, int]) -> None:
         self.t, self.codes = t, codes
         ok = codes == 0
         self.acc_t, self.acc_values = t[ok], values[:, ok]
         self.rej_t = t[~ok]
-        self._before = (accepted, dict(rejected), has_last, last_t)
-        self._cum: np.ndarray | None = None
+        self._before = validator_before
+        self._ticks: tuple[np.ndarray, ...] | None = None
 
     @staticmethod
     def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
         return v.accepted, dict(v.rejected), v.has_last, v.last_t_ns
 
-    def counts_between(self, lo: int, hi: int | None) -> tuple[int, int]:
-        """Samples received and rejected with time in ``(lo, hi]`` (``hi`` None = to the end)."""
-        hi_i = self.t.shape[0] if hi is None else int(np.searchsorted(self.t, hi, side="right"))
-        lo_i = int(np.searchsorted(self.t, lo, side="right"))
-        hi_j = self.rej_t.shape[0] if hi is None else int(np.searchsorted(self.rej_t, hi, side="right"))
-        lo_j = int(np.searchsorted(self.rej_t, lo, side="right"))
-        return hi_i - lo_i, hi_j - lo_j
+    def counts_after(self, lo: int) -> tuple[int, int]:
+        """Samples received and rejected with time after ``lo``."""
+        return (self.t.shape[0] - int(np.searchsorted(self.t, lo, side="right")),
+                self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
 
-    def totals_at(self, now: int) -> tuple[bool, int, int, dict[str, int]]:
-        """(has_last, last accepted time, accepted, rejected by reason) counting samples <= now."""
+    def prepare(self, ends: np.ndarray) -> None:
+        """Vectorised health at every tick end of this slab (cumulative counts and last time)."""
+        cut = np.searchsorted(self.t, ends, side="right")
+        rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+        by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
+                              for i in range(1, len(REASONS) + 1)])
+        k = np.searchsorted(self.acc_t, ends, side="right")
+        last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
+                        self._before[3])
+        self._ticks = (cut, rej_cut, by_reason, k, last)
+
+    def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
+        """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
+        (the caller adds what earlier slabs contributed to the same tick) for ``k = 0``."""
         accepted, rejected, has_last, last_t = self._before
-        if self._cum is None:
-            one_hot = self.codes[None, :] == np.arange(len(REASONS) + 1, dtype=np.int8)[:, None]
-            self._cum = np.concatenate(
-                [np.zeros((len(REASONS) + 1, 1), np.int64), np.cumsum(one_hot, axis=1)], axis=1)
-        cut = int(np.searchsorted(self.t, now, side="right"))
-        counts = self._cum[:, cut]
-        k = int(np.searchsorted(self.acc_t, now, side="right"))
-        if k:
-            has_last, last_t = True, int(self.acc_t[k - 1])
-        return (has_last, last_t, accepted + int(counts[0]),
-                {r: rejected[r] + int(counts[i]) for i, r in enumerate(REASONS, start=1)})
+        cut, rej_cut, by_reason, n_acc, last = self._ticks
+        if n_acc[k]:
+            has_last, last_t = True, int(last[k])
+        received = int(cut[k] - (cut[k - 1] if k else 0))
+        rejected_tick = int(rej_cut[k] - (rej_cut[k - 1] if k else 0))
+        return StreamObs(
+            last_t_ns=last_t if has_last else 0,
+            stale=not has_last or now - last_t > stale_ns,
+            accepted=accepted + int(n_acc[k]),
+            rejected={r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
+            rejected_in_tick=rejected_tick, received_in_tick=received,
+        )
 
+
+class _LazyComponents(Mapping[str, ComponentObs]):
+    """Per-tick component figures, computed only for the components a rule looks at."""
+
+    def __init__(self, components: Mapping[str, Component], stresses: Mapping[str, np.ndarray]):
+        self._components, self._stresses = components, stresses
+        self._done: dict[str, ComponentObs] = {}
+
+    def __getitem__(self, name: str) -> ComponentObs:
+        obs = self._done.get(name)
+        if obs is None:
+            f = self._components[name].figures()
+            s = self._stresses[name]
+            obs = self._done[name] = ComponentObs(
+                f["damage"], f["damage_committed"], f["damage_rate_per_day"],
+                f["remaining_life_days"], float(s.max()) if s.shape[0] else math.nan)
+        return obs
+
+    def __iter__(self):
+        return iter(self._components)
+
+    def __len__(self) -> int:
+        return len(self._components)
 
 
 class Pipeline:
@@ -224,6 +257,9 @@ class Pipeline:
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
             st.get("alerts"))
+        rule_keys = getattr(self.alerts, "rule_keys", None)
+        self._has_rules = not isinstance(self.alerts, NullAlertEngine) and (
+            rule_keys is None or bool(rule_keys()))
         lim = config.validate["tension"].fields["tension_N"]
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
@@ -275,7 +311,7 @@ class Pipeline:
             before = _StreamSlab.before(validator)
             codes = validator.check(t, values, max(self.processed_ns, self.taken_upto.get(s, _NEVER)))
             self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
-            streams[s] = info = _StreamSlab(t, values, codes, *before)
+            streams[s] = info = _StreamSlab(t, values, codes, before)
             n_acc += info.acc_t.shape[0]
             for i, reason in enumerate(REASONS, start=1):
                 rejected[reason] += int(np.count_nonzero(codes == i))
@@ -337,7 +373,10 @@ class Pipeline:
             k = (tick_limit - self.next_tick_ns) // self.tick_ns
             ends = self.next_tick_ns + self.tick_ns * np.arange(k + 1, dtype=np.int64)
         cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
-        evaluate = not isinstance(self.alerts, NullAlertEngine)
+        evaluate = self._has_rules and ends.shape[0] > 0
+        if evaluate:
+            for info in streams.values():
+                info.prepare(ends)
         start, prev_end = 0, _NEVER
         for k in range(ends.shape[0] + 1):
             stop = int(cuts[k])
@@ -357,7 +396,7 @@ class Pipeline:
                 if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
                     tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
                     ss = {n: c.stress(tv) for n, c in self.components.items()}
-                self._evaluate(end, tt, tv, ts, ss, streams, prev_end)
+                self._evaluate(k, end, tt, tv, ts, ss, streams)
             self.open_tick = _empty_load()
             start, prev_end = stop, end
         if ends.shape[0]:
@@ -368,60 +407,57 @@ class Pipeline:
                                    for o, x in zip(self.open_tick, (t, v, src)))
         for s, info in streams.items():
             # what this slab adds to the tick still open
-            received, rej = info.counts_between(prev_end, None)
+            received, rej = info.counts_after(prev_end)
             counts = self.tick_counts.setdefault(s, [0, 0])
             counts[0] += received
             counts[1] += rej
         return {n: [np.concatenate(c) if c else np.zeros(0) for c in v3]
                 for n, v3 in closed.items()}
 
-    def _evaluate(self, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
-                  stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
-                  prev_end: int) -> None:
-        comps = {}
-        for name, comp in self.components.items():
-            f = comp.figures()
-            s = stresses[name]
-            comps[name] = ComponentObs(f["damage"], f["damage_committed"],
-                                       f["damage_rate_per_day"], f["remaining_life_days"],
-                                       float(s.max()) if s.shape[0] else math.nan)
-        meas, est = v[src == MEASURED], v[src == ESTIMATED]
+    def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                  stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
+        """Evaluate the alert rules at the end of the slab's ``k``-th tick."""
+        if src.shape[0] and src[0] == src[-1] and bool(np.all(src == src[0])):
+            mean = float(v.mean())
+            meas, est = (mean, math.nan) if src[0] == MEASURED else (math.nan, mean)
+        else:
+            m, e = v[src == MEASURED], v[src == ESTIMATED]
+            meas = float(m.mean()) if m.shape[0] else math.nan
+            est = float(e.mean()) if e.shape[0] else math.nan
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
-            measured_tension_N=float(meas.mean()) if meas.shape[0] else math.nan,
-            estimated_tension_N=float(est.mean()) if est.shape[0] else math.nan,
-            components=comps, streams=self._stream_obs(end, streams, prev_end),
+            measured_tension_N=meas, estimated_tension_N=est,
+            components=_LazyComponents(self.components, stresses),
+            streams=self._stream_obs(end, streams, k),
         )
         for rec in self.alerts.evaluate(obs):
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
         del self.alert_history[:-ALERT_HISTORY_LIMIT]
 
-    def _stream_obs(self, now: int, streams: Mapping[str, "_StreamSlab"] | None = None,
-                    prev_end: int = _NEVER) -> dict[str, StreamObs]:
-        """Stream health at ``now``: totals up to ``now``; counts of this slab's samples in
-        ``(prev_end, now]`` plus those of earlier slabs in the same tick."""
+    def _stream_obs(self, now: int, streams: Mapping[str, _StreamSlab] | None = None,
+                    k: int = 0) -> dict[str, StreamObs]:
+        """Stream health at ``now`` (the end of the slab's ``k``-th tick, or any time when
+        ``streams`` is None): totals up to ``now`` and counts within the tick."""
         out = {}
         for s, val in self.validators.items():
-            info = (streams or {}).get(s)
-            if info is None:
-                has_last, last_t = val.has_last, val.last_t_ns
-                accepted, rejected = val.accepted, dict(val.rejected)
-                received_tick, rejected_tick = 0, 0
+            stale_ns = self.config.validate[s].stale_after_s * 1e9
+            info = None if streams is None else streams.get(s)
+            if info is not None:
+                obs = info.tick(k, now, stale_ns)
             else:
-                has_last, last_t, accepted, rejected = info.totals_at(now)
-                received_tick, rejected_tick = info.counts_between(prev_end, now)
-            open_counts = self.tick_counts.pop(s, None) if streams is not None else None
-            if open_counts is not None:
-                received_tick += open_counts[0]
-                rejected_tick += open_counts[1]
-            out[s] = StreamObs(
-                last_t_ns=last_t if has_last else 0,
-                stale=not has_last or now - last_t > self.config.validate[s].stale_after_s * 1e9,
-                accepted=accepted, rejected=rejected,
-                rejected_in_tick=rejected_tick, received_in_tick=received_tick,
-            )
+                obs = StreamObs(
+                    last_t_ns=val.last_t_ns if val.has_last else 0,
+                    stale=not val.has_last or now - val.last_t_ns > stale_ns,
+                    accepted=val.accepted, rejected=dict(val.rejected),
+                    rejected_in_tick=0, received_in_tick=0)
+            if k == 0 and streams is not None and s in self.tick_counts:
+                # samples of earlier slabs that fell into this same tick
+                received, rejected = self.tick_counts.pop(s)
+                obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
+                                          rejected_in_tick=obs.rejected_in_tick + rejected)
+            out[s] = obs
         return out
 
     def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
