@@ -1,0 +1,156 @@
+"""Which load feeds fatigue: the measured tension, or the motion estimate when the cell is stale.
+
+``[load] source``:
+
+``measured``   the accepted load-cell samples only;
+``estimated``  the motion -> tension estimate (models.estimator) only;
+``auto``       the load cell while it is fresh and good, the estimate while it is not.
+
+The ``auto`` rule, per estimated sample at time ``e``: it is used if and only if no ACCEPTED
+tension sample lies in ``[e - stale_after_s, e]``. Measured samples are always used. So each
+stretch of time is fed by exactly one source (no double counting): the cell's samples where it
+is alive, the estimate inside gaps (silence or runs of rejected samples) longer than
+``stale_after_s``, and nothing in the first ``stale_after_s`` of a gap. The decision for ``e``
+only needs the tension stream up to ``e``, which the ordering watermark guarantees, so it is the
+same for any split of the data into blocks.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from typing import Any, Mapping, Protocol
+
+import numpy as np
+
+from monitor.config import Config, LoadConfig
+
+log = logging.getLogger(__name__)
+
+MEASURED, ESTIMATED = 1, 2
+SOURCE_NAMES = {0: "none", MEASURED: "measured", ESTIMATED: "estimated"}
+
+
+class MotionEstimator(Protocol):
+    """What the pipeline needs from a motion -> tension estimator (adapter over models.estimator)."""
+
+    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Accepted motion samples in time order -> ``(t_ns, tension_N)`` of the estimate."""
+        ...
+
+    def state(self) -> dict[str, Any]: ...
+
+
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
+    """The motion estimator for this mooring, or None when models.estimator is not installed."""
+    try:
+        estimator = importlib.import_module("models.estimator")
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("models.estimator", "models"):
+            raise
+        log.warning("models.estimator is not installed: no motion-based tension estimate")
+        return None
+    return estimator.MotionTensionEstimator.from_config(config, state=state)
+
+
+class LoadSelector:
+    """Merges measured and estimated tension into the one fatigue load series."""
+
+    def __init__(self, cfg: LoadConfig, state: Mapping[str, Any] | None = None) -> None:
+        self.mode = cfg.source
+        self.stale_ns = int(round(cfg.stale_after_s * 1e9))
+        self.last_measured_ns: int | None = None
+        if state is not None and state["last_measured_ns"] is not None:
+            self.last_measured_ns = int(state["last_measured_ns"])
+
+    def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED."""
+        if self.mode == "estimated":
+            return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
+        prev = self.last_measured_ns
+        if m_t.shape[0]:
+            self.last_measured_ns = int(m_t[-1])
+        measured = (m_t, m_v, np.full(m_t.shape, MEASURED, np.int8))
+        if self.mode == "measured" or e_t.shape[0] == 0:
+            return measured
+        # latest accepted tension time at or before each estimated sample
+        idx = np.searchsorted(m_t, e_t, side="right") - 1
+        never = idx < 0
+        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
+        if prev is not None:
+            latest = np.where(never, np.int64(prev), latest)
+            never[:] = False
+        use = never | (e_t - latest > self.stale_ns)
+        if not use.any():
+            return measured
+        t = np.concatenate([m_t, e_t[use]])
+        v = np.concatenate([m_v, e_v[use]])
+        src = np.concatenate([measured[2], np.full(int(use.sum()), ESTIMATED, np.int8)])
+        order = np.argsort(t, kind="stable")
+        return t[order], v[order], src[order]
+
+    def state(self) -> dict[str, Any]: ...
+
+
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
+    """The motion estimator for this mooring, or None when models.estimator is not installed."""
+    try:
+        estimator = importlib.import_module("models.estimator")
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("models.estimator", "models"):
+            raise
+        log.warning("models.estimator is not installed: no motion-based tension estimate")
+        return None
+    return estimator.MotionTensionEstimator.from_config(config, state=state)
+
+
+class LoadSelector:
+    """Merges measured and estimated tension into the one fatigue load series."""
+
+    def __init__(self, cfg: LoadConfig, state: Mapping[str, Any] | None = None) -> None:
+        self.mode = cfg.source
+        self.stale_ns = int(round(cfg.stale_after_s * 1e9))
+        self.last_measured_ns: int | None = None
+        if state is not None and state["last_measured_ns"] is not None:
+            self.last_measured_ns = int(state["last_measured_ns"])
+
+    def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED."""
+        if self.mode == "estimated":
+            return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
+        prev = self.last_measured_ns
+        if m_t.shape[0]:
+            self.last_measured_ns = int(m_t[-1])
+        measured = (m_t, m_v, np.full(m_t.shape, MEASURED, np.int8))
+        if self.mode == "measured" or e_t.shape[0] == 0:
+            return measured
+        # latest accepted tension time at or before each estimated sample
+        idx = np.searchsorted(m_t, e_t, side="right") - 1
+        never = idx < 0
+        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
+        if prev is not None:
+            latest = np.where(never, np.int64(prev), latest)
+            never[:] = False
+        use = never | (e_t - latest > self.stale_ns)
+        if not use.any():
+            return measured
+        t = np.concatenate([m_t, e_t[use]])
+        v = np.concatenate([m_v, e_v[use]])
+        src = np.concatenate([measured[2], np.full(int(use.sum()), ESTIMATED, np.int8)])
+        order = np.argsort(t, kind="stable")
+        return t[order], v[order], src[order]
+
+    def current(self, now_ns: int, estimate_available: bool) -> str:
+        """The source feeding fatigue at ``now_ns``."""
+        if self.mode != "estimated" and self.last_measured_ns is not None and (
+            now_ns - self.last_measured_ns <= self.stale_ns
+        ):
+            return "measured"
+        if self.mode != "measured" and estimate_available:
+            return "estimated"
+        return "none"
+
+    def state(self) -> dict[str, Any]:
+        return {"last_measured_ns": self.last_measured_ns}
