@@ -8,6 +8,7 @@ from typing import Any
 
 from monitor.config import ConfigError, default_config, load_config
 from monitor.events import Sink
+from replay import cmd_fleet
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,6 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pace.add_argument("--realtime", action="store_true", help="pace the replay at sensor time")
     pace.add_argument("--speed", type=float, metavar="X", help="pace at X times real time")
     p.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
+    cmd_fleet.add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -40,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
     if args.speed is not None and not args.speed > 0:
         print(f"replay: --speed {args.speed}: must be > 0", file=sys.stderr)
         return 2
+    if cmd_fleet.wanted(args):
+        return cmd_fleet.run(args, config)
     speed = 1.0 if args.realtime else args.speed
     try:
         result = replay_logs(config, args.logs, state_path=args.state,
