@@ -1,0 +1,137 @@
+"""Fleet replay benchmark (issue 9): speed-up with 2 workers over 1, and seconds per buoy-year.
+
+Writes a synthetic archive (default 12 buoys x 30 days = 12 buoy-months, one file per buoy and
+day, 20 Hz tension and 10 Hz IMU in 1 s blocks, each buoy in its own sea state) with
+replay.writer, then replays the whole archive with ``replay.fleet.run_fleet`` serially
+(``--workers 1``, in-process) and with a 2-process pool, checks both give identical reports, and
+prints:
+
+* wall time of each run and the speed-up (target >= 1.8x on a 2-core machine);
+* seconds per buoy-year (serial wall time / buoy-years): a cluster of W single-core workers
+  reprocesses F buoy-years in about F x that / W seconds (one buoy per task, so W <= buoys).
+
+The machine is shared: the load average before each run is printed so a low figure can be
+judged. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+S = 1_000_000_000
+T0 = 1_600_000_000 * S
+PERIODS = np.array([4.4, 5.0, 5.25, 5.6, 6.3, 8.0])
+SHAPE = np.array([0.3, 0.65, 1.0, 0.65, 0.35, 0.2])  # relative amplitudes of the sea
+
+
+def write_day(path: str, buoy: str, day: int, amp_N: float, seed: int) -> int:
+    """One day of one buoy, written hour by hour; return the tension sample count."""
+    from replay.writer import LogWriter, Series
+
+    rng = np.random.default_rng([seed, day])
+    phases = np.random.default_rng(seed).uniform(0, 2 * np.pi, PERIODS.size)
+    amps = amp_N * SHAPE
+    n_tension = 0
+    with LogWriter(path) as w:
+        for hour in range(24):
+            t0 = T0 + (day * 24 + hour) * 3600 * S
+            series = []
+            for sensor, hz in (("tension", 20), ("imu", 10)):
+                n = 3600 * hz
+                t = t0 + (np.arange(n, dtype=np.int64) * S) // hz
+                x = (t - T0) / S
+                wave = np.sin(2 * np.pi * x[None, :] / PERIODS[:, None] + phases[:, None])
+                if sensor == "tension":
+                    v = 5000.0 + amps @ wave + 0.2 * amp_N * np.sin(2 * np.pi * x / 600)
+                    values = (v + rng.normal(0, 50, n))[None, :]
+                    n_tension += n
+                else:
+                    az = (SHAPE * amp_N / 1400.0) @ wave
+                    values = np.stack([rng.normal(0, 0.05, n), rng.normal(0, 0.05, n), az])
+                series.append(Series(buoy, sensor, t, values))
+            w.write_series(series, block_ns=S, recv_delay_ns=50_000_000)
+    return n_tension
+
+
+def write_archive(root: Path, buoys: int, days: int, workers: int) -> int:
+    """``root/<buoy>/day_<k>.mcap``; buoy k's sea grows with k. Returns tension samples."""
+    tasks = []
+    for b in range(buoys):
+        d = root / f"buoy{b:03d}"
+        d.mkdir(parents=True, exist_ok=True)
+        for day in range(days):
+            tasks.append((str(d / f"day_{day:04d}.mcap"), f"buoy{b:03d}", day, 400.0 + 150.0 * b, b))
+    with ProcessPoolExecutor(workers, mp_context=get_context("forkserver")) as pool:
+        return sum(pool.map(write_day, *zip(*tasks)))
+
+
+def bench_config():
+    from monitor.config import config_with, default_config
+
+    c = default_config()
+    return config_with(c, load={**c.section("load"), "source": "measured"})
+
+
+def timed_run(archives, config, workers: int) -> tuple[float, list]:
+    from replay.fleet import run_fleet
+
+    print(f"  load average before the {workers}-worker run: {os.getloadavg()[0]:.2f}")
+    start = time.perf_counter()
+    reports = run_fleet(archives, config, workers=workers)
+    return time.perf_counter() - start, reports
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--buoys", type=int, default=12)
+    ap.add_argument("--days", type=int, default=30, help="days per buoy")
+    ap.add_argument("--dir", help="archive folder (default: a temporary one, removed after)")
+    ap.add_argument("--keep", action="store_true", help="keep the generated archive")
+    args = ap.parse_args()
+    from replay.fleet import BuoyArchive, discover, make_jobs, replay_buoy
+
+    work = Path(args.dir or tempfile.mkdtemp(prefix="bench_fleet_"))
+    buoy_years = args.buoys * args.days / 365.25
+    try:
+        t = time.perf_counter()
+        if not any(work.rglob("*.mcap")):
+            n = write_archive(work, args.buoys, args.days, workers=2)
+            print(f"wrote {args.buoys} buoys x {args.days} days ({args.buoys * args.days / 30:.1f} "
+                  f"buoy-months, {n:,d} tension samples) in {time.perf_counter() - t:.0f} s")
+        archives = discover([work])
+        config = bench_config()
+        # warm the numba cache and imports once, outside the timed runs
+        first = BuoyArchive(archives[0].buoy_id, archives[0].files[:1])
+        replay_buoy(make_jobs([first], config)[0])
+        wall1, rep1 = timed_run(archives, config, 1)
+        print(f"1 worker : {wall1:7.1f} s")
+        wall2, rep2 = timed_run(archives, config, 2)
+        print(f"2 workers: {wall2:7.1f} s")
+        assert rep1 == rep2, "the pool's reports differ from the serial run's"
+        print(f"speed-up 2 workers / 1: {wall1 / wall2:.2f}x (target >= 1.8x); reports identical")
+        tension = sum(r["samples"]["tension"]["accepted"] for r in rep1)
+        print(f"serial: {tension / wall1 / 1e6:.2f} M tension samples/s, "
+              f"{wall1 / buoy_years:.0f} s per buoy-year "
+              f"({wall1 / buoy_years / 3600:.2f} core-hours per buoy-year)")
+        print(f"sizing: 100 buoys x 5 years on W one-core workers ~ "
+              f"{500 * wall1 / buoy_years / 3600:.1f} / W hours")
+    finally:
+        if not args.keep and not args.dir:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
