@@ -22,7 +22,7 @@ from typing import Any, Protocol
 import numpy as np
 import zenoh
 
-from monitor.blocks import SampleBlock, validate_buoy_id
+from monitor.blocks import SampleBlock, parse_sensor_topic, validate_buoy_id
 from monitor.daemon_config import ZenohConfig
 from monitor.recorder import ChannelSpec
 
@@ -144,8 +144,26 @@ class BlockCodec(Protocol):
     def channel_spec(self, sensor: str) -> ChannelSpec: ...
 
 
-def default_codec() -> BlockCodec:
-    """The log format's protobuf codec (``replay.codec``)."""
-    from replay.codec import ZenohCodec  # noqa: PLC0415 (lazy: replay is optional here)
+class ProtobufCodec:
+    """The log format's protobuf block encoding (``replay.codec``) as a :class:`BlockCodec`."""
 
-    return ZenohCodec()
+    def __init__(self) -> None:
+        from replay import codec  # noqa: PLC0415 (lazy: numba compile only when used)
+
+        self._codec = codec
+
+    def encode(self, block: SampleBlock) -> bytes:
+        return self._codec.encode_block(block)
+
+    def decode(self, topic: str, payload: bytes, recv_ns: int) -> SampleBlock:
+        buoy_id, sensor = parse_sensor_topic(topic)
+        return self._codec.decode_block(buoy_id, sensor, payload, recv_ns)
+
+    def channel_spec(self, sensor: str) -> ChannelSpec:
+        return ChannelSpec(self._codec.schema_name(sensor), "protobuf",
+                           self._codec.file_descriptor_set(sensor), "protobuf")
+
+
+def default_codec() -> BlockCodec:
+    """The codec used on the wire: the same bytes as the MCAP log messages."""
+    return ProtobufCodec()
