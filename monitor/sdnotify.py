@@ -29,13 +29,15 @@ class SdNotifier:
         self._sock: socket.socket | None = None
         if self._addr:
             self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
+            # never let a slow reader stall the daemon: a full queue drops the message
+            self._sock.setblocking(False)
 
     @property
     def enabled(self) -> bool:
         return self._sock is not None
 
     def notify(self, message: str) -> bool:
-        """Send one datagram; False if not under systemd or the send failed."""
+        """Send one datagram; False if not under systemd or it could not be sent now."""
         if self._sock is None:
             return False
         try:

@@ -48,3 +48,13 @@ def test_watchdog_meant_for_another_pid_is_ignored(tmp_path):
     assert n.watchdog_interval_s is None
     assert not n.ready()  # nobody listens on that path: reported, not raised
     n.close()
+
+
+def test_a_reader_that_never_reads_cannot_stall_the_sender(tmp_path):
+    path = str(tmp_path / "notify")
+    server = _listen(path)
+    n = SdNotifier({"NOTIFY_SOCKET": path})
+    sent = [n.watchdog() for _ in range(2000)]  # far beyond the kernel's datagram queue
+    assert sent[0] and not all(sent)
+    n.close()
+    server.close()
