@@ -21,7 +21,7 @@ import logging
 import queue
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
 from monitor.blocks import SampleBlock, parse_sensor_topic
@@ -40,9 +40,13 @@ _IDLE_WAIT_S = 0.2
 
 
 class PipelineLike(Protocol):
+    """What the daemon needs of ``monitor.pipeline.Pipeline``."""
+
     def process(self, block: SampleBlock) -> StepResult: ...
 
     def state(self) -> Any: ...
+
+    def status(self) -> Mapping[str, Any]: ...
 
 
 # make_pipeline(restored_state_or_None, sinks) -> pipeline
@@ -51,25 +55,15 @@ PipelineFactory = Callable[[Any, Sequence[Sink]], PipelineLike]
 
 @dataclass
 class StreamHealth:
-    """What the daemon knows about one sensor stream (wall clock and liveliness)."""
+    """Wall-clock view of one sensor stream: data age and liveliness (not in the checkpoint)."""
 
     last_arrival_mono: float | None = None
-    last_t_ns: int = 0
     alive: bool | None = None  # None: no liveliness token seen either way
-    accepted: int = 0
-    rejected: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self, now_mono: float, timeout_s: float) -> dict[str, Any]:
         age = None if self.last_arrival_mono is None else now_mono - self.last_arrival_mono
-        return {
-            "data_age_s": age,
-            "data_age_timeout_s": timeout_s,
-            "stale": age is None or age > timeout_s,
-            "alive": self.alive,
-            "last_t_ns": self.last_t_ns,
-            "accepted": self.accepted,
-            "rejected": dict(self.rejected),
-        }
+        return {"data_age_s": age, "data_age_timeout_s": timeout_s,
+                "data_stale": age is None or age > timeout_s, "alive": self.alive}
 
 
 class Daemon:
@@ -91,11 +85,7 @@ class Daemon:
                                          "status_published": 0, "queries": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
-        for name, h in saved.get("daemon", {}).get("streams", {}).items():
-            self.streams[name] = StreamHealth(last_t_ns=h["last_t_ns"], accepted=h["accepted"],
-                                              rejected=dict(h["rejected"]))
         self.restored_seq = restored.seq if restored is not None else 0
-        self._latest: StepResult | None = None
         self.pipeline = make_pipeline(saved.get("pipeline"), [*extra_sinks])
         self._checkpointer = PeriodicCheckpointer(self._store, self.checkpoint_state,
                                                   config.state.checkpoint_interval_s)
@@ -217,15 +207,8 @@ class Daemon:
         if self.recorder is not None:
             self.recorder.write(key, payload, self.codec.channel_spec(block.sensor),
                                 recv_ns, block.t_first_ns)
-        health = self._stream(block.sensor)
-        health.last_arrival_mono = time.monotonic()
-        step = self.pipeline.process(block)
-        health.accepted += step.accepted
-        for reason, n in step.rejected.items():
-            health.rejected[reason] = health.rejected.get(reason, 0) + n
-        if step.accepted:
-            health.last_t_ns = max(health.last_t_ns, block.t_last_ns)
-        self._latest = step
+        self._stream(block.sensor).last_arrival_mono = time.monotonic()
+        self.pipeline.process(block)
         self._dirty_status = True
 
     def _on_alive(self, key: str, alive: bool) -> None:
@@ -245,29 +228,27 @@ class Daemon:
     # ---- output ----------------------------------------------------------------------------
 
     def status(self) -> dict[str, Any]:
-        """The status document published on ``buoy/<id>/monitor/status``."""
+        """The status document published on ``buoy/<id>/monitor/status``.
+
+        The pipeline's figures (sensor time, load source, latest measured and estimated
+        tension, per-component damage, damage rate and remaining life, per-stream accepted
+        and rejected counts and sensor-time staleness) with, per stream, the daemon's
+        wall-clock data age and liveliness, and the daemon's own counters.
+        """
         now = time.monotonic()
-        step = self._latest
+        doc = dict(self.pipeline.status())
         ages = self.config.health.data_age_timeout_s
-        sensors = {name: h.to_dict(now, ages.get(name, max(ages.values())))
-                   for name, h in sorted(self.streams.items())}
-        doc: dict[str, Any] = {
+        streams = {name: dict(s) for name, s in doc.get("streams", {}).items()}
+        for name in sorted(set(streams) | set(self.streams)):
+            health = self.streams.get(name, StreamHealth())
+            streams.setdefault(name, {}).update(health.to_dict(now, ages[name]))
+        doc.update({
             "buoy_id": self.buoy_id,
             "wall_time_ns": time.time_ns(),
-            "sensor_time_ns": step.now_ns if step else 0,
-            "load_source": step.load_source if step else "none",
-            "measured_tension_N": step.measured_tension_N if step else None,
-            "estimated_tension_N": step.estimated_tension_N if step else None,
-            "components": {} if step is None else {
-                name: {"damage": c.damage, "damage_committed": c.damage_committed,
-                       "damage_rate_per_day": c.damage_rate_per_day,
-                       "remaining_life_days": c.remaining_life_days,
-                       "max_stress_Pa": c.max_stress_Pa}
-                for name, c in step.components.items()},
-            "sensors": sensors,
+            "streams": streams,
             "counters": dict(self.counters),
             "uptime_s": now - self._started_mono,
-        }
+        })
         return doc
 
     def full_state(self) -> dict[str, Any]:
@@ -277,11 +258,7 @@ class Daemon:
     def checkpoint_state(self) -> dict[str, Any]:
         return {
             "pipeline": self.pipeline.state(),
-            "daemon": {
-                "counters": dict(self.counters),
-                "streams": {n: {"last_t_ns": h.last_t_ns, "accepted": h.accepted,
-                                "rejected": dict(h.rejected)} for n, h in self.streams.items()},
-            },
+            "daemon": {"counters": dict(self.counters)},
         }
 
     def publish_json(self, key: str, doc: Mapping[str, Any], sensor_time_ns: int) -> None:
@@ -298,7 +275,7 @@ class Daemon:
 
     def _publish_status(self) -> None:
         doc = self.status()
-        self.publish_json(zenoh_io.status_key(self.buoy_id), doc, doc["sensor_time_ns"])
+        self.publish_json(zenoh_io.status_key(self.buoy_id), doc, int(doc.get("now_ns") or 0))
         self.counters["status_published"] += 1
         self._last_status_mono = time.monotonic()
         self._dirty_status = False

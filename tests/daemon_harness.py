@@ -54,36 +54,54 @@ class FakeCodec:
 
 class FakePipeline:
     """Damage = sum of accepted tension samples / 1e9; samples at or before a stream's last
-    time are skipped as duplicates, NaNs are rejected: the contract the real pipeline keeps."""
+    time are rejected as duplicates, NaNs as nan: the contract the real pipeline keeps."""
 
     def __init__(self, state: Any = None) -> None:
         state = state or {}
         self.last_t = dict(state.get("last_t", {}))
         self.total = float(state.get("total", 0.0))
+        self.accepted = dict(state.get("accepted", {}))
+        self.rejected = {k: dict(v) for k, v in state.get("rejected", {}).items()}
 
     def process(self, block: SampleBlock) -> StepResult:
         last = self.last_t.get(block.sensor, -1)
         new = block.t_ns > last
-        rejected = {"duplicate": int((~new).sum())}
+        ok = new & np.isfinite(block.fields["tension_N"]) if block.sensor == "tension" else new
         if block.sensor == "tension":
-            x = block.fields["tension_N"]
-            ok = new & np.isfinite(x)
-            rejected["nan"] = int((new & ~ok).sum())
-            for v in x[ok]:  # sequential so the float sum does not depend on block sizes
+            for v in block.fields["tension_N"][ok]:  # sequential: independent of block sizes
                 self.total += float(v) / 1e9
-        else:
-            ok = new
         if ok.any():
             self.last_t[block.sensor] = int(block.t_ns[ok][-1])
+        rej = self.rejected.setdefault(block.sensor, {"duplicate": 0, "nan": 0})
+        rej["duplicate"] += int((~new).sum())
+        rej["nan"] += int((new & ~ok).sum())
+        self.accepted[block.sensor] = self.accepted.get(block.sensor, 0) + int(ok.sum())
         comp = ComponentStep("conductor", np.empty(0), np.empty(0), np.empty(0), np.empty(0),
                              self.total, self.total, 0.0, float("inf"), 0.0)
-        t_used = block.t_ns[ok] if block.sensor == "tension" else np.empty(0, np.int64)
-        return StepResult(BUOY, block.sensor, int(max(self.last_t.values(), default=0)),
-                          t_used, np.zeros(len(t_used)), "measured", float("nan"),
-                          float("nan"), {"conductor": comp}, int(ok.sum()), rejected)
+        return StepResult(BUOY, block.sensor, self.now_ns, np.empty(0, np.int64), np.empty(0),
+                          "measured", float("nan"), float("nan"), {"conductor": comp},
+                          int(ok.sum()), dict(rej))
+
+    @property
+    def now_ns(self) -> int:
+        return int(max(self.last_t.values(), default=0))
+
+    def status(self) -> dict[str, Any]:
+        return {
+            "buoy_id": BUOY, "now_ns": self.now_ns,
+            "load_source": "measured" if self.total else "none",
+            "measured_tension_N": None, "estimated_tension_N": None,
+            "components": {"conductor": {"damage": self.total, "damage_committed": self.total,
+                                         "damage_rate_per_day": 0.0,
+                                         "remaining_life_days": None}},
+            "streams": {s: {"last_t_ns": self.last_t.get(s, 0), "accepted": n,
+                            "rejected": dict(self.rejected.get(s, {}))}
+                        for s, n in self.accepted.items()},
+        }
 
     def state(self) -> dict[str, Any]:
-        return {"last_t": dict(self.last_t), "total": self.total}
+        return {"last_t": dict(self.last_t), "total": self.total,
+                "accepted": dict(self.accepted), "rejected": self.rejected}
 
 
 def tension_blocks(n_blocks: int, seed: int = 1) -> list[SampleBlock]:

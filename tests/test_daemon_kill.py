@@ -48,7 +48,8 @@ def test_twenty_kill_9_then_restart_equal_one_uninterrupted_run(tmp_path):
         store.close()
         progress.append(cp.state["pipeline"]["last_t"].get("tension", 0) if cp else 0)
     assert progress == sorted(progress)  # a checkpoint never goes back in time
-    assert 0 < progress[0] < blocks[-1].t_last_ns  # kills did interrupt the stream
+    # kills did interrupt the stream part way, several times
+    assert len({p for p in progress if 0 < p < blocks[-1].t_last_ns}) >= 3, progress
     d = DaemonProcess([sys.executable, HARNESS, "run", str(cfg)], tmp_path)
     d.wait_for("READY=1")
     subprocess.run([sys.executable, HARNESS, "publish", endpoint, str(N_BLOCKS), "0"],
@@ -60,4 +61,4 @@ def test_twenty_kill_9_then_restart_equal_one_uninterrupted_run(tmp_path):
     cp = store.load()
     store.close()
     assert cp.state["pipeline"]["total"] == expected_total(blocks)  # to the last bit
-    assert cp.state["daemon"]["streams"]["tension"]["accepted"] == N_BLOCKS * 20
+    assert cp.state["pipeline"]["accepted"]["tension"] == N_BLOCKS * 20
