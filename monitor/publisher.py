@@ -81,16 +81,24 @@ def _wait_matching(pub: Any, timeout_s: float, clock: Callable[[], float],
                     extra={"fields": {"key": str(pub.key_expr)}})
 
 
+def play(blocks: Iterable[SampleBlock], zc: ZenohConfig, speed: float | None = None,
+         start_after_ns: int | None = None, codec: zenoh_io.BlockCodec | None = None,
+         wait_for_subscriber_s: float = 10.0) -> int:
+    """Open a session from ``zc`` and :func:`publish_blocks` (``buoymon simulate --publish``)."""
+    codec = codec or zenoh_io.default_codec()
+    with zenoh_io.open_session(zc) as session:
+        return publish_blocks(session, blocks, codec, speed, start_after_ns,
+                              wait_for_subscriber_s)
+
+
 def publish_logs(paths: Sequence[str], zc: ZenohConfig, speed: float | None = None,
                  start_after_ns: int | None = None, codec: zenoh_io.BlockCodec | None = None,
                  wait_for_subscriber_s: float = 10.0) -> int:
-    """Open a session from ``zc`` and play MCAP logs (``replay.reader.iter_blocks``)."""
+    """Play MCAP logs message by message (as recorded: not coalesced) over Zenoh."""
     from replay.reader import iter_blocks  # noqa: PLC0415 (replay is only needed here)
 
-    codec = codec or zenoh_io.default_codec()
-    with zenoh_io.open_session(zc) as session:
-        return publish_blocks(session, iter_blocks(list(paths)), codec, speed, start_after_ns,
-                              wait_for_subscriber_s)
+    return play(iter_blocks(list(paths), coalesce=False), zc, speed, start_after_ns, codec,
+                wait_for_subscriber_s)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
