@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import threading
 import time
 from typing import Any, Callable, Iterable, Sequence
 
@@ -29,7 +30,7 @@ def publisher_config(connect: Sequence[str]) -> ZenohConfig:
 
 def publish_blocks(session: Any, blocks: Iterable[SampleBlock], codec: zenoh_io.BlockCodec,
                    speed: float | None = None, start_after_ns: int | None = None,
-                   wait_for_subscriber_s: float = 10.0,
+                   wait_for_subscriber_s: float = 10.0, stop: threading.Event | None = None,
                    clock: Callable[[], float] = time.monotonic,
                    sleep: Callable[[float], None] = time.sleep) -> int:
     """Publish ``blocks`` (in sensor-time order) and return how many were sent.
@@ -40,6 +41,7 @@ def publish_blocks(session: Any, blocks: Iterable[SampleBlock], codec: zenoh_io.
         start_after_ns: skip blocks whose last sample is at or before this sensor time.
         wait_for_subscriber_s: before the first block of each stream, wait up to this long
             for a matching subscriber (nothing is routed before one exists).
+        stop: when set, return before the next block.
     """
     if speed is not None and not speed > 0:
         raise ValueError(f"publish: speed = {speed!r} must be > 0 (or None for no pacing)")
@@ -50,6 +52,8 @@ def publish_blocks(session: Any, blocks: Iterable[SampleBlock], codec: zenoh_io.
     t0_wall = 0.0
     try:
         for block in blocks:
+            if stop is not None and stop.is_set():
+                break
             if len(block) == 0 or (start_after_ns is not None and block.t_last_ns <= start_after_ns):
                 continue
             pub = pubs.get(block.topic)

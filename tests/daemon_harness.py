@@ -237,24 +237,24 @@ class DaemonProcess:
             os.unlink(self.notify_path)
 
 
-def query_state(port: int, timeout: float = 5.0) -> dict[str, Any] | None:
+def query_state(port: int, timeout: float = 5.0, buoy: str = BUOY) -> dict[str, Any] | None:
     """The daemon's ``monitor/state`` answer, or None if it did not answer."""
     from monitor import zenoh_io
     from monitor.daemon_config import ZenohConfig
 
     zc = ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",))
     with zenoh_io.open_session(zc) as s:
-        for reply in s.get(zenoh_io.state_key(BUOY), timeout=timeout):
+        for reply in s.get(zenoh_io.state_key(buoy), timeout=timeout):
             if reply.ok:
                 return json.loads(reply.ok.payload.to_bytes())
     return None
 
 
-def wait_until_state(port: int, pred, timeout: float = 60.0) -> dict[str, Any]:
+def wait_until_state(port: int, pred, timeout: float = 60.0, buoy: str = BUOY) -> dict[str, Any]:
     deadline = time.monotonic() + timeout
     last = None
     while time.monotonic() < deadline:
-        last = query_state(port)
+        last = query_state(port, buoy=buoy)
         if last is not None and pred(last):
             return last
         time.sleep(0.2)
