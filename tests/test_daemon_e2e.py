@@ -9,7 +9,7 @@
 from __future__ import annotations
 
 import json
-import os
+import queue
 import random
 import subprocess
 import sys
@@ -216,3 +216,149 @@ def test_twenty_kill_9_with_restarts_equal_an_uninterrupted_run(tmp_path):
     assert committed(survived)["conductor"] > 0
     assert committed(survived) == committed(clean)
     assert survived["samples"]["tension"]["accepted"] == clean["samples"]["tension"]["accepted"]
+
+
+# ---- rejections counted by the running daemon, one test per reason ---------------------------
+
+class LiveDaemon:
+    """A running daemon and a client session that sends hand-made tension blocks."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.port = free_port()
+        self.daemon = start_daemon(write_config(tmp, self.port, load_source="measured"), tmp)
+        self.session = client_session(self.port).__enter__()
+        self.pub = zenoh_io.declare_data_publisher(self.session, f"buoy/{BUOY}/sensor/tension")
+        self.codec = zenoh_io.ProtobufCodec()
+        self.next_t = T0_NS
+        self.sent = 0
+
+    def send(self, t_ns, values) -> None:
+        block = SampleBlock(BUOY, "tension", np.asarray(t_ns, np.int64),
+                            {"tension_N": np.asarray(values, np.float64)})
+        self.pub.put(self.codec.encode(block))
+        self.sent += 1
+
+    def send_clean(self, n: int = 20) -> None:
+        t = self.next_t + 50_000_000 * np.arange(n, dtype=np.int64)
+        self.send(t, 3000.0 + 100.0 * np.sin(np.arange(n)))
+        self.next_t = int(t[-1]) + 50_000_000
+
+    def tension(self) -> dict:
+        state = wait_until_state(self.port, lambda s: s["status"]["counters"]["messages"]
+                                 == self.sent, buoy=BUOY)
+        return state["status"]["streams"]["tension"]
+
+    def close(self) -> None:
+        self.pub.undeclare()
+        self.session.__exit__(None, None, None)
+        assert self.daemon.terminate() == 0
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    d = LiveDaemon(tmp_path_factory.mktemp("live"))
+    d.send_clean()
+    d.send_clean()
+    yield d
+    d.close()
+
+
+def _rejections(live: LiveDaemon, send_faulty) -> tuple[dict, int]:
+    """Rejections and acceptances caused by ``send_faulty`` (clean blocks push it through)."""
+    before = live.tension()
+    send_faulty()
+    live.send_clean()
+    live.send_clean()
+    after = live.tension()
+    diff = {k: after["rejected"][k] - before["rejected"][k] for k in after["rejected"]}
+    return {k: v for k, v in diff.items() if v}, after["accepted"] - before["accepted"]
+
+
+def _faulty(live: LiveDaemon, values) -> None:
+    t = live.next_t + 50_000_000 * np.arange(len(values), dtype=np.int64)
+    live.send(t, values)
+    live.next_t = int(t[-1]) + 50_000_000
+
+
+def test_nan_samples_are_counted_and_skipped(live):
+    vals = np.full(10, 3000.0)
+    vals[[2, 5, 7]] = [np.nan, np.inf, -np.inf]
+    rejected, accepted = _rejections(live, lambda: _faulty(live, vals))
+    assert rejected == {"nan": 3}
+    assert accepted == 7 + 40
+
+
+def test_out_of_range_samples_are_counted(live):
+    vals = np.full(10, 3000.0)
+    vals[[1, 8]] = [250_000.0, -9_000.0]  # limits [-5 kN, 200 kN] of the shipped config
+    rejected, accepted = _rejections(live, lambda: _faulty(live, vals))
+    assert rejected == {"out_of_range": 2}
+    assert accepted == 8 + 40
+
+
+def test_spikes_beyond_the_rate_limit_are_counted(live):
+    vals = np.full(10, 3000.0)
+    vals[4] = 3000.0 + 60_000.0  # 60 kN in 50 ms; the limit is 500 kN/s * 0.05 s = 25 kN
+    rejected, accepted = _rejections(live, lambda: _faulty(live, vals))
+    assert rejected == {"spike": 1}
+    assert accepted == 9 + 40
+
+
+def test_time_going_backwards_is_counted(live):
+    last = live.tension()["last_t_ns"]
+    rejected, accepted = _rejections(
+        live, lambda: live.send([last - 30_000_000, last - 20_000_000], [3000.0, 3000.0]))
+    assert rejected == {"time_backwards": 2}
+    assert accepted == 40
+
+
+def test_duplicates_are_counted(live):
+    last = live.tension()["last_t_ns"]
+    rejected, accepted = _rejections(live, lambda: live.send([last], [3000.0]))
+    assert rejected == {"duplicate": 1}
+    assert accepted == 40
+
+
+def test_undecodable_payload_is_counted_not_fatal(live):
+    before = query_state(live.port, buoy=BUOY)["status"]["counters"]
+    live.pub.put(b"\xff\xff\xff not protobuf")
+    live.sent += 1
+    live.send_clean()
+    after = live.tension()
+    counters = query_state(live.port, buoy=BUOY)["status"]["counters"]
+    assert counters["undecodable"] == before["undecodable"] + 1
+    assert after["last_t_ns"] > 0
+
+
+# ---- stale load cell: failover to the motion estimate and back ------------------------------
+
+def test_stale_tension_fails_over_to_the_motion_estimate_and_back(tmp_path):
+    port = free_port()
+    gap = (60, 120)  # seconds of sensor time with a silent load cell
+    blocks = synthetic_blocks(200, tension_gap=gap)
+    cfg = write_config(tmp_path, port)  # [load] source = "auto", stale_after_s = 5
+    config = load_config(cfg)
+    d = start_daemon(cfg, tmp_path)
+    q = queue.SimpleQueue()
+    with client_session(port) as session:
+        sub = zenoh_io.declare_enqueuing_subscriber(session, zenoh_io.status_key(BUOY), q)
+        publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=40.0)
+        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                         buoy=BUOY)
+        sub.undeclare()
+    assert d.terminate() == 0
+    seen = []
+    while not q.empty():
+        doc = json.loads(q.get()[2])
+        seen.append(((doc["now_ns"] - T0_NS) / 1e9, doc["load_source"],
+                     doc["streams"]["tension"]["stale"]))
+    before = [s for t, s, _ in seen if 10 < t < gap[0]]
+    during = [(s, stale) for t, s, stale in seen if gap[0] + 15 < t < gap[1]]
+    after = [s for t, s, _ in seen if gap[1] + 10 < t]
+    assert before and set(before) == {"measured"}, seen
+    assert during and set(during) == {("estimated", True)}, seen
+    assert after and set(after) == {"measured"}, seen
+    # and the same samples replayed from a log give the same committed damage
+    live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
+    replayed = replayed_figures(config, [write_log(tmp_path / "gap.mcap", blocks)])
+    assert committed(live) == committed(replayed)
