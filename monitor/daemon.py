@@ -35,7 +35,7 @@ from monitor import zenoh_io
 log = logging.getLogger("buoymon.daemon")
 
 # status is re-published after new data at most this often (bounds the cost of bursts)
-_MIN_STATUS_GAP_S = 0.05
+_MIN_STATUS_GAP_S = 0.02
 _IDLE_WAIT_S = 0.2
 
 
@@ -147,8 +147,10 @@ class Daemon:
     def _serve(self) -> None:
         zc = self.config.zenoh
         while not self._stop.is_set():
+            next_status = self._last_status_mono + (
+                _MIN_STATUS_GAP_S if self._dirty_status else zc.status_interval_s)
             wait = min(_IDLE_WAIT_S, max(0.0, self._checkpointer.due_in()),
-                       max(0.0, self._last_status_mono + zc.status_interval_s - time.monotonic()))
+                       max(0.0, next_status - time.monotonic()))
             try:
                 item = self._q.get(timeout=wait)
             except queue.Empty:
@@ -248,6 +250,7 @@ class Daemon:
             "streams": streams,
             "counters": dict(self.counters),
             "uptime_s": now - self._started_mono,
+            "queue_depth": self._q.qsize(),  # received but not yet processed
         })
         return doc
 
