@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from monitor.blocks import SampleBlock, parse_sensor_topic
-from monitor.config import Config, config_with, parse_config
+from monitor.config import Config, parse_config
+from monitor.shore import config_for_buoy
 
 FLEET_REPORT_VERSION = 1
 # forkserver: workers fork from a clean server process, never from a parent that already runs
@@ -142,15 +143,9 @@ def discover(paths: Iterable[str | Path]) -> list[BuoyArchive]:
 # ------------------------------------------------------------------------------ one buoy
 
 
-def buoy_config(config: Config, buoy_id: str) -> Config:
-    """``config`` for ``buoy_id`` (the fleet shares one configuration; only the id differs)."""
-    if config.buoy.id == buoy_id:
-        return config
-    return config_with(config, buoy={**config.section("buoy"), "id": buoy_id})
-
-
 def make_jobs(archives: Sequence[BuoyArchive], config: Config) -> list[BuoyJob]:
-    return [BuoyJob(a.buoy_id, a.files, buoy_config(config, a.buoy_id).raw, config.source)
+    """One job per buoy; the fleet shares ``config``, with each buoy's own id."""
+    return [BuoyJob(a.buoy_id, a.files, config_for_buoy(config, a.buoy_id).raw, config.source)
             for a in archives]
 
 
