@@ -7,8 +7,9 @@ replay.writer, then replays the whole archive with ``replay.fleet.run_fleet`` se
 prints:
 
 * wall time of each run and the speed-up (target >= 1.8x on a 2-core machine);
-* seconds per buoy-year (serial wall time / buoy-years): a cluster of W single-core workers
-  reprocesses F buoy-years in about F x that / W seconds (one buoy per task, so W <= buoys).
+* seconds per buoy-year (serial wall and CPU time / buoy-years): a cluster of W single-core
+  workers reprocesses F buoy-years in about F x CPU-s per buoy-year / W seconds (one buoy per
+  task, so W <= buoys).
 
 The machine is shared: the load average before each run is printed so a low figure can be
 judged. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep]
@@ -85,13 +86,14 @@ def bench_config():
     return config_with(c, load={**c.section("load"), "source": "measured"})
 
 
-def timed_run(archives, config, workers: int) -> tuple[float, list]:
+def timed_run(archives, config, workers: int) -> tuple[float, float, list]:
+    """(wall s, CPU s of this process, reports); the CPU time is the whole cost when serial."""
     from replay.fleet import run_fleet
 
     print(f"  load average before the {workers}-worker run: {os.getloadavg()[0]:.2f}")
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     reports = run_fleet(archives, config, workers=workers)
-    return time.perf_counter() - start, reports
+    return time.perf_counter() - start, time.process_time() - cpu, reports
 
 
 def main() -> None:
@@ -116,18 +118,18 @@ def main() -> None:
         # warm the numba cache and imports once, outside the timed runs
         first = BuoyArchive(archives[0].buoy_id, archives[0].files[:1])
         replay_buoy(make_jobs([first], config)[0])
-        wall1, rep1 = timed_run(archives, config, 1)
-        print(f"1 worker : {wall1:7.1f} s")
-        wall2, rep2 = timed_run(archives, config, 2)
+        wall1, cpu1, rep1 = timed_run(archives, config, 1)
+        print(f"1 worker : {wall1:7.1f} s (CPU {cpu1:.1f} s)")
+        wall2, _, rep2 = timed_run(archives, config, 2)
         print(f"2 workers: {wall2:7.1f} s")
         assert rep1 == rep2, "the pool's reports differ from the serial run's"
         print(f"speed-up 2 workers / 1: {wall1 / wall2:.2f}x (target >= 1.8x); reports identical")
         tension = sum(r["samples"]["tension"]["accepted"] for r in rep1)
         print(f"serial: {tension / wall1 / 1e6:.2f} M tension samples/s, "
-              f"{wall1 / buoy_years:.0f} s per buoy-year "
-              f"({wall1 / buoy_years / 3600:.2f} core-hours per buoy-year)")
+              f"{wall1 / buoy_years:.0f} s per buoy-year wall, {cpu1 / buoy_years:.0f} CPU-s per "
+              f"buoy-year ({cpu1 / buoy_years / 3600:.2f} core-hours per buoy-year)")
         print(f"sizing: 100 buoys x 5 years on W one-core workers ~ "
-              f"{500 * wall1 / buoy_years / 3600:.1f} / W hours")
+              f"{500 * cpu1 / buoy_years / 3600:.1f} / W hours (W <= 100)")
     finally:
         if not args.keep and not args.dir:
             shutil.rmtree(work, ignore_errors=True)

@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "replay": "replay.cmd_replay",
     "demo": "replay.cmd_demo",
     "run": "monitor.cmd_run",
+    "shore": "monitor.shore",
     "check-config": "monitor.cmd_check_config",
     "record": "monitor.cmd_record",
     "alerts": "monitor.alerts.cmd_alerts",

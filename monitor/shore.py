@@ -314,3 +314,47 @@ def _live_pipeline(config: Config) -> Any:
     from monitor.pipeline import Pipeline  # noqa: PLC0415 (heavy: models, numba)
 
     return Pipeline(config)
+
+
+# ---- command line: `buoymon shore` -----------------------------------------------------------
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("shore", help="follow every buoy on the Zenoh network (shore side)",
+                       description="Subscribe to buoy/*/sensor/**, run one pipeline per buoy, "
+                       "publish shore/<name>/status with a status per buoy.")
+    p.add_argument("--config", metavar="CFG.toml",
+                   help="configuration shared by the fleet (its [zenoh] section says how to "
+                   "connect; default: the seed 004 example, client of tcp/127.0.0.1:7447)")
+    p.add_argument("--name", default="shore", help="status key shore/<name>/status")
+    p.add_argument("--data-age-timeout-s", type=float, default=10.0,
+                   help="a buoy with no data this long is stale or offline")
+    p.add_argument("--max-pending-blocks", type=int, default=600,
+                   help="per buoy: received blocks waiting to be processed before drops")
+    p.add_argument("--max-buoys", type=int, default=1000, help="buoys followed at most")
+    p.set_defaults(func=run_command)
+
+
+def run_command(args: Any) -> int:
+    import signal  # noqa: PLC0415
+    import tomllib  # noqa: PLC0415
+
+    from monitor.config import default_config, load_config  # noqa: PLC0415
+    from monitor.daemon_config import parse_daemon_sections  # noqa: PLC0415
+
+    try:
+        config = load_config(args.config) if args.config else default_config()
+        zenoh_section = config.section("zenoh") if args.config else {}
+        zc = (parse_daemon_sections({"zenoh": zenoh_section}).zenoh if zenoh_section
+              else ShoreConfig().zenoh)
+        shore = ShoreConfig(args.name, zc, data_age_timeout_s=args.data_age_timeout_s,
+                            max_pending_blocks=args.max_pending_blocks, max_buoys=args.max_buoys,
+                            status_interval_s=zc.status_interval_s)
+    except (ValueError, OSError, tomllib.TOMLDecodeError) as exc:
+        log.error(str(exc))
+        return 2
+    monitor = ShoreMonitor(config, shore)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda signum, frame: monitor.stop())
+    monitor.run()
+    return 0

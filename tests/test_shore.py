@@ -69,7 +69,16 @@ def committed(report: dict) -> dict:
     return {n: c["damage_committed"] for n, c in report["components"].items()}
 
 
+def hub_session(port: int):
+    """A loopback peer the buoys and the shore connect to: stands in for a Zenoh router
+    (zenohd is not on the package index); a peer routes for the clients connected to it."""
+    from monitor import zenoh_io
+
+    return zenoh_io.open_session(ZenohConfig(mode="peer", listen=(f"tcp/127.0.0.1:{port}",)))
+
+
 def test_three_buoys_publishing_at_once_over_loopback(tmp_path):
+    """Three publisher processes (peers) and the shore monitor (a client) meet at a hub."""
     config = measured_config()
     logs = {}
     for k, (buoy, amp) in enumerate(AMPLITUDES.items()):
@@ -78,16 +87,17 @@ def test_three_buoys_publishing_at_once_over_loopback(tmp_path):
             for b in buoy_blocks(buoy, amp, SECONDS, seed=k):
                 w.write_block(b)
     port = free_port()
+    hub = hub_session(port)
     shore = ShoreMonitor(config, ShoreConfig(
-        zenoh=ZenohConfig(mode="peer", listen=(f"tcp/127.0.0.1:{port}",), connect=()),
-        status_interval_s=0.2, data_age_timeout_s=2.0))
+        zenoh=ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",)),
+        status_interval_s=0.2, data_age_timeout_s=3.0))
     server = threading.Thread(target=shore.run)
     server.start()
     try:
         assert shore.wait_ready(30)
         env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
         pubs = [subprocess.Popen([sys.executable, "-m", "monitor.publisher", str(log),
-                                  "--connect", f"tcp/127.0.0.1:{port}", "--speed", "60"],
+                                  "--connect", f"tcp/127.0.0.1:{port}", "--speed", "30"],
                                  env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 for log in logs.values()]
         # all three are followed at the same time while they publish
@@ -104,6 +114,7 @@ def test_three_buoys_publishing_at_once_over_loopback(tmp_path):
     finally:
         shore.stop()
         server.join(timeout=30)
+        hub.close()
     assert not server.is_alive()
     status = shore.status()
     assert set(status["buoys"]) == set(AMPLITUDES)
@@ -234,3 +245,12 @@ def test_buoy_of_key():
     assert buoy_of_key("buoy/b1/sensor/tension") == "b1"
     assert buoy_of_key("buoy/b1/monitor/status") is None
     assert buoy_of_key("buoy/b1/sensor") is None
+
+
+def test_shore_command_rejects_a_bad_configuration(tmp_path):
+    from monitor.cli import main
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[buoy]\nid = "x"\n[[component]]\nname = "c"\nlay = "up"\n')
+    assert main(["shore", "--config", str(bad)]) == 2
+    assert main(["shore", "--max-buoys", "0"]) == 2
