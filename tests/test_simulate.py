@@ -133,6 +133,9 @@ def test_cli(tmp_path, capsys):
     assert main(["simulate", "-o", str(out), "--hours", "1", "--hs", "1", "--tp", "6",
                  "--seed", "3", "--nans", "1.5"]) == 2
     assert "nans = 1.5: must be a probability" in capsys.readouterr().err
+    assert main(["simulate", "-o", str(out), "--hours", "1", "--hs", "1", "--tp", "6",
+                 "--seed", "3", "--mean-span", "33"]) == 2
+    assert "cannot reach" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("kw, message", [
