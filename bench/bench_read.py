@@ -35,13 +35,15 @@ def synthetic_hour(hour: int, rng: np.random.Generator, buoy: str) -> list[Serie
         ts = (t - T0_NS) * 1e-9
         vals = np.empty((nf, n))
         for f in range(nf):
-            vals[f] = scale * (1.0 + 0.3 * np.sin(2 * np.pi * ts / (5.25 + f))) + rng.normal(0, 0.02 * scale, n)
+            wave = 1.0 + 0.3 * np.sin(2 * np.pi * ts / (5.25 + f))
+            vals[f] = scale * wave + rng.normal(0, 0.02 * scale, n)
         out.append(Series(buoy, sensor, t, vals))
     return out
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--days", type=float, default=30.0, help="log length in days (default 30)")
     ap.add_argument("--keep", type=Path, help="write the log here and keep it")
     ap.add_argument("--baseline-messages", type=int, default=200_000,
@@ -64,7 +66,8 @@ def main() -> None:
             write_cpu += time.process_time() - c1
             gen += t1 - t0
     size = path.stat().st_size
-    print(f"log: {hours} h, {messages:,} messages, {size / 1e6:,.1f} MB; peak RSS so far {_peak_mb():,.0f} MB")
+    print(f"log: {hours} h, {messages:,} messages, {size / 1e6:,.1f} MB; "
+          f"peak RSS so far {_peak_mb():,.0f} MB")
     print(f"write: {write:.2f} s wall = {messages / write:,.0f} msg/s; "
           f"{write_cpu:.2f} s CPU = {messages / write_cpu:,.0f} msg/s "
           f"(synthetic data generation {gen:.2f} s not included)")
@@ -97,7 +100,8 @@ def main() -> None:
                 if n >= args.baseline_messages:
                     break
         dt, cpu = time.perf_counter() - t0, time.process_time() - c0
-        print(f"mcap streaming reader, undecoded payloads, first {n:,} messages: {n / dt:,.0f} msg/s wall, "
+        print(f"mcap streaming reader, undecoded payloads, first {n:,} messages: "
+              f"{n / dt:,.0f} msg/s wall, "
               f"{n / cpu:,.0f} msg/s CPU")
     print(f"peak RSS: {_peak_mb():,.0f} MB")
 

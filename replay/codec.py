@@ -90,7 +90,10 @@ def file_descriptor_set(sensor: str) -> bytes:
 
 
 @lru_cache(maxsize=None)
-def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> tuple[int, int, int, tuple[int, ...]]:
+FieldNumbers = tuple[int, int, int, tuple[int, ...]]  # t0, period, offsets, value fields
+
+
+def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> FieldNumbers:
     """Field numbers ``(t0, period, offsets, values...)`` of message ``name`` in a stored schema.
 
     Read from the schema in the file (not assumed) so a log written by another tool with a
@@ -108,7 +111,8 @@ def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> tup
             if missing:
                 raise ValueError(f"schema {name}: missing fields {missing}")
             values = tuple(numbers[w] for w in SENSOR_FIELDS[sensor])
-            return numbers["t0_ns"], numbers.get("period_ns", -1), numbers.get("t_offset_ns", -1), values
+            return (numbers["t0_ns"], numbers.get("period_ns", -1),
+                    numbers.get("t_offset_ns", -1), values)
     raise ValueError(f"schema data does not define message {name!r}")
 
 
@@ -443,7 +447,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
 
 def decode_many(
     buf: np.ndarray, offs: np.ndarray, lens: np.ndarray,
-    numbers: tuple[int, int, int, tuple[int, ...]],
+    numbers: FieldNumbers,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Decode many block payloads lying in one byte buffer.
 
@@ -467,7 +471,7 @@ def decode_many(
 
 
 def decode_block(buoy_id: str, sensor: str, payload: bytes, recv_ns: int = 0,
-                 numbers: tuple[int, int, int, tuple[int, ...]] | None = None) -> SampleBlock:
+                 numbers: FieldNumbers | None = None) -> SampleBlock:
     """Decode one payload into a :class:`SampleBlock` (ValueError if malformed)."""
     _check_sensor(sensor)
     buf = np.frombuffer(payload, np.uint8)

@@ -222,7 +222,8 @@ def _gnss(cfg: SimConfig, surge: np.ndarray, sway: np.ndarray, span_m: float,
     north = along * math.cos(b) + across * math.cos(b - math.pi / 2)
     east = along * math.sin(b) + across * math.sin(b - math.pi / 2)
     lat = cfg.anchor_lat_deg + np.degrees(north / EARTH_RADIUS_M)
-    lon = cfg.anchor_lon_deg + np.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(cfg.anchor_lat_deg))))
+    east_radius = EARTH_RADIUS_M * math.cos(math.radians(cfg.anchor_lat_deg))
+    lon = cfg.anchor_lon_deg + np.degrees(east / east_radius)
     return np.vstack([lat, lon])
 
 
@@ -238,6 +239,7 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
     t_sum, t_min, t_max = 0.0, math.inf, -math.inf
     wave_n = int(round(cfg.waves_interval_s * BASE_HZ))
     heave_hist = np.empty(0)
+    delay_ns = int(round(cfg.link_delay_s * SECOND))
     with LogWriter(path) as w:
         for hour in range(math.ceil(total / per_hour)):
             i0 = hour * per_hour
@@ -259,8 +261,8 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
 
             add("tension", t, tension[None, :], cfg.tension_noise_N)
             even = (idx % 2) == 0  # 10 Hz
-            add("imu", t[even], np.vstack([motion[f][even] for f in ("accel_x", "accel_y", "accel_z")]),
-                cfg.accel_noise_mps2)
+            accel = np.vstack([motion[f][even] for f in ("accel_x", "accel_y", "accel_z")])
+            add("imu", t[even], accel, cfg.accel_noise_mps2)
             add("motion", t[even], np.vstack([motion[f][even] for f in ("heave", "surge", "sway")]),
                 cfg.motion_noise_m)
             sec = (idx % BASE_HZ) == 0  # 1 Hz
@@ -283,7 +285,7 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
                 summary.samples["waves"] = summary.samples.get("waves", 0) + len(wt)
                 series.append(Series(cfg.buoy_id, "waves", np.array(wt, np.int64),
                                      np.array(wv, np.float64).T))
-            summary.messages += w.write_series(series, recv_delay_ns=int(round(cfg.link_delay_s * SECOND)))
+            summary.messages += w.write_series(series, recv_delay_ns=delay_ns)
             summary.end_ns = int(t[-1])
     summary.tension_N = (t_min, t_sum / total, t_max)
     return summary
