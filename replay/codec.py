@@ -89,10 +89,10 @@ def file_descriptor_set(sensor: str) -> bytes:
     return descriptor_pb2.FileDescriptorSet(file=[proto]).SerializeToString(deterministic=True)
 
 
-@lru_cache(maxsize=None)
 FieldNumbers = tuple[int, int, int, tuple[int, ...]]  # t0, period, offsets, value fields
 
 
+@lru_cache(maxsize=None)
 def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> FieldNumbers:
     """Field numbers ``(t0, period, offsets, values...)`` of message ``name`` in a stored schema.
 
