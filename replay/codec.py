@@ -89,6 +89,28 @@ def file_descriptor_set(sensor: str) -> bytes:
     return descriptor_pb2.FileDescriptorSet(file=[proto]).SerializeToString(deterministic=True)
 
 
+def proto_text() -> str:
+    """The schemas as ``.proto`` source, rendered from the descriptors (``replay/buoymon.proto``
+    is this text, kept for readers and for protoc users; a test checks they agree)."""
+    names = {descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED64: "sfixed64",
+             descriptor_pb2.FieldDescriptorProto.TYPE_UINT64: "uint64",
+             descriptor_pb2.FieldDescriptorProto.TYPE_SINT64: "sint64",
+             descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE: "double"}
+    lines = ["// buoymon log format: one message per block of samples of one sensor.",
+             "// Generated from replay/codec.py (proto_text); see docs/LOG_FORMAT.md.",
+             'syntax = "proto3";', "", f"package {PACKAGE};"]
+    for sensor, fields in SENSOR_FIELDS.items():
+        fds = descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set(sensor))
+        msg = fds.file[0].message_type[0]
+        lines += ["", f"message {msg.name} {{"]
+        for fld in msg.field:
+            rep = "repeated " if fld.label == fld.LABEL_REPEATED else ""
+            unit = fields.get(fld.name) or "ns"
+            lines.append(f"  {rep}{names[fld.type]} {fld.name} = {fld.number};  // {unit}")
+        lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
 FieldNumbers = tuple[int, int, int, tuple[int, ...]]  # t0, period, offsets, value fields
 
 

@@ -126,3 +126,12 @@ def test_field_numbers_are_read_from_the_stored_schema():
     assert numbers == (1, 2, 3, (4, 9))
     with pytest.raises(ValueError, match="missing fields"):
         codec.field_numbers_from_schema(codec.file_descriptor_set("gnss"), name, "imu")
+
+
+def test_shipped_proto_file_matches_the_runtime_schemas():
+    from pathlib import Path
+
+    shipped = Path(codec.__file__).with_name("buoymon.proto").read_text()
+    assert shipped == codec.proto_text()
+    assert "  repeated double accel_z_mps2 = 6;  // m/s^2" in shipped
+    assert "  sfixed64 t0_ns = 1;  // ns" in shipped
