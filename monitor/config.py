@@ -33,10 +33,11 @@ DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
 # installed yet leaves its section unchecked (check-config says so).
 SECTION_PARSERS: dict[str, str] = {
     "alerts": "monitor.alerts.config:AlertsConfig.from_dict",
-    "zenoh": "monitor.zenoh_io:parse_zenoh_config",
-    "state": "monitor.checkpoint:parse_state_config",
-    "record": "monitor.recorder:parse_record_config",
-    "rerun": "monitor.viz.rerun_sink:parse_rerun_config",
+    "zenoh": "monitor.daemon_config:ZenohConfig.from_dict",
+    "state": "monitor.daemon_config:StateConfig.from_dict",
+    "record": "monitor.daemon_config:RecordConfig.from_dict",
+    "health": "monitor.daemon_config:HealthConfig.from_dict",
+    "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
     "outputs": "monitor.viz.report:parse_outputs_config",
 }
 
