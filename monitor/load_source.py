@@ -17,13 +17,14 @@ same for any split of the data into blocks.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import logging
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 
-from monitor.config import Config, LoadConfig
+from monitor.config import Config, LoadConfig, MooringConfig
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +40,23 @@ class MotionEstimator(Protocol):
         ...
 
     def state(self) -> dict[str, Any]: ...
+
+
+@functools.lru_cache(maxsize=8)
+def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
+    """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
+    a second), so built once per mooring and step and shared by every estimator."""
+    from models import catenary, estimator
+
+    m = mooring
+    if m.preset == "vaps_seed004":
+        return estimator.seed004_estimator(dt=dt, span=m.span_m)
+    line = catenary.Line(segments=tuple(
+        catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
+    mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
+    return estimator.catenary_estimator(
+        line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
+        drag_diameter=m.segments[-1].diameter_m)
 
 
 class _ModelsEstimator:
@@ -74,24 +92,12 @@ def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> M
     """
     try:
         est = importlib.import_module("models.estimator")
-        catenary = importlib.import_module("models.catenary")
     except ModuleNotFoundError as exc:
-        if exc.name not in ("models.estimator", "models.catenary", "models"):
+        if exc.name not in ("models.estimator", "models"):
             raise
         log.warning("models.estimator is not installed: no motion-based tension estimate")
         return None
-    m = config.mooring
-    dt = 1.0 / config.load.motion_rate_hz
-    if m.preset == "vaps_seed004":
-        est_cfg, quasi_static = est.seed004_estimator(dt=dt, span=m.span_m)
-    else:
-        line = catenary.Line(segments=tuple(
-            catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
-        top = m.segments[-1]
-        mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
-        est_cfg, quasi_static = est.catenary_estimator(
-            line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
-            drag_diameter=top.diameter_m)
+    est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
     saved = None if not state else est.EstimatorState.from_dict(dict(state))
     model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
     return _ModelsEstimator(est, model, config.load.motion_sensor)
@@ -137,6 +143,23 @@ class LoadSelector:
     def state(self) -> dict[str, Any]: ...
 
 
+@functools.lru_cache(maxsize=8)
+def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
+    """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
+    a second), so built once per mooring and step and shared by every estimator."""
+    from models import catenary, estimator
+
+    m = mooring
+    if m.preset == "vaps_seed004":
+        return estimator.seed004_estimator(dt=dt, span=m.span_m)
+    line = catenary.Line(segments=tuple(
+        catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
+    mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
+    return estimator.catenary_estimator(
+        line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
+        drag_diameter=m.segments[-1].diameter_m)
+
+
 class _ModelsEstimator:
     """Adapter over ``models.estimator.MotionTensionEstimator`` for one motion stream.
 
@@ -170,24 +193,12 @@ def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> M
     """
     try:
         est = importlib.import_module("models.estimator")
-        catenary = importlib.import_module("models.catenary")
     except ModuleNotFoundError as exc:
-        if exc.name not in ("models.estimator", "models.catenary", "models"):
+        if exc.name not in ("models.estimator", "models"):
             raise
         log.warning("models.estimator is not installed: no motion-based tension estimate")
         return None
-    m = config.mooring
-    dt = 1.0 / config.load.motion_rate_hz
-    if m.preset == "vaps_seed004":
-        est_cfg, quasi_static = est.seed004_estimator(dt=dt, span=m.span_m)
-    else:
-        line = catenary.Line(segments=tuple(
-            catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
-        top = m.segments[-1]
-        mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
-        est_cfg, quasi_static = est.catenary_estimator(
-            line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
-            drag_diameter=top.diameter_m)
+    est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
     saved = None if not state else est.EstimatorState.from_dict(dict(state))
     model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
     return _ModelsEstimator(est, model, config.load.motion_sensor)
