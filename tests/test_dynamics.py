@@ -36,7 +36,10 @@ def test_seed002_longitudinal_tension_cases():
             kw = {"horizontal_speed": case["ship_speed_kn"] * KNOT_FT_S}
         if "dPdt_ft_per_s" in case:
             assert dyn.tangential_speed(alpha, **kw) == pytest.approx(case["dPdt_ft_per_s"], rel=0.01)
-        for bound, key in (("twist_unrestrained", "T_unrestrained_lb"), ("twist_restrained", "T_restrained_lb")):
+        for bound, key in (
+            ("twist_unrestrained", "T_unrestrained_lb"),
+            ("twist_restrained", "T_restrained_lb"),
+        ):
             t = dyn.longitudinal_tension(z[bound], alpha, **kw)
             assert t == pytest.approx(case[key], rel=0.01), (case["case"], bound)
 
@@ -62,25 +65,33 @@ def test_impedance_and_finite_line():
     omega = 2 * math.pi / 5.0
     amp = dyn.finite_line_tension_amplitude(omega, 0.1, ea, m, length)
     spring = ea * 0.1 / length
-    assert amp == pytest.approx(spring - dyn.finite_line_added_mass(m, length) * omega**2 * 0.1, rel=1e-7)
+    inertia = dyn.finite_line_added_mass(m, length) * omega**2 * 0.1
+    assert amp == pytest.approx(spring - inertia, rel=1e-7)
     assert dyn.finite_line_tension_amplitude(0.0, 0.1, ea, m, length) == pytest.approx(spring)
     # k L = pi / 4: cot = 1, amplitude = EA k U exactly.
     w4 = math.pi / 4 * c1 / length
-    assert dyn.finite_line_tension_amplitude(w4, 0.1, ea, m, length) == pytest.approx(ea * w4 / c1 * 0.1, rel=1e-12)
+    got = dyn.finite_line_tension_amplitude(w4, 0.1, ea, m, length)
+    assert got == pytest.approx(ea * w4 / c1 * 0.1, rel=1e-12)
 
 
 @needs_shared
 def test_seed001_appendix_dynamic_tension():
     ref = _ref("seed001_anchor_chain.json")
     inp, exp = ref["inputs"], ref["expected"]
-    t0, w, depth = inp["horizontal_force_per_chain_t"] * 1000, inp["chain_weight_kgf_per_m"], inp["depth_m"]
+    t0 = inp["horizontal_force_per_chain_t"] * 1000
+    w, depth = inp["chain_weight_kgf_per_m"], inp["depth_m"]
     # Static part by hand (seed 001 eqs for the chain on the seabed; the solver is in catenary).
     s = depth * math.sqrt(2 * t0 / (w * depth) + 1)
     t_static = t0 + w * depth
     assert s == pytest.approx(exp["suspended_length_m"], abs=0.6)
     assert t_static / 1000 == pytest.approx(exp["static_top_tension_t"], abs=0.05)
     # The paper carries the rounded 160 m into the dynamics.
-    cord = dyn.ElasticDragCord(c=inp["drag_c"], span=exp["suspended_length_m"], alpha=inp["form_parameter_alpha"], axial_stiffness=inp["elasticity_Ed2_kgf"])
+    cord = dyn.ElasticDragCord(
+        c=inp["drag_c"],
+        span=exp["suspended_length_m"],
+        alpha=inp["form_parameter_alpha"],
+        axial_stiffness=inp["elasticity_Ed2_kgf"],
+    )
     # Paper: speed ratio 0.64 read from Fig. 8 -> 27.2 t (cube on 1/alpha restored).
     dt = cord.tension_increment(exp["speed_ratio_fig8"] * inp["bow_speed_m_per_s"])
     assert dt == pytest.approx(exp["dynamic_tension_kgf"], rel=0.01)

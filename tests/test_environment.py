@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from models import environment as env
+from models.dynamics import ElasticDragCord, drag_constant
+from models.estimator import EstimatorConfig, LinearisedQuasiStatic
 from models.fatigue import SNCurve
 from models.helix import HelixCable, conductor_stress
 from models.wavfor import wavfor
@@ -23,7 +25,9 @@ def test_exceedance_to_sea_states_hand_example():
     np.testing.assert_allclose(tab.hours, [300.0, 90.0, 10.0])
     np.testing.assert_allclose(tab.height, [1.0, 2.0, 2.0])
     np.testing.assert_allclose(tab.period, [3.5, 4.5, 4.5])  # T = H + 2.5 s
-    mid = env.sea_states_from_exceedance([0.5, 1.0, 2.0], [40.0, 10.0, 1.0], 1000.0, representative="mid")
+    mid = env.sea_states_from_exceedance(
+        [0.5, 1.0, 2.0], [40.0, 10.0, 1.0], 1000.0, representative="mid"
+    )
     np.testing.assert_allclose(mid.height, [0.75, 1.5, 2.0])
     with pytest.raises(ValueError, match="non-increasing"):
         env.sea_states_from_exceedance([0.5, 1.0], [10.0, 20.0])
@@ -44,7 +48,9 @@ def test_regular_waves_seed004_field_failure():
 
 def test_rayleigh_sea_state_statistics():
     tab = env.SeaStateTable(np.array([2.0]), np.array([6.0]), np.array([3.0]))
-    cyc = env.load_cycles(tab, lambda h, t: 1000.0 * h, waves="rayleigh", n_heights=200, max_height_ratio=3.0)
+    cyc = env.load_cycles(
+        tab, lambda h, t: 1000.0 * h, waves="rayleigh", n_heights=200, max_height_ratio=3.0
+    )
     assert cyc.total_cycles == pytest.approx(3 * 3600 / 6.0)
     # Rayleigh: mean square height = Hs^2 / 2 exactly; a fraction exp(-2) of waves exceeds Hs.
     h = cyc.ranges / 1000.0
@@ -71,12 +77,10 @@ def test_damage_hand_calculation_and_per_storm():
 
 
 def test_simulated_load_cycles_scale_with_sea_state():
-    from models.dynamics import ElasticDragCord, drag_constant
-    from models.estimator import EstimatorConfig, LinearisedQuasiStatic
-
     qs = LinearisedQuasiStatic(8000.0, 6000.0, 4000.0, 1500.0, 1500.0, 3000.0)
-    cfg = EstimatorConfig(dt=0.1, span=30.0, height=23.0, line_length=40.0, mass_per_length=1.1, ea=3.43e6,
-                          drag=ElasticDragCord(drag_constant(1.2, 0.031, 1000.0), 30.0, 0.1, 3.43e6))
+    cord = ElasticDragCord(drag_constant(1.2, 0.031, 1000.0), 30.0, 0.1, 3.43e6)
+    cfg = EstimatorConfig(dt=0.1, span=30.0, height=23.0, line_length=40.0,
+                          mass_per_length=1.1, ea=3.43e6, drag=cord)
     tab = env.SeaStateTable(np.array([1.0, 2.0]), np.array([6.0, 6.0]), np.array([1.0, 3.0]))
     cyc = env.simulated_load_cycles(tab, cfg, qs, depth=23.0, duration_s=600.0, seed=4)
     again = env.simulated_load_cycles(tab, cfg, qs, depth=23.0, duration_s=600.0, seed=4)
@@ -92,6 +96,8 @@ def test_simulated_load_cycles_scale_with_sea_state():
     r1 = np.sqrt(np.sum(cyc.counts[~big] * cyc.ranges[~big] ** 2) / np.sum(cyc.counts[~big]))
     r2 = np.sqrt(np.sum(cyc.counts[big] * cyc.ranges[big] ** 2) / np.sum(cyc.counts[big]))
     assert 2.0 < r2 / r1 < 3.0
+    # Cycle means sit around the static tension hypot(8000, 6000) = 10 kN.
+    assert np.average(cyc.means, weights=cyc.counts) == pytest.approx(10000.0, rel=0.05)
 
 
 def test_seed004_field_failure_damage_with_helix_and_copper_curve():
