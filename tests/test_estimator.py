@@ -1,7 +1,9 @@
 """Motion -> tension estimator: quasi-static limit, dynamic increments, flags, state, IMU path."""
 
+import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +21,10 @@ from models.estimator import (
 )
 from models.catenary import solve, vaps_mooring
 
+SHARED = next(
+    (p / "shared" for p in Path(__file__).resolve().parents if (p / "shared/realdata").is_dir()),
+    None,
+)
 DT = 0.05
 # Stand-in quasi-static model: a taut-ish line with top angle atan(6/8) at rest.
 QS = LinearisedQuasiStatic(h0=8000.0, v0=6000.0, k_hx=4000.0, k_hz=1500.0, k_vx=1500.0, k_vz=3000.0,
@@ -182,3 +188,24 @@ def test_imu_path_matches_displacement_path():
     # The integrator's phase lead shifts samples but keeps the load ranges: std within 5 %.
     assert np.std(tension[settled]) == pytest.approx(np.std(ref[settled]), rel=0.05)
     assert np.mean(tension[settled]) == pytest.approx(np.mean(ref[settled]), rel=0.01)
+
+
+@pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
+def test_real_spotter_record_through_seed004(vaps):
+    """Measured motion of a moored Spotter (2.5 Hz, mm): one hour of the clean window gives a
+    calm-sea tension near the static value; the record's +/-10 m spike burst is flagged."""
+    cfg, qs = vaps
+    cfg25 = dataclasses.replace(cfg, dt=0.4)
+    path = SHARED / "realdata/spotter_clallam_1945/0026_FLT.CSV"
+    clean = np.genfromtxt(path, delimiter=",", skip_header=466, max_rows=9000, usecols=(2, 3, 4))
+    x, y, z = clean.T / 1000.0
+    assert waves.sea_state_from_heave(z, 0.4).hs == pytest.approx(0.41, abs=0.02)
+    est = simulate_tension(z, x, y, cfg25, qs)
+    static = float(qs(np.zeros(1), np.zeros(1))[0][0])
+    assert np.median(est.tension) == pytest.approx(static, rel=0.05)
+    assert np.all(np.isfinite(est.tension)) and not np.any(est.flags[2:])
+    spikes = np.genfromtxt(path, delimiter=",", skip_header=184700, max_rows=200, usecols=(2, 3, 4))
+    x, y, z = spikes.T / 1000.0
+    est = simulate_tension(z, x, y, cfg25, qs)
+    big = np.abs(z) > 5.0
+    assert big.any() and np.all(est.flags[big] & Flag.OUT_OF_RANGE)
