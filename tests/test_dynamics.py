@@ -164,3 +164,16 @@ def test_form_parameter():
     x = np.linspace(0, xs, 20001)
     alpha, _ = dyn.form_parameter(x, 120 * (np.cosh(x / 120) - 1))
     assert alpha == pytest.approx(0.1191, abs=2e-4)
+
+
+def test_seed004_line_resonates_in_its_wave_band():
+    """VAPS line at ~220 N (seed004_estimator's nominal position), 1.10 kg/m plus the added
+    mass of a 31 mm cylinder in fresh water (0.755 kg/m): T1 = 2 L / c = 7.35 s, inside the
+    WAVFOR table's periods (3.6 ... 9.65 s): the 6.9 and 7.45 s waves are flagged."""
+    m = 1.10 + 1000.0 * math.pi / 4 * 0.031**2
+    periods = np.array([3.6, 4.15, 4.7, 5.25, 5.8, 6.35, 6.9, 7.45, 8.0, 9.65])
+    scr = dyn.resonance_screen(periods, 220.0, m, 40.0, n_modes=3, band=0.08)
+    assert scr.natural_periods[0] == pytest.approx(80.0 / math.sqrt(220.0 / m), rel=1e-12)
+    assert scr.natural_periods[0] == pytest.approx(7.35, abs=0.01)
+    np.testing.assert_array_equal(periods[scr.near], [3.6, 6.9, 7.45])  # 3.6 s: mode 2 (3.67 s)
+    assert scr.nearest_mode[0] == 2 and np.all(scr.nearest_mode[6:8] == 1)
