@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.catenary_line import Line, LineSolution, solve
+from models.catenary_line import Line, LineSolution, broadcast_pair, solve
 
 
 def span_from_top_tension(line: Line, t_top, height, rtol: float = 1e-12,
@@ -19,7 +19,7 @@ def span_from_top_tension(line: Line, t_top, height, rtol: float = 1e-12,
     solved line there: `.span` is the offset, `.top_angle` the line angle at the fairlead.
     A tension below the slack minimum (span 0) or, for an inextensible line, beyond any
     reachable span is a ValueError."""
-    t, z = np.broadcast_arrays(np.asarray(t_top, dtype=float), np.asarray(height, dtype=float))
+    t, z = broadcast_pair(t_top, height, ("t_top", "height"))
     if not np.all(np.isfinite(t)) or np.any(t <= 0.0):
         raise ValueError("t_top must be finite and > 0")
     if not np.all(np.isfinite(z)):

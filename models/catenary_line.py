@@ -7,6 +7,14 @@ suspended part and the vertical tension grows by the submerged weight of every e
 On the seabed (flat, at the anchor's level) the grounded part carries a tension that friction
 lowers by mu * w per metre from the touchdown point towards the anchor (never below zero).
 
+Regimes (LineSolution.regime, names in REGIMES): fully suspended (including near-taut and
+vertical lines: span 0 is solved as the limit span = 1e-9 L, H -> 0), grounded with and without
+tension at the anchor, slack (H = 0: the heavy part piles on the seabed under a vertical column
+that may fold over buoyant parts), and lying on the seabed. Limits: the seabed is flat at the
+anchor's level and only the heavy part next to the anchor (no floats in it) may touch it; a
+configuration that needs contact elsewhere (a mid-line sag or a float pressed down) is a clear
+ValueError. An inextensible line that cannot reach the fairlead is a ValueError.
+
 Conventions: x horizontal from the anchor towards the fairlead, z up from the anchor; weights
 are SUBMERGED weights per unit length (N/m, negative = buoyant); tensions in N; stiffness
 entries are derivatives of the fairlead force (H, V) with respect to fairlead motion (x, z).
@@ -31,6 +39,15 @@ REGIMES = {
 }
 
 
+def _number(value, name: str) -> float:
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be a number, got {value!r}") from err
+
+
 @dataclass(frozen=True)
 class Segment:
     """Homogeneous piece of line: unstretched length (m), submerged weight (N/m, negative =
@@ -42,6 +59,8 @@ class Segment:
     name: str = ""
 
     def __post_init__(self) -> None:
+        for name in ("length", "weight", "ea"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"segment {name}"))
         if not (math.isfinite(self.length) and self.length > 0.0):
             raise ValueError(f"segment length must be finite and > 0, got {self.length!r}")
         if not math.isfinite(self.weight):
@@ -60,6 +79,8 @@ class Joint:
     name: str = ""
 
     def __post_init__(self) -> None:
+        for name in ("weight", "mass"):
+            object.__setattr__(self, name, _number(getattr(self, name), f"joint {name}"))
         if not math.isfinite(self.weight):
             raise ValueError(f"joint weight must be finite, got {self.weight!r}")
         if not (math.isfinite(self.mass) and self.mass >= 0.0):
@@ -89,7 +110,7 @@ class Line:
         if len(joints) != len(segs) - 1 or not all(isinstance(j, Joint) for j in joints):
             raise ValueError(f"need {len(segs) - 1} Joint objects between {len(segs)} segments, "
                              f"got {len(joints)}")
-        mu = float(self.seabed_friction)
+        mu = _number(self.seabed_friction, "seabed_friction")
         if not (math.isfinite(mu) and mu >= 0.0):
             raise ValueError(f"seabed_friction must be finite and >= 0, got {mu!r}")
         object.__setattr__(self, "segments", segs)
@@ -205,8 +226,29 @@ class LineSolution:
         return _profile(self, int(n))
 
 
+def _as_float_array(value, name: str) -> np.ndarray:
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must be numeric, got {value!r}") from err
+
+
+def broadcast_pair(a, b, names: tuple[str, str]) -> tuple[np.ndarray, np.ndarray]:
+    """Two inputs as float arrays of their common shape (real copies where broadcasting
+    expands them, so the compiled kernels get ordinary contiguous arrays)."""
+    x = _as_float_array(a, names[0])
+    z = _as_float_array(b, names[1])
+    try:
+        shape = np.broadcast_shapes(x.shape, z.shape)
+    except ValueError as err:
+        raise ValueError(f"{names[0]} and {names[1]} do not broadcast together: {err}") from err
+    x = np.require(x if x.shape == shape else np.broadcast_to(x, shape).copy(), requirements="C")
+    z = np.require(z if z.shape == shape else np.broadcast_to(z, shape).copy(), requirements="C")
+    return x, z
+
+
 def _check_inputs(line: Line, span, height) -> tuple[np.ndarray, np.ndarray]:
-    x, z = np.broadcast_arrays(np.asarray(span, dtype=float), np.asarray(height, dtype=float))
+    x, z = broadcast_pair(span, height, ("span", "height"))
     if not np.all(np.isfinite(x)):
         raise ValueError("span must be finite (got NaN or inf)")
     if not np.all(np.isfinite(z)):
@@ -314,8 +356,9 @@ def solve_line(span, height, length: float, weight: float, ea: float = math.inf,
     submerged `weight` (N/m, negative = buoyant), axial stiffness `ea` (N, inf =
     inextensible), flat seabed at the anchor with Coulomb `seabed_friction`, or
     `seabed=False` for a free line that may dip below the anchor (seed 003)."""
-    return solve(_homogeneous(float(length), float(weight), float(ea), bool(seabed),
-                              float(seabed_friction)), span, height)
+    return solve(_homogeneous(_number(length, "length"), _number(weight, "weight"),
+                              _number(ea, "ea"), bool(seabed),
+                              _number(seabed_friction, "seabed_friction")), span, height)
 
 
 @functools.lru_cache(maxsize=64)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from models.catenary_line import Line, solve
+from models.catenary_line import Line, broadcast_pair, solve
 
 
 @numba.njit(cache=True)
@@ -184,9 +184,9 @@ class TensionTable:
         return out
 
     def _points(self, x, z) -> tuple[np.ndarray, np.ndarray, tuple]:
-        xa, za = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(z, dtype=float))
-        xf = np.ascontiguousarray(xa.ravel())
-        zf = np.ascontiguousarray(za.ravel())
+        xa, za = broadcast_pair(x, z, ("span", "height"))
+        xf = xa.ravel()
+        zf = za.ravel()
         if xf.size:
             lo_x, hi_x, lo_z, hi_z = xf.min(), xf.max(), zf.min(), zf.max()
             if not (lo_x >= self.x[0] and hi_x <= self.x[-1]):

@@ -213,6 +213,15 @@ def test_bad_inputs_are_clear_errors(kwargs, match):
         solve_line(np.array([kwargs["span"], 1.0]), kwargs["height"], 50.0, 10.0)
 
 
+def test_wrong_types_are_clear_errors():
+    with pytest.raises(ValueError, match="span must be numeric"):
+        solve_line("far", 10.0, 50.0, 10.0)
+    with pytest.raises(ValueError, match="segment weight must be a number"):
+        Segment(10.0, "heavy")
+    with pytest.raises(ValueError, match="broadcast"):
+        solve_line(np.ones(3), np.ones(2), 50.0, 10.0)
+
+
 @pytest.mark.parametrize("bad", [dict(length=0.0, weight=1.0), dict(length=1.0, weight=math.nan),
                                  dict(length=1.0, weight=1.0, ea=-5.0)])
 def test_bad_segments_are_clear_errors(bad):
