@@ -83,7 +83,7 @@ class LinearisedQuasiStatic:
     """Small-motion quasi-static mooring: fairlead tension components linear in the offset.
 
     H = h0 + dH/dx x + dH/dz z, V = v0 + dV/dx x + dV/dz z (the catenary's end stiffness at
-    the mean position), T = hypot(H, V). H <= 0 or T <= 0 is flagged SLACK (and clipped);
+    the mean position), T = hypot(H, V). H <= 0 is flagged SLACK (H clipped to 0, V to >= 0);
     positions outside ``x_range`` / ``z_range`` are flagged OUT_OF_RANGE.
     """
 
@@ -165,7 +165,7 @@ class EstimatorConfig:
 
     span: nominal horizontal anchor -> fairlead distance (m); height: fairlead above the
     anchor at zero heave (m); line_length (m); mass_per_length: in-air mass (kg/m) for axial
-    inertia; ea: axial stiffness (N); axial_model: "finite" | "infinite" | "none"; drag: the
+    inertia; ea: axial stiffness (N, inf = inextensible); axial_model: "finite" | "infinite" | "none"; drag: the
     jerk model (None: off); flat_cord_max_deg: top angle above which FLAT_CORD is flagged when
     the jerk model is on; imu_f_cut: high-pass corner (Hz) of the IMU integrator.
     """
@@ -184,8 +184,11 @@ class EstimatorConfig:
     def __post_init__(self) -> None:
         for name in ("dt", "span", "height", "line_length", "mass_per_length", "ea"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            finite = math.isfinite(v) if name != "ea" else not math.isnan(v)
+            if not (isinstance(v, (int, float)) and finite and v > 0):
                 raise ValueError(f"EstimatorConfig.{name} must be finite and > 0, got {v!r}")
+        if self.axial_model == "infinite" and math.isinf(self.ea):
+            raise ValueError("EstimatorConfig.axial_model 'infinite' needs a finite ea")
         if self.axial_model not in ("finite", "infinite", "none"):
             raise ValueError(
                 "EstimatorConfig.axial_model must be finite|infinite|none, "
@@ -464,14 +467,17 @@ def catenary_estimator(
     table_rtol: float = 1e-3,
     anchor_uplift_limit_N: float = 0.0,
     axial_model: str = "finite",
+    jerk: bool = True,
 ) -> tuple[EstimatorConfig, CatenaryQuasiStatic]:
     """Estimator configuration and quasi-static model for a catenary mooring ``line``.
 
     Builds the catenary TensionTable over the nominal fairlead position plus ``x_range`` /
     ``z_range`` (m) and the jerk model from the static shape there: span l = ``span``,
     alpha = sag / chord of the line's profile (:func:`models.dynamics.form_parameter`), EA =
-    the stiffest-segment-weighted series stiffness of the line (inf segments ignored; a line
-    of only inextensible segments gives mu = 0, seed 001 eq 45).
+    the series stiffness of the segments, L / sum(L_i / EA_i) (inextensible segments add no
+    compliance; an all-inextensible line gives mu = 0, seed 001 eq 45). ``jerk=False`` leaves
+    the jerk model out (required for a line that is nearly straight at the nominal position,
+    alpha < 0.01, where the flat-cord drag theory has no meaning).
     """
     xr, zr = _check_range("x_range", x_range), _check_range("z_range", z_range)
     table = TensionTable(
@@ -483,13 +489,20 @@ def catenary_estimator(
     alpha, _ = form_parameter(prof.x, prof.z)
     compliance = sum(seg.length / seg.ea for seg in line.segments)
     ea = line.length / compliance if compliance > 0 else math.inf
-    cord = ElasticDragCord(
-        c=drag_constant(drag_cd, drag_diameter, rho), span=float(span),
-        alpha=max(alpha, 1e-3), axial_stiffness=ea, length=line.length,
-    )
+    cord = None
+    if jerk:
+        if alpha < 0.01:
+            raise ValueError(
+                f"the line is nearly straight at span {span!r} m (sag/chord {alpha:.4f}): "
+                "the jerk model does not apply; pass jerk=False"
+            )
+        cord = ElasticDragCord(
+            c=drag_constant(drag_cd, drag_diameter, rho), span=float(span),
+            alpha=alpha, axial_stiffness=ea, length=line.length,
+        )
     cfg = EstimatorConfig(
         dt=dt, span=float(span), height=float(height), line_length=line.length,
-        mass_per_length=mass_per_length, ea=ea if math.isfinite(ea) else 1e12,
+        mass_per_length=mass_per_length, ea=ea,
         axial_model=axial_model, drag=cord,
     )
     return cfg, qs

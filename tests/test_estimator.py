@@ -16,6 +16,7 @@ from models.estimator import (
     Flag,
     LinearisedQuasiStatic,
     MotionTensionEstimator,
+    catenary_estimator,
     seed004_estimator,
     simulate_tension,
 )
@@ -209,3 +210,18 @@ def test_real_spotter_record_through_seed004(vaps):
     est = simulate_tension(z, x, y, cfg25, qs)
     big = np.abs(z) > 5.0
     assert big.any() and np.all(est.flags[big] & Flag.OUT_OF_RANGE)
+
+
+def test_catenary_estimator_options_and_errors():
+    line = vaps_mooring()
+    with pytest.raises(ValueError, match="nearly straight"):
+        catenary_estimator(line, 33.0, 23.0, DT, 1.1, 1.2, 0.031, x_range=(-1, 0.3),
+                           z_range=(-1, 0.5))
+    cfg, _ = catenary_estimator(line, 33.0, 23.0, DT, 1.1, 1.2, 0.031, x_range=(-1, 0.3),
+                                z_range=(-1, 0.5), jerk=False)
+    assert cfg.drag is None
+    # Series stiffness of the three segments (bridle rod much stiffer than the cable).
+    comp = sum(s.length / s.ea for s in line.segments)
+    assert cfg.ea == pytest.approx(40.0 / comp)
+    with pytest.raises(ValueError, match="needs a finite ea"):
+        config(ea=math.inf, axial_model="infinite")
