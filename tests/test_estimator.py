@@ -216,9 +216,9 @@ def test_catenary_estimator_options_and_errors():
     line = vaps_mooring()
     with pytest.raises(ValueError, match="nearly straight"):
         catenary_estimator(line, 33.0, 23.0, DT, 1.1, 1.2, 0.031, x_range=(-1, 0.3),
-                           z_range=(-1, 0.5))
+                           z_range=(-1, 0.5), table_rtol=1e-2)
     cfg, _ = catenary_estimator(line, 33.0, 23.0, DT, 1.1, 1.2, 0.031, x_range=(-1, 0.3),
-                                z_range=(-1, 0.5), jerk=False)
+                                z_range=(-1, 0.5), jerk=False, table_rtol=1e-2)
     assert cfg.drag is None
     # Series stiffness of the three segments (bridle rod much stiffer than the cable).
     comp = sum(s.length / s.ea for s in line.segments)
