@@ -41,13 +41,14 @@ _DAY_S = 86400.0
 _STATE_VERSION = 1
 
 
-def _commit_loop(ranges, counts, params, table, committed):
+def _commit_loop(ranges, counts, params, table, inv_width, committed):
     """Add each cycle's damage in order and bin it. Returns (committed, added, cycles, bad).
 
-    ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., coef_0.., bounds_0..]
-    (segment i: damage = count * coef_i * S**m_i; bounds ascending, MPa); ``table`` row 0
-    holds the histogram edges, row 1 the counts (last = overflow). ``bad`` is -1, or the
-    index of the first invalid cycle, in which case nothing has been changed.
+    ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., ln coef_0.., bounds_0..]
+    (segment i: damage = count * exp(m_i ln S + ln coef_i); bounds ascending, MPa);
+    ``table`` row 0 holds the histogram edges, row 1 the counts (last = overflow);
+    ``inv_width`` > 0 marks uniform edges (direct bin index, then an exact fix-up).
+    ``bad`` is -1, or the index of the first invalid cycle; then nothing has changed.
     """
     n = ranges.shape[0]
     for i in range(n):
@@ -68,7 +69,7 @@ def _commit_loop(ranges, counts, params, table, committed):
                 seg -= 1
         d = 0.0
         if s >= cutoff:
-            d = counts[i] * (params[3 + nseg + seg] * s ** params[3 + seg])
+            d = counts[i] * math.exp(params[3 + seg] * math.log(s) + params[3 + nseg + seg])
         committed += d
         cycles += counts[i]
         r = ranges[i]
@@ -77,6 +78,15 @@ def _commit_loop(ranges, counts, params, table, committed):
         elif r >= table[0, 0]:
             lo = 0
             hi = nb - 1
+            if inv_width > 0.0:  # uniform edges: start next to the bin, then bisect exactly
+                lo = min(max(int((r - table[0, 0]) * inv_width) - 1, 0), nb - 2)
+                hi = min(lo + 3, nb - 1)
+                if r >= table[0, hi]:
+                    lo = hi
+                    hi = nb - 1
+                elif r < table[0, lo]:
+                    hi = lo
+                    lo = 0
             while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
                 mid = (lo + hi) >> 1
                 if r >= table[0, mid]:
@@ -138,7 +148,12 @@ class MinerAccumulator:
         # mean-free curves scale the raw ranges straight to the curve's MPa
         self._scale = c.scf * c.derating / 1e6
         self._needs_means = c.mean_correction != "none"
-        self._params = np.concatenate(([self._scale, self._cutoff, m.size], m, self._seg_coef, bounds))
+        with np.errstate(divide="ignore"):
+            self._params = np.concatenate(([self._scale, self._cutoff, m.size], m, np.log(self._seg_coef), bounds))
+        edges = self._table[0]
+        width = (edges[-1] - edges[0]) / (edges.size - 1)
+        uniform = np.allclose(np.diff(edges), width, rtol=1e-9, atol=0.0)
+        self._inv_width = 1.0 / width if uniform else 0.0
 
     @property
     def _edges(self) -> np.ndarray:
@@ -167,7 +182,8 @@ class MinerAccumulator:
             # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
             added = self._commit_numpy(r, n, self.sn_curve.effective_range_MPa(r, means_Pa))
         elif self.backend == "numba":
-            committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._committed)
+            committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._inv_width,
+                                                             self._committed)
             if bad >= 0:
                 raise ValueError(f"cycle {bad} has an invalid range or count ({r[bad]!r}, {n[bad]!r})")
             self._committed = committed
@@ -184,7 +200,9 @@ class MinerAccumulator:
         if bad.size:
             raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
         seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
-        d = n * (self._seg_coef[seg] * np.power(s, self._seg_m[seg]))
+        lncoef = self._params[3 + self._seg_m.size: 3 + 2 * self._seg_m.size]
+        with np.errstate(divide="ignore"):  # ln 0 = -inf gives exp(-inf) = 0 damage
+            d = n * np.exp(self._seg_m[seg] * np.log(s) + lncoef[seg])
         d = np.where(s >= self._cutoff, d, 0.0)
         start = self._committed
         # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
