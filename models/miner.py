@@ -7,6 +7,7 @@ rate_buckets=24, reference_cycles=1e7, backend="auto")``
       (seconds, any epoch, non-decreasing) dates them for the damage rate.
   ``set_provisional(ranges_Pa, counts, means_Pa=None) -> float``
       replace the provisional damage (the rainflow residue's half cycles).
+  ``set_provisional_from(rainflow) -> float``  the same from a ``StreamingRainflow``.
   ``damage_committed``, ``damage_provisional``, ``damage`` (= committed + provisional)
   ``damage_rate_per_day``   committed damage per day over the last ``rate_window_s``
   ``remaining_life_days``   (1 - damage) / rate (inf while the rate is zero)
@@ -219,6 +220,11 @@ class MinerAccumulator:
                                            np.asarray(counts, dtype=np.float64), means_Pa)
         self._provisional = float(np.sum(d))
         return self._provisional
+
+    def set_provisional_from(self, rainflow) -> float:
+        """Provisional damage from a ``StreamingRainflow``'s residue; return it."""
+        ranges, means, counts = rainflow.residue_half_cycles()
+        return self.set_provisional(ranges, counts, means)
 
     def _date(self, added: float, t: float) -> None:
         if self._t_first is None:

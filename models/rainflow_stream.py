@@ -5,8 +5,10 @@
       arrays in closure order (counts are all 1.0: four-point counting closes whole cycles).
   ``residue``                    open turning points (numpy array), oldest first; the last
                                  element is the running extreme, which later data may extend.
-  ``residue_half_cycles() -> (ranges, means, counts)``  the residue as ASTM half cycles
-                                 (each consecutive pair, count 0.5).
+  ``residue_half_cycles() -> (ranges, means, counts)``  the residue counted as ASTM E1049
+                                 would at the end of the series: half cycles (0.5), plus a
+                                 full cycle (1.0) where ASTM's three-point rule pairs two
+                                 residue ranges.
   ``state() -> dict`` / ``StreamingRainflow.from_state(dict)``  small, JSON-serialisable;
                                  floats are stored as Python floats so a JSON round trip
                                  restores the counter bit for bit.
@@ -23,9 +25,10 @@ cycle never depends on later samples, the cycles and the order in which they clo
 same for any split of the series into blocks; together with the residue half cycles they
 total the ASTM E1049 (``rainflow.extract_cycles``) counts for every (range, mean).
 
-Two backends give identical results: ``"numba"`` runs one compiled loop over the samples
-(a few microseconds per call); ``"numpy"`` extracts monotone-run ends with vectorised
-numpy and runs the same state machine in Python over those only. ``"auto"`` picks numba
+Two backends give identical results: ``"numba"`` compiles ``_feed_loop`` (a few
+microseconds per call); ``"numpy"`` extracts monotone-run ends with vectorised numpy and
+runs the same state machine, uncompiled, over those only (the gate gives the same turning
+points on run ends as on all samples, because a run's end is its farthest point). ``"auto"`` picks numba
 when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
 counted.
 """
