@@ -24,7 +24,8 @@ E_i | cos(a) sqrt((1 + e_c)^2 + (C' / P)^2) - 1 |, which needs no trigonometry p
 Public API
 ----------
 - ``HelixCable`` (frozen dataclass), ``HelixCable.vaps_biw()``
-- ``conductor_stress(tension_N, cable, lay="left", combined=False) -> ndarray`` [Pa]
+- ``conductor_stress(tension_N, cable, lay="left", combined=False, backend="auto") -> ndarray``
+  [Pa]; NaN/inf tension raises ValueError
 - ``tension_for_stress(stress_Pa, cable, lay="left") -> ndarray`` [N], the inverse
   ("equivalent cable load" of the seed's predicted-failure table)
 - ``cable_load(tension_N, stress_Pa, cable) -> ndarray`` [N], CABLE2/3's "cable load"

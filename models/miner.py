@@ -34,9 +34,8 @@ from typing import Literal
 
 import numpy as np
 
-from models.sn_curve import SNCurve
-
 from models._jit import compile_loop
+from models.sn_curve import SNCurve
 
 _DAY_S = 86400.0
 _STATE_VERSION = 1
