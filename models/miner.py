@@ -47,7 +47,7 @@ def _commit_loop(ranges, counts, params, table, inv_width, committed):
     ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., ln coef_0.., bounds_0..]
     (segment i: damage = count * exp(m_i ln S + ln coef_i); bounds ascending, MPa);
     ``table`` row 0 holds the histogram edges, row 1 the counts (last = overflow);
-    ``inv_width`` > 0 marks uniform edges (direct bin index, then an exact fix-up).
+    ``inv_width`` > 0 marks uniform edges (direct bin index, then an exact check).
     ``bad`` is -1, or the index of the first invalid cycle; then nothing has changed.
     """
     n = ranges.shape[0]
@@ -76,23 +76,21 @@ def _commit_loop(ranges, counts, params, table, inv_width, committed):
         if r >= top:
             table[1, nb - 1] += counts[i]
         elif r >= table[0, 0]:
-            lo = 0
-            hi = nb - 1
-            if inv_width > 0.0:  # uniform edges: start next to the bin, then bisect exactly
-                lo = min(max(int((r - table[0, 0]) * inv_width) - 1, 0), nb - 2)
-                hi = min(lo + 3, nb - 1)
-                if r >= table[0, hi]:
-                    lo = hi
-                    hi = nb - 1
-                elif r < table[0, lo]:
-                    hi = lo
-                    lo = 0
-            while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
-                mid = (lo + hi) >> 1
-                if r >= table[0, mid]:
-                    lo = mid
-                else:
-                    hi = mid
+            if inv_width > 0.0:  # uniform edges: direct index, then exact against the edges
+                lo = min(int((r - table[0, 0]) * inv_width), nb - 2)
+                while r < table[0, lo]:
+                    lo -= 1
+                while r >= table[0, lo + 1]:
+                    lo += 1
+            else:
+                lo = 0
+                hi = nb - 1
+                while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
+                    mid = (lo + hi) >> 1
+                    if r >= table[0, mid]:
+                        lo = mid
+                    else:
+                        hi = mid
             table[1, lo] += counts[i]
     return committed, committed - start, cycles, -1
 

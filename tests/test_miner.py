@@ -128,6 +128,13 @@ def test_histogram_fixed_edges_and_equivalent_range():
     np.testing.assert_array_equal(e, edges)
     np.testing.assert_array_equal(h, [1.5, 3.0])
     assert overflow == 4.0
+    # uniform edges take a direct-index path: values exactly on (inexact) edges
+    edges = np.linspace(0.0, 0.7e6, 8)  # 0.1e6 steps are not exact in binary
+    for backend in ("numba", "numpy"):
+        uniform = MinerAccumulator(curve, histogram_edges_Pa=edges, backend=backend)
+        uniform.add_cycles(np.concatenate((edges, np.nextafter(edges[1:], 0))), np.ones(15))
+        np.testing.assert_array_equal(uniform.histogram[1], [2.0] * 7)
+        assert uniform.histogram[2] == 1.0
     # hand value: S_eq = (sum n S^3 / N_ref)^(1/3) for a single slope
     expected = (np.sum(counts * (ranges / 1e6) ** 3) / 1e6) ** (1 / 3) * 1e6
     assert miner.equivalent_stress_range() == pytest.approx(expected, rel=1e-12)
