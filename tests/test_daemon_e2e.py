@@ -25,6 +25,7 @@ pytest.importorskip("replay.writer")
 
 from monitor import zenoh_io  # noqa: E402
 from monitor.blocks import SampleBlock  # noqa: E402
+from monitor.cmd_record import recorder_token_key  # noqa: E402
 from monitor.daemon_config import ZenohConfig  # noqa: E402
 from monitor.publisher import publish_blocks  # noqa: E402
 from monitor.checkpoint import CheckpointStore  # noqa: E402
@@ -399,3 +400,34 @@ def test_stale_tension_fails_over_to_the_motion_estimate_and_back(tmp_path):
     live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
     replayed = replayed_figures(config, [write_log(tmp_path / "gap.mcap", blocks)])
     assert committed(live) == committed(replayed)
+
+
+# ---- buoymon record ----------------------------------------------------------------------------
+
+def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_path):
+    port = free_port()
+    blocks = synthetic_blocks(120)
+    cfg = write_config(tmp_path, port, load_source="measured")
+    config = load_config(cfg)
+    d = start_daemon(cfg, tmp_path)
+    out_dir = tmp_path / "recorded"
+    rec = subprocess.Popen([sys.executable, "-m", "monitor.cli", "record", "--config", str(cfg),
+                            "-o", str(out_dir)], env=ENV, stderr=subprocess.PIPE, text=True)
+    with client_session(port) as session:
+        deadline = time.monotonic() + 60  # the recorder's token says it has subscribed
+        while not [r for r in session.liveliness().get(recorder_token_key(BUOY), timeout=1)]:
+            assert time.monotonic() < deadline and rec.poll() is None, "recorder not up"
+            time.sleep(0.1)
+        publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=None)
+        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                         buoy=BUOY)
+    time.sleep(1.0)
+    rec.terminate()
+    assert rec.wait(30) == 0, rec.stderr.read()
+    assert d.terminate() == 0
+    files = sorted(out_dir.glob("*.mcap"))
+    assert files
+    statuses = recorded_json(files, f"buoy/{BUOY}/monitor/status")
+    assert statuses and statuses[-1]["buoy_id"] == BUOY
+    live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
+    assert committed(replayed_figures(config, files)) == committed(live)
