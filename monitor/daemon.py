@@ -121,7 +121,7 @@ class Daemon:
         restored = self._store.load()
         saved = restored.state if restored is not None else {}
         self.counters: dict[str, int] = {"messages": 0, "undecodable": 0, "wrong_buoy": 0,
-                                         "status_published": 0, "queries": 0}
+                                         "refused": 0, "status_published": 0, "queries": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
         self.restored_seq = restored.seq if restored is not None else 0
@@ -257,7 +257,12 @@ class Daemon:
             self.recorder.write(key, payload, self.codec.channel_spec(block.sensor),
                                 recv_ns, block.t_first_ns)
         self._stream(block.sensor).last_arrival_mono = time.monotonic()
-        self.pipeline.process(block)
+        try:
+            self.pipeline.process(block)
+        except ValueError as exc:  # a block the pipeline refuses: count it, keep serving
+            self.counters["refused"] += 1
+            log.warning("block refused by the pipeline",
+                        extra={"fields": {"key": key, "error": str(exc)}})
         self._dirty_status = True
 
     def _on_alive(self, key: str, alive: bool) -> None:
