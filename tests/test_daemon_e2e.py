@@ -431,3 +431,19 @@ def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_p
     assert statuses and statuses[-1]["buoy_id"] == BUOY
     live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
     assert committed(replayed_figures(config, files)) == committed(live)
+
+
+@pytest.mark.parametrize("section, message", [
+    ('[zenoh]\nmode = "router"\n', "zenoh.mode = 'router': must be one of"),
+    ('[state]\ncheckpoint_interval_s = 0\n', "state.checkpoint_interval_s = 0"),
+    ('[record]\nrotate_s = -5\n', "record.rotate_s = -5"),
+])
+def test_run_refuses_an_invalid_config_naming_key_and_value(tmp_path, section, message):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(SHIPPED.read_text() + "\n" + section)
+    proc = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
+                          env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    logged = [json.loads(line) for line in proc.stderr.splitlines() if line.startswith("{")]
+    assert any(message in entry["msg"] and entry["level"] == "error" for entry in logged), \
+        proc.stderr
