@@ -66,15 +66,19 @@ def write_log(path: Path, days: float, seed: int = 4) -> int:
     return n_tension
 
 
-def child_replay(path: str) -> None:
+def child_replay(path: str, rules: bool) -> None:
     """Run in a child process: replay, print figures as JSON (with this process's peak RSS)."""
-    from monitor.config import default_config
+    from monitor.config import config_with, default_config
     from replay.reader import LogReader
     from replay.runner import run_blocks
 
+    config = default_config()
+    if not rules:
+        config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
+                                             if k != "rule"})
     start = time.perf_counter()
     reader = LogReader([path])
-    pipeline, result = run_blocks(default_config(), reader)
+    pipeline, result = run_blocks(config, reader)
     wall = time.perf_counter() - start
     rep = pipeline.report()
     print(json.dumps({
@@ -86,9 +90,9 @@ def child_replay(path: str) -> None:
     }))
 
 
-def replay_in_child(path: Path) -> dict:
-    out = subprocess.run([sys.executable, __file__, "--child-replay", str(path)],
-                         check=True, capture_output=True, text=True)
+def replay_in_child(path: Path, rules: bool = True) -> dict:
+    cmd = [sys.executable, __file__, "--child-replay", str(path)] + ([] if rules else ["--no-rules"])
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -132,9 +136,10 @@ def main() -> None:
     ap.add_argument("--dir", help="where to write the logs (default: a temporary directory)")
     ap.add_argument("--keep", action="store_true", help="keep the generated logs")
     ap.add_argument("--child-replay", help=argparse.SUPPRESS)
+    ap.add_argument("--no-rules", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child_replay:
-        child_replay(args.child_replay)
+        child_replay(args.child_replay, rules=not args.no_rules)
         return
     work = Path(args.dir or tempfile.mkdtemp(prefix="bench_replay_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -147,10 +152,13 @@ def main() -> None:
               f"{big.stat().st_size / 1e6:.0f} MB, in {time.perf_counter() - t:.1f} s")
         r_big = replay_in_child(big)
         r_small = replay_in_child(small)
+        r_plain = replay_in_child(big, rules=False)
         rate = r_big["tension_samples"] / r_big["wall_s"]
-        print(f"replay {args.days:g} d: {r_big['wall_s']:.2f} s, {rate / 1e6:.2f} M tension "
-              f"samples/s ({r_big['all_samples'] / r_big['wall_s'] / 1e6:.2f} M samples/s all "
-              f"streams), {rate / 20:,.0f} x real time; target >= 3 M/s")
+        for label, r in (("default config", r_big), ("no alert rules", r_plain)):
+            rr = r["tension_samples"] / r["wall_s"]
+            print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s, {rr / 1e6:.2f} M "
+                  f"tension samples/s ({r['all_samples'] / r['wall_s'] / 1e6:.2f} M samples/s "
+                  f"all streams), {rr / 20:,.0f} x real time; target >= 3 M/s")
         growth = r_big["peak_rss_mb"] / r_small["peak_rss_mb"] - 1
         print(f"peak RSS: 1 d {r_small['peak_rss_mb']:.0f} MB, {args.days:g} d "
               f"{r_big['peak_rss_mb']:.0f} MB ({growth:+.1%}); target within 10 %")

@@ -39,12 +39,18 @@ def client_side(zc: ZenohConfig) -> ZenohConfig:
     return replace(zc, listen=(), connect=zc.connect or zc.listen)
 
 
+def recorder_token_key(buoy_id: str) -> str:
+    return f"buoy/{validate_buoy_id(buoy_id)}/recorder/alive"
+
+
 def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
            stop: threading.Event, codec: zenoh_io.BlockCodec) -> int:
     """Record until ``stop`` is set; returns the number of messages written."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     with zenoh_io.open_session(zc) as session:
         sub = zenoh_io.declare_enqueuing_subscriber(session, f"buoy/{buoy_id}/**", q)
+        # tells the shore (and tests) that this buoy's traffic is being recorded
+        token = session.liveliness().declare_token(recorder_token_key(buoy_id))
         try:
             while not stop.is_set():
                 try:
@@ -54,6 +60,7 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
                     continue
                 _write(recorder, codec, key, payload, recv_ns)
         finally:
+            token.undeclare()
             sub.undeclare()
             while not q.empty():
                 _, key, payload, recv_ns = q.get_nowait()
@@ -67,7 +74,8 @@ def _write(recorder: McapRecorder, codec: zenoh_io.BlockCodec, key: str, payload
     try:
         parse_sensor_topic(key)
     except ValueError:  # status, alerts, anything else: JSON documents
-        recorder.write(key, payload, JSON_OBJECT, recv_ns, recv_ns)
+        if payload:  # an empty payload is a DELETE (a cleared alert): no document to keep
+            recorder.write(key, payload, JSON_OBJECT, recv_ns, recv_ns)
         return
     try:
         block = codec.decode(key, payload, recv_ns)

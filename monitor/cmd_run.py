@@ -44,7 +44,34 @@ def build_daemon(path: str) -> Daemon:
     def make_pipeline(state: Any, sinks: Any) -> Pipeline:
         return Pipeline(cfg, list(sinks), state)
 
-    return Daemon(cfg.buoy.id, dcfg, make_pipeline, default_codec())
+    def attach(session: Any, pipeline: Pipeline) -> list[AlertDelivery]:
+        if not hasattr(pipeline.alerts, "apply_command"):  # no alert rules engine installed
+            return []
+        return [AlertDelivery(session, pipeline, cfg.raw.get("alerts", {}))]
+
+    return Daemon(cfg.buoy.id, dcfg, make_pipeline, default_codec(), attach=attach)
+
+
+class AlertDelivery:
+    """Alert transitions to Zenoh (and webhook/e-mail via the outbox); operator commands
+    (``buoymon alerts ack|reset``) applied on the daemon's thread between blocks."""
+
+    def __init__(self, session: Any, pipeline: Any, alerts_raw: Any) -> None:
+        from monitor.alerts.config import AlertsConfig  # noqa: PLC0415
+        from monitor.alerts.delivery import OutboxSink, ZenohAlertSink  # noqa: PLC0415
+
+        self.engine = pipeline.alerts
+        self.zenoh = ZenohAlertSink(session, pipeline.buoy_id, active=self.engine.active())
+        self.outbox = OutboxSink.from_config(AlertsConfig.from_dict(alerts_raw, "alerts"))
+        pipeline.sinks.extend(s for s in (self.zenoh, self.outbox) if s is not None)
+
+    def poll(self) -> None:
+        self.zenoh.apply_commands(self.engine)
+
+    def close(self) -> None:
+        self.zenoh.close()
+        if self.outbox is not None:
+            self.outbox.close()
 
 
 def run(args: argparse.Namespace) -> int:

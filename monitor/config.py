@@ -33,10 +33,11 @@ DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
 # installed yet leaves its section unchecked (check-config says so).
 SECTION_PARSERS: dict[str, str] = {
     "alerts": "monitor.alerts.config:AlertsConfig.from_dict",
-    "zenoh": "monitor.zenoh_io:parse_zenoh_config",
-    "state": "monitor.checkpoint:parse_state_config",
-    "record": "monitor.recorder:parse_record_config",
-    "rerun": "monitor.viz.rerun_sink:parse_rerun_config",
+    "zenoh": "monitor.daemon_config:ZenohConfig.from_dict",
+    "state": "monitor.daemon_config:StateConfig.from_dict",
+    "record": "monitor.daemon_config:RecordConfig.from_dict",
+    "health": "monitor.daemon_config:HealthConfig.from_dict",
+    "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
     "outputs": "monitor.viz.report:parse_outputs_config",
 }
 
@@ -186,30 +187,23 @@ class SegmentConfig:
 
 @dataclass(frozen=True)
 class MooringConfig:
+    """The line from anchor to buoy: a named preset (built by ``models.catenary``) or segments."""
+
     depth_m: float
+    span_m: float  # nominal horizontal distance anchor -> buoy (for the motion estimator)
     bearing_deg: float
     anchor_lat_deg: float
     anchor_lon_deg: float
-    segments: tuple[SegmentConfig, ...]
-
-    @property
-    def length_m(self) -> float:
-        return sum(s.length_m for s in self.segments)
+    preset: str | None
+    segments: tuple[SegmentConfig, ...]  # empty for a preset
+    length_m: float
 
 
-# Seed 004 (VAPS, 1981): 40 m cable in 23 m of water, flotation jacket on the lower 20 m.
-# The report gives no weights; these are estimates from its dimensions: 31 mm cable of steel
-# core (42.1 mm^2) and ten copper conductor sets, about 15 N/m in water; the 80 mm flotation
-# jacket makes the lower 20 m buoyant, about -15 N/m. EA = core E * A = 81.4e9 * 42.1e-6.
-_VAPS_EA_N = 81.4e9 * 42.1e-6
-MOORING_PRESETS: Mapping[str, Mapping[str, Any]] = {
-    "vaps_seed004": {
-        "depth_m": 23.0,
-        "segments": (
-            SegmentConfig("floated_cable", 20.0, -15.0, _VAPS_EA_N, 0.080),
-            SegmentConfig("cable", 20.0, 15.0, _VAPS_EA_N, 0.031),
-        ),
-    },
+# Presets are built by models.catenary (the seed 004 line: models.catenary.vaps_mooring(),
+# bridle, 17.5 m of floated cable, 20 m of bare cable; 40 m in 23 m of water). Only what the
+# configuration needs to check itself is listed here.
+MOORING_PRESETS: Mapping[str, Mapping[str, float]] = {
+    "vaps_seed004": {"depth_m": 23.0, "length_m": 40.0, "span_m": 29.0},
 }
 
 
@@ -257,6 +251,7 @@ class LoadConfig:
     source: str  # "auto" | "measured" | "estimated"
     stale_after_s: float
     motion_sensor: str  # stream that feeds the motion estimator: "imu" or "motion"
+    motion_rate_hz: float  # its nominal sample rate (the estimator works on a fixed step)
 
 
 @dataclass(frozen=True)
@@ -322,16 +317,17 @@ def _parse_mooring(r: SectionReader) -> MooringConfig:
     tables = r.table_list("segment")
     if preset is not None and tables:
         raise r.error("preset", preset, "give either a preset or [[mooring.segment]], not both")
+    segments: list[SegmentConfig] = []
     if preset is not None:
         if preset not in MOORING_PRESETS:
             raise r.error("preset", preset, f"must be one of {sorted(MOORING_PRESETS)}")
         p = MOORING_PRESETS[preset]
-        segments = p["segments"]
+        length = p["length_m"]
         depth = r.float("depth_m", p["depth_m"], gt=0)
+        span = r.float("span_m", p["span_m"], gt=0)
     else:
         if not tables:
             raise ConfigError("config error: mooring: needs preset or [[mooring.segment]] tables")
-        segments = []
         for i, t in enumerate(tables):
             s = SectionReader(t, f"mooring.segment[{i}]")
             segments.append(SegmentConfig(
@@ -339,17 +335,23 @@ def _parse_mooring(r: SectionReader) -> MooringConfig:
                 s.float("ea_N", gt=0, allow_inf=True), s.float("diameter_m", gt=0),
             ))
             s.done()
-        segments = tuple(segments)
+        length = sum(seg.length_m for seg in segments)
         depth = r.float("depth_m", gt=0)
+        span = r.float("span_m", gt=0)
+    if length < depth:
+        raise r.error("depth_m", depth, f"deeper than the line is long ({length:g} m)")
+    if span >= length:
+        raise r.error("span_m", span, f"must be shorter than the line ({length:g} m)")
     out = MooringConfig(
         depth_m=depth,
+        span_m=span,
         bearing_deg=r.float("bearing_deg", 0.0, ge=0, le=360),
         anchor_lat_deg=r.float("anchor_lat_deg", 0.0, ge=-90, le=90),
         anchor_lon_deg=r.float("anchor_lon_deg", 0.0, ge=-180, le=180),
-        segments=segments,
+        preset=preset,
+        segments=tuple(segments),
+        length_m=length,
     )
-    if out.length_m < depth:
-        raise r.error("depth_m", depth, f"deeper than the line is long ({out.length_m:g} m)")
     r.done()
     return out
 
@@ -421,6 +423,7 @@ def _parse_load(r: SectionReader) -> LoadConfig:
         source=r.str("source", "auto", choices=("auto", "measured", "estimated")),
         stale_after_s=r.float("stale_after_s", 5.0, gt=0),
         motion_sensor=r.str("motion_sensor", "imu", choices=("imu", "motion")),
+        motion_rate_hz=r.float("motion_rate_hz", 10.0, gt=0),
     )
     r.done()
     return out

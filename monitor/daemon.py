@@ -53,6 +53,35 @@ class PipelineLike(Protocol):
 PipelineFactory = Callable[[Any, Sequence[Sink]], PipelineLike]
 
 
+class Extension(Protocol):
+    """Something attached to the daemon's session and pipeline (e.g. alert delivery)."""
+
+    def poll(self) -> None:
+        """Called on the daemon's thread every loop turn (between blocks): never blocks."""
+
+    def close(self) -> None: ...
+
+
+# attach(session, pipeline) -> extensions; may add sinks to ``pipeline.sinks``
+Attach = Callable[[Any, PipelineLike], Sequence[Extension]]
+
+
+class _RecordAlertsSink:
+    """Records the alert transitions the pipeline emits, as JSON on their Zenoh keys."""
+
+    def __init__(self, recorder: McapRecorder) -> None:
+        self.recorder = recorder
+
+    def on_step(self, step: StepResult) -> None:
+        for rec in step.alerts:
+            now = time.time_ns()
+            self.recorder.write(rec.key, zenoh_io.to_json_bytes(rec.to_dict()), JSON_OBJECT,
+                                now, getattr(rec, "at_ns", 0) or now)
+
+    def close(self) -> None:
+        pass
+
+
 @dataclass
 class StreamHealth:
     """Wall-clock view of one sensor stream: data age and liveliness (not in the checkpoint)."""
@@ -66,12 +95,22 @@ class StreamHealth:
                 "data_stale": age is None or age > timeout_s, "alive": self.alive}
 
 
+class _Closing:
+    """Adapts an extension to the undeclare-on-exit list."""
+
+    def __init__(self, ext: Extension) -> None:
+        self.ext = ext
+
+    def undeclare(self) -> None:
+        self.ext.close()
+
+
 class Daemon:
     """Runs one buoy's live monitoring until :meth:`stop` is called."""
 
     def __init__(self, buoy_id: str, config: DaemonConfig, make_pipeline: PipelineFactory,
                  codec: zenoh_io.BlockCodec, notifier: SdNotifier | None = None,
-                 extra_sinks: Sequence[Sink] = ()) -> None:
+                 attach: Attach | None = None) -> None:
         self.buoy_id = buoy_id
         self.config = config
         self.codec = codec
@@ -82,16 +121,19 @@ class Daemon:
         restored = self._store.load()
         saved = restored.state if restored is not None else {}
         self.counters: dict[str, int] = {"messages": 0, "undecodable": 0, "wrong_buoy": 0,
-                                         "status_published": 0, "queries": 0}
+                                         "refused": 0, "status_published": 0, "queries": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
         self.restored_seq = restored.seq if restored is not None else 0
-        self.pipeline = make_pipeline(saved.get("pipeline"), [*extra_sinks])
-        self._checkpointer = PeriodicCheckpointer(self._store, self.checkpoint_state,
-                                                  config.state.checkpoint_interval_s)
         self.recorder = (McapRecorder(config.record.dir, config.record.rotate_s,
                                       config.record.flush_interval_s)
                          if config.record.enabled else None)
+        sinks = [_RecordAlertsSink(self.recorder)] if self.recorder is not None else []
+        self.pipeline = make_pipeline(saved.get("pipeline"), sinks)
+        self._attach = attach
+        self._extensions: Sequence[Extension] = ()
+        self._checkpointer = PeriodicCheckpointer(self._store, self.checkpoint_state,
+                                                  config.state.checkpoint_interval_s)
         self.session: Any = None
         self._status_pub: Any = None
         self._started_mono = time.monotonic()
@@ -120,6 +162,9 @@ class Daemon:
             declared.append(self._status_pub)
             declared.append(self.session.liveliness().declare_token(
                 zenoh_io.monitor_token_key(self.buoy_id)))
+            if self._attach is not None:
+                self._extensions = self._attach(self.session, self.pipeline)
+                declared.extend(_Closing(e) for e in self._extensions)
             subscriber = zenoh_io.declare_enqueuing_subscriber(
                 self.session, zenoh_io.sensor_key(self.buoy_id), self._q)
             log.info("daemon ready", extra={"fields": {
@@ -162,6 +207,8 @@ class Daemon:
             if (now - self._last_status_mono >= zc.status_interval_s
                     or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
                 self._publish_status()
+            for ext in self._extensions:
+                ext.poll()
             self._checkpointer.maybe_save()
             if self.recorder is not None:
                 self.recorder.maybe_flush()
@@ -210,7 +257,12 @@ class Daemon:
             self.recorder.write(key, payload, self.codec.channel_spec(block.sensor),
                                 recv_ns, block.t_first_ns)
         self._stream(block.sensor).last_arrival_mono = time.monotonic()
-        self.pipeline.process(block)
+        try:
+            self.pipeline.process(block)
+        except ValueError as exc:  # a block the pipeline refuses: count it, keep serving
+            self.counters["refused"] += 1
+            log.warning("block refused by the pipeline",
+                        extra={"fields": {"key": key, "error": str(exc)}})
         self._dirty_status = True
 
     def _on_alive(self, key: str, alive: bool) -> None:

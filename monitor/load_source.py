@@ -17,13 +17,14 @@ same for any split of the data into blocks.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import logging
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 
-from monitor.config import Config, LoadConfig
+from monitor.config import Config, LoadConfig, MooringConfig
 
 log = logging.getLogger(__name__)
 
@@ -41,16 +42,65 @@ class MotionEstimator(Protocol):
     def state(self) -> dict[str, Any]: ...
 
 
+@functools.lru_cache(maxsize=8)
+def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
+    """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
+    a second), so built once per mooring and step and shared by every estimator."""
+    from models import catenary, estimator
+
+    m = mooring
+    if m.preset == "vaps_seed004":
+        return estimator.seed004_estimator(dt=dt, span=m.span_m)
+    line = catenary.Line(segments=tuple(
+        catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
+    mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
+    return estimator.catenary_estimator(
+        line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
+        drag_diameter=m.segments[-1].diameter_m)
+
+
+class _ModelsEstimator:
+    """Adapter over ``models.estimator.MotionTensionEstimator`` for one motion stream.
+
+    The model works on a fixed time step (``[load] motion_rate_hz``); samples it flags as
+    SETTLING (the IMU integrator warming up, a stream's first samples) give no estimate.
+    """
+
+    def __init__(self, est_module: Any, model: Any, sensor: str) -> None:
+        self._flags = est_module.Flag
+        self.model, self.sensor = model, sensor
+
+    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        if self.sensor == "imu":
+            e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
+                                        fields["accel_z_mps2"])
+        else:
+            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"])
+        ok = (e.flags & np.uint8(self._flags.SETTLING)) == 0
+        return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok]
+
+    def state(self) -> dict[str, Any]:
+        return self.model.state.to_dict()
+
+
 def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
-    """The motion estimator for this mooring, or None when models.estimator is not installed."""
+    """The motion estimator for this mooring, or None when models.estimator is not installed.
+
+    The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
+    uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
+    mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
+    """
     try:
-        estimator = importlib.import_module("models.estimator")
+        est = importlib.import_module("models.estimator")
     except ModuleNotFoundError as exc:
         if exc.name not in ("models.estimator", "models"):
             raise
         log.warning("models.estimator is not installed: no motion-based tension estimate")
         return None
-    return estimator.MotionTensionEstimator.from_config(config, state=state)
+    est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
+    saved = None if not state else est.EstimatorState.from_dict(dict(state))
+    model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
+    return _ModelsEstimator(est, model, config.load.motion_sensor)
 
 
 class LoadSelector:
@@ -93,16 +143,65 @@ class LoadSelector:
     def state(self) -> dict[str, Any]: ...
 
 
+@functools.lru_cache(maxsize=8)
+def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
+    """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
+    a second), so built once per mooring and step and shared by every estimator."""
+    from models import catenary, estimator
+
+    m = mooring
+    if m.preset == "vaps_seed004":
+        return estimator.seed004_estimator(dt=dt, span=m.span_m)
+    line = catenary.Line(segments=tuple(
+        catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
+    mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
+    return estimator.catenary_estimator(
+        line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
+        drag_diameter=m.segments[-1].diameter_m)
+
+
+class _ModelsEstimator:
+    """Adapter over ``models.estimator.MotionTensionEstimator`` for one motion stream.
+
+    The model works on a fixed time step (``[load] motion_rate_hz``); samples it flags as
+    SETTLING (the IMU integrator warming up, a stream's first samples) give no estimate.
+    """
+
+    def __init__(self, est_module: Any, model: Any, sensor: str) -> None:
+        self._flags = est_module.Flag
+        self.model, self.sensor = model, sensor
+
+    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        if self.sensor == "imu":
+            e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
+                                        fields["accel_z_mps2"])
+        else:
+            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"])
+        ok = (e.flags & np.uint8(self._flags.SETTLING)) == 0
+        return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok]
+
+    def state(self) -> dict[str, Any]:
+        return self.model.state.to_dict()
+
+
 def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
-    """The motion estimator for this mooring, or None when models.estimator is not installed."""
+    """The motion estimator for this mooring, or None when models.estimator is not installed.
+
+    The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
+    uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
+    mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
+    """
     try:
-        estimator = importlib.import_module("models.estimator")
+        est = importlib.import_module("models.estimator")
     except ModuleNotFoundError as exc:
         if exc.name not in ("models.estimator", "models"):
             raise
         log.warning("models.estimator is not installed: no motion-based tension estimate")
         return None
-    return estimator.MotionTensionEstimator.from_config(config, state=state)
+    est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
+    saved = None if not state else est.EstimatorState.from_dict(dict(state))
+    model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
+    return _ModelsEstimator(est, model, config.load.motion_sensor)
 
 
 class LoadSelector:

@@ -148,9 +148,11 @@ class _StreamSlab:
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
         self.t, self.codes = t, codes
-        ok = codes == 0
-        self.acc_t, self.acc_values = t[ok], values[:, ok]
-        self.rej_t = t[~ok]
+        if codes.any():
+            ok = codes == 0
+            self.acc_t, self.acc_values, self.rej_t = t[ok], values[:, ok], t[~ok]
+        else:  # the usual case: no copies
+            self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
         self._before = validator_before
         self._ticks: tuple[np.ndarray, ...] | None = None
 
@@ -167,8 +169,10 @@ class _StreamSlab:
         """Vectorised health at every tick end of this slab (cumulative counts and last time)."""
         cut = np.searchsorted(self.t, ends, side="right")
         rej_cut = np.searchsorted(self.rej_t, ends, side="right")
-        by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
-                              for i in range(1, len(REASONS) + 1)])
+        by_reason = None
+        if self.rej_t.shape[0]:
+            by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
+                                  for i in range(1, len(REASONS) + 1)])
         k = np.searchsorted(self.acc_t, ends, side="right")
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         self._before[3])
@@ -187,7 +191,8 @@ class _StreamSlab:
             last_t_ns=last_t if has_last else 0,
             stale=not has_last or now - last_t > stale_ns,
             accepted=accepted + int(n_acc[k]),
-            rejected={r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
+            rejected=rejected if by_reason is None else
+            {r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
             rejected_in_tick=rejected_tick, received_in_tick=received,
         )
 

@@ -30,7 +30,8 @@ class ChannelSpec:
     message_encoding: str  # "protobuf" or "json"
 
 
-JSON_OBJECT = ChannelSpec("buoymon.Json", "jsonschema", b'{"type":"object"}', "json")
+JSON_OBJECT = ChannelSpec("buoymon.v1.Json", "jsonschema",
+                          b'{"title":"buoymon.v1.Json","type":"object"}', "json")
 
 
 class McapRecorder:

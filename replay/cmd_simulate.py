@@ -24,6 +24,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--buoy-id", default="vaps", help="buoy id for the topics (default vaps)")
     p.add_argument("--start", default="2000-01-01T00:00:00Z",
                    help="sensor time of the first sample, ISO 8601 (default 2000-01-01T00:00:00Z)")
+    p.add_argument("--mean-span", type=float, default=31.0,
+                   help="mean horizontal anchor -> buoy distance in m, the steady drift "
+                        "(default 31; the 40 m line in 23 m of water is straight at 32.7)")
     p.add_argument("--dropouts", type=float, default=0.0,
                    help="probability that a 1 s block of a stream is lost (default 0)")
     p.add_argument("--spikes", type=float, default=0.0,
@@ -37,9 +40,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
                         buoy_id=args.buoy_id, start=args.start, dropouts=args.dropouts,
-                        spikes=args.spikes, nans=args.nans)
+                        spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span)
     except ValueError as e:
         print(f"buoymon simulate: {e}", file=sys.stderr)
         return 2
-    print(simulate(cfg, args.output).text())
+    try:
+        summary = simulate(cfg, args.output)
+    except ValueError as e:
+        print(f"buoymon simulate: {e}", file=sys.stderr)
+        return 2
+    print(summary.text())
     return 0

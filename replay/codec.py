@@ -89,8 +89,33 @@ def file_descriptor_set(sensor: str) -> bytes:
     return descriptor_pb2.FileDescriptorSet(file=[proto]).SerializeToString(deterministic=True)
 
 
+def proto_text() -> str:
+    """The schemas as ``.proto`` source, rendered from the descriptors (``replay/buoymon.proto``
+    is this text, kept for readers and for protoc users; a test checks they agree)."""
+    names = {descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED64: "sfixed64",
+             descriptor_pb2.FieldDescriptorProto.TYPE_UINT64: "uint64",
+             descriptor_pb2.FieldDescriptorProto.TYPE_SINT64: "sint64",
+             descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE: "double"}
+    lines = ["// buoymon log format: one message per block of samples of one sensor.",
+             "// Generated from replay/codec.py (proto_text); see docs/LOG_FORMAT.md.",
+             'syntax = "proto3";', "", f"package {PACKAGE};"]
+    for sensor, fields in SENSOR_FIELDS.items():
+        fds = descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set(sensor))
+        msg = fds.file[0].message_type[0]
+        lines += ["", f"message {msg.name} {{"]
+        for fld in msg.field:
+            rep = "repeated " if fld.label == fld.LABEL_REPEATED else ""
+            unit = fields.get(fld.name) or "ns"
+            lines.append(f"  {rep}{names[fld.type]} {fld.name} = {fld.number};  // {unit}")
+        lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+FieldNumbers = tuple[int, int, int, tuple[int, ...]]  # t0, period, offsets, value fields
+
+
 @lru_cache(maxsize=None)
-def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> tuple[int, int, int, tuple[int, ...]]:
+def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> FieldNumbers:
     """Field numbers ``(t0, period, offsets, values...)`` of message ``name`` in a stored schema.
 
     Read from the schema in the file (not assumed) so a log written by another tool with a
@@ -108,7 +133,8 @@ def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> tup
             if missing:
                 raise ValueError(f"schema {name}: missing fields {missing}")
             values = tuple(numbers[w] for w in SENSOR_FIELDS[sensor])
-            return numbers["t0_ns"], numbers.get("period_ns", -1), numbers.get("t_offset_ns", -1), values
+            return (numbers["t0_ns"], numbers.get("period_ns", -1),
+                    numbers.get("t_offset_ns", -1), values)
     raise ValueError(f"schema data does not define message {name!r}")
 
 
@@ -443,7 +469,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
 
 def decode_many(
     buf: np.ndarray, offs: np.ndarray, lens: np.ndarray,
-    numbers: tuple[int, int, int, tuple[int, ...]],
+    numbers: FieldNumbers,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Decode many block payloads lying in one byte buffer.
 
@@ -467,7 +493,7 @@ def decode_many(
 
 
 def decode_block(buoy_id: str, sensor: str, payload: bytes, recv_ns: int = 0,
-                 numbers: tuple[int, int, int, tuple[int, ...]] | None = None) -> SampleBlock:
+                 numbers: FieldNumbers | None = None) -> SampleBlock:
     """Decode one payload into a :class:`SampleBlock` (ValueError if malformed)."""
     _check_sensor(sensor)
     buf = np.frombuffer(payload, np.uint8)

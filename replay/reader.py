@@ -252,7 +252,8 @@ def _gather_index(start: np.ndarray, n: np.ndarray) -> np.ndarray:
     return np.repeat(start - first, n) + np.arange(total)
 
 
-def _take(t: np.ndarray, v: np.ndarray, start: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _take(t: np.ndarray, v: np.ndarray, start: np.ndarray, n: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray]:
     """Samples of messages (start, n) in that order: views when they are contiguous (usual)."""
     if start.shape[0] == 0:
         return t[:0], v[:, :0]
@@ -338,7 +339,8 @@ class LogReader:
                 cut = ln > size - pos - 9
                 if op == 0 or 0x10 <= op < 0x80 or (cut and op != OP_CHUNK):
                     # an impossible record header: skip to the next chunk if there is one
-                    why = "file cut inside a record" if cut and op else f"corrupt record (opcode {op})"
+                    why = ("file cut inside a record" if cut and op
+                           else f"corrupt record (opcode {op})")
                     nxt = _find_chunk(f, pos + 1, size)
                     tail = "" if nxt is None else f"; skipped {nxt - pos} bytes to the next chunk"
                     # a cut index/summary record holds no messages; a corrupt header may hide some
@@ -555,7 +557,8 @@ class LogReader:
         # runs of equal (pub, stream): compare each message with the earlier kept ones
         for j in np.flatnonzero(same) + 1:
             i = j - 1
-            while i >= 0 and rel["pub"][i] == rel["pub"][j] and rel["stream"][i] == rel["stream"][j]:
+            while (i >= 0 and rel["pub"][i] == rel["pub"][j]
+                   and rel["stream"][i] == rel["stream"][j]):
                 if not drop[i] and self._same_samples(rel, stores, i, j):
                     drop[j] = True
                     break
@@ -583,7 +586,8 @@ class LogReader:
             if self.coalesce:
                 tt, vv = _take(t, v, rel["start"][mine], rel["n"][mine])
                 blk = SampleBlock(stream.buoy_id, stream.sensor, tt,
-                                  {f: vv[q] for q, f in enumerate(names)}, int(rel["log"][mine].max()))
+                                  {f: vv[q] for q, f in enumerate(names)},
+                                  int(rel["log"][mine].max()))
                 out.append((int(rel["pub"][mine[0]]), int(rank[s]), int(mine[0]), blk))
                 continue
             for k in mine.tolist():
@@ -628,7 +632,8 @@ class _FileContext:
             self.channels[cid] = topic  # not a sensor block channel: skipped, counted
             return
         try:
-            numbers = codec.field_numbers_from_schema(schema[2], schema[0], reader._streams[sidx].sensor)
+            numbers = codec.field_numbers_from_schema(schema[2], schema[0],
+                                                      reader._streams[sidx].sensor)
         except Exception as e:  # a foreign or broken schema: skip its messages, say why
             self.channels[cid] = f"{topic} (undecodable schema: {e})"
             return

@@ -66,10 +66,10 @@ class SimConfig:
     gnss_noise_m: float = 1.5
     link_delay_s: float = 0.2
     waves_interval_s: float = 1800.0
-    physics: dict = field(default_factory=dict)  # passed to the mooring model (see _Mooring)
+    mean_span_m: float = 31.0  # mean horizontal anchor -> buoy distance (steady drift)
 
     def __post_init__(self) -> None:
-        for name in ("hours", "hs_m", "tp_s", "depth_m", "waves_interval_s"):
+        for name in ("hours", "hs_m", "tp_s", "depth_m", "waves_interval_s", "mean_span_m"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} = {v!r}: must be a finite number > 0")
@@ -148,34 +148,42 @@ class _Sea:
 class _Mooring:
     """Line tension from buoy motion through the physics models (stateful, streaming).
 
-    Quasi-static part: the seed 004 mooring (:func:`models.catenary_vaps.vaps_mooring`)
-    tabulated around the mean fairlead position; dynamics: :class:`models.estimator.
-    MotionTensionEstimator` (axial inertia of the finite line) fed with the displacements.
-    ``cfg.physics["mean_span_m"]`` is the mean horizontal anchor -> buoy distance (set by the
-    steady drift of wind and current; default 31 m, the line nearly straight).
+    Quasi-static part: the seed 004 mooring (:func:`models.catenary_vaps.vaps_mooring`, its
+    assumed weights) tabulated around the mean fairlead position (``cfg.mean_span_m`` from the
+    anchor horizontally, ``cfg.depth_m`` above it); dynamics: the axial inertia of the finite
+    line in :class:`models.estimator.MotionTensionEstimator`, fed with the displacements.
+    The mean span stands for the steady drift by wind and current, which sets how close to
+    taut the 40 m line rides: at the 31 m default a 1.5 m sea gives tension peaks of a few kN.
     """
+
+    MASS_PER_LENGTH = 1.10  # kg/m in air, the cable mass assumed by vaps_mooring()
 
     def __init__(self, cfg: SimConfig):
         from models.catenary_table import TensionTable
         from models.catenary_vaps import vaps_mooring
-        from models.estimator import EstimatorConfig, MotionTensionEstimator
+        from models.estimator import EstimatorConfig, Flag, MotionTensionEstimator
 
-        self.span_m = float(cfg.physics.get("mean_span_m", 31.0))
+        line = vaps_mooring(cable_mass=self.MASS_PER_LENGTH)
+        length = sum(seg.length for seg in line.segments)
+        self.span_m = cfg.mean_span_m
         depth = cfg.depth_m
-        x_lim = (max(self.span_m - 6.0, 1.0), self.span_m + 2.5)
+        if math.hypot(self.span_m, depth) >= length:
+            raise ValueError(f"mean_span_m = {self.span_m}: the {length:g} m line cannot reach "
+                             f"a buoy that far in {depth:g} m of water")
+        x_lim = (max(self.span_m - 6.0, 0.5), self.span_m + 2.5)
         z_lim = (max(depth - 4.0, 0.0), depth + 4.0)
-        table = TensionTable(vaps_mooring(), x_lim, z_lim, nx=48, nz=12, max_refinements=1)
+        table = TensionTable(line, x_lim, z_lim, nx=48, nz=12, max_refinements=1)
+        out_bit = np.uint8(Flag.OUT_OF_RANGE)
 
         def quasi_static(x_off: np.ndarray, z: np.ndarray):
-            x = self.span_m + x_off
-            zz = depth + z
+            x, zz = self.span_m + x_off, depth + z
             out = (x < x_lim[0]) | (x > x_lim[1]) | (zz < z_lim[0]) | (zz > z_lim[1])
             h, v, t = table.top_tension(np.clip(x, *x_lim), np.clip(zz, *z_lim))
-            return t, h, v, out.astype(np.uint8) * np.uint8(8)
+            return t, h, v, out.astype(np.uint8) * out_bit
 
         self._est = MotionTensionEstimator(
-            EstimatorConfig(dt=1.0 / BASE_HZ, span=self.span_m, height=depth, line_length=40.0,
-                            mass_per_length=1.10, ea=4.21e-5 * 81.4e9),
+            EstimatorConfig(dt=1.0 / BASE_HZ, span=self.span_m, height=depth, line_length=length,
+                            mass_per_length=self.MASS_PER_LENGTH, ea=line.segments[-1].ea),
             quasi_static)
 
     def tension(self, motion: dict[str, np.ndarray]) -> np.ndarray:
@@ -214,7 +222,8 @@ def _gnss(cfg: SimConfig, surge: np.ndarray, sway: np.ndarray, span_m: float,
     north = along * math.cos(b) + across * math.cos(b - math.pi / 2)
     east = along * math.sin(b) + across * math.sin(b - math.pi / 2)
     lat = cfg.anchor_lat_deg + np.degrees(north / EARTH_RADIUS_M)
-    lon = cfg.anchor_lon_deg + np.degrees(east / (EARTH_RADIUS_M * math.cos(math.radians(cfg.anchor_lat_deg))))
+    east_radius = EARTH_RADIUS_M * math.cos(math.radians(cfg.anchor_lat_deg))
+    lon = cfg.anchor_lon_deg + np.degrees(east / east_radius)
     return np.vstack([lat, lon])
 
 
@@ -230,6 +239,7 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
     t_sum, t_min, t_max = 0.0, math.inf, -math.inf
     wave_n = int(round(cfg.waves_interval_s * BASE_HZ))
     heave_hist = np.empty(0)
+    delay_ns = int(round(cfg.link_delay_s * SECOND))
     with LogWriter(path) as w:
         for hour in range(math.ceil(total / per_hour)):
             i0 = hour * per_hour
@@ -251,8 +261,8 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
 
             add("tension", t, tension[None, :], cfg.tension_noise_N)
             even = (idx % 2) == 0  # 10 Hz
-            add("imu", t[even], np.vstack([motion[f][even] for f in ("accel_x", "accel_y", "accel_z")]),
-                cfg.accel_noise_mps2)
+            accel = np.vstack([motion[f][even] for f in ("accel_x", "accel_y", "accel_z")])
+            add("imu", t[even], accel, cfg.accel_noise_mps2)
             add("motion", t[even], np.vstack([motion[f][even] for f in ("heave", "surge", "sway")]),
                 cfg.motion_noise_m)
             sec = (idx % BASE_HZ) == 0  # 1 Hz
@@ -275,7 +285,7 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
                 summary.samples["waves"] = summary.samples.get("waves", 0) + len(wt)
                 series.append(Series(cfg.buoy_id, "waves", np.array(wt, np.int64),
                                      np.array(wv, np.float64).T))
-            summary.messages += w.write_series(series, recv_delay_ns=int(round(cfg.link_delay_s * SECOND)))
+            summary.messages += w.write_series(series, recv_delay_ns=delay_ns)
             summary.end_ns = int(t[-1])
     summary.tension_N = (t_min, t_sum / total, t_max)
     return summary

@@ -211,7 +211,8 @@ class LogWriter:
         pub_ns = block.t_first_ns
         self._check_times(block.topic, log_ns, pub_ns)
         ch = self._sensor_channel(block.buoy_id, block.sensor)
-        payload = codec.encode_samples(block.t_ns, [block.fields[f] for f in SENSOR_FIELDS[block.sensor]])
+        values = [block.fields[f] for f in SENSOR_FIELDS[block.sensor]]
+        payload = codec.encode_samples(block.t_ns, values)
         self._add_message(ch, log_ns, pub_ns, payload)
 
     def write_json(self, topic: str, obj: Mapping[str, Any], log_ns: int, publish_ns: int,
@@ -241,7 +242,8 @@ class LogWriter:
         for bulk writers (simulator, importer, benchmark).
         """
         if block_ns <= 0 or recv_delay_ns < 0:
-            raise ValueError(f"block_ns = {block_ns} must be > 0 and recv_delay_ns = {recv_delay_ns} >= 0")
+            raise ValueError(f"block_ns = {block_ns} must be > 0 and "
+                             f"recv_delay_ns = {recv_delay_ns} >= 0")
         bufs, offs, pubs, logs, chans = [], [], [], [], []
         base = 0
         for s in series:
@@ -249,7 +251,8 @@ class LogWriter:
             vals = np.ascontiguousarray(s.values, dtype=np.float64)
             nf = len(SENSOR_FIELDS.get(s.sensor, ()))
             if t.ndim != 1 or vals.shape != (nf, t.shape[0]):
-                raise ValueError(f"{s.sensor}: values must be ({nf}, {t.shape[0]}), got {vals.shape}")
+                raise ValueError(
+                    f"{s.sensor}: values must be ({nf}, {t.shape[0]}), got {vals.shape}")
             if t.shape[0] == 0:
                 continue
             if t[0] <= 0 or np.any(np.diff(t) < 0):

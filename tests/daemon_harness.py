@@ -64,6 +64,8 @@ class FakePipeline:
         self.rejected = {k: dict(v) for k, v in state.get("rejected", {}).items()}
 
     def process(self, block: SampleBlock) -> StepResult:
+        if block.sensor == "waves":  # stands for any block the real pipeline refuses
+            raise ValueError("waves blocks are refused by the fake pipeline")
         last = self.last_t.get(block.sensor, -1)
         new = block.t_ns > last
         ok = new & np.isfinite(block.fields["tension_N"]) if block.sensor == "tension" else new

@@ -76,7 +76,8 @@ def test_round_trip_and_generic_protobuf_agree(sensor, kind):
 
 def test_numba_bulk_encoder_matches_reference_encoder():
     rng = np.random.default_rng(5)
-    t = np.concatenate([T0 + np.arange(10) * 10**8, T0 + 10**9 + np.cumsum(rng.integers(1, 10**7, 7))])
+    t = np.concatenate([T0 + np.arange(10) * 10**8,
+                        T0 + 10**9 + np.cumsum(rng.integers(1, 10**7, 7))])
     vals = rng.normal(size=(3, t.shape[0]))
     out = np.zeros(codec.payload_bound(t.shape[0], 3), np.uint8)
     for a, b in ((0, 10), (10, 17), (3, 4)):
@@ -120,7 +121,17 @@ def test_field_numbers_are_read_from_the_stored_schema():
     for fld in fds.file[0].message_type[0].field:
         if fld.name == "lon_deg":
             fld.number = 9
-    numbers = codec.field_numbers_from_schema(fds.SerializeToString(), "buoymon.v1.GnssBlock", "gnss")
+    name = "buoymon.v1.GnssBlock"
+    numbers = codec.field_numbers_from_schema(fds.SerializeToString(), name, "gnss")
     assert numbers == (1, 2, 3, (4, 9))
     with pytest.raises(ValueError, match="missing fields"):
-        codec.field_numbers_from_schema(codec.file_descriptor_set("gnss"), "buoymon.v1.GnssBlock", "imu")
+        codec.field_numbers_from_schema(codec.file_descriptor_set("gnss"), name, "imu")
+
+
+def test_shipped_proto_file_matches_the_runtime_schemas():
+    from pathlib import Path
+
+    shipped = Path(codec.__file__).with_name("buoymon.proto").read_text()
+    assert shipped == codec.proto_text()
+    assert "  repeated double accel_z_mps2 = 6;  // m/s^2" in shipped
+    assert "  sfixed64 t0_ns = 1;  // ns" in shipped

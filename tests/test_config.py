@@ -19,10 +19,8 @@ def test_default_is_the_seed_004_mooring():
     c = default_config()
     assert c.buoy.id == "vaps"
     assert c.mooring.depth_m == 23.0 and c.mooring.length_m == 40.0
-    # flotation jacket on the lower 20 m: the first segment from the anchor is buoyant
-    assert [s.length_m for s in c.mooring.segments] == [20.0, 20.0]
-    assert c.mooring.segments[0].weight_N_per_m < 0 < c.mooring.segments[1].weight_N_per_m
-    assert c.mooring.segments[0].ea_N == pytest.approx(81.4e9 * 42.1e-6)
+    assert c.mooring.preset == "vaps_seed004" and c.mooring.segments == ()
+    assert c.mooring.span_m == 29.0 and c.load.motion_rate_hz == 10.0
     assert c.cable.preset == "vaps_biw" and not c.cable.overrides
     (comp,) = c.components
     assert (comp.kind, comp.lay, comp.sn_curve.preset) == ("conductor", "left", "vaps_copper")
@@ -60,6 +58,8 @@ def test_default_is_the_seed_004_mooring():
      "config error: buoy.id = 'a/b': buoy id 'a/b' must be"),
     (lambda d: d["mooring"].update(depth_m=45.0),
      "config error: mooring.depth_m = 45.0: deeper than the line is long (40 m)"),
+    (lambda d: d["mooring"].update(span_m=41.0),
+     "config error: mooring.span_m = 41.0: must be shorter than the line (40 m)"),
     (lambda d: d["mooring"].update(preset="nope"),
      "config error: mooring.preset = 'nope': must be one of ['vaps_seed004']"),
     (lambda d: d["alerts"].update(eval_interval_s=0),
@@ -81,12 +81,16 @@ def test_invalid_values_name_the_key_and_value(mutate, message):
 
 def test_explicit_segments_replace_the_preset():
     data = shipped()
-    del data["mooring"]["preset"]
+    del data["mooring"]["preset"], data["mooring"]["span_m"]
     data["mooring"]["segment"] = [
         {"name": "chain", "length_m": 30.0, "weight_N_per_m": 400.0, "ea_N": 5e8, "diameter_m": 0.05},
     ]
+    with pytest.raises(ConfigError, match="mooring.span_m is missing"):
+        parse_config(data)
+    data["mooring"]["span_m"] = 12.0
     c = parse_config(data)
     assert c.mooring.length_m == 30.0 and c.mooring.depth_m == 23.0
+    assert c.mooring.segments[0].weight_N_per_m == 400.0
     data["mooring"]["preset"] = "vaps_seed004"
     with pytest.raises(ConfigError, match="mooring.preset = 'vaps_seed004': give either"):
         parse_config(data)

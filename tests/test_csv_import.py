@@ -39,7 +39,8 @@ def test_every_bad_row_is_reported_with_line_and_reason(tmp_path):
     got = [(b.line, b.reason.split(":")[0]) for b in d.bad_rows]
     assert got == [(4, "duplicate time"), (5, "unparsable number in column tension_N"),
                    (7, "NaN in column tension_N"), (8, "wrong column count"),
-                   (9, "empty cell in column tension_N"), (10, "infinite value in column tension_N"),
+                   (9, "empty cell in column tension_N"),
+                   (10, "infinite value in column tension_N"),
                    (11, "bad time_s 'x.5'"), (13, "time going backwards")]
     assert (d.rows_read, d.rows_accepted, d.rows_skipped, d.blank_lines) == (12, 4, 8, 1)
     t, v = d.sensors["tension"]
@@ -63,7 +64,8 @@ def test_times_are_exact_to_the_nanosecond(tmp_path):
     with pytest.raises(ValueError, match="more than 9 fractional digits"):
         parse_iso_ns("2024-03-01T12:00:00.0000000001Z")
     p = _csv(tmp_path, "time_s,tension_N\n1.000000001,5\n1e1,6\n", "rel.csv")
-    assert read_csv(p, start="1970-01-01T00:00:00Z").sensors["tension"][0].tolist() == [10**9 + 1, 10 * 10**9]
+    t = read_csv(p, start="1970-01-01T00:00:00Z").sensors["tension"][0]
+    assert t.tolist() == [10**9 + 1, 10 * 10**9]
 
 
 @pytest.mark.parametrize("header, message", [
@@ -110,5 +112,6 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert "no valid rows" in capsys.readouterr().err and not out.exists()
     assert main(["import", str(_csv(tmp_path, "t,tension_N\n")), "-o", str(out)]) == 2
     assert "exactly one time column" in capsys.readouterr().err
-    assert main(["import", str(_csv(tmp_path, "time_s,tension_N\n1,2\n", "bad id!.csv")), "-o", str(out)]) == 2
+    bad_name = _csv(tmp_path, "time_s,tension_N\n1,2\n", "bad id!.csv")
+    assert main(["import", str(bad_name), "-o", str(out)]) == 2
     assert "--buoy-id" in capsys.readouterr().err

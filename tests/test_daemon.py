@@ -2,7 +2,8 @@
 
 Status at >= 1 Hz with damage, counters and sensor health; the state queryable; liveliness and
 wall-clock data age of a sensor; sd_notify READY/WATCHDOG/STOPPING; SIGTERM drains and
-checkpoints; the recorder keeps every received and published message.
+checkpoints; the recorder keeps every received and published message; undecodable payloads
+and blocks the pipeline refuses are counted without stopping the daemon.
 """
 
 import json
@@ -12,14 +13,17 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 from mcap.reader import make_reader
 
 from monitor import zenoh_io
+from monitor.blocks import SampleBlock
 from monitor.checkpoint import CheckpointStore
 from monitor.daemon_config import ZenohConfig
 
 from daemon_harness import (
-    BUOY, ENV, DaemonProcess, expected_total, free_port, tension_blocks, write_config,
+    BUOY, ENV, T0_NS, DaemonProcess, FakeCodec, expected_total, free_port, tension_blocks,
+    write_config,
 )
 
 HARNESS = os.path.join(os.path.dirname(__file__), "daemon_harness.py")
@@ -70,6 +74,13 @@ def test_daemon_status_query_health_notify_and_clean_shutdown(tmp_path):
         gone = _statuses(q, lambda doc: doc["streams"]["tension"]["data_stale"]
                          and doc["streams"]["tension"]["alive"] is False)
         assert gone[-1]["streams"]["tension"]["data_age_s"] > 1.0
+        waves = SampleBlock(BUOY, "waves", np.array([T0_NS], np.int64),
+                            {"hs_m": np.array([1.5]), "tp_s": np.array([5.25])})
+        s.put(f"buoy/{BUOY}/sensor/waves", FakeCodec().encode(waves))
+        s.put(f"buoy/{BUOY}/sensor/tension", b"garbage")
+        refused = _statuses(q, lambda doc: doc["counters"]["refused"] == 1
+                            and doc["counters"]["undecodable"] == 1)
+        assert refused[-1]["components"]["conductor"]["damage"] == total  # still serving
         replies = [r.ok for r in s.get(zenoh_io.state_key(BUOY), timeout=5) if r.ok]
         full = json.loads(replies[0].payload.to_bytes())
         assert full["state"]["pipeline"]["total"] == total
@@ -83,7 +94,7 @@ def test_daemon_status_query_health_notify_and_clean_shutdown(tmp_path):
     store.close()
     assert cp.state["pipeline"]["total"] == total
     assert cp.state["pipeline"]["accepted"]["tension"] == 600
-    assert cp.state["daemon"]["counters"]["messages"] == n_blocks
+    assert cp.state["daemon"]["counters"]["messages"] == n_blocks + 2
     msgs = []
     for name in sorted(os.listdir(rec)):
         with open(rec / name, "rb") as f:

@@ -25,6 +25,7 @@ pytest.importorskip("replay.writer")
 
 from monitor import zenoh_io  # noqa: E402
 from monitor.blocks import SampleBlock  # noqa: E402
+from monitor.cmd_record import recorder_token_key  # noqa: E402
 from monitor.daemon_config import ZenohConfig  # noqa: E402
 from monitor.publisher import publish_blocks  # noqa: E402
 from monitor.checkpoint import CheckpointStore  # noqa: E402
@@ -85,12 +86,15 @@ def write_log(path: Path, blocks: list[SampleBlock]) -> Path:
 
 
 def write_config(tmp: Path, port: int, *, record: bool = False, checkpoint_s: float = 1.0,
-                 load_source: str = "auto") -> Path:
+                 load_source: str = "auto", tension_alert: bool = False) -> Path:
     text = SHIPPED.read_text().replace('source = "auto"', f'source = "{load_source}"', 1)
     text += (f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\nstatus_interval_s = 0.5\n'
              f'[state]\npath = "{tmp / "state.sqlite"}"\ncheckpoint_interval_s = {checkpoint_s}\n')
     if record:
         text += f'[record]\ndir = "{tmp / "rec"}"\nflush_interval_s = 1.0\n'
+    if tension_alert:  # fires above 4.5 kN (10 % of 45 kN): on the bigger wave groups
+        text += ('[[alerts.rule]]\nkind = "tension_high"\nthreshold = 0.1\n'
+                 'breaking_strength_N = 45000.0\n')
     path = tmp / "buoymon.toml"
     path.write_text(text)
     return path
@@ -142,6 +146,19 @@ def replayed_figures(config, paths) -> dict:
     return pipeline.report()
 
 
+def recorded_json(paths, prefix: str) -> list[dict]:
+    """JSON messages of the recording whose topic starts with ``prefix``, in log order."""
+    from mcap.reader import make_reader
+
+    out = []
+    for path in paths:
+        with open(path, "rb") as f:
+            for _, channel, msg in make_reader(f).iter_messages(log_time_order=False):
+                if channel.topic.startswith(prefix):
+                    out.append(json.loads(msg.data))
+    return out
+
+
 def committed(report: dict) -> dict:
     return {n: c["damage_committed"] for n, c in report["components"].items()}
 
@@ -150,23 +167,44 @@ def test_live_over_zenoh_equals_replay_of_the_recording(tmp_path):
     port = free_port()
     blocks = synthetic_blocks(240)
     log = write_log(tmp_path / "sim.mcap", blocks)
-    cfg = write_config(tmp_path, port, record=True, load_source="measured")
+    cfg = write_config(tmp_path, port, record=True, load_source="measured", tension_alert=True)
     config = load_config(cfg)
     d = start_daemon(cfg, tmp_path)
-    pub = publish(log, port, speed=50.0)
-    out, err = pub.communicate(timeout=120)
-    assert pub.returncode == 0 and out.strip() == str(len(blocks)), err
-    wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
-                     buoy=BUOY)
+    alerts = queue.SimpleQueue()
+    with client_session(port) as session:
+        sub = zenoh_io.declare_enqueuing_subscriber(session, f"buoy/{BUOY}/monitor/alert/**",
+                                                    alerts)
+        pub = publish(log, port, speed=50.0)
+        out, err = pub.communicate(timeout=120)
+        assert pub.returncode == 0 and out.strip() == str(len(blocks)), err
+        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                         buoy=BUOY)
+        time.sleep(0.5)
+        sub.undeclare()
     assert d.terminate() == 0
-    live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
+    published = []  # alert PUTs (a clearing alert is a DELETE, with an empty payload)
+    while not alerts.empty():
+        payload = alerts.get()[2]
+        if payload:
+            published.append(json.loads(payload))
+    final = checkpoint(tmp_path)["pipeline"]
+    emitted = Pipeline(config, state=final).report()["alerts"]  # as of the daemon's shutdown
+    live = flushed_figures(config, final)
     recorded = sorted((tmp_path / "rec").glob("*.mcap"))
     from_recording = replayed_figures(config, recorded)
     from_log = replayed_figures(config, [log])
     assert committed(live)["conductor"] > 0
     assert committed(live) == committed(from_recording) == committed(from_log)
     assert live["samples"] == from_log["samples"]
-    assert live["alerts"] == from_recording["alerts"]
+    assert live["alerts"] == from_recording["alerts"] == from_log["alerts"]
+    # what went out over Zenoh and into the recording while live: every transition, in order
+    fired = [a for a in emitted if a["state"] == "firing"]
+    assert len(fired) >= 2 and len(emitted) > len(fired)
+    assert published == fired
+    assert recorded_json(recorded, f"buoy/{BUOY}/monitor/alert/") == emitted
+    statuses = recorded_json(recorded, f"buoy/{BUOY}/monitor/status")
+    assert statuses[-1]["components"]["conductor"]["damage_committed"] == \
+        Pipeline(config, state=final).status()["components"]["conductor"]["damage_committed"]
 
 
 SPEED = 100.0  # sensor seconds per wall second while the daemon is being killed
@@ -362,3 +400,50 @@ def test_stale_tension_fails_over_to_the_motion_estimate_and_back(tmp_path):
     live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
     replayed = replayed_figures(config, [write_log(tmp_path / "gap.mcap", blocks)])
     assert committed(live) == committed(replayed)
+
+
+# ---- buoymon record ----------------------------------------------------------------------------
+
+def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_path):
+    port = free_port()
+    blocks = synthetic_blocks(120)
+    cfg = write_config(tmp_path, port, load_source="measured")
+    config = load_config(cfg)
+    d = start_daemon(cfg, tmp_path)
+    out_dir = tmp_path / "recorded"
+    rec = subprocess.Popen([sys.executable, "-m", "monitor.cli", "record", "--config", str(cfg),
+                            "-o", str(out_dir)], env=ENV, stderr=subprocess.PIPE, text=True)
+    with client_session(port) as session:
+        deadline = time.monotonic() + 60  # the recorder's token says it has subscribed
+        while not [r for r in session.liveliness().get(recorder_token_key(BUOY), timeout=1)]:
+            assert time.monotonic() < deadline and rec.poll() is None, "recorder not up"
+            time.sleep(0.1)
+        publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=None)
+        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                         buoy=BUOY)
+    time.sleep(1.0)
+    rec.terminate()
+    assert rec.wait(30) == 0, rec.stderr.read()
+    assert d.terminate() == 0
+    files = sorted(out_dir.glob("*.mcap"))
+    assert files
+    statuses = recorded_json(files, f"buoy/{BUOY}/monitor/status")
+    assert statuses and statuses[-1]["buoy_id"] == BUOY
+    live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
+    assert committed(replayed_figures(config, files)) == committed(live)
+
+
+@pytest.mark.parametrize("section, message", [
+    ('[zenoh]\nmode = "router"\n', "zenoh.mode = 'router': must be one of"),
+    ('[state]\ncheckpoint_interval_s = 0\n', "state.checkpoint_interval_s = 0"),
+    ('[record]\nrotate_s = -5\n', "record.rotate_s = -5"),
+])
+def test_run_refuses_an_invalid_config_naming_key_and_value(tmp_path, section, message):
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(SHIPPED.read_text() + "\n" + section)
+    proc = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
+                          env=ENV, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    logged = [json.loads(line) for line in proc.stderr.splitlines() if line.startswith("{")]
+    assert any(message in entry["msg"] and entry["level"] == "error" for entry in logged), \
+        proc.stderr

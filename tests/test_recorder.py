@@ -49,7 +49,7 @@ def test_rotates_hourly_and_keeps_payloads_and_times(tmp_path):
         "buoy/b1/sensor/tension", "protobuf", "buoymon.v1.TensionBlock", times[2],
         times[2] - 1000, b"p2")
     status = per_file[1][1]
-    assert status[1:3] == ("jsonschema", "buoymon.Json")
+    assert status[1:3] == ("jsonschema", "buoymon.v1.Json")
     assert status[4] == times[2] + 1  # publish_time 0 would mean "unset": log time is used
     assert rec.messages == 10
 

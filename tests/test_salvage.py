@@ -91,7 +91,8 @@ def test_cut_mid_chunk_recovers_every_complete_message(tmp_path):
             w.write_block(SampleBlock("b1", "tension", t, {"tension_N": rng.normal(size=20)}),
                           recv_ns=T0 + (k + 1) * S)
     with open(path, "rb") as f:
-        chunks = sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
+                        key=lambda c: c.chunk_start_offset)
     victim = chunks[1]
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes()[:victim.chunk_start_offset + victim.chunk_length * 2 // 3])
@@ -139,7 +140,8 @@ def test_corrupt_compressed_bytes_lose_only_that_chunk(log, tmp_path):
     _, st, values = _read(p)
     assert values.shape[0] == (N_SECONDS - _messages_in(path, victim)) * 20
     (lost,) = st.lost
-    assert lost.messages == _messages_in(path, victim) and lost.start_ns == victim.message_start_time
+    assert lost.messages == _messages_in(path, victim)
+    assert lost.start_ns == victim.message_start_time
 
 
 @pytest.mark.parametrize("content, error", [
@@ -169,9 +171,11 @@ def test_corrupt_record_header_skips_to_the_next_chunk(log, tmp_path):
     reader, st, values = _read(p)
     first_lost = sum(_messages_in(path, c) for c in chunks[:4]) * 20
     n_lost = _messages_in(path, victim) * 20
-    assert np.array_equal(values, np.delete(np.arange(N_SECONDS * 20.0), np.s_[first_lost:first_lost + n_lost]))
+    expected = np.delete(np.arange(N_SECONDS * 20.0), np.s_[first_lost:first_lost + n_lost])
+    assert np.array_equal(values, expected)
     (lost,) = st.lost
-    assert lost.reason.startswith("corrupt record (opcode 0)") and lost.offset == victim.chunk_start_offset
+    assert lost.reason.startswith("corrupt record (opcode 0)")
+    assert lost.offset == victim.chunk_start_offset
     assert "next chunk" in lost.reason and st.complete
 
 

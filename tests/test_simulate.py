@@ -60,7 +60,8 @@ def test_sea_state_matches_the_request(clean):
     smooth = np.convolve(spec, np.ones(101) / 101, mode="same")
     assert 1 / f[np.argmax(smooth)] == pytest.approx(cfg.tp_s, rel=0.1)
     hs_reported, tp_reported = s["waves"][1]
-    assert np.allclose(hs_reported, cfg.hs_m, rtol=0.15) and np.allclose(tp_reported, cfg.tp_s, rtol=0.15)
+    assert np.allclose(hs_reported, cfg.hs_m, rtol=0.15)
+    assert np.allclose(tp_reported, cfg.tp_s, rtol=0.15)
 
 
 def test_motion_and_tension_are_continuous_across_the_hour_join(clean):
@@ -89,7 +90,8 @@ def test_gnss_sits_at_the_anchor_plus_the_mean_offset(clean):
     cfg, _, _, s = clean
     lat, lon = s["gnss"][1]
     north = np.radians(lat - cfg.anchor_lat_deg) * EARTH_RADIUS_M
-    east = np.radians(lon - cfg.anchor_lon_deg) * EARTH_RADIUS_M * math.cos(math.radians(cfg.anchor_lat_deg))
+    east_radius = EARTH_RADIUS_M * math.cos(math.radians(cfg.anchor_lat_deg))
+    east = np.radians(lon - cfg.anchor_lon_deg) * east_radius
     assert np.mean(east) == pytest.approx(0.0, abs=0.2)  # bearing 0: the buoy is due north
     assert 5.0 < np.mean(north) < 40.0 and np.std(north) < 3.0
 
@@ -100,7 +102,8 @@ def test_deterministic_and_faults_leave_the_rest_untouched(clean, tmp_path):
     simulate(cfg, again)
     assert hashlib.sha256(again.read_bytes()).digest() == hashlib.sha256(path.read_bytes()).digest()
     faulty = tmp_path / "faulty.mcap"
-    fcfg = SimConfig(hours=1.25, hs_m=1.5, tp_s=5.25, seed=7, dropouts=0.05, spikes=0.002, nans=0.01)
+    fcfg = SimConfig(hours=1.25, hs_m=1.5, tp_s=5.25, seed=7,
+                     dropouts=0.05, spikes=0.002, nans=0.01)
     simulate(fcfg, faulty)
     f = _series(faulty)
     t_clean, v_clean = s["tension"]
@@ -133,6 +136,9 @@ def test_cli(tmp_path, capsys):
     assert main(["simulate", "-o", str(out), "--hours", "1", "--hs", "1", "--tp", "6",
                  "--seed", "3", "--nans", "1.5"]) == 2
     assert "nans = 1.5: must be a probability" in capsys.readouterr().err
+    assert main(["simulate", "-o", str(out), "--hours", "1", "--hs", "1", "--tp", "6",
+                 "--seed", "3", "--mean-span", "33"]) == 2
+    assert "cannot reach" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("kw, message", [
