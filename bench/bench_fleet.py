@@ -12,7 +12,7 @@ prints:
   task, so W <= buoys).
 
 The machine is shared: the load average before each run is printed so a low figure can be
-judged. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep]
+judged. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep] [--measured-only]
 """
 
 from __future__ import annotations
@@ -79,11 +79,15 @@ def write_archive(root: Path, buoys: int, days: int, workers: int) -> int:
         return sum(pool.map(write_day, *zip(*tasks)))
 
 
-def bench_config():
+def bench_config(measured_only: bool):
+    """The shipped configuration (load source auto: the motion estimator runs on the IMU too,
+    alert rules on), or with ``[load] source = "measured"``."""
     from monitor.config import config_with, default_config
 
     c = default_config()
-    return config_with(c, load={**c.section("load"), "source": "measured"})
+    if measured_only:
+        c = config_with(c, load={**c.section("load"), "source": "measured"})
+    return c
 
 
 def timed_run(archives, config, workers: int) -> tuple[float, float, list]:
@@ -102,6 +106,8 @@ def main() -> None:
     ap.add_argument("--days", type=int, default=30, help="days per buoy")
     ap.add_argument("--dir", help="archive folder (default: a temporary one, removed after)")
     ap.add_argument("--keep", action="store_true", help="keep the generated archive")
+    ap.add_argument("--measured-only", action="store_true",
+                    help='replay with [load] source = "measured" (no motion estimator)')
     args = ap.parse_args()
     from replay.fleet import BuoyArchive, discover, make_jobs, replay_buoy
 
@@ -114,7 +120,8 @@ def main() -> None:
             print(f"wrote {args.buoys} buoys x {args.days} days ({args.buoys * args.days / 30:.1f} "
                   f"buoy-months, {n:,d} tension samples) in {time.perf_counter() - t:.0f} s")
         archives = discover([work])
-        config = bench_config()
+        config = bench_config(args.measured_only)
+        print(f"configuration: shipped example, load source {config.load.source!r}")
         # warm the numba cache and imports once, outside the timed runs
         first = BuoyArchive(archives[0].buoy_id, archives[0].files[:1])
         replay_buoy(make_jobs([first], config)[0])
