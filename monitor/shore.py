@@ -33,7 +33,7 @@ import queue
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable
 
 from monitor.blocks import validate_buoy_id
 from monitor.config import Config, config_with
@@ -280,9 +280,9 @@ class ShoreMonitor:
             try:
                 declared.append(session.liveliness().declare_subscriber(
                     SENSOR_KEYS, on_alive, history=True))
-                declared.append(session.declare_subscriber(SENSOR_KEYS, on_sample))
                 pub = zenoh_io.declare_json_publisher(session, status_key)
                 declared.append(pub)
+                subscriber = session.declare_subscriber(SENSOR_KEYS, on_sample)
                 self._ready.set()
                 last_status = 0.0
                 while not self._stop.is_set():
@@ -290,8 +290,7 @@ class ShoreMonitor:
                     if self.clock() - last_status >= self.shore.status_interval_s:
                         self._publish(pub)
                         last_status = self.clock()
-                declared[1].undeclare()
-                declared.pop(1)
+                subscriber.undeclare()  # stop intake, then finish what already arrived
                 self.drain()
                 self._publish(pub)
             finally:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -46,10 +46,6 @@ class BuoyArchive:
 
     buoy_id: str
     files: tuple[str, ...]
-
-    @property
-    def size_bytes(self) -> int:
-        return sum(os.path.getsize(f) for f in self.files)
 
 
 @dataclass(frozen=True)
@@ -170,7 +166,7 @@ def replay_buoy(job: BuoyJob) -> dict[str, Any]:
     config = parse_config(job.config_raw, source=job.config_source)
     reader = LogReader(list(job.files))
     ignored: dict[str, int] = {}
-    pipeline, result = run_blocks(config, _only_buoy(reader, job.buoy_id, ignored))
+    pipeline, _ = run_blocks(config, _only_buoy(reader, job.buoy_id, ignored))
     report = build_report(pipeline.config, pipeline.report(), list(job.files),
                           read_summary(reader.stats))
     if ignored:
@@ -202,7 +198,8 @@ def _run_pool(jobs: Sequence[BuoyJob], workers: int, done: Callable[[str], None]
     with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
                              mp_context=get_context(MP_START_METHOD)) as pool:
         futures = {pool.submit(replay_buoy, jobs[i]): i for i in _largest_first(jobs)}
-        for fut, i in futures.items():
+        for fut in as_completed(futures):
+            i = futures[fut]
             results[i] = fut.result()
             done(jobs[i].buoy_id)
     return results  # type: ignore[return-value]
@@ -212,17 +209,18 @@ def _run_dask(jobs: Sequence[BuoyJob], address: str, done: Callable[[str], None]
               ) -> list[dict[str, Any]]:
     """Run on an existing Dask scheduler. The workers need this package installed and the log
     files at the same paths (a shared file system)."""
-    from dask.distributed import Client
+    from dask.distributed import Client, as_completed as dask_completed
 
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
     with Client(address, set_as_default=False) as client:
-        order = _largest_first(jobs)
         # pure=False: a rerun after a model change must recompute, never reuse cached results
-        futures = {i: client.submit(replay_buoy, jobs[i], pure=False) for i in order}
-        results = []
-        for i in range(len(jobs)):
-            results.append(futures[i].result())
+        futures = {client.submit(replay_buoy, jobs[i], pure=False): i
+                   for i in _largest_first(jobs)}
+        for fut in dask_completed(futures):
+            i = futures[fut]
+            results[i] = fut.result()
             done(jobs[i].buoy_id)
-    return results
+    return results  # type: ignore[return-value]
 
 
 def run_jobs(jobs: Sequence[BuoyJob], *, workers: int = 1, cluster: str | None = None,

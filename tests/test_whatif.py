@@ -2,7 +2,6 @@
 what-if comparison on a small archive, and the command line."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
