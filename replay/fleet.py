@@ -216,7 +216,7 @@ def _run_dask(jobs: Sequence[BuoyJob], address: str, done: Callable[[str], None]
         # pure=False: a rerun after a model change must recompute, never reuse cached results
         futures = {client.submit(replay_buoy, jobs[i], pure=False): i
                    for i in _largest_first(jobs)}
-        for fut in dask_completed(futures):
+        for fut in dask_completed(list(futures), loop=client.loop):
             i = futures[fut]
             results[i] = fut.result()
             done(jobs[i].buoy_id)
