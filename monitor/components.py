@@ -71,6 +71,64 @@ def build_cable(config: Config) -> Any:
 _EMPTY = np.zeros(0)
 
 
+class ResidueDamage:
+    """Damage of the open rainflow residue counted as ASTM E1049 would, i.e. exactly
+    ``sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())`` summed, but cheap enough
+    to evaluate at every alert tick.
+
+    Why it can be incremental: the residue is the four-point stack ``S`` followed by the
+    running extreme ``c``. In ``S`` no inner range is smaller than or equal to both neighbours
+    (it would have closed), so the ranges rise to a peak and then fall; ASTM's three-point
+    pass over ``S`` therefore closes only the rising ranges, each containing the start point
+    (half cycles), and keeps the falling ones. Only ``c`` can close more: from the top, while
+    ``X = |c - top| >= Y`` (the last range) it closes ``Y`` as a full cycle and drops its two
+    points (or, when ``Y`` holds the start point, stops with ``Y`` as a half cycle). Every
+    remaining range, and ``X``, is a half cycle. So the damage is the half-cycle damage of a
+    prefix of ``S``'s ranges, plus a few cycles at the top; the per-range damages of ``S`` are
+    cached while its points are unchanged, and a tick costs one small S-N evaluation.
+    """
+
+    def __init__(self, sn_curve: Any) -> None:
+        self.sn_curve = sn_curve
+        self._points = _EMPTY  # the stack S whose per-range damages are cached
+        self._half = _EMPTY  # damage of each range of S as a half cycle
+
+    def __call__(self, residue: np.ndarray) -> float:
+        if residue.shape[0] < 2:
+            return 0.0
+        stack, c = residue[:-1], float(residue[-1])
+        n = stack.shape[0]
+        keep = min(self._points.shape[0], n)
+        if keep and not np.array_equal(self._points[:keep], stack[:keep]):
+            keep = int(np.argmin(self._points[:keep] == stack[:keep]))
+        ranges = np.abs(np.diff(stack))
+        rising = np.flatnonzero(ranges[1:] < ranges[:-1])
+        # ASTM's start point after S: the rising ranges before it were emitted as half cycles
+        start = int(rising[0]) if rising.shape[0] else max(n - 2, 0)
+        # the running extreme closes the falling ranges at the top that are not larger
+        top, x = n - 1, abs(c - float(stack[-1]))
+        full_r: list[float] = []
+        full_m: list[float] = []
+        while top - start >= 2 and x >= ranges[top - 1]:
+            full_r.append(float(ranges[top - 1]))
+            full_m.append(0.5 * (float(stack[top]) + float(stack[top - 1])))
+            top -= 2
+            x = abs(c - float(stack[top]))
+        # ranges of S whose half-cycle damage is not cached yet, the full cycles, and X
+        new = slice(max(keep - 1, 0), n - 1)
+        r = np.concatenate([ranges[new], full_r, [x]])
+        m = np.concatenate([0.5 * (stack[new] + stack[1:][new]), full_m,
+                            [0.5 * (c + float(stack[top]))]])
+        counts = np.concatenate([np.full(ranges[new].shape[0], 0.5), np.ones(len(full_r)), [0.5]])
+        d = self.sn_curve.damage_per_cycle(r, counts, m)
+        k = ranges[new].shape[0]
+        self._half = np.concatenate([self._half[:new.start], d[:k]])
+        self._points = stack.copy()
+        # sums over fixed arrays in a fixed order: the same value however the cache was filled
+        return float(np.sum(self._half[:top])) + math.fsum(d[k:].tolist())
+
+
+
 class Component:
     """Stress, rainflow and damage of one ``[[component]]``."""
 
@@ -94,6 +152,7 @@ class Component:
             self._pending = [np.array(v, dtype=np.float64) for v in state["pending"]]
             peak = state["max_stress_Pa"]
             self.max_stress_Pa = -math.inf if peak is None else float(peak)
+        self._residue_damage = ResidueDamage(self.sn_curve)
 
     def stress(self, tension_N: np.ndarray) -> np.ndarray:
         if self.cfg.kind == "conductor":
@@ -132,7 +191,7 @@ class Component:
         and not accumulated, so reading figures never changes the state.
         """
         committed = self.miner.damage_committed + self._damage(*self._pending)
-        damage = committed + self._damage(*self.rainflow.residue_half_cycles())
+        damage = committed + self._residue_damage(self.rainflow.residue)
         rate = float(self.miner.damage_rate_per_day)
         return {
             "damage": damage,

@@ -85,13 +85,17 @@ class SNCurve:
 class StreamingRainflow:
     def __init__(self, hysteresis: float = 0.0):
         self.hysteresis = hysteresis
-        self.residue: list[float] = []
+        self._res: list[float] = []
+
+    @property
+    def residue(self):
+        return np.array(self._res)
 
     def feed(self, block):
         x = np.asarray(block, dtype=np.float64)
         if not np.all(np.isfinite(x)):
             raise ValueError("StreamingRainflow.feed: block contains NaN or inf")
-        r = self.residue
+        r = self._res
         out_r, out_m = [], []
         for v in x.tolist():
             if len(r) >= 2 and (r[-1] - r[-2]) * (v - r[-1]) >= 0:
@@ -111,18 +115,18 @@ class StreamingRainflow:
         return np.array(out_r), np.array(out_m), np.ones(len(out_r))
 
     def residue_half_cycles(self):
-        r = np.array(self.residue)
+        r = self.residue
         if r.size < 2:
             return np.zeros(0), np.zeros(0), np.zeros(0)
         return np.abs(np.diff(r)), (r[1:] + r[:-1]) / 2, np.full(r.size - 1, 0.5)
 
     def state(self):
-        return {"hysteresis": self.hysteresis, "residue": list(self.residue)}
+        return {"hysteresis": self.hysteresis, "residue": list(self._res)}
 
     @classmethod
     def from_state(cls, state):
         obj = cls(state["hysteresis"])
-        obj.residue = list(state["residue"])
+        obj._res = list(state["residue"])
         return obj
 
 

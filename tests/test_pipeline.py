@@ -260,3 +260,23 @@ def test_models_estimator_adapter_is_split_invariant_and_restorable():
         parts.append(est.feed(t[a:a + 7], {k: v[a:a + 7] for k, v in imu.items()}))
     np.testing.assert_array_equal(np.concatenate([p[0] for p in parts]), ref_t)
     np.testing.assert_allclose(np.concatenate([p[1] for p in parts]), ref_v, rtol=1e-9)
+
+
+@pytest.mark.parametrize("hysteresis", [0.0, 2e6])
+def test_residue_damage_equals_the_astm_residue_at_every_block(hysteresis):
+    from monitor.components import ResidueDamage
+
+    if hysteresis and getattr(fatigue, "__file__", None) is None:
+        pytest.skip("the test stand-in for models.fatigue has no hysteresis")
+    rng = np.random.default_rng(11)
+    sn = fatigue.SNCurve.vaps_copper()
+    for trial in range(4):
+        x = np.cumsum(rng.normal(0, 4e6, 4000)) + 5e6 * np.sin(np.arange(4000) / 7)
+        rf, cached = fatigue.StreamingRainflow(hysteresis=hysteresis), ResidueDamage(sn)
+        cuts = np.sort(rng.choice(np.arange(1, 4000), 300, replace=False))
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, 4000]):
+            rf.feed(x[a:b])
+            r, m, c = rf.residue_half_cycles()
+            expected = float(np.sum(sn.damage_per_cycle(r, c, m)))
+            assert cached(rf.residue) == pytest.approx(expected, rel=1e-12, abs=1e-300)
+        assert expected > 0
