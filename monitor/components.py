@@ -96,37 +96,37 @@ class ResidueDamage:
     def __call__(self, residue: np.ndarray) -> float:
         if residue.shape[0] < 2:
             return 0.0
-        stack, c = residue[:-1], float(residue[-1])
+        stack, c = residue[:-1], float(residue[-1])  # residue is a fresh array: no copy
         n = stack.shape[0]
         keep = min(self._points.shape[0], n)
-        if keep and not np.array_equal(self._points[:keep], stack[:keep]):
-            keep = int(np.argmin(self._points[:keep] == stack[:keep]))
+        if keep:
+            same = self._points[:keep] == stack[:keep]
+            if not same.all():
+                keep = int(np.argmin(same))
         ranges = np.abs(np.diff(stack))
-        rising = np.flatnonzero(ranges[1:] < ranges[:-1])
+        falling = np.flatnonzero(ranges[1:] < ranges[:-1])
         # ASTM's start point after S: the rising ranges before it were emitted as half cycles
-        start = int(rising[0]) if rising.shape[0] else max(n - 2, 0)
+        start = int(falling[0]) if falling.shape[0] else max(n - 2, 0)
         # the running extreme closes the falling ranges at the top that are not larger
         top, x = n - 1, abs(c - float(stack[-1]))
-        full_r: list[float] = []
-        full_m: list[float] = []
+        full: list[tuple[float, float]] = []
         while top - start >= 2 and x >= ranges[top - 1]:
-            full_r.append(float(ranges[top - 1]))
-            full_m.append(0.5 * (float(stack[top]) + float(stack[top - 1])))
+            full.append((float(ranges[top - 1]), 0.5 * (float(stack[top]) + float(stack[top - 1]))))
             top -= 2
             x = abs(c - float(stack[top]))
-        # ranges of S whose half-cycle damage is not cached yet, the full cycles, and X
-        new = slice(max(keep - 1, 0), n - 1)
-        r = np.concatenate([ranges[new], full_r, [x]])
-        m = np.concatenate([0.5 * (stack[new] + stack[1:][new]), full_m,
-                            [0.5 * (c + float(stack[top]))]])
-        counts = np.concatenate([np.full(ranges[new].shape[0], 0.5), np.ones(len(full_r)), [0.5]])
+        # one S-N evaluation: ranges of S not cached yet (half cycles), the full cycles, X
+        first = max(keep - 1, 0)
+        k, nf = n - 1 - first, len(full)
+        r, m, counts = np.empty(k + nf + 1), np.empty(k + nf + 1), np.empty(k + nf + 1)
+        r[:k], m[:k], counts[:k] = ranges[first:], 0.5 * (stack[first:-1] + stack[first + 1:]), 0.5
+        for i, (fr, fm) in enumerate(full, start=k):
+            r[i], m[i], counts[i] = fr, fm, 1.0
+        r[-1], m[-1], counts[-1] = x, 0.5 * (c + float(stack[top])), 0.5
         d = self.sn_curve.damage_per_cycle(r, counts, m)
-        k = ranges[new].shape[0]
-        self._half = np.concatenate([self._half[:new.start], d[:k]])
-        self._points = stack.copy()
+        self._half = np.concatenate([self._half[:first], d[:k]]) if first else d[:k]
+        self._points = stack
         # sums over fixed arrays in a fixed order: the same value however the cache was filled
         return float(np.sum(self._half[:top])) + math.fsum(d[k:].tolist())
-
 
 
 class Component:
