@@ -8,16 +8,12 @@ import numpy as np
 import pytest
 import rainflow
 
-import standin_models
-
-standin_models.install()  # until models.helix / models.fatigue land on main
-
-from models import fatigue, helix  # noqa: E402
-from monitor import pipeline as pipeline_mod  # noqa: E402
-from monitor.blocks import SampleBlock  # noqa: E402
-from monitor.config import config_with, default_config  # noqa: E402
-from monitor.pipeline import Pipeline  # noqa: E402
-from synthetic_buoy import S, T0, blocks_interleaved, sea  # noqa: E402
+from models import fatigue, helix
+from monitor import pipeline as pipeline_mod
+from monitor.blocks import SampleBlock
+from monitor.config import config_with, default_config
+from monitor.pipeline import Pipeline
+from synthetic_buoy import S, T0, blocks_interleaved, sea
 
 
 class FakeEstimator:
@@ -244,7 +240,6 @@ def test_state_is_strict_json_and_blocks_of_another_buoy_are_refused():
 
 
 def test_models_estimator_adapter_is_split_invariant_and_restorable():
-    pytest.importorskip("models.estimator")
     from monitor.load_source import build_estimator
 
     config = default_config()
@@ -266,8 +261,6 @@ def test_models_estimator_adapter_is_split_invariant_and_restorable():
 def test_residue_damage_equals_the_astm_residue_at_every_block(hysteresis):
     from monitor.components import ResidueDamage
 
-    if hysteresis and getattr(fatigue, "__file__", None) is None:
-        pytest.skip("the test stand-in for models.fatigue has no hysteresis")
     rng = np.random.default_rng(11)
     sn = fatigue.SNCurve.vaps_copper()
     for trial in range(4):

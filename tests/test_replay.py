@@ -8,16 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import standin_models
-
-standin_models.install()  # until models.helix / models.fatigue land on main
-
-from monitor.blocks import SampleBlock  # noqa: E402
-from monitor.cli import main  # noqa: E402
-from monitor.config import config_with, default_config  # noqa: E402
-from replay.report import build_report, summary_text, write_report  # noqa: E402
-from replay.runner import Progress, load_state, run_blocks, save_state  # noqa: E402
-from synthetic_buoy import S, T0, blocks_interleaved, sea  # noqa: E402
+from monitor.blocks import SampleBlock
+from monitor.cli import main
+from monitor.config import config_with, default_config
+from replay.report import build_report, summary_text, write_report
+from replay.runner import Progress, load_state, run_blocks, save_state
+from replay.writer import LogWriter
+from synthetic_buoy import S, T0, blocks_interleaved, sea
 
 RULES = [
     {"kind": "damage_fraction", "name": "damage_warning", "threshold": 1e-6},
@@ -97,14 +94,12 @@ def test_buoy_of_the_log_replaces_the_default_config_buoy():
 
 # ------------------------------------------------------------------- on real MCAP logs
 def write_log(path: Path, blocks) -> None:
-    writer = pytest.importorskip("replay.writer")
-    with writer.LogWriter(path) as w:
+    with LogWriter(path) as w:
         for b in blocks:
             w.write_block(b, recv_ns=b.t_last_ns + 1)
 
 
 def test_replay_command_split_logs_and_state(tmp_path, capsys):
-    pytest.importorskip("replay.reader")
     blocks = blocks_interleaved(sea(1200), 1)
     cut = len(blocks) // 2
     write_log(tmp_path / "all.mcap", blocks)
@@ -128,7 +123,6 @@ def test_replay_command_split_logs_and_state(tmp_path, capsys):
 
 
 def test_replay_exits_non_zero_only_when_nothing_could_be_read(tmp_path, capsys):
-    pytest.importorskip("replay.reader")
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all" * 10)
     assert main(["replay", str(junk)]) == 1
