@@ -92,7 +92,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"Done in {time.monotonic() - start:.0f} s. Outputs in {out}/:")
     print(f"  {log_path}    the simulated log (MCAP; `buoymon replay` it, or open it in Foxglove)")
     print(f"  {report_path}    the fatigue report (JSON)")
-    for extra in sorted(out.iterdir()):
-        if extra not in (log_path, report_path) and not extra.name.startswith("."):
-            print(f"  {extra}")
+    extras = [p for p in sorted(out.iterdir())
+              if p not in (log_path, report_path) and not p.name.startswith(".")]
+    for extra in extras:
+        print(f"  {extra}")
+    if not extras:
+        print("  (no visual outputs were configured for this run)")
     return 0
