@@ -151,22 +151,6 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     return pipeline, result
 
 
-def _span_ns(paths: Sequence[Path]) -> int | None:
-    """Sensor-time span of the logs from their summaries (None if any is unreadable)."""
-    try:
-        from mcap.reader import make_reader
-
-        lo, hi = None, None
-        for p in paths:
-            with open(p, "rb") as f:
-                stats = make_reader(f).get_summary().statistics
-            lo = stats.message_start_time if lo is None else min(lo, stats.message_start_time)
-            hi = stats.message_end_time if hi is None else max(hi, stats.message_end_time)
-        return None if lo is None else int(hi - lo)
-    except Exception:  # a damaged file has no summary: the bar just shows hours done
-        return None
-
-
 def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
     """Totals over the reader's per-file statistics, plus the per-file details."""
     files = [st.as_dict() for st in stats]
@@ -190,14 +174,16 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
                 sinks: Sequence[Sink] = (), speed: float | None = None,
                 show_progress: bool | None = None) -> ReplayResult:
     """Replay MCAP logs (files or directories) through the pipeline; return the report."""
-    from replay.reader import LogReader
+    from replay.reader import LogReader, time_span
 
     files = collect_logs(paths)
     state = load_state(state_path)
     if show_progress is None:
         show_progress = sys.stderr.isatty()
-    progress = Progress(sys.stderr, _span_ns(files) if show_progress else None, show_progress)
-    source = LogReader(files)
+    span = time_span(files) if show_progress else None
+    progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
+    # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
+    source = LogReader(files, coalesce=speed is None)
     pipeline, result = run_blocks(config, source, state=state, sinks=sinks, speed=speed,
                                   progress=progress)
     result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],

@@ -136,3 +136,17 @@ def test_replay_exits_non_zero_only_when_nothing_could_be_read(tmp_path, capsys)
     report = json.loads((tmp_path / "r.json").read_text())
     assert 0 < report["samples"]["tension"]["accepted"] < 600 * 20
     assert report["inputs"]["read"]["incomplete_files"]
+
+
+def test_paced_replay_follows_sensor_time():
+    import time
+
+    blocks = blocks_interleaved(sea(3), 1)
+    start = time.monotonic()
+    run_blocks(default_config(), blocks)
+    fast = time.monotonic() - start
+    start = time.monotonic()
+    run_blocks(default_config(), blocks, speed=4.0)
+    paced = time.monotonic() - start
+    # 3 s of data at 4 x real time: the last blocks start 2 s after the first, i.e. 0.5 s
+    assert paced - fast >= 0.45
