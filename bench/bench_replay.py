@@ -10,7 +10,7 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second.
 
-Usage: python bench/bench_replay.py [--days 30] [--baseline-days 1] [--dir DIR] [--keep]
+Usage: python bench/bench_replay.py [--days 30] [--baseline-days 1] [--dir DIR [--reuse]] [--keep]
 """
 
 from __future__ import annotations
@@ -135,6 +135,7 @@ def main() -> None:
     ap.add_argument("--baseline-days", type=float, default=1.0)
     ap.add_argument("--dir", help="where to write the logs (default: a temporary directory)")
     ap.add_argument("--keep", action="store_true", help="keep the generated logs")
+    ap.add_argument("--reuse", action="store_true", help="reuse logs already in --dir")
     ap.add_argument("--child-replay", help=argparse.SUPPRESS)
     ap.add_argument("--no-rules", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -146,10 +147,11 @@ def main() -> None:
     try:
         t = time.perf_counter()
         big, small = work / f"log_{args.days:g}d.mcap", work / "log_1d.mcap"
-        n_big = write_log(big, args.days)
-        write_log(small, 1.0)
-        print(f"wrote {args.days:g}-day log: {n_big:,d} tension samples, "
-              f"{big.stat().st_size / 1e6:.0f} MB, in {time.perf_counter() - t:.1f} s")
+        if not (args.reuse and big.exists() and small.exists()):
+            write_log(big, args.days)
+            write_log(small, 1.0)
+        print(f"{args.days:g}-day log: {big.stat().st_size / 1e6:.0f} MB "
+              f"(written or found in {time.perf_counter() - t:.1f} s)")
         r_big = replay_in_child(big)
         r_small = replay_in_child(small)
         r_plain = replay_in_child(big, rules=False)
