@@ -18,15 +18,11 @@ same for any split of the data into blocks.
 from __future__ import annotations
 
 import functools
-import importlib
-import logging
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 
 from monitor.config import Config, LoadConfig, MooringConfig
-
-log = logging.getLogger(__name__)
 
 MEASURED, ESTIMATED = 1, 2
 SOURCE_NAMES = {0: "none", MEASURED: "measured", ESTIMATED: "estimated"}
@@ -83,24 +79,19 @@ class _ModelsEstimator:
         return self.model.state.to_dict()
 
 
-def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
-    """The motion estimator for this mooring, or None when models.estimator is not installed.
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator:
+    """The motion estimator of ``config``'s mooring, continuing from ``state`` if given.
 
     The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
     uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
     mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
     """
-    try:
-        est = importlib.import_module("models.estimator")
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("models.estimator", "models"):
-            raise
-        log.warning("models.estimator is not installed: no motion-based tension estimate")
-        return None
+    from models import estimator
+
     est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
-    saved = None if not state else est.EstimatorState.from_dict(dict(state))
-    model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
-    return _ModelsEstimator(est, model, config.load.motion_sensor)
+    saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
+    model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
+    return _ModelsEstimator(estimator, model, config.load.motion_sensor)
 
 
 class LoadSelector:
@@ -184,24 +175,19 @@ class _ModelsEstimator:
         return self.model.state.to_dict()
 
 
-def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
-    """The motion estimator for this mooring, or None when models.estimator is not installed.
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator:
+    """The motion estimator of ``config``'s mooring, continuing from ``state`` if given.
 
     The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
     uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
     mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
     """
-    try:
-        est = importlib.import_module("models.estimator")
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("models.estimator", "models"):
-            raise
-        log.warning("models.estimator is not installed: no motion-based tension estimate")
-        return None
+    from models import estimator
+
     est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
-    saved = None if not state else est.EstimatorState.from_dict(dict(state))
-    model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
-    return _ModelsEstimator(est, model, config.load.motion_sensor)
+    saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
+    model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
+    return _ModelsEstimator(estimator, model, config.load.motion_sensor)
 
 
 class LoadSelector:

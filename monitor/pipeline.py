@@ -48,28 +48,14 @@ class AlertEngineLike(Protocol):
     def state(self) -> dict[str, Any]: ...
 
 
-class NullAlertEngine:
-    """Used when monitor.alerts is not installed: no rules, no alerts."""
-
-    def evaluate(self, obs: Observation) -> list[Any]:
-        return []
-
-    def state(self) -> dict[str, Any]:
-        return {}
-
-
 def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, float | None],
                        state: Mapping[str, Any] | None) -> AlertEngineLike:
-    """The ``[alerts]`` rules engine (monitor.alerts), or a no-op one if that is not installed.
+    """The ``[alerts]`` rules engine, restored from ``state`` if given.
 
     ``endurance_Pa`` maps each component to its derated endurance stress (None if it has none).
     """
-    try:
-        from monitor.alerts.engine import AlertEngine
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("monitor.alerts", "monitor.alerts.engine"):
-            raise
-        return NullAlertEngine()
+    from monitor.alerts.engine import AlertEngine
+
     components = {name: {"endurance_stress_Pa": e} for name, e in endurance_Pa.items()}
     if state:
         return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
@@ -264,9 +250,9 @@ class Pipeline:
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
             st.get("alerts"))
+        # without rules there is nothing to evaluate: skip building the per-tick observations
         rule_keys = getattr(self.alerts, "rule_keys", None)
-        self._has_rules = not isinstance(self.alerts, NullAlertEngine) and (
-            rule_keys is None or bool(rule_keys()))
+        self._has_rules = rule_keys is None or bool(rule_keys())
         lim = config.validate["tension"].fields["tension_N"]
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}

@@ -273,3 +273,17 @@ def test_residue_damage_equals_the_astm_residue_at_every_block(hysteresis):
             expected = float(np.sum(sn.damage_per_cycle(r, c, m)))
             assert cached(rf.residue) == pytest.approx(expected, rel=1e-12, abs=1e-300)
         assert expected > 0
+
+
+def test_estimator_for_a_line_given_as_segments():
+    from monitor.load_source import build_estimator
+
+    c = default_config()
+    chain = {"name": "chain", "length_m": 60.0, "weight_N_per_m": 300.0, "ea_N": 5e8,
+             "diameter_m": 0.05}
+    config = config_with(c, mooring={"segment": [chain], "depth_m": 23.0, "span_m": 50.0})
+    t, imu = sea(300)["imu"]
+    est_t, est_v = build_estimator(config).feed(t, imu)
+    assert est_t.shape[0] > 0.4 * t.shape[0]
+    # a 60 m chain of 300 N/m hanging 23 m: the top tension is at least its suspended weight
+    assert np.all(est_v > 300.0 * 23.0)
