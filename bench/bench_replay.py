@@ -76,13 +76,14 @@ def child_replay(path: str, rules: bool) -> None:
     if not rules:
         config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
                                              if k != "rule"})
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     reader = LogReader([path])
     pipeline, result = run_blocks(config, reader)
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     rep = pipeline.report()
     print(json.dumps({
         "wall_s": wall,
+        "cpu_s": cpu,
         "tension_samples": rep["samples"]["tension"]["accepted"],
         "all_samples": result.samples,
         "damage_committed": rep["components"]["conductor"]["damage_committed"],
@@ -97,14 +98,15 @@ def replay_in_child(path: Path, rules: bool = True) -> dict:
 
 
 def naive_baseline(path: Path) -> tuple[float, int, float]:
-    """Decode every message with mcap's reader and protobuf, then ASTM rainflow on it all."""
+    """Decode every message with mcap's reader and protobuf, then ASTM rainflow on it all.
+    Returns (CPU seconds, tension samples, damage)."""
     import rainflow
     from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
     from mcap.reader import make_reader
 
     from models import fatigue, helix
 
-    start = time.perf_counter()
+    start = time.process_time()
     parts = []
     with open(path, "rb") as f:
         classes = {}
@@ -126,7 +128,7 @@ def naive_baseline(path: Path) -> tuple[float, int, float]:
     cycles = np.array([(r, c) for r, _, c, _, _ in rainflow.extract_cycles(stress)])
     sn = fatigue.SNCurve.vaps_copper()
     damage = float(np.sum(sn.damage_per_cycle(cycles[:, 0], cycles[:, 1])))
-    return time.perf_counter() - start, tension.shape[0], damage
+    return time.process_time() - start, tension.shape[0], damage
 
 
 def main() -> None:
@@ -158,9 +160,11 @@ def main() -> None:
         rate = r_big["tension_samples"] / r_big["wall_s"]
         for label, r in (("default config", r_big), ("no alert rules", r_plain)):
             rr = r["tension_samples"] / r["wall_s"]
-            print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s, {rr / 1e6:.2f} M "
-                  f"tension samples/s ({r['all_samples'] / r['wall_s'] / 1e6:.2f} M samples/s "
-                  f"all streams), {rr / 20:,.0f} x real time; target >= 3 M/s")
+            print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s wall, "
+                  f"{r['cpu_s']:.2f} s CPU; {rr / 1e6:.2f} M tension samples/s wall, "
+                  f"{r['tension_samples'] / r['cpu_s'] / 1e6:.2f} M/s per CPU second "
+                  f"({r['all_samples'] / r['wall_s'] / 1e6:.2f} M samples/s all streams), "
+                  f"{rr / 20:,.0f} x real time; target >= 3 M/s")
         growth = r_big["peak_rss_mb"] / r_small["peak_rss_mb"] - 1
         print(f"peak RSS: 1 d {r_small['peak_rss_mb']:.0f} MB, {args.days:g} d "
               f"{r_big['peak_rss_mb']:.0f} MB ({growth:+.1%}); target within 10 %")
@@ -170,9 +174,11 @@ def main() -> None:
         wall, n, damage = naive_baseline(base_log)
         base_rate = n / wall
         ours = replay_in_child(base_log)
+        ours_rate = ours["tension_samples"] / ours["cpu_s"]
         print(f"naive baseline ({args.baseline_days:g} d, mcap per message + rainflow): "
-              f"{base_rate / 1e6:.3f} M tension samples/s; pipeline is {rate / base_rate:.0f} x "
-              "faster; target >= 20 x")
+              f"{base_rate / 1e6:.3f} M tension samples/s per CPU second; the pipeline on the "
+              f"same log {ours_rate / 1e6:.2f} M/s, {ours_rate / base_rate:.1f} x faster; "
+              "target >= 20 x")
         print(f"damage check on the baseline log: naive {damage:.6e} (ASTM incl. residue), "
               f"pipeline committed {ours['damage_committed']:.6e}")
     finally:
