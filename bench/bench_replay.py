@@ -157,7 +157,6 @@ def main() -> None:
         r_big = replay_in_child(big)
         r_small = replay_in_child(small)
         r_plain = replay_in_child(big, rules=False)
-        rate = r_big["tension_samples"] / r_big["wall_s"]
         for label, r in (("default config", r_big), ("no alert rules", r_plain)):
             rr = r["tension_samples"] / r["wall_s"]
             print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s wall, "
