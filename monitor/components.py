@@ -155,15 +155,19 @@ class Component:
         self._residue_damage = ResidueDamage(self.sn_curve)
 
     def stress(self, tension_N: np.ndarray) -> np.ndarray:
+        """Stress of the component under the load samples; records the peak."""
         if self.cfg.kind == "conductor":
-            return helix.conductor_stress(tension_N, self._cable, lay=self.cfg.lay)
-        return tension_N / self.cfg.area_m2
+            stress = helix.conductor_stress(tension_N, self._cable, lay=self.cfg.lay)
+        else:
+            stress = tension_N / self.cfg.area_m2
+        if stress.shape[0]:
+            self.max_stress_Pa = max(self.max_stress_Pa, float(stress.max()))
+        return stress
 
     def feed(self, stress_Pa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rainflow the next stress samples; returns the cycles they closed (kept pending)."""
         if stress_Pa.shape[0] == 0:
             return _EMPTY, _EMPTY, _EMPTY
-        self.max_stress_Pa = max(self.max_stress_Pa, float(stress_Pa.max()))
         ranges, means, counts = self.rainflow.feed(stress_Pa)
         if ranges.shape[0]:
             if self._pending[0].shape[0]:

@@ -70,8 +70,8 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
     return dict(record)
 
 
-def _empty_load() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8)
+# no load samples: (t_ns, tension_N, source); shared, never written to
+_NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -265,7 +265,7 @@ class Pipeline:
                                           "time_start_ns": None, "time_end_ns": None}))
         self.new_alerts: list[Any] = []
         # load samples of the tick not yet evaluated: (t_ns, tension_N, source)
-        self.open_tick = _empty_load() if "open_tick" not in st else (
+        self.open_tick = _NO_LOAD if "open_tick" not in st else (
             np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
             np.array(st["open_tick"][2], np.int8))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
@@ -356,7 +356,7 @@ class Pipeline:
                       stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
                       tick_limit: int | None) -> dict[str, list[np.ndarray]]:
         """Feed the rainflow tick by tick, committing damage and evaluating alerts at tick ends."""
-        closed: dict[str, list[list[np.ndarray]]] = {n: [[], [], []] for n in self.components}
+        closed: dict[str, list[tuple[np.ndarray, ...]]] = {n: [] for n in self.components}
         if self.next_tick_ns is None and streams:
             first = min(int(x.t[0]) for x in streams.values())
             self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
@@ -371,17 +371,18 @@ class Pipeline:
             for info in streams.values():
                 info.prepare(ends)
         start, prev_end = 0, _NEVER
+        comps = list(self.components.items())
         for k in range(ends.shape[0] + 1):
             stop = int(cuts[k])
-            for name, comp in self.components.items():
-                for acc, part in zip(closed[name], comp.feed(stresses[name][start:stop])):
-                    acc.append(part)
+            if stop > start:
+                for name, comp in comps:
+                    closed[name].append(comp.feed(stresses[name][start:stop]))
             if k == ends.shape[0]:
                 break
             end = int(ends[k])
-            for comp in self.components.values():
+            for _, comp in comps:
                 comp.commit(end)
-            if t[start:stop].shape[0]:
+            if stop > start:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
             if evaluate:
                 tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
@@ -390,7 +391,7 @@ class Pipeline:
                     tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
                     ss = {n: c.stress(tv) for n, c in self.components.items()}
                 self._evaluate(k, end, tt, tv, ts, ss, streams)
-            self.open_tick = _empty_load()
+            self.open_tick = _NO_LOAD
             start, prev_end = stop, end
         if ends.shape[0]:
             self.next_tick_ns = int(ends[-1]) + self.tick_ns
@@ -404,8 +405,8 @@ class Pipeline:
             counts = self.tick_counts.setdefault(s, [0, 0])
             counts[0] += received
             counts[1] += rej
-        return {n: [np.concatenate(c) if c else np.zeros(0) for c in v3]
-                for n, v3 in closed.items()}
+        return {n: [np.concatenate(parts) for parts in zip(*cycles)] if cycles
+                else [np.zeros(0)] * 3 for n, cycles in closed.items()}
 
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                   stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
