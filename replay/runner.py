@@ -15,7 +15,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence, TextIO
+from typing import Any, Iterable, Sequence, TextIO
 
 from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
@@ -116,15 +116,15 @@ def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | No
 def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | None = None,
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None) -> tuple[Pipeline, ReplayResult]:
-    """Feed blocks into a pipeline (built at the first block: its buoy id may override the
-    config's when the config is the default); flush at the end."""
-    it: Iterator[SampleBlock] = iter(blocks)
+    """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
+    block, whose buoy id replaces the config's (with a warning) unless a state is continued;
+    blocks of other buoys are counted and skipped."""
     pipeline: Pipeline | None = None
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     origin: list[float] = []
     start = time.perf_counter()
-    for block in it:
+    for block in blocks:
         if pipeline is None:
             if block.buoy_id != config.buoy.id and state is None:
                 log.warning("log is for buoy %r, config for %r: replaying as %r",
