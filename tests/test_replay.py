@@ -5,8 +5,6 @@ import io
 import json
 from pathlib import Path
 
-import numpy as np
-import pytest
 
 from monitor.blocks import SampleBlock
 from monitor.cli import main
