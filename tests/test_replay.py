@@ -1,10 +1,9 @@
 """Replay: split replay with a state file equals one pass to the last bit; the report contract;
-the command line on real MCAP logs (once the log format has landed)."""
+the command line on real MCAP logs, including damaged ones."""
 
 import io
 import json
 from pathlib import Path
-
 
 from monitor.blocks import SampleBlock
 from monitor.cli import main
