@@ -202,7 +202,8 @@ class Component:
             "damage_committed": committed,
             "damage_rate_per_day": rate,
             "remaining_life_days": max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf,
-            "cycles": float(self.miner.total_cycles + float(np.sum(self._pending[2]))),
+            "cycles": float(self.miner.total_cycles) + (
+                float(self._pending[2].sum()) if self._pending[2].shape[0] else 0.0),
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
         }
 

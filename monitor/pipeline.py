@@ -232,6 +232,8 @@ class Pipeline:
             s: StreamValidator(s, config.validate[s], st.get("validators", {}).get(s))
             for s in SENSOR_ORDER
         }
+        self._stale_ns = {s: config.validate[s].stale_after_s * 1e9 for s in SENSOR_ORDER}
+        self._idle_obs: dict[str, tuple[tuple, StreamObs]] = {}
         self.selector = LoadSelector(config.load, st.get("load"))
         self.motion_sensor = config.load.motion_sensor
         self.estimator = (build_estimator(config, st.get("estimator"))
@@ -436,16 +438,22 @@ class Pipeline:
         ``streams`` is None): totals up to ``now`` and counts within the tick."""
         out = {}
         for s, val in self.validators.items():
-            stale_ns = self.config.validate[s].stale_after_s * 1e9
+            stale_ns = self._stale_ns[s]
             info = None if streams is None else streams.get(s)
             if info is not None:
                 obs = info.tick(k, now, stale_ns)
-            else:
-                obs = StreamObs(
-                    last_t_ns=val.last_t_ns if val.has_last else 0,
-                    stale=not val.has_last or now - val.last_t_ns > stale_ns,
-                    accepted=val.accepted, rejected=dict(val.rejected),
-                    rejected_in_tick=0, received_in_tick=0)
+            else:  # nothing new on this stream: reuse the last answer while it holds
+                stale = not val.has_last or now - val.last_t_ns > stale_ns
+                key = (val.accepted, val.last_t_ns, stale, sum(val.rejected.values()))
+                cached = self._idle_obs.get(s)
+                if cached is not None and cached[0] == key:
+                    obs = cached[1]
+                else:
+                    obs = StreamObs(
+                        last_t_ns=val.last_t_ns if val.has_last else 0, stale=stale,
+                        accepted=val.accepted, rejected=dict(val.rejected),
+                        rejected_in_tick=0, received_in_tick=0)
+                    self._idle_obs[s] = (key, obs)
             if k == 0 and streams is not None and s in self.tick_counts:
                 # samples of earlier slabs that fell into this same tick
                 received, rejected = self.tick_counts.pop(s)
