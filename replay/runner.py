@@ -27,7 +27,8 @@ log = logging.getLogger(__name__)
 
 
 def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
-    """Expand directories to their ``*.mcap`` files (sorted); missing paths are errors."""
+    """Expand directories to their ``*.mcap`` files (sorted). A missing path is logged and
+    skipped (the others are still replayed); FileNotFoundError if nothing is left."""
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
@@ -35,7 +36,9 @@ def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
         elif p.exists():
             out.append(p)
         else:
-            raise FileNotFoundError(f"replay: {p} does not exist")
+            log.error("replay: %s does not exist; skipped", p)
+    if not out:
+        raise FileNotFoundError(f"no log files in {[str(p) for p in paths]}")
     return out
 
 

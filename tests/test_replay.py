@@ -114,6 +114,10 @@ def test_replay_command_split_logs_and_state(tmp_path, capsys):
     two = json.loads((tmp_path / "b.json").read_text())
     assert two["components"] == one["components"]
     assert two["samples"] == one["samples"]
+    # a missing file among others is skipped, not fatal
+    assert main(["replay", str(tmp_path / "all.mcap"), str(tmp_path / "gone.mcap"),
+                 "--report", str(tmp_path / "skip.json")]) == 0
+    assert json.loads((tmp_path / "skip.json").read_text())["components"] == one["components"]
     # a directory replays its files in order: the same as one pass
     assert main(["replay", str(tmp_path / "parts"), "--report", str(tmp_path / "dir.json")]) == 0
     assert json.loads((tmp_path / "dir.json").read_text())["components"] == one["components"]
@@ -125,6 +129,7 @@ def test_replay_exits_non_zero_only_when_nothing_could_be_read(tmp_path, capsys)
     assert main(["replay", str(junk)]) == 1
     assert "nothing could be read" in capsys.readouterr().err
     assert main(["replay", str(tmp_path / "missing.mcap")]) == 1
+    assert "no log files" in capsys.readouterr().err
     # a log cut in the middle still replays what is intact
     write_log(tmp_path / "cut.mcap", blocks_interleaved(sea(600), 1))
     data = (tmp_path / "cut.mcap").read_bytes()
