@@ -170,14 +170,14 @@ def main() -> None:
         base_log = small if args.baseline_days == 1.0 else work / "log_baseline.mcap"
         if base_log != small:
             write_log(base_log, args.baseline_days)
-        wall, n, damage = naive_baseline(base_log)
-        base_rate = n / wall
+        cpu, n, damage = naive_baseline(base_log)
+        base_rate = n / cpu
         ours = replay_in_child(base_log)
-        ours_rate = ours["tension_samples"] / ours["cpu_s"]
         print(f"naive baseline ({args.baseline_days:g} d, mcap per message + rainflow): "
-              f"{base_rate / 1e6:.3f} M tension samples/s per CPU second; the pipeline on the "
-              f"same log {ours_rate / 1e6:.2f} M/s, {ours_rate / base_rate:.1f} x faster; "
-              "target >= 20 x")
+              f"{base_rate / 1e6:.3f} M tension samples/s per CPU second; the {args.days:g}-day "
+              f"replay is {r_big['tension_samples'] / r_big['cpu_s'] / base_rate:.1f} x faster "
+              f"({r_plain['tension_samples'] / r_plain['cpu_s'] / base_rate:.1f} x without alert "
+              "rules); target >= 20 x")
         print(f"damage check on the baseline log: naive {damage:.6e} (ASTM incl. residue), "
               f"pipeline committed {ours['damage_committed']:.6e}")
     finally:
