@@ -4,11 +4,12 @@ A thin adapter over ``models.helix`` and ``models.fatigue`` so the pipeline sees
 interface per ``[[component]]``: conductors get the helix stress of their lay
 (``models.helix.conductor_stress``), axial members ``tension / area_m2``.
 
-Damage bookkeeping keeps the result independent of block sizes, to the last bit: cycles closed
-by the rainflow are held as *pending* until the alert tick that contains their closing sample
-ends, and only then added to the Miner accumulator, one addition per tick. Tick boundaries are
-a fixed sensor-time grid, so the floating-point summation order is the same for any split of
-the data. Pending cycles (at most one tick's worth) are part of the saved state.
+Damage bookkeeping is independent of block sizes: cycles closed by the rainflow are held as
+*pending* until the alert tick that contains their closing sample ends, and then committed to
+the Miner accumulator dated at the tick end. Tick ends are a fixed sensor-time grid, so the
+committed damage (a sequential sum in closure order) and the damage rate (bucketed by those
+dates) are the same for any split of the data. Pending cycles (at most one tick's worth) are
+part of the saved state; figures read between ticks include them.
 """
 
 from __future__ import annotations
