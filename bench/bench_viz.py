@@ -1,0 +1,106 @@
+"""Cost of the Rerun sink in a replay-like bulk run, with and without an .rrd recording.
+
+A replay drives the pipeline core with steps of buffered blocks; the sink's cost per day of
+20 Hz tension is measured for several step sizes and both option presets, next to a stand-in
+replay (stress per component + rainflow counting with the ``rainflow`` package per step) run
+without the sink. Also reported: the ratio against the replay throughput target of 3 M
+samples/s (issue 2), the budget that ``--rrd`` may at most double.
+
+Run: PYTHONPATH=. python bench/bench_viz.py [--days D]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+
+import numpy as np
+import rainflow
+
+from monitor.events import ComponentStep, StepResult
+from monitor.viz.rerun_options import RerunOptions
+from monitor.viz.rerun_outputs import open_recording
+from monitor.viz.rerun_sink import RerunSink
+
+RATE_HZ = 20
+T0_NS = 1_700_000_000_000_000_000
+TARGET_SAMPLES_PER_S = 3e6
+COMPONENTS = {"left_lay": 2000.0, "right_lay": 1000.0}  # Pa per N
+
+
+def series(days: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    n = int(days * 86400 * RATE_HZ)
+    i = np.arange(n)
+    rng = np.random.default_rng(seed)
+    tension = 5000 + 1500 * np.sin(2 * np.pi * i / (RATE_HZ * 5.25)) + rng.normal(0, 100, n)
+    return T0_NS + i * (1_000_000_000 // RATE_HZ), tension
+
+
+def steps(t: np.ndarray, tension: np.ndarray, step_s: float, count_cycles: bool):
+    """Replay-like steps; with count_cycles the rainflow work is part of the timed loop."""
+    n = int(step_s * RATE_HZ)
+    damage = 0.0
+    for k in range(0, len(t), n):
+        tt, tn = t[k:k + n], tension[k:k + n]
+        comps = {}
+        for name, kpa in COMPONENTS.items():
+            stress = tn * kpa
+            if count_cycles:
+                cyc = np.array([c[:3] for c in rainflow.extract_cycles(stress)]).reshape(-1, 3)
+            else:
+                cyc = np.zeros((0, 3))
+            damage += 1e-9 * len(cyc)
+            comps[name] = ComponentStep(name, stress, cyc[:, 0], cyc[:, 1], cyc[:, 2], damage * 1.1,
+                                        damage, 1e-3, 1e4, float(stress.max()))
+        yield StepResult("B1", "tension", int(tt[-1]), tt, tn, "measured", float(tn[-1]),
+                         float("nan"), comps, len(tt), {}, [])
+
+
+def run(t, tension, step_s: float, options: RerunOptions | None, path: str) -> float:
+    sink = None
+    if options is not None:
+        sink = RerunSink(open_recording("B1", options, rrd=path), options)
+    # materialise the steps (with their rainflow cycles) outside the timed sink loop, and time
+    # the stand-in replay separately
+    all_steps = list(steps(t, tension, step_s, count_cycles=True))
+    t0 = time.perf_counter()
+    if sink is not None:
+        for s in all_steps:
+            sink.on_step(s)
+        sink.close()
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--days", type=float, default=1.0)
+    args = ap.parse_args()
+    t, tension = series(args.days)
+    n = len(t)
+    t0 = time.perf_counter()
+    for _ in steps(t, tension, 600.0, count_cycles=True):
+        pass
+    standin = time.perf_counter() - t0
+    target = n / TARGET_SAMPLES_PER_S
+    print(f"{args.days:g} day(s), {n:,} tension samples, 2 components")
+    print(f"stand-in replay without sink (rainflow pkg, 600 s steps): {standin:.2f} s "
+          f"({n / standin / 1e6:.2f} M samples/s); replay target time at 3 M/s: {target:.2f} s")
+    with tempfile.TemporaryDirectory() as tmp:
+        warm = run(t[:72000], tension[:72000], 60.0, RerunOptions(), os.path.join(tmp, "w.rrd"))
+        print(f"first use of rerun in the process (one-off start-up, 1 h of data): {warm:.2f} s")
+        for preset_name, opts in (("replay preset", RerunOptions().for_replay()),
+                                  ("live preset", RerunOptions())):
+            for step_s in (60.0, 600.0, 3600.0):
+                path = os.path.join(tmp, f"b_{step_s:g}.rrd")
+                dt = run(t, tension, step_s, opts, path)
+                size = os.path.getsize(path) / 1e6
+                print(f"  {preset_name:13s} steps {step_s:6g} s: sink {dt:6.2f} s "
+                      f"({n / dt / 1e6:5.2f} M samples/s), .rrd {size:6.1f} MB; "
+                      f"with-rrd/without: vs stand-in {(standin + dt) / standin:4.2f}x, "
+                      f"vs 3 M/s target {(target + dt) / target:4.2f}x")
+
+
+if __name__ == "__main__":
+    main()
