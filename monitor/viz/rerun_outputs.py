@@ -25,10 +25,14 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import rerun as rr
 
 from monitor.viz.rerun_options import RerunOptions
+
+if TYPE_CHECKING:
+    from monitor.viz.rerun_sink import RerunSink, ShapeProvider
 
 APPLICATION_ID = "buoymon"
 
@@ -135,3 +139,22 @@ def open_recording(buoy_id: str, options: RerunOptions, *, rrd: str | Path | Non
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=buoy_id)
     rec.set_sinks(*sinks)
     return rec
+
+
+def open_rerun_sink(buoy_id: str, options: RerunOptions, *, rrd: str | Path | None = None,
+                    shape_provider: "ShapeProvider | None" = None, replay: bool = False,
+                    config_home: Path | None = None) -> tuple["RerunSink", WebViewer | None]:
+    """The sink the replay (``--rrd``, ``replay=True`` for the bulk preset) and the daemon
+    (``[rerun]`` section: ``rrd``, ``connect``, ``serve_web``) use. The caller stops the
+    returned web viewer, if any, after closing the sink."""
+    from monitor.viz.rerun_sink import RerunSink
+
+    opts = options.for_replay() if replay else options
+    viewer = serve_web_viewer(opts, config_home) if opts.serve_web else None
+    try:
+        rec = open_recording(buoy_id, opts, rrd=rrd, viewer=viewer)
+    except ValueError:
+        if viewer is not None:
+            viewer.stop()
+        raise
+    return RerunSink(rec, opts, shape_provider=shape_provider), viewer
