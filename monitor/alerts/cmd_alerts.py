@@ -1,0 +1,171 @@
+"""``buoymon alerts list|ack|reset``: inspect and manage alerts.
+
+Two targets:
+
+* a running daemon, over Zenoh (``--buoy ID [--connect ENDPOINT]``): ``list`` queries
+  ``buoy/<id>/monitor/alerts``; ``ack``/``reset`` send the command as the payload of a query on
+  ``buoy/<id>/monitor/alerts/operator`` and print the daemon's answer once it has applied it;
+* a saved state file (``--state PATH``, the pipeline's JSON state whose ``"alerts"`` key holds
+  the alert engine state) for when the daemon is stopped; ``ack``/``reset`` rewrite the file
+  atomically, and a reset is applied at the first tick after the daemon restarts.
+
+Every ack and reset records who, when (wall-clock time of the command) and why in the engine's
+history.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from monitor.alerts.engine import AlertEngine
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("alerts", help="list, acknowledge or reset alerts",
+                              description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="alerts_command", metavar="ACTION", required=True)
+
+    def target(sp: argparse.ArgumentParser) -> None:
+        g = sp.add_mutually_exclusive_group(required=True)
+        g.add_argument("--state", type=Path, help="pipeline state file (JSON) of a stopped daemon")
+        g.add_argument("--buoy", help="buoy id of a running daemon (reached over Zenoh)")
+        sp.add_argument("--connect", action="append", metavar="ENDPOINT",
+                        help=f"Zenoh endpoint of the daemon (default {DEFAULT_CONNECT}); "
+                             "repeatable")
+        sp.add_argument("--timeout", type=float, default=10.0,
+                        help="seconds to wait for the daemon (default 10)")
+        sp.add_argument("--json", action="store_true", help="print JSON instead of a table")
+
+    ls = sub.add_parser("list", help="list active alerts")
+    target(ls)
+    ack = sub.add_parser("ack", help="acknowledge an active alert (stops its re-sends)")
+    ack.add_argument("fingerprint")
+    reset = sub.add_parser("reset", help="release and re-arm a rule (e.g. a latched damage "
+                                         "alert after an inspection or cable replacement)")
+    reset.add_argument("rule")
+    reset.add_argument("component")
+    for sp in (ack, reset):
+        sp.add_argument("--who", required=True, help="operator name")
+        sp.add_argument("--why", required=True, help="reason, recorded in the alert history")
+        target(sp)
+    p.set_defaults(func=run)
+
+
+def _command(args: argparse.Namespace) -> dict[str, Any] | None:
+    if args.alerts_command == "list":
+        return None
+    # when the operator acted (wall clock): recorded in the history, not used for evaluation
+    base = {"who": args.who, "why": args.why, "at_ns": time.time_ns()}
+    if args.alerts_command == "ack":
+        return {"op": "ack", "fingerprint": args.fingerprint, **base}
+    return {"op": "reset", "rule": args.rule, "component": args.component, **base}
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        if args.state is not None:
+            result = _on_state_file(args.state, _command(args))
+        else:
+            result = _on_daemon(args.buoy, args.connect or [DEFAULT_CONNECT], args.timeout,
+                                _command(args))
+    except (ValueError, OSError, TimeoutError) as exc:
+        print(f"buoymon alerts: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result, indent=2, allow_nan=False))
+    elif args.alerts_command == "list":
+        print(format_table(result["alerts"]))
+    else:
+        print(f"{args.alerts_command} done: " + ", ".join(
+            f"{k}={v}" for k, v in result.items() if k not in ("ok", "op", "alert")))
+    return 0
+
+
+def format_table(alerts: list[dict[str, Any]]) -> str:
+    """Active alerts as an aligned text table."""
+    if not alerts:
+        return "no active alerts"
+    header = ("FINGERPRINT", "SEVERITY", "RULE", "COMPONENT", "SINCE (sensor time, UTC)",
+              "VALUE", "THRESHOLD", "ACKED BY")
+    rows = [header] + [(
+        a["fingerprint"], a["severity"], a["rule"], a["labels"]["component"],
+        datetime.fromtimestamp(a["starts_at_ns"] / 1e9, tz=timezone.utc).strftime(
+            "%Y-%m-%d %H:%M:%S"),
+        a["annotations"]["value"], a["annotations"]["threshold"], a["acked_by"] or "-",
+    ) for a in alerts]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
+
+
+def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]:
+    try:
+        state = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not a JSON state file ({exc})") from None
+    if not isinstance(state, dict) or "alerts" not in state:
+        raise ValueError(f"{path}: state file has no \"alerts\" entry")
+    engine = AlertEngine.from_state(state["alerts"])
+    if command is None:
+        return {"buoy": engine.buoy_id, "alerts": [r.to_dict() for r in engine.active()]}
+    result = engine.apply_command(command)
+    state["alerts"] = engine.state()
+    _write_atomic(path, json.dumps(state, allow_nan=False))
+    return result
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Replace ``path`` so that a crash leaves either the old or the new file, never half."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+    dfd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dfd)
+    finally:
+        os.close(dfd)
+
+
+def _on_daemon(buoy: str, connect: list[str], timeout: float,
+               command: dict[str, Any] | None) -> dict[str, Any]:
+    import zenoh
+
+    from monitor.alerts.delivery import alerts_key, operator_key, peer_config
+
+    key = alerts_key(buoy) if command is None else operator_key(buoy)
+    payload = None if command is None else json.dumps(command)
+    deadline = time.monotonic() + timeout
+    with zenoh.open(peer_config(connect=connect)) as session:
+        # right after connecting, the daemon's queryables may not be known yet: a query then
+        # ends at once without replies, so ask again until the deadline (a query that reached
+        # the daemon is answered, so a command is never applied twice)
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError(f"no answer from buoy {buoy!r} on {key} via {connect} "
+                                   f"within {timeout:g} s")
+            for reply in session.get(key, payload=payload, timeout=remaining):
+                if reply.ok is None:
+                    raise ValueError(f"daemon error: {reply.err.payload.to_string()}")
+                result = json.loads(reply.ok.payload.to_bytes())
+                if command is not None and not result.get("ok"):
+                    raise ValueError(result.get("error", "command refused"))
+                return result
+            time.sleep(0.1)

@@ -1,0 +1,328 @@
+"""The ``[alerts]`` section of the buoymon TOML file, validated.
+
+Layout (every key optional unless marked)::
+
+    [alerts]
+    eval_interval_s = 10        # sensor-time tick of alert evaluation (the pipeline uses it)
+    resend_interval_s = 3600    # re-send active, unacknowledged alerts this often; 0 = never
+    history_limit = 10000       # transitions/operator actions kept in the engine's history
+
+    [[alerts.rule]]
+    kind = "damage_fraction"    # required, see KIND_PARAMS
+    component = "left"          # component / sensor stream; omitted = every one that applies
+    severity = "warning"        # info | warning | critical (default warning)
+    name = "damage_warning"     # default: the kind; must be unique per component
+    threshold = 0.1             # meaning and unit depend on the kind (see KIND_PARAMS)
+    on_delay_s = 0              # condition must hold this long before firing
+    off_delay_s = 0             # condition must be gone this long before clearing
+
+    [alerts.webhook]            # optional: POST Alertmanager-compatible JSON
+    url = "http://127.0.0.1:9093/api/v2/..."
+    timeout_s = 10
+
+    [alerts.email]              # optional: SMTP
+    host = "127.0.0.1", port = 25, from = "...", to = ["..."], starttls = false,
+    username = "", password_env = ""   # name of the environment variable holding the password
+
+    [alerts.outbox]             # durable queue for webhook/email
+    path = "alerts_outbox.sqlite", retry_base_s = 5, retry_max_s = 600
+
+Errors raise ValueError naming the key and the value, e.g.
+``alerts.rule[2].threshold = -1: must be > 0`` (rule indices count from 0, as in the file's
+array of tables).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from monitor.alerts.records import SEVERITIES
+
+# A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
+CABLE_COMPONENT = "cable"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One numeric rule parameter: default (None = required), bounds and unit for messages."""
+
+    default: float | None
+    low: float
+    low_inclusive: bool = False
+    high: float = math.inf
+    unit: str = ""
+
+
+def _p(default, low, low_inclusive=False, high=math.inf, unit=""):
+    return ParamSpec(default, low, low_inclusive, high, unit)
+
+
+_DELAYS = {"on_delay_s": _p(0.0, 0.0, True, unit="s"), "off_delay_s": _p(0.0, 0.0, True, unit="s")}
+
+# kind -> (what the component names: "component" | "stream" | "cable", numeric parameters).
+# threshold units: damage_fraction Miner sum; damage_rate Miner sum per day; remaining_life
+# days; tension_high fraction of breaking strength; conductor_stress multiple of the component's
+# (derated) endurance stress; slack_snap jump in N above floor_N; rejected_rate fraction of
+# received samples over window_s; model_residual |measured - estimated| in N.
+KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, ParamSpec]]] = {
+    "damage_fraction": ("component", {"threshold": _p(None, 0.0)}),
+    "damage_rate": ("component", {"threshold": _p(None, 0.0, unit="1/d"), **_DELAYS}),
+    "remaining_life": ("component", {"threshold": _p(None, 0.0, unit="d"), **_DELAYS}),
+    "tension_high": ("cable", {
+        "threshold": _p(None, 0.0), "breaking_strength_N": _p(None, 0.0, unit="N"),
+        "deadband": _p(0.0, 0.0, True), **_DELAYS,
+    }),
+    "conductor_stress": ("component", {"threshold": _p(1.0, 0.0), **_DELAYS}),
+    "slack_snap": ("cable", {
+        "threshold": _p(None, 0.0, unit="N"), "floor_N": _p(None, 0.0, True, unit="N"),
+        "window_s": _p(2.0, 0.0, unit="s"), "off_delay_s": _p(60.0, 0.0, True, unit="s"),
+    }),
+    "stale": ("stream", dict(_DELAYS)),
+    "rejected_rate": ("stream", {
+        "threshold": _p(None, 0.0, high=1.0), "window_s": _p(600.0, 0.0, unit="s"), **_DELAYS,
+    }),
+    "model_residual": ("cable", {
+        "threshold": _p(None, 0.0, unit="N"), "on_delay_s": _p(60.0, 0.0, True, unit="s"),
+        "off_delay_s": _p(0.0, 0.0, True, unit="s"),
+    }),
+}
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace('"', '\\"') + '"'
+    return repr(value)
+
+
+def _err(where: str, value: Any, msg: str) -> ValueError:
+    return ValueError(f"{where} = {_show(value)}: {msg}")
+
+
+def _number(where: str, value: Any, spec: ParamSpec) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _err(where, value, "must be a number")
+    x = float(value)
+    if math.isnan(x):
+        raise _err(where, value, "must be a number, not NaN")
+    if spec.low_inclusive and x < spec.low:
+        raise _err(where, value, f"must be >= {spec.low:g}")
+    if not spec.low_inclusive and x <= spec.low:
+        raise _err(where, value, f"must be > {spec.low:g}")
+    if x > spec.high:
+        raise _err(where, value, f"must be <= {spec.high:g}")
+    if math.isinf(x):
+        raise _err(where, value, "must be finite")
+    return x
+
+
+def _string(where: str, value: Any, pattern_ok=lambda s: True, what="a non-empty string") -> str:
+    if not isinstance(value, str) or not value or not pattern_ok(value):
+        raise _err(where, value, f"must be {what}")
+    return value
+
+
+def _chunk_ok(s: str) -> bool:
+    # rule names and components become Zenoh key chunks: no separators or wildcards
+    return all(c.isalnum() or c in "_.-" for c in s) and len(s) <= 64
+
+
+def _check_keys(where: str, d: Mapping[str, Any], allowed: set[str]) -> None:
+    for key in d:
+        if key not in allowed:
+            raise _err(f"{where}.{key}", d[key], f"unknown key; expected one of {sorted(allowed)}")
+
+
+@dataclass(frozen=True)
+class RuleConfig:
+    """One ``[[alerts.rule]]`` entry, validated. ``params`` holds every numeric parameter of
+    the kind (defaults filled in); ``component`` None means every component/stream it applies
+    to."""
+
+    kind: str
+    name: str
+    component: str | None
+    severity: str
+    params: Mapping[str, float]
+    where: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"kind": self.kind, "name": self.name, "severity": self.severity}
+        if self.component is not None:
+            d["component"] = self.component
+        d.update(self.params)
+        return d
+
+
+@dataclass(frozen=True)
+class WebhookConfig:
+    url: str
+    timeout_s: float = 10.0
+    receiver: str = "buoymon"
+
+
+@dataclass(frozen=True)
+class EmailConfig:
+    host: str
+    port: int
+    sender: str
+    to: tuple[str, ...]
+    starttls: bool = False
+    username: str = ""
+    password_env: str = ""
+    timeout_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class OutboxConfig:
+    path: str = "alerts_outbox.sqlite"
+    retry_base_s: float = 5.0
+    retry_max_s: float = 600.0
+
+
+@dataclass(frozen=True)
+class AlertsConfig:
+    eval_interval_s: float = 10.0
+    resend_interval_s: float = 3600.0
+    history_limit: int = 10000
+    rules: tuple[RuleConfig, ...] = ()
+    webhook: WebhookConfig | None = None
+    email: EmailConfig | None = None
+    outbox: OutboxConfig = field(default_factory=OutboxConfig)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | None, where: str = "alerts") -> "AlertsConfig":
+        """Validate the parsed ``[alerts]`` table (None or {} gives the defaults, no rules)."""
+        d = {} if d is None else d
+        if not isinstance(d, Mapping):
+            raise _err(where, d, "must be a table")
+        _check_keys(where, d, {"eval_interval_s", "resend_interval_s", "history_limit", "rule",
+                               "webhook", "email", "outbox"})
+        eval_s = _number(f"{where}.eval_interval_s", d.get("eval_interval_s", 10.0), _p(0, 0.0))
+        resend = _number(f"{where}.resend_interval_s", d.get("resend_interval_s", 3600.0),
+                         _p(0, 0.0, True))
+        hist = d.get("history_limit", 10000)
+        if isinstance(hist, bool) or not isinstance(hist, int) or hist < 1:
+            raise _err(f"{where}.history_limit", hist, "must be an integer >= 1")
+        raw_rules = d.get("rule", [])
+        if not isinstance(raw_rules, list):
+            raise _err(f"{where}.rule", raw_rules, "must be an array of tables ([[alerts.rule]])")
+        rules = tuple(_rule(f"{where}.rule[{i}]", r) for i, r in enumerate(raw_rules))
+        seen: dict[tuple[str, str | None], str] = {}
+        for r in rules:
+            key = (r.name, r.component)
+            if key in seen:
+                raise _err(f"{r.where}.name", r.name,
+                           f"duplicate of {seen[key]} for component {r.component or '(all)'}; "
+                           "give each rule a distinct name")
+            seen[key] = r.where
+        return cls(
+            eval_interval_s=eval_s, resend_interval_s=resend, history_limit=hist, rules=rules,
+            webhook=_webhook(f"{where}.webhook", d["webhook"]) if "webhook" in d else None,
+            email=_email(f"{where}.email", d["email"]) if "email" in d else None,
+            outbox=_outbox(f"{where}.outbox", d.get("outbox", {})),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``[alerts]`` table that :meth:`from_dict` turns back into this config."""
+        d: dict[str, Any] = {
+            "eval_interval_s": self.eval_interval_s, "resend_interval_s": self.resend_interval_s,
+            "history_limit": self.history_limit, "rule": [r.to_dict() for r in self.rules],
+            "outbox": {"path": self.outbox.path, "retry_base_s": self.outbox.retry_base_s,
+                       "retry_max_s": self.outbox.retry_max_s},
+        }
+        if self.webhook is not None:
+            d["webhook"] = {"url": self.webhook.url, "timeout_s": self.webhook.timeout_s,
+                            "receiver": self.webhook.receiver}
+        if self.email is not None:
+            e = self.email
+            d["email"] = {"host": e.host, "port": e.port, "from": e.sender, "to": list(e.to),
+                          "starttls": e.starttls, "username": e.username,
+                          "password_env": e.password_env, "timeout_s": e.timeout_s}
+        return d
+
+
+def _rule(where: str, r: Any) -> RuleConfig:
+    if not isinstance(r, Mapping):
+        raise _err(where, r, "must be a table")
+    if "kind" not in r:
+        raise ValueError(f"{where}.kind: missing; expected one of {sorted(KIND_PARAMS)}")
+    kind = r["kind"]
+    if kind not in KIND_PARAMS:
+        raise _err(f"{where}.kind", kind, f"unknown rule kind; expected one of {sorted(KIND_PARAMS)}")
+    _, specs = KIND_PARAMS[kind]
+    _check_keys(where, r, {"kind", "name", "component", "severity", *specs})
+    name = _string(f"{where}.name", r.get("name", kind), _chunk_ok,
+                   "1-64 letters, digits, '_', '.', '-'")
+    component = r.get("component")
+    if component is not None:
+        component = _string(f"{where}.component", component, _chunk_ok,
+                            "1-64 letters, digits, '_', '.', '-'")
+    severity = r.get("severity", "warning")
+    if severity not in SEVERITIES:
+        raise _err(f"{where}.severity", severity, f"must be one of {list(SEVERITIES)}")
+    params: dict[str, float] = {}
+    for key, spec in specs.items():
+        if key not in r:
+            if spec.default is None:
+                raise ValueError(f"{where}.{key}: missing; rule kind {kind!r} requires it")
+            params[key] = float(spec.default)
+        else:
+            params[key] = _number(f"{where}.{key}", r[key], spec)
+    if kind == "tension_high" and params["deadband"] >= params["threshold"]:
+        raise _err(f"{where}.deadband", r.get("deadband"),
+                   f"must be < threshold ({params['threshold']:g})")
+    return RuleConfig(kind, name, component, severity, params, where)
+
+
+def _webhook(where: str, d: Any) -> WebhookConfig:
+    if not isinstance(d, Mapping):
+        raise _err(where, d, "must be a table")
+    _check_keys(where, d, {"url", "timeout_s", "receiver"})
+    url = _string(f"{where}.url", d.get("url"), lambda s: s.startswith(("http://", "https://")),
+                  "an http:// or https:// URL")
+    return WebhookConfig(
+        url=url, timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
+        receiver=_string(f"{where}.receiver", d.get("receiver", "buoymon")),
+    )
+
+
+def _email(where: str, d: Any) -> EmailConfig:
+    if not isinstance(d, Mapping):
+        raise _err(where, d, "must be a table")
+    _check_keys(where, d, {"host", "port", "from", "to", "starttls", "username", "password_env",
+                           "timeout_s"})
+    port = d.get("port", 25)
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
+        raise _err(f"{where}.port", port, "must be an integer 1-65535")
+    to = d.get("to")
+    if isinstance(to, str):
+        to = [to]
+    if not isinstance(to, list) or not to or not all(isinstance(a, str) and "@" in a for a in to):
+        raise _err(f"{where}.to", to, "must be an address or a non-empty list of addresses")
+    starttls = d.get("starttls", False)
+    if not isinstance(starttls, bool):
+        raise _err(f"{where}.starttls", starttls, "must be true or false")
+    username, password_env = d.get("username", ""), d.get("password_env", "")
+    for key, val in (("username", username), ("password_env", password_env)):
+        if not isinstance(val, str):
+            raise _err(f"{where}.{key}", val, "must be a string")
+    return EmailConfig(
+        host=_string(f"{where}.host", d.get("host")), port=port,
+        sender=_string(f"{where}.from", d.get("from"), lambda s: "@" in s, "an e-mail address"),
+        to=tuple(to), starttls=starttls, username=username, password_env=password_env,
+        timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
+    )
+
+
+def _outbox(where: str, d: Any) -> OutboxConfig:
+    if not isinstance(d, Mapping):
+        raise _err(where, d, "must be a table")
+    _check_keys(where, d, {"path", "retry_base_s", "retry_max_s"})
+    base = _number(f"{where}.retry_base_s", d.get("retry_base_s", 5.0), _p(0, 0.0))
+    top = _number(f"{where}.retry_max_s", d.get("retry_max_s", 600.0), _p(0, 0.0))
+    if top < base:
+        raise _err(f"{where}.retry_max_s", d.get("retry_max_s"), f"must be >= retry_base_s ({base:g})")
+    return OutboxConfig(path=_string(f"{where}.path", d.get("path", "alerts_outbox.sqlite")),
+                        retry_base_s=base, retry_max_s=top)

@@ -1,0 +1,228 @@
+"""Durable outbox: webhook delivery to a receiver that comes up late, no duplicates, restart,
+and the e-mail rendering."""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+import numpy as np
+import pytest
+
+from monitor.alerts.config import AlertsConfig
+from monitor.alerts.delivery import EmailSender, OutboxSink, WebhookSender
+from monitor.alerts.engine import AlertEngine
+from monitor.alerts.outbox import Outbox
+from monitor.events import ComponentObs, Observation
+
+NS = 1_000_000_000
+T0 = 1_700_000_000 * NS
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Receiver:
+    """A local Alertmanager-like webhook receiver recording every POST."""
+
+    def __init__(self, port: int, fail_first: int = 0) -> None:
+        self.bodies: list[dict] = []
+        self.keys: list[str] = []
+        self.fail_left = fail_first
+        outer = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_POST(self):
+                body = self.rfile.read(int(self.headers["Content-Length"]))
+                if outer.fail_left > 0:
+                    outer.fail_left -= 1
+                    self.send_response(500)
+                else:
+                    outer.bodies.append(json.loads(body))
+                    outer.keys.append(self.headers["Idempotency-Key"])
+                    self.send_response(200)
+                self.end_headers()
+
+            def log_message(self, *args):
+                pass
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", port), Handler)
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def wait_for(pred, timeout=10.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def damage_records():
+    """fire, resend, clear of one damage-rate alert, as the engine emits them."""
+    eng = AlertEngine.from_config(
+        {"resend_interval_s": 10, "rule": [{"kind": "damage_rate", "threshold": 1.0}]},
+        "b1", {"left": None})
+    out = []
+    for k, rate in enumerate([2.0, 2.0, 0.5], 1):
+        c = ComponentObs(0.0, 0.0, rate, 1.0, float("nan"))
+        out += eng.evaluate(Observation("b1", T0 + k * 10 * NS, 10.0, "measured",
+                                        np.zeros(0, np.int64), np.zeros(0), 1.0, 1.0,
+                                        {"left": c}, {}))
+    assert [r.event for r in out] == ["fire", "resend", "clear"]
+    return out
+
+
+def test_webhook_delivers_after_receiver_comes_up_late_without_duplicates(tmp_path):
+    port = free_port()
+    cfg = AlertsConfig.from_dict({"webhook": {"url": f"http://127.0.0.1:{port}/hook",
+                                              "timeout_s": 2},
+                                  "outbox": {"retry_base_s": 0.05, "retry_max_s": 0.2}})
+    sink = OutboxSink.from_config(cfg, str(tmp_path / "outbox.sqlite"))
+    records = damage_records()
+    sink.publish(records)
+    # nobody listens yet: every attempt fails and is retried with backoff
+    assert wait_for(lambda: sink.outbox.messages()[0]["attempts"] >= 3)
+    assert sink.outbox.pending() == 3
+    assert "Connection refused" in sink.outbox.messages()[0]["last_error"]
+    rx = Receiver(port)
+    try:
+        assert wait_for(lambda: sink.outbox.pending() == 0)
+        sink.publish(records)  # the same transitions again (e.g. after a restart): ignored
+        time.sleep(0.3)
+        assert [b["alerts"][0]["status"] for b in rx.bodies] == ["firing", "firing", "resolved"]
+        assert rx.keys == [f"{r.fingerprint}:{r.event}:{r.at_ns}" for r in records]
+        first = rx.bodies[0]
+        assert first["version"] == "4" and first["receiver"] == "buoymon"
+        assert first["alerts"][0]["labels"]["alertname"] == "damage_rate"
+        assert rx.bodies[2]["alerts"][0]["endsAt"] == "2023-11-14T22:13:50.000000Z"
+    finally:
+        sink.close()
+        rx.close()
+
+
+def test_http_error_is_retried_in_order(tmp_path):
+    port = free_port()
+    rx = Receiver(port, fail_first=2)
+    box = Outbox(str(tmp_path / "o.sqlite"),
+                 {"webhook": WebhookSender(AlertsConfig.from_dict(
+                     {"webhook": {"url": f"http://127.0.0.1:{port}/"}}).webhook)},
+                 retry_base_s=0.02, retry_max_s=0.05)
+    try:
+        for i in range(3):
+            box.enqueue("webhook", f"k{i}", json.dumps({"i": i}).encode())
+        box.start()
+        assert wait_for(lambda: box.pending() == 0)
+        assert [b["i"] for b in rx.bodies] == [0, 1, 2]
+        assert [m["attempts"] for m in box.messages()] == [3, 1, 1]
+    finally:
+        box.close()
+        rx.close()
+
+
+def test_outbox_survives_restart_and_never_resends_delivered(tmp_path):
+    path = str(tmp_path / "o.sqlite")
+    sent: list[bytes] = []
+    clock = [1000.0]
+
+    def down(payload, key):
+        raise ConnectionError("receiver down")
+
+    box = Outbox(path, {"webhook": down}, retry_base_s=5, retry_max_s=40, clock=lambda: clock[0])
+    assert box.enqueue("webhook", "a", b"A") and box.enqueue("webhook", "b", b"B")
+    assert not box.enqueue("webhook", "a", b"A")
+    # backoff 5, 10, 20, 40, 40 s after successive failures (wall clock injected)
+    dues = []
+    for _ in range(5):
+        dues.append(box.run_once() - clock[0])
+        clock[0] += dues[-1]
+    assert dues == [5, 10, 20, 40, 40]
+    box.close()
+
+    box = Outbox(path, {"webhook": lambda p, k: sent.append(p)}, clock=lambda: clock[0])
+    assert box.pending() == 2
+    assert box.run_once() is None
+    assert sent == [b"A", b"B"] and box.pending() == 0
+    box.close()
+
+    box = Outbox(path, {"webhook": lambda p, k: sent.append(p)}, clock=lambda: clock[0])
+    assert box.run_once() is None and sent == [b"A", b"B"]  # nothing delivered twice
+    assert [m["attempts"] for m in box.messages()] == [6, 1]
+    clock[0] += 100
+    assert box.prune(50) == 2 and box.messages() == []
+    box.close()
+
+
+def test_outbox_rejects_unknown_channel(tmp_path):
+    box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": lambda p, k: None})
+    with pytest.raises(ValueError, match="channel 'email': no sender"):
+        box.enqueue("email", "k", b"x")
+    box.close()
+
+
+class SmtpCapture:
+    """Minimal SMTP server (enough of RFC 5321 for smtplib) that stores received messages."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(1)
+        self.port = self.sock.getsockname()[1]
+        self.messages: list[str] = []
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        conn, _ = self.sock.accept()
+        with conn, conn.makefile("rwb") as f:
+            def say(line):
+                f.write(line.encode() + b"\r\n")
+                f.flush()
+            say("220 test")
+            while line := f.readline().decode():
+                cmd = line[:4].upper()
+                if cmd in ("EHLO", "HELO"):
+                    say("250 test")
+                elif cmd == "DATA":
+                    say("354 go")
+                    data = []
+                    while (row := f.readline().decode()) != ".\r\n":
+                        data.append(row)
+                    self.messages.append("".join(data))
+                    say("250 ok")
+                elif cmd == "QUIT":
+                    say("221 bye")
+                    return
+                else:
+                    say("250 ok")
+
+
+def test_email_through_outbox(tmp_path):
+    smtp = SmtpCapture()
+    cfg = AlertsConfig.from_dict({"email": {"host": "127.0.0.1", "port": smtp.port,
+                                            "from": "buoymon@example.org",
+                                            "to": "ops@example.org"}})
+    sink = OutboxSink.from_config(cfg, str(tmp_path / "o.sqlite"))
+    try:
+        rec = damage_records()[0]
+        sink.publish([rec])
+        assert wait_for(lambda: sink.outbox.pending() == 0)
+    finally:
+        sink.close()
+    msg = smtp.messages[0]
+    assert "Subject: [buoymon FIRING] warning damage_rate left (buoy b1)" in msg
+    assert "value: 2 1/d" in msg and "threshold: 1 1/d" in msg
+    assert EmailSender(cfg.email).message(json.dumps(rec.to_dict()).encode(), "f:fire:1")[
+        "Message-ID"] == "<f.fire.1@buoymon>"
