@@ -146,6 +146,35 @@ def test_alert_lanes_and_text_log_levels(tmp_path):
         RerunSink(open_recording("B1", RerunOptions(), rrd=tmp_path / "x.rrd")).on_alert({})
 
 
+def test_alert_record_objects_and_stale_lanes(tmp_path):
+    from monitor.alerts.records import AlertRecord
+    from monitor.events import Observation, StreamObs
+
+    def events(sink, k, step):
+        if k in (2, 6, 7):
+            stale = k >= 6  # ok at 2, stale at 6, still stale at 7 (no new lane entry)
+            sink.on_observation(Observation(
+                buoy_id="B1", t_ns=step.now_ns, tick_s=1.0, load_source="measured",
+                load_t_ns=step.t_ns, tension_N=step.tension_N, measured_tension_N=5e3,
+                estimated_tension_N=float("nan"), components={},
+                streams={"imu": StreamObs(last_t_ns=step.now_ns, stale=stale, accepted=1,
+                                          rejected={}, rejected_in_tick=0,
+                                          received_in_tick=1)}))
+        if k == 8:
+            rec = AlertRecord(rule="stale_imu", kind="sensor_stale", severity="warning",
+                              buoy="B1", component="imu", state="firing", event="fire",
+                              starts_at_ns=step.now_ns, ends_at_ns=0, at_ns=step.now_ns,
+                              value=12.0, threshold=10.0, unit="s", summary="imu silent 12 s")
+            step.alerts.append(rec)  # transitions carried by the step are logged by on_step
+
+    data, steps = record(tmp_path, RerunOptions(), extra=events)
+    assert data["health/imu/state"]["StateChange:state"] == [["ok"], ["stale"]]
+    assert [ns(x) for x in data["health/imu/state"]["sensor_time"]] == [
+        steps[2].now_ns, steps[6].now_ns]
+    assert data["alerts/state/stale_imu/imu"]["StateChange:state"] == [["warning"]]
+    assert data["alerts/log"]["TextLog:text"] == [["[fire] stale_imu/imu: imu silent 12 s"]]
+
+
 def test_position_watch_circle_and_cable_shape(tmp_path):
     opts = RerunOptions(anchor_lat_deg=45.0, anchor_lon_deg=-70.0, watch_circle_m=50.0,
                         bearing_deg=90.0)

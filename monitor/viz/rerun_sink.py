@@ -29,6 +29,7 @@ entity                              archetype                   content
 ``alerts/log``                      TextLog (levels)            one line per alert transition
 ``health/<sensor>/accepted``        Scalars                     accepted samples (total)
 ``health/<sensor>/rejected``        Scalars                     rejected samples (total)
+``health/<sensor>/state``           StateChange                 ok / stale (from alert ticks)
 ``position/buoy``                   Points2D                    buoy east/north of anchor (m)
 ``position/anchor``, ``position/watch_circle``  Points2D / LineStrips2D (static)
 ``mooring/line``                    LineStrips3D                cable shape (m, z up)
@@ -51,7 +52,7 @@ import pyarrow as pa
 import rerun as rr
 
 from monitor.blocks import SampleBlock
-from monitor.events import StepResult
+from monitor.events import Observation, StepResult
 from monitor.viz.rerun_options import RerunOptions
 
 log = logging.getLogger(__name__)
@@ -243,7 +244,7 @@ class RerunSink:
         self._hist: dict[str, _Histogram] = {}
         self._styled: set[str] = set()
         self._health: dict[str, list[int]] = {}  # sensor -> [accepted, rejected]
-        self._alert_state: dict[str, str] = {}
+        self._alert_state: dict[str, str] = {}  # state lane -> last state logged
         self._source = ""
         self._samples = 0
         self._now_ns = 0
@@ -311,6 +312,15 @@ class RerunSink:
             self._set_origin(float(lat[i]), float(lon[i]))
         # logged on the slow grid by the next step, at the fix's own time
         self._last_fix = (int(block.t_ns[i]), float(lat[i]), float(lon[i]))
+
+    def on_observation(self, obs: Observation) -> None:
+        """Sensor staleness at an alert-evaluation tick, as ok/stale lanes (logged on change)."""
+        for sensor, stream in obs.streams.items():
+            lane = f"health/{sensor}/state"
+            state = "stale" if stream.stale else "ok"
+            if self._alert_state.get(lane) != state:
+                self._alert_state[lane] = state
+                self._rows[(lane, "state")].add(int(obs.t_ns), self._samples, state)
 
     def on_alert(self, record: Any) -> None:
         """Log one alert transition: a state lane per (rule, component) and a text-log line."""
