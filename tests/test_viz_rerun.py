@@ -70,6 +70,21 @@ def test_full_rate_logs_every_sample(tmp_path):
     assert data["tension/load"]["sample"] == list(range(len(t)))
 
 
+def test_nan_samples_are_left_out(tmp_path):
+    steps = make_steps(4)
+    steps[1].tension_N[:] = np.nan  # a whole bin of bad load samples
+    steps[2].tension_N[3] = np.nan  # one bad sample
+    data, _ = record(tmp_path, RerunOptions(), steps=steps)
+    env = scalars(data["tension/load"])
+    assert [ns(x) for x in data["tension/load"]["sensor_time"]] == [
+        T0_NS + k * 1_000_000_000 for k in (0, 2, 3)]
+    good = np.delete(steps[2].tension_N, 3)
+    np.testing.assert_array_equal(env[1], [good.min(), good.max()])
+    assert len(scalars(data["stress/left"])) == 4  # the stress series has all four bins
+    data, _ = record(tmp_path, RerunOptions(envelope_s=0.0), steps=steps)
+    assert len(scalars(data["tension/load"])) == 4 * RATE_HZ - RATE_HZ - 1
+
+
 def test_damage_life_health_and_slow_sampling(tmp_path):
     data, steps = record(tmp_path, RerunOptions(slow_interval_s=5.0))
     # a point at the first step, then whenever sensor time crosses a 5 s grid line
@@ -243,7 +258,7 @@ def test_memory_stays_bounded_in_a_long_live_run(tmp_path):
     peaks = []
     for k, step in enumerate(make_steps(1800)):
         sink.on_step(step)
-        buffered = sum(h.count for h in sink._high.values()) + sum(
+        buffered = sum(len(a) for parts in sink._high.v.values() for a in parts) + sum(
             len(r.t) for r in sink._rows.values())
         if k % 300 == 0:
             peaks.append(0)

@@ -134,41 +134,53 @@ class _Rows:
 
 
 class _HighRate:
-    """Buffered high-rate samples of one series; reduced to a min/max envelope on flush.
+    """Buffered high-rate series sharing one time base (the step's load samples): the load and
+    every component's stress. Reduced on flush to a min/max envelope per bin, or sent as is.
 
     Samples of the last (possibly incomplete) envelope bin are carried to the next flush so a
-    bin is never split between two rows.
+    bin is never split between two rows. Sample indices are consecutive from ``first``.
     """
-
-    __slots__ = ("t", "n", "v", "count")
 
     def __init__(self) -> None:
         self.t: list[np.ndarray] = []
-        self.n: list[np.ndarray] = []
-        self.v: list[np.ndarray] = []
+        self.v: dict[str, list[np.ndarray]] = defaultdict(list)
+        self.first = 0  # sample index of the first buffered sample
         self.count = 0
 
-    def add(self, t_ns: np.ndarray, first_sample: int, values: np.ndarray) -> None:
-        if len(t_ns):
-            self.t.append(t_ns)
-            self.n.append(np.arange(first_sample, first_sample + len(t_ns), dtype=np.int64))
-            self.v.append(np.asarray(values, dtype=np.float64))
-            self.count += len(t_ns)
-
-    def take(self, bin_ns: int, final: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rows (t, sample, values) ready to send; values (k,) or (k, 2) for an envelope."""
+    def add(self, t_ns: np.ndarray, first_sample: int, values: Mapping[str, np.ndarray]) -> None:
+        """One step's samples; every entity already buffered must be in ``values``."""
+        n = len(t_ns)
+        if not n:
+            return
         if not self.t:
-            return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
-        t, n, v = (np.concatenate(x) for x in (self.t, self.n, self.v))
-        self.t, self.n, self.v, self.count = [], [], [], 0
-        ok = np.isfinite(v)
-        if not ok.all():
-            t, n, v = t[ok], n[ok], v[ok]
+            self.first = first_sample
+        for entity in self.v.keys() | values.keys():
+            if entity not in self.v:  # a series that starts late: NaN-pad what came before
+                self.v[entity] = [np.full(self.count, np.nan)] if self.count else []
+            self.v[entity].append(np.asarray(values.get(entity, np.full(n, np.nan)),
+                                             dtype=np.float64))
+        self.t.append(t_ns)
+        self.count += n
+
+    def take(self, bin_ns: int, final: bool
+             ) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+        """Rows per entity (entity, t, sample, values); values (k,) or (k, 2) for an envelope."""
+        if not self.t:
+            return []
+        t = np.concatenate(self.t)
+        n = np.arange(self.first, self.first + len(t), dtype=np.int64)
+        v = {e: np.concatenate(parts) for e, parts in self.v.items()}
+        self.t, self.v, self.count = [], defaultdict(list), 0
         if len(t) > 1 and not np.all(t[1:] >= t[:-1]):  # the pipeline emits sensor-time order;
             order = np.argsort(t, kind="stable")       # stay correct (and deterministic) if not
-            t, n, v = t[order], n[order], v[order]
-        if bin_ns <= 0 or not len(t):
-            return t, n, v
+            t, n = t[order], n[order]
+            v = {e: x[order] for e, x in v.items()}
+        if bin_ns <= 0:
+            out = []
+            for e, x in v.items():
+                ok = np.isfinite(x)
+                out.append((e, t[ok], n[ok], x[ok]))
+            return out
         # first sample of every occupied bin, by bisection on the sorted times (cheaper than
         # dividing every sample)
         edges = np.arange(t[0] // bin_ns, t[-1] // bin_ns + 1, dtype=np.int64) * bin_ns
@@ -176,12 +188,19 @@ class _HighRate:
         starts = starts[np.concatenate(([True], np.diff(starts) > 0)) & (starts < len(t))]
         if not final:  # keep the open (last) bin for the next flush
             last = int(starts[-1])
-            self.add(t[last:], int(n[last]), v[last:])
-            t, n, v, starts = t[:last], n[:last], v[:last], starts[:-1]
+            self.add(t[last:], int(n[last]), {e: x[last:] for e, x in v.items()})
+            t, n, starts = t[:last], n[:last], starts[:-1]
             if not len(t):
-                return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0)
-        env = np.column_stack((np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts)))
-        return t[starts] // bin_ns * bin_ns, n[starts], env
+                return []
+        bin_t = t[starts] // bin_ns * bin_ns
+        out = []
+        for e, x in v.items():
+            # fmin/fmax skip NaN; a bin with no finite sample stays NaN and is dropped
+            env = np.column_stack((np.fmin.reduceat(x[:len(t)], starts),
+                                   np.fmax.reduceat(x[:len(t)], starts)))
+            ok = np.isfinite(env[:, 0])
+            out.append((e, bin_t[ok], n[starts][ok], env[ok]))
+        return out
 
 
 class _Histogram:
@@ -239,7 +258,7 @@ class RerunSink:
         self._shape_ns = int(round(self.opt.shape_interval_s * 1e9))
         self._range_edges = np.asarray(self.opt.range_edges_Pa, dtype=float)
         self._mean_edges = np.asarray(self.opt.mean_edges_Pa, dtype=float)
-        self._high: dict[str, _HighRate] = defaultdict(_HighRate)
+        self._high = _HighRate()
         self._rows: dict[tuple[str, str], _Rows] = defaultdict(_Rows)  # (entity, kind) -> rows
         self._hist: dict[str, _Histogram] = {}
         self._styled: set[str] = set()
@@ -271,9 +290,10 @@ class RerunSink:
         n0, n = self._samples, len(step.t_ns)
         self._samples += n
         self._now_ns = max(self._now_ns, int(step.now_ns))
-        self._high["tension/load"].add(step.t_ns, n0, step.tension_N)
+        high = {"tension/load": step.tension_N}
+        high.update({f"stress/{name}": c.stress_Pa for name, c in step.components.items()})
+        self._high.add(step.t_ns, n0, high)
         for name, comp in step.components.items():
-            self._high[f"stress/{name}"].add(step.t_ns, n0, comp.stress_Pa)
             hist = self._hist.get(name)
             if hist is None:
                 hist = self._hist[name] = _Histogram(self._range_edges, self._mean_edges)
@@ -339,8 +359,7 @@ class RerunSink:
         """Send everything buffered to Rerun (``final`` also closes the open envelope bins)."""
         for hist in self._hist.values():
             hist.update()
-        for entity, series in self._high.items():
-            t, n, v = series.take(self._env_ns, final)
+        for entity, t, n, v in self._high.take(self._env_ns, final):
             if len(t):
                 self._style(entity, v.ndim == 2)
                 self._send(entity, t, n, rr.Scalars.columns(scalars=v))
