@@ -47,3 +47,22 @@ def test_web_viewer_binds_loopback_only(tmp_path):
     finally:
         viewer.stop()
     assert viewer.process.poll() is not None
+
+
+def test_web_viewer_serves_a_recording_on_loopback(tmp_path):
+    from monitor.viz.rerun_outputs import open_recording, serve_web_viewer
+    from monitor.viz.rerun_sink import RerunSink
+
+    rrd = tmp_path / "r.rrd"
+    sink = RerunSink(open_recording("B1", RerunOptions(), rrd=rrd))
+    for step in make_steps(3):
+        sink.on_step(step)
+    sink.close()
+    opts = RerunOptions(web_port=free_port(), grpc_port=free_port())
+    viewer = serve_web_viewer(opts, tmp_path / "cfg", recordings=(rrd,))
+    try:
+        assert listening_addresses(opts.web_port) == {"0100007F"}
+        assert viewer.web_url.startswith(f"http://127.0.0.1:{opts.web_port}/")
+        assert viewer.process.poll() is None
+    finally:
+        viewer.stop()

@@ -99,12 +99,14 @@ def _wait_listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None
 
 
 def serve_web_viewer(options: RerunOptions, config_home: Path | None = None,
-                     timeout_s: float = 30.0) -> WebViewer:
-    """Start a web viewer bound to 127.0.0.1 with a capped buffer (oldest data dropped)."""
+                     timeout_s: float = 30.0, recordings: tuple[Path, ...] = ()) -> WebViewer:
+    """Start a web viewer bound to 127.0.0.1 with a capped buffer (oldest data dropped),
+    serving live data sent to its gRPC proxy or the given ``.rrd`` files."""
     cmd = rerun_command() + [
         "--serve-web", "--bind", "127.0.0.1",
         "--port", str(options.grpc_port), "--web-viewer-port", str(options.web_port),
         "--server-memory-limit", options.server_memory_limit,
+        *[str(p) for p in recordings],
     ]
     proc = subprocess.Popen(cmd, env=analytics_disabled_env(config_home),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
