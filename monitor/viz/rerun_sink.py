@@ -41,8 +41,10 @@ single scalar instead of a [min, max] pair.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+import threading
 import time
 from collections import defaultdict
 from typing import Any, Callable, Mapping, Sequence
@@ -95,6 +97,17 @@ def local_east_north(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0_deg: float,
     east = np.radians(np.asarray(lon_deg) - lon0_deg) * _EARTH_RADIUS_M * math.cos(lat0)
     north = np.radians(np.asarray(lat_deg) - lat0_deg) * _EARTH_RADIUS_M
     return east, north
+
+
+def _locked(method):
+    """Run a sink method under the sink's (re-entrant) lock."""
+
+    @functools.wraps(method)
+    def locked(self, *args, **kwargs):
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return locked
 
 
 class _ArrowBatch:
@@ -275,9 +288,12 @@ class RerunSink:
         self._pending = 0
         self._last_flush = time.monotonic()
         self._closed = False
+        # the daemon may deliver alerts or ticks from another thread than the steps
+        self._lock = threading.RLock()
 
     # ---- Sink interface -------------------------------------------------------------------
 
+    @_locked
     def on_step(self, step: StepResult) -> None:
         """Buffer one step's output; flush when the thresholds are reached."""
         if self._closed:
@@ -319,6 +335,7 @@ class RerunSink:
         self._pending += n + 1
         self._maybe_flush()
 
+    @_locked
     def on_block(self, block: SampleBlock) -> None:
         """Raw sensor blocks the pipeline does not summarise in a step: GNSS positions."""
         if block.sensor != "gnss" or not len(block):
@@ -333,6 +350,7 @@ class RerunSink:
         # logged on the slow grid by the next step, at the fix's own time
         self._last_fix = (int(block.t_ns[i]), float(lat[i]), float(lon[i]))
 
+    @_locked
     def on_observation(self, obs: Observation) -> None:
         """Sensor staleness at an alert-evaluation tick, as ok/stale lanes (logged on change)."""
         for sensor, stream in obs.streams.items():
@@ -342,6 +360,7 @@ class RerunSink:
                 self._alert_state[lane] = state
                 self._rows[(lane, "state")].add(int(obs.t_ns), self._samples, state)
 
+    @_locked
     def on_alert(self, record: Any) -> None:
         """Log one alert transition: a state lane per (rule, component) and a text-log line."""
         a = alert_fields(record)
@@ -355,6 +374,7 @@ class RerunSink:
         self._rows[("alerts/log", "text")].add(a["at_ns"], self._samples, (text, level))
         self._pending += 1
 
+    @_locked
     def flush(self, final: bool = False) -> None:
         """Send everything buffered to Rerun (``final`` also closes the open envelope bins)."""
         for hist in self._hist.values():
@@ -369,6 +389,7 @@ class RerunSink:
         self._pending = 0
         self._last_flush = time.monotonic()
 
+    @_locked
     def close(self) -> None:
         """Flush everything (including a last snapshot) and, if owned, close the recording."""
         if self._closed:
@@ -377,6 +398,10 @@ class RerunSink:
             self._snapshot_histograms(self._now_ns)
         if self._last_fix is not None:
             self._log_position()
+        if self._want_blueprint:  # no component ever seen: still give the viewer a layout
+            from monitor.viz.blueprint import default_blueprint
+
+            self.rec.send_blueprint(default_blueprint([]))
         self.flush(final=True)
         self._closed = True
         if self._own:
