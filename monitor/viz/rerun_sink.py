@@ -37,6 +37,11 @@ entity                              archetype                   content
 
 With ``envelope_s = 0`` the ``tension/load`` and ``stress/*`` entities hold every sample as a
 single scalar instead of a [min, max] pair.
+
+Feeding the sink: :meth:`RerunSink.on_step` for every pipeline step (alert transitions in
+``step.alerts`` are logged from there), :meth:`RerunSink.on_block` for raw GNSS blocks (buoy
+position), :meth:`RerunSink.on_observation` at alert ticks (stale lanes), and
+:meth:`RerunSink.on_alert` only for records that do not travel in a step (e.g. an operator reset).
 """
 
 from __future__ import annotations
@@ -341,7 +346,8 @@ class RerunSink:
         if block.sensor != "gnss" or not len(block):
             return
         lat, lon = block.fields["lat_deg"], block.fields["lon_deg"]
-        ok = np.isfinite(lat) & np.isfinite(lon)
+        # NaN or out-of-range fixes (the validator normally rejects them) are not drawn
+        ok = (np.abs(lat) <= 90.0) & (np.abs(lon) <= 180.0)
         if not ok.any():
             return
         i = int(np.flatnonzero(ok)[-1])
