@@ -17,6 +17,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from monitor.viz.cycle_histogram import check_edges
+
 _MPA = 1e6
 
 
@@ -77,12 +79,8 @@ class RerunOptions:
                 f"config error: rerun.flush_samples = {self.flush_samples!r}: must be an integer >= 1"
             )
         for name in ("range_edges_Pa", "mean_edges_Pa"):
-            e = np.asarray(getattr(self, name), dtype=float)
-            if e.ndim != 1 or e.size < 2 or not np.all(np.isfinite(e)) or np.any(np.diff(e) <= 0):
-                raise ValueError(
-                    f"config error: rerun.{name} = {getattr(self, name)!r}: must be at least two "
-                    "finite, strictly increasing values"
-                )
+            edges = check_edges(getattr(self, name), f"config error: rerun.{name}")
+            object.__setattr__(self, name, tuple(edges.tolist()))  # frozen: normalise once
         for name in ("web_port", "grpc_port"):
             p = getattr(self, name)
             if not isinstance(p, int) or not 0 <= p <= 65535:
@@ -100,11 +98,7 @@ class RerunOptions:
         unknown = sorted(set(section) - known)
         if unknown:
             raise ValueError(f"config error: rerun.{unknown[0]}: unknown key (known: {sorted(known)})")
-        values = dict(section)
-        for name in ("range_edges_Pa", "mean_edges_Pa"):
-            if name in values:
-                values[name] = tuple(float(x) for x in values[name])
-        return cls(**values)
+        return cls(**section)
 
     def for_replay(self) -> "RerunOptions":
         """Coarser sampling for bulk replay of long logs (same entities as live)."""

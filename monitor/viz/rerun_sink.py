@@ -60,6 +60,7 @@ import rerun as rr
 
 from monitor.blocks import SampleBlock
 from monitor.events import Observation, StepResult
+from monitor.viz.cycle_histogram import CycleHistogram
 from monitor.viz.rerun_options import RerunOptions
 
 log = logging.getLogger(__name__)
@@ -221,35 +222,6 @@ class _HighRate:
         return out
 
 
-class _Histogram:
-    """Cumulative rainflow counts per range bin and per (range, mean) cell; cycles beyond the
-    outer edges are counted in the outermost bins so no cycle is lost from the totals."""
-
-    def __init__(self, range_edges: np.ndarray, mean_edges: np.ndarray) -> None:
-        self.range_edges = range_edges
-        self.mean_edges = mean_edges
-        self.matrix = np.zeros((len(range_edges) - 1, len(mean_edges) - 1))
-        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-
-    def add(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> None:
-        if len(ranges):
-            self._pending.append((ranges, means, counts))
-
-    def update(self) -> None:
-        if not self._pending:
-            return
-        r, m, c = (np.concatenate(x) for x in zip(*self._pending))
-        self._pending.clear()
-        nr, nm = self.matrix.shape
-        ir = np.clip(np.searchsorted(self.range_edges, r, side="right") - 1, 0, nr - 1)
-        im = np.clip(np.searchsorted(self.mean_edges, m, side="right") - 1, 0, nm - 1)
-        self.matrix += np.bincount(ir * nm + im, weights=c, minlength=nr * nm).reshape(nr, nm)
-
-    @property
-    def counts(self) -> np.ndarray:
-        return self.matrix.sum(axis=1)
-
-
 class RerunSink:
     """A pipeline sink writing to a Rerun recording stream (see the module docstring).
 
@@ -278,7 +250,7 @@ class RerunSink:
         self._mean_edges = np.asarray(self.opt.mean_edges_Pa, dtype=float)
         self._high = _HighRate()
         self._rows: dict[tuple[str, str], _Rows] = defaultdict(_Rows)  # (entity, kind) -> rows
-        self._hist: dict[str, _Histogram] = {}
+        self._hist: dict[str, CycleHistogram] = {}
         self._styled: set[str] = set()
         self._health: dict[str, list[int]] = {}  # sensor -> [accepted, rejected]
         self._alert_state: dict[str, str] = {}  # state lane -> last state logged
@@ -317,7 +289,7 @@ class RerunSink:
         for name, comp in step.components.items():
             hist = self._hist.get(name)
             if hist is None:
-                hist = self._hist[name] = _Histogram(self._range_edges, self._mean_edges)
+                hist = self._hist[name] = CycleHistogram(self._range_edges, self._mean_edges)
             hist.add(comp.ranges_Pa, comp.means_Pa, comp.counts)
         health = self._health.setdefault(step.sensor, [0, 0])
         health[0] += int(step.accepted)
