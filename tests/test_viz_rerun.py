@@ -234,6 +234,10 @@ def test_options_errors_name_the_key():
         RerunOptions.from_toml({"mean_edges_Pa": ["a", "b"]})
     with pytest.raises(ValueError, match=r"rerun.colour: unknown key"):
         RerunOptions.from_toml({"colour": "red"})
+    with pytest.raises(ValueError, match=r"rerun.anchor_lat_deg = 91"):
+        RerunOptions(anchor_lat_deg=91.0)
+    with pytest.raises(ValueError, match=r"rerun.rrd = 5"):
+        RerunOptions.from_toml({"rrd": 5})
     with pytest.raises(ValueError, match=r"rerun.connect"):
         RerunOptions(connect="http://0.0.0.0:9876")
     with pytest.raises(ValueError, match="rerun output"):

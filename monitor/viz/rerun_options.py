@@ -72,8 +72,16 @@ class RerunOptions:
         for name in ("envelope_s", "slow_interval_s", "snapshot_interval_s", "shape_interval_s",
                      "flush_interval_s", "watch_circle_m"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"config error: rerun.{name} = {v!r}: must be a finite number >= 0")
+        for name, limit in (("anchor_lat_deg", 90.0), ("anchor_lon_deg", 180.0),
+                            ("bearing_deg", 360.0)):
+            v = getattr(self, name)
+            nan_ok = name != "bearing_deg"  # NaN anchor: use the first GNSS fix
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (
+                    abs(v) <= limit or (nan_ok and math.isnan(v))):
+                raise ValueError(f"config error: rerun.{name} = {v!r}: must be within "
+                                 f"[-{limit:g}, {limit:g}]")
         if not isinstance(self.flush_samples, int) or self.flush_samples < 1:
             raise ValueError(
                 f"config error: rerun.flush_samples = {self.flush_samples!r}: must be an integer >= 1"
@@ -85,6 +93,12 @@ class RerunOptions:
             p = getattr(self, name)
             if not isinstance(p, int) or not 0 <= p <= 65535:
                 raise ValueError(f"config error: rerun.{name} = {p!r}: must be a port 0-65535")
+        for name in ("rrd", "connect", "server_memory_limit"):
+            if not isinstance(getattr(self, name), str):
+                raise ValueError(
+                    f"config error: rerun.{name} = {getattr(self, name)!r}: must be a string")
+        if not isinstance(self.serve_web, bool):
+            raise ValueError(f"config error: rerun.serve_web = {self.serve_web!r}: must be true/false")
         if self.connect and not self.connect.startswith(("rerun://", "rerun+http://", "rerun+https://")):
             raise ValueError(
                 f"config error: rerun.connect = {self.connect!r}: must be a rerun:// or "
