@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+# default stress-range and mean bins: 2 MPa range bins to 100 MPa, 5 MPa mean bins (Pa)
+DEFAULT_RANGE_EDGES_Pa: tuple[float, ...] = tuple(np.linspace(0.0, 100e6, 51).tolist())
+DEFAULT_MEAN_EDGES_Pa: tuple[float, ...] = tuple(np.linspace(-50e6, 150e6, 41).tolist())
+
 
 def check_edges(values, name: str) -> np.ndarray:
     """Bin edges as a float array; ValueError naming ``name`` unless they are at least two

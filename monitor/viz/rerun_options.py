@@ -15,11 +15,7 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Mapping
 
-import numpy as np
-
-from monitor.viz.cycle_histogram import check_edges
-
-_MPA = 1e6
+from monitor.viz.cycle_histogram import DEFAULT_MEAN_EDGES_Pa, DEFAULT_RANGE_EDGES_Pa, check_edges
 
 
 @dataclass(frozen=True)
@@ -55,8 +51,8 @@ class RerunOptions:
     shape_interval_s: float = 1.0
     flush_samples: int = 200_000
     flush_interval_s: float = 1.0
-    range_edges_Pa: tuple[float, ...] = tuple(np.linspace(0.0, 100 * _MPA, 51))
-    mean_edges_Pa: tuple[float, ...] = tuple(np.linspace(-50 * _MPA, 150 * _MPA, 41))
+    range_edges_Pa: tuple[float, ...] = DEFAULT_RANGE_EDGES_Pa
+    mean_edges_Pa: tuple[float, ...] = DEFAULT_MEAN_EDGES_Pa
     anchor_lat_deg: float = math.nan
     anchor_lon_deg: float = math.nan
     watch_circle_m: float = 0.0
