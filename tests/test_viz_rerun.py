@@ -12,7 +12,7 @@ import pytest
 from monitor.blocks import SampleBlock
 from monitor.viz.rerun_options import RerunOptions
 from monitor.viz.rerun_outputs import analytics_disabled, analytics_disabled_env, open_recording
-from monitor.viz.rerun_sink import RerunSink, local_east_north
+from monitor.viz.rerun_sink import RerunSink, entity_part, local_east_north
 from tests.viz_helpers import RATE_HZ, T0_NS, make_steps, ns, read_rrd
 
 N_STEPS = 30
@@ -274,3 +274,8 @@ def test_memory_stays_bounded_in_a_long_live_run(tmp_path):
     # 300 samples plus ~15 slow rows per step) and does not grow with the run's length
     assert max(peaks) < 4 * 300
     assert max(peaks) <= 1.1 * peaks[0]
+
+
+def test_entity_parts_are_sanitised():
+    assert entity_part("left lay/conductor") == "left_lay_conductor"
+    assert entity_part("") == "_" and entity_part("c-1.a_b") == "c-1.a_b"

@@ -49,6 +49,7 @@ from __future__ import annotations
 import functools
 import logging
 import math
+import re
 import threading
 import time
 from collections import defaultdict
@@ -74,6 +75,11 @@ ShapeProvider = Callable[[float], tuple[np.ndarray, np.ndarray]]
 
 _TEXT_LEVEL = {"critical": "CRITICAL", "warning": "WARN", "info": "INFO"}
 _EARTH_RADIUS_M = 6_371_008.8  # mean Earth radius (IUGG); local tangent-plane approximation
+
+
+def entity_part(name: str) -> str:
+    """``name`` made safe as one entity-path part (component, sensor, rule names)."""
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", str(name)) or "_"
 
 
 def alert_fields(record: Any) -> dict[str, Any]:
@@ -275,23 +281,24 @@ class RerunSink:
         """Buffer one step's output; flush when the thresholds are reached."""
         if self._closed:
             raise ValueError("RerunSink.on_step called after close()")
-        if self._want_blueprint and step.components:
+        comps = {entity_part(n): c for n, c in step.components.items()}
+        if self._want_blueprint and comps:
             from monitor.viz.blueprint import default_blueprint
 
-            self.rec.send_blueprint(default_blueprint(sorted(step.components)))
+            self.rec.send_blueprint(default_blueprint(sorted(comps)))
             self._want_blueprint = False
         n0, n = self._samples, len(step.t_ns)
         self._samples += n
         self._now_ns = max(self._now_ns, int(step.now_ns))
         high = {"tension/load": step.tension_N}
-        high.update({f"stress/{name}": c.stress_Pa for name, c in step.components.items()})
+        high.update({f"stress/{name}": c.stress_Pa for name, c in comps.items()})
         self._high.add(step.t_ns, n0, high)
-        for name, comp in step.components.items():
+        for name, comp in comps.items():
             hist = self._hist.get(name)
             if hist is None:
                 hist = self._hist[name] = CycleHistogram(self._range_edges, self._mean_edges)
             hist.add(comp.ranges_Pa, comp.means_Pa, comp.counts)
-        health = self._health.setdefault(step.sensor, [0, 0])
+        health = self._health.setdefault(entity_part(step.sensor), [0, 0])
         health[0] += int(step.accepted)
         health[1] += int(sum(step.rejected.values()))
         if step.load_source != self._source:
@@ -301,7 +308,7 @@ class RerunSink:
             self.on_alert(record)
         t = int(step.now_ns)
         if t >= self._next_slow:
-            self._sample_slow(step)
+            self._sample_slow(step, comps)
             self._next_slow = self._next_after(t, self._slow_ns)
         if t >= self._next_snap and self._hist:
             self._snapshot_histograms(t)
@@ -332,7 +339,7 @@ class RerunSink:
     def on_observation(self, obs: Observation) -> None:
         """Sensor staleness at an alert-evaluation tick, as ok/stale lanes (logged on change)."""
         for sensor, stream in obs.streams.items():
-            lane = f"health/{sensor}/state"
+            lane = f"health/{entity_part(sensor)}/state"
             state = "stale" if stream.stale else "ok"
             if self._alert_state.get(lane) != state:
                 self._alert_state[lane] = state
@@ -342,7 +349,7 @@ class RerunSink:
     def on_alert(self, record: Any) -> None:
         """Log one alert transition: a state lane per (rule, component) and a text-log line."""
         a = alert_fields(record)
-        lane = f"alerts/state/{a['rule']}/{a['component'] or '_'}"
+        lane = f"alerts/state/{entity_part(a['rule'])}/{entity_part(a['component'])}"
         state = a["severity"] if a["state"] == "firing" else "ok"
         if self._alert_state.get(lane) != state:
             self._alert_state[lane] = state
@@ -397,13 +404,13 @@ class RerunSink:
                 or time.monotonic() - self._last_flush >= self.opt.flush_interval_s):
             self.flush()
 
-    def _sample_slow(self, step: StepResult) -> None:
+    def _sample_slow(self, step: StepResult, comps: Mapping[str, Any]) -> None:
         t, s = int(step.now_ns), self._samples
         for entity, value in (("tension/measured", step.measured_tension_N),
                               ("tension/estimated", step.estimated_tension_N)):
             if math.isfinite(value):
                 self._rows[(entity, "scalar")].add(t, s, float(value))
-        for name, c in step.components.items():
+        for name, c in comps.items():
             for entity, value in ((f"damage/{name}/committed", c.damage_committed),
                                   (f"damage/{name}/provisional", c.damage),
                                   (f"damage_rate/{name}", c.damage_rate_per_day),
