@@ -15,6 +15,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from monitor.viz.alert_view import alert_fields
+
 
 def _num(value: Any, where: str) -> float:
     """A JSON number, or one of the strings "inf", "-inf", "nan"; ValueError otherwise."""
@@ -156,18 +158,12 @@ def _component(name: str, c: Any) -> Component:
 def _alert(i: int, a: Any) -> Alert:
     where = f"alerts[{i}]"
     a = _mapping(a, where)
-    labels = a.get("labels") or {}
-    at = a.get("at_ns", a.get("starts_at_ns"))
-    if at is None or not isinstance(at, int):
-        raise ValueError(f"report: {where}.at_ns = {at!r}: expected int ns since the epoch")
-    return Alert(
-        rule=str(a.get("rule") or labels.get("rule", "?")),
-        component=str(a.get("component") or labels.get("component", "")),
-        severity=str(a.get("severity", "info")), state=str(a.get("state", "firing")),
-        event=str(a.get("event", "")), at_ns=at,
-        starts_at_ns=int(a.get("starts_at_ns") or at), ends_at_ns=int(a.get("ends_at_ns") or 0),
-        summary=str(a.get("summary", "")),
-    )
+    try:
+        f = alert_fields(a)
+        starts, ends = int(a.get("starts_at_ns") or f["at_ns"]), int(a.get("ends_at_ns") or 0)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"report: {where}: {exc}") from exc
+    return Alert(**f, starts_at_ns=starts, ends_at_ns=ends)
 
 
 def parse_report(data: Any) -> Report:

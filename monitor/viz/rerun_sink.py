@@ -61,6 +61,7 @@ import rerun as rr
 
 from monitor.blocks import SampleBlock
 from monitor.events import Observation, StepResult
+from monitor.viz.alert_view import alert_fields
 from monitor.viz.cycle_histogram import CycleHistogram
 from monitor.viz.rerun_options import RerunOptions
 
@@ -70,7 +71,7 @@ SENSOR_TIME = "sensor_time"
 SAMPLE = "sample"
 
 # A cable-shape provider: top tension (N) -> (x, z) arrays in metres, x horizontal from the
-# anchor towards the buoy, z up from the anchor (e.g. ``solve_line(...).profile(n)``).
+# anchor towards the buoy, z up from the anchor (see monitor.viz.cable_shape).
 ShapeProvider = Callable[[float], tuple[np.ndarray, np.ndarray]]
 
 _TEXT_LEVEL = {"critical": "CRITICAL", "warning": "WARN", "info": "INFO"}
@@ -80,25 +81,6 @@ _EARTH_RADIUS_M = 6_371_008.8  # mean Earth radius (IUGG); local tangent-plane a
 def entity_part(name: str) -> str:
     """``name`` made safe as one entity-path part (component, sensor, rule names)."""
     return re.sub(r"[^A-Za-z0-9_.-]", "_", str(name)) or "_"
-
-
-def alert_fields(record: Any) -> dict[str, Any]:
-    """The fields of an alert record the visual outputs use, from an ``AlertRecord`` or its
-    ``to_dict()`` form: rule, component, severity, state, event, at_ns, summary."""
-    get = record.get if isinstance(record, Mapping) else lambda k, d=None: getattr(record, k, d)
-    labels = get("labels") or {}
-    out = {
-        "rule": str(get("rule") or labels.get("rule", "")),
-        "component": str(get("component") or labels.get("component", "")),
-        "severity": str(get("severity", "info")),
-        "state": str(get("state", "firing")),
-        "event": str(get("event", "")),
-        "at_ns": int(get("at_ns", 0) or 0),
-        "summary": str(get("summary", "")),
-    }
-    if not out["rule"] or out["at_ns"] <= 0:
-        raise ValueError(f"alert record needs a rule and a positive at_ns: {record!r}")
-    return out
 
 
 def local_east_north(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0_deg: float,
