@@ -49,6 +49,8 @@ def analytics_disabled_env(config_home: Path | None = None) -> dict[str, str]:
     """
     home = Path(config_home or Path(tempfile.gettempdir()) / f"buoymon-rerun-{os.getuid()}")
     home.mkdir(parents=True, exist_ok=True, mode=0o700)
+    if home.stat().st_uid != os.getuid():  # a shared /tmp: never use someone else's config
+        raise RuntimeError(f"rerun config directory {home} is not owned by this user")
     env = dict(os.environ, XDG_CONFIG_HOME=str(home), XDG_DATA_HOME=str(home))
     env.pop("FORCE_RERUN_ANALYTICS", None)
     if not analytics_disabled(home):
