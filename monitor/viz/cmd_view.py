@@ -30,8 +30,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"buoymon view: no such recording: {', '.join(missing)}", file=sys.stderr)
         return 2
     if args.native:
-        return subprocess.call(rerun_command() + [str(p) for p in args.recordings],
-                               env=analytics_disabled_env())
+        # the desktop viewer also hosts a gRPC server, on all interfaces unless told otherwise
+        cmd = rerun_command() + ["--bind", "127.0.0.1", "--port", str(args.grpc_port),
+                                 *[str(p) for p in args.recordings]]
+        return subprocess.call(cmd, env=analytics_disabled_env())
     try:
         opts = RerunOptions(web_port=args.web_port, grpc_port=args.grpc_port)
         viewer = serve_web_viewer(opts, recordings=tuple(args.recordings))
