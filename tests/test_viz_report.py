@@ -175,6 +175,9 @@ def test_report_renders_in_headless_chromium(rendered, tmp_path):
     cmd = [str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
            "--no-first-run", "--disable-background-networking", "--disable-component-update",
            "--disable-sync", f"--user-data-dir={tmp_path / 'profile'}", "--hide-scrollbars",
+           # Chromium still tries Google hosts (updates, accounts) despite the flags above;
+           # resolve no host at all so nothing leaves the machine (the page is a local file)
+           "--host-resolver-rules=MAP * ~NOTFOUND",
            "--force-color-profile=srgb", "--window-size=1200,4200", f"--screenshot={shot}",
            out.html_path.as_uri()]
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
