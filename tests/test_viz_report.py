@@ -192,3 +192,20 @@ def test_report_renders_in_headless_chromium(rendered, tmp_path):
         assert has_colour(img, colour), colour
     # and the page is not blank: a good share of it is drawn
     assert np.mean(np.any(img[..., :3] < 0.95, axis=-1)) > 0.05
+
+
+def test_empty_and_non_finite_values_render(tmp_path):
+    r = minimal_report()
+    r["components"] = {"c": {"damage": 0.0, "damage_committed": 0.0, "cycles": 0,
+                             "max_stress_Pa": "nan", "damage_rate_per_day": 0.0,
+                             "remaining_life_days": "inf"}}
+    r["tension_N"] = {"min": "nan", "mean": "nan", "max": "nan", "p99": "nan"}
+    r["alerts"] = []
+    out = write_report(parse_report(r), tmp_path / "e.html")
+    page = out.html_path.read_text()
+    assert "No alerts were raised." in page and "n/a" in page
+    assert sorted(out.png_paths) == ["alerts", "damage", "life", "tension"]
+    r["components"] = {}
+    out = write_report(parse_report(r), tmp_path / "e2.html")
+    assert sorted(out.png_paths) == ["alerts", "tension"]
+    assert "Not shown: no fatigue components in the report" in out.html_path.read_text()
