@@ -1,0 +1,535 @@
+"""Buoy motion -> top tension estimator (no load cell, or a cross-check of one).
+
+Estimated tension = quasi-static catenary tension at the instantaneous fairlead position
+                  + axial dynamic increment (seed 002)
+                  + elastic-drag "jerk" increment (seed 001, B3).
+
+* Quasi-static: any vectorised ``quasi_static(x_offset_m, z_heave_m) -> (T, H, V, flags)``
+  (N, N, N, uint8 :class:`Flag` bits). ``x_offset_m`` is the horizontal anchor -> fairlead
+  distance minus the nominal span (sway included: the line turns with the buoy), ``z_heave_m``
+  the fairlead rise. Provided: :class:`CatenaryQuasiStatic` (the catenary's precomputed
+  TensionTable, :func:`catenary_estimator`, :func:`seed004_estimator`) and
+  :class:`LinearisedQuasiStatic` (from a 2x2 end stiffness, for small motions).
+* Axial, along the cable tangent at the top (angle atan2(V, H)): ``"finite"`` = the
+  short-line limit of EA k U cot(kL), i.e. (m L / 3) x tangential acceleration;
+  ``"infinite"`` = impedance sqrt(EA m) x tangential speed (a long, non-reflecting line);
+  ``"none"``.
+* Jerk: the support separation speed V_z = d|anchor -> fairlead|/dt drives
+  V + mu d(V|V|)/dt = V_z (implicit Euler, stable at any step) and dT = k V|V|
+  (:class:`models.dynamics.ElasticDragCord`); an approaching fairlead unloads the line.
+
+Velocities and accelerations are backward differences of the displacements, continued across
+blocks through the saved state. Output flags (bitwise, per sample): SLACK (estimate <= 0,
+clipped to 0), ANCHOR_LIFTED and OUT_OF_RANGE (from the quasi-static model or the configured
+calibrated range), FLAT_CORD (the top angle exceeds the flat-cord limit of the jerk model),
+SETTLING (IMU integrator warming up, or the first two samples of a stream).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from models.catenary import VAPS_DEPTH, Line, TensionTable, solve, vaps_mooring
+from models.dynamics import (
+    ElasticDragCord,
+    axial_impedance,
+    drag_constant,
+    finite_line_added_mass,
+    form_parameter,
+    jerk_step,
+)
+from models.imu import DisplacementIntegrator
+
+
+class Flag(enum.IntFlag):
+    """Validity bits of an estimate (uint8 per sample)."""
+
+    SLACK = 1
+    ANCHOR_LIFTED = 2
+    FLAT_CORD = 4
+    OUT_OF_RANGE = 8
+    SETTLING = 16
+
+
+QuasiStatic = Callable[
+    [NDArray[np.float64], NDArray[np.float64]],
+    tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.uint8]],
+]
+
+
+def _check_range(name: str, rng: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = rng
+    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
+        raise ValueError(f"{name} must be (low, high) with low < high, got {rng!r}")
+    return float(lo), float(hi)
+
+
+def _range_flags(
+    x: NDArray, z: NDArray, xr: tuple[float, float], zr: tuple[float, float]
+) -> NDArray[np.uint8]:
+    out = (x < xr[0]) | (x > xr[1]) | (z < zr[0]) | (z > zr[1])
+    return out.astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
+
+
+@dataclass(frozen=True)
+class LinearisedQuasiStatic:
+    """Small-motion quasi-static mooring: fairlead tension components linear in the offset.
+
+    H = h0 + dH/dx x + dH/dz z, V = v0 + dV/dx x + dV/dz z (the catenary's end stiffness at
+    the mean position), T = hypot(H, V). H <= 0 is flagged SLACK (H clipped to 0, V to >= 0);
+    positions outside ``x_range`` / ``z_range`` are flagged OUT_OF_RANGE.
+    """
+
+    h0: float
+    v0: float
+    k_hx: float
+    k_hz: float
+    k_vx: float
+    k_vz: float
+    x_range: tuple[float, float] = (-math.inf, math.inf)
+    z_range: tuple[float, float] = (-math.inf, math.inf)
+
+    def __post_init__(self) -> None:
+        for name in ("h0", "v0", "k_hx", "k_hz", "k_vx", "k_vz"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v)):
+                raise ValueError(f"LinearisedQuasiStatic.{name} must be finite, got {v!r}")
+        _check_range("x_range", self.x_range)
+        _check_range("z_range", self.z_range)
+
+    def __call__(self, x: NDArray[np.float64], z: NDArray[np.float64]):
+        h = self.h0 + self.k_hx * x + self.k_hz * z
+        v = self.v0 + self.k_vx * x + self.k_vz * z
+        slack = h <= 0.0
+        h = np.maximum(h, 0.0)
+        v = np.where(slack, np.maximum(v, 0.0), v)
+        flags = _range_flags(x, z, self.x_range, self.z_range)
+        flags |= slack.astype(np.uint8) * np.uint8(Flag.SLACK)
+        return np.hypot(h, v), h, v, flags
+
+
+class CatenaryQuasiStatic:
+    """Quasi-static model from the catenary (models.catenary.TensionTable) of a mooring line
+    around a nominal fairlead position ``span`` (m from the anchor), ``height`` (m above it).
+
+    Positions outside the table are clamped to its edge and flagged OUT_OF_RANGE. SLACK: the
+    horizontal tension vanishes (a slack column). ANCHOR_LIFTED: the line pulls the anchor
+    up by more than ``anchor_uplift_limit_N`` (vertical equilibrium of the whole line:
+    V_anchor = max(0, V_top - line weight), friction being horizontal).
+    """
+
+    def __init__(
+        self,
+        table: TensionTable,
+        span: float,
+        height: float,
+        anchor_uplift_limit_N: float = 0.0,
+    ):
+        if not (table.x[0] <= span <= table.x[-1] and table.z[0] <= height <= table.z[-1]):
+            raise ValueError(
+                f"nominal fairlead (span {span!r}, height {height!r}) is outside the table"
+            )
+        if not anchor_uplift_limit_N >= 0:
+            raise ValueError(f"anchor_uplift_limit_N must be >= 0, got {anchor_uplift_limit_N!r}")
+        self.table = table
+        self.span = float(span)
+        self.height = float(height)
+        self.anchor_uplift_limit_N = float(anchor_uplift_limit_N)
+        self._line_weight = table.line.weight
+        self._box = (table.x[0], table.x[-1], table.z[0], table.z[-1])
+
+    def __call__(self, x_offset: NDArray[np.float64], z_heave: NDArray[np.float64]):
+        x0, x1, z0, z1 = self._box
+        xs = self.span + x_offset
+        zs = self.height + z_heave
+        xc = np.clip(xs, x0, x1)
+        zc = np.clip(zs, z0, z1)
+        f = self.table.forces(xc, zc)
+        flags = ((xc != xs) | (zc != zs)).astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
+        flags |= (f.h <= 0.0).astype(np.uint8) * np.uint8(Flag.SLACK)
+        lifted = f.v - self._line_weight > self.anchor_uplift_limit_N
+        flags |= lifted.astype(np.uint8) * np.uint8(Flag.ANCHOR_LIFTED)
+        return f.t, f.h, f.v, flags
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Static description of the mooring line for the dynamic increments (SI units).
+
+    span: nominal horizontal anchor -> fairlead distance (m); height: fairlead above the
+    anchor at zero heave (m); line_length (m); mass_per_length: in-air mass (kg/m) for axial
+    inertia; ea: axial stiffness (N, inf = inextensible); axial_model: "finite" | "infinite" | "none"; drag: the
+    jerk model (None: off); flat_cord_max_deg: top angle above which FLAT_CORD is flagged when
+    the jerk model is on; imu_f_cut: high-pass corner (Hz) of the IMU integrator.
+    """
+
+    dt: float
+    span: float
+    height: float
+    line_length: float
+    mass_per_length: float
+    ea: float
+    axial_model: str = "finite"
+    drag: ElasticDragCord | None = None
+    flat_cord_max_deg: float = 45.0
+    imu_f_cut: float = 0.03
+
+    def __post_init__(self) -> None:
+        for name in ("dt", "span", "height", "line_length", "mass_per_length", "ea"):
+            v = getattr(self, name)
+            finite = math.isfinite(v) if name != "ea" else not math.isnan(v)
+            if not (isinstance(v, (int, float)) and finite and v > 0):
+                raise ValueError(f"EstimatorConfig.{name} must be finite and > 0, got {v!r}")
+        if self.axial_model == "infinite" and math.isinf(self.ea):
+            raise ValueError("EstimatorConfig.axial_model 'infinite' needs a finite ea")
+        if self.axial_model not in ("finite", "infinite", "none"):
+            raise ValueError(
+                "EstimatorConfig.axial_model must be finite|infinite|none, "
+                f"got {self.axial_model!r}"
+            )
+        if not 0 < self.flat_cord_max_deg <= 90:
+            raise ValueError(
+                "EstimatorConfig.flat_cord_max_deg must be in (0, 90], "
+                f"got {self.flat_cord_max_deg!r}"
+            )
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Per-sample estimate (N) and its parts; ``flags`` are :class:`Flag` bits (uint8)."""
+
+    tension: NDArray[np.float64]
+    quasi_static: NDArray[np.float64]
+    axial: NDArray[np.float64]
+    drag: NDArray[np.float64]
+    top_angle: NDArray[np.float64]
+    flags: NDArray[np.uint8]
+
+
+@dataclass
+class EstimatorState:
+    """Everything the estimator carries between blocks (JSON-ready via to_dict/from_dict).
+
+    history: last two (surge, sway, heave) positions, oldest first, or None at stream start;
+    jerk_y: the jerk ODE state V|V| (m^2/s^2); imu: the IMU integrator memory, if used.
+    """
+
+    history: list[list[float]] | None = None
+    jerk_y: float = 0.0
+    samples_seen: int = 0
+    imu: dict | None = field(default=None)
+
+    def to_dict(self) -> dict:
+        return {
+            "history": self.history,
+            "jerk_y": self.jerk_y,
+            "samples_seen": self.samples_seen,
+            "imu": self.imu,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> EstimatorState:
+        hist = d.get("history")
+        if hist is not None:
+            arr = np.asarray(hist, dtype=float)
+            if arr.shape != (2, 3) or not np.all(np.isfinite(arr)):
+                raise ValueError(
+                    "estimator state history must be 2 finite (surge, sway, heave) rows"
+                )
+            hist = arr.tolist()
+        y = float(d.get("jerk_y", 0.0))
+        if not math.isfinite(y):
+            raise ValueError(f"estimator state jerk_y must be finite, got {y!r}")
+        seen = int(d.get("samples_seen", 0))
+        return cls(history=hist, jerk_y=y, samples_seen=seen, imu=d.get("imu"))
+
+
+def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be a 1-D array")
+    if n is not None and arr.size != n:
+        raise ValueError(f"{name} has {arr.size} samples, expected {n}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+_AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
+
+
+@numba.njit(cache=True)
+def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain, drag_on,
+                  drag_k, drag_b, y0, tan_flat, total, axial, drag, angle):
+    """Per-sample dynamic increments (see the module docstring); returns the jerk state.
+
+    p: (3, n + 2) surge, sway, heave with the two previous samples first.
+    """
+    inv_dt = 1.0 / dt
+    y = y0
+    xs = span + p[0, 1]
+    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
+    for i in range(t_qs.size):
+        j = i + 2
+        xs = span + p[0, j]
+        ys = p[1, j]
+        hor = math.sqrt(xs * xs + ys * ys)
+        tq, hi, vi = t_qs[i], h[i], v[i]
+        f = flags[i]
+        a_i = 0.0
+        if axial_mode != 0:
+            if axial_mode == 1:  # short line: inertia of a third of the line, acceleration
+                s0 = (p[0, j] - 2.0 * p[0, j - 1] + p[0, j - 2]) * inv_dt * inv_dt
+                s1 = (p[1, j] - 2.0 * p[1, j - 1] + p[1, j - 2]) * inv_dt * inv_dt
+                s2 = (p[2, j] - 2.0 * p[2, j - 1] + p[2, j - 2]) * inv_dt * inv_dt
+            else:  # non-reflecting line: impedance, velocity
+                s0 = (p[0, j] - p[0, j - 1]) * inv_dt
+                s1 = (p[1, j] - p[1, j - 1]) * inv_dt
+                s2 = (p[2, j] - p[2, j - 1]) * inv_dt
+            if tq > 0.0 and hor > 0.0:
+                a_i = axial_gain * ((hi / tq) * (xs * s0 + ys * s1) / hor + (vi / tq) * s2)
+        d_i = 0.0
+        if drag_on:
+            zc = height + p[2, j]
+            chord = math.sqrt(hor * hor + zc * zc)
+            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
+            chord_prev = chord
+            d_i = drag_k * y
+            if vi > tan_flat * hi:
+                f |= 4  # Flag.FLAT_CORD
+        tot = tq + a_i + d_i
+        if tot <= 0.0:
+            tot = 0.0
+            f |= 1  # Flag.SLACK
+        total[i] = tot
+        axial[i] = a_i
+        drag[i] = d_i
+        angle[i] = math.atan2(vi, hi)
+        flags[i] = f
+    return y
+
+
+class MotionTensionEstimator:
+    """Streaming motion -> tension estimator; feed blocks, save and restore its state.
+
+    >>> est = MotionTensionEstimator(config, quasi_static)
+    >>> out = est.update(heave, surge, sway)          # displacements (m)
+    >>> out = est.update_accel(ax, ay, az)            # or IMU accelerations (m/s^2)
+    >>> saved = est.state.to_dict()                   # JSON-ready
+    >>> est2 = MotionTensionEstimator(config, quasi_static, EstimatorState.from_dict(saved))
+    """
+
+    def __init__(
+        self,
+        config: EstimatorConfig,
+        quasi_static: QuasiStatic,
+        state: EstimatorState | None = None,
+    ):
+        self.config = config
+        self.quasi_static = quasi_static
+        st = state if state is not None else EstimatorState()
+        self._hist = None if st.history is None else np.asarray(st.history, dtype=float).T.copy()
+        self._jerk_y = float(st.jerk_y)
+        self._seen = int(st.samples_seen)
+        self._imu_saved = st.imu
+        self._imu: DisplacementIntegrator | None = None
+        c = config
+        self._axial_mode = _AXIAL_MODES[c.axial_model]
+        if c.axial_model == "finite":
+            self._axial_gain = finite_line_added_mass(c.mass_per_length, c.line_length)
+        elif c.axial_model == "infinite":
+            self._axial_gain = axial_impedance(c.ea, c.mass_per_length)
+        else:
+            self._axial_gain = 0.0
+        self._tan_flat = math.tan(math.radians(c.flat_cord_max_deg))
+        if c.drag is None:
+            self._drag_k, self._drag_b = 0.0, math.inf
+        else:
+            self._drag_k = c.drag.tension_coefficient
+            self._drag_b = c.dt / c.drag.mu if c.drag.mu > 0 else math.inf
+
+    @property
+    def state(self) -> EstimatorState:
+        """A snapshot of the stream state (history, jerk ODE, IMU filter memory)."""
+        return EstimatorState(
+            history=None if self._hist is None else self._hist.T.tolist(),
+            jerk_y=self._jerk_y,
+            samples_seen=self._seen,
+            imu=self._imu.state() if self._imu is not None else self._imu_saved,
+        )
+
+    # ------------------------------------------------------------------ inputs
+    def update(
+        self,
+        heave: ArrayLike,
+        surge: ArrayLike,
+        sway: ArrayLike,
+        heading_deg: ArrayLike | None = None,
+    ) -> Estimate:
+        """Estimate tension for a block of displacements (m) in the motion frame.
+
+        ``heading_deg`` (optional, scalar or per sample): angle of the input's x-axis from the
+        mooring's mean direction, counter-clockwise; the horizontal inputs are rotated into
+        the mooring frame first (for buoy-frame displacements).
+        """
+        z = _as_block("heave", heave, None)
+        x = _as_block("surge", surge, z.size)
+        y = _as_block("sway", sway, z.size)
+        if heading_deg is not None:
+            x, y = _rotate(x, y, heading_deg, z.size)
+        return self._estimate(x, y, z, settling=None)
+
+    def update_accel(
+        self,
+        accel_x: ArrayLike,
+        accel_y: ArrayLike,
+        accel_z: ArrayLike,
+        heading_deg: ArrayLike | None = None,
+    ) -> Estimate:
+        """As :meth:`update` from IMU accelerations (m/s^2, gravity removed, motion frame),
+        double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
+        Samples before the integrator has settled are flagged SETTLING."""
+        az = _as_block("accel_z", accel_z, None)
+        a = np.empty((3, az.size))
+        a[0] = _as_block("accel_x", accel_x, az.size)
+        a[1] = _as_block("accel_y", accel_y, az.size)
+        a[2] = az
+        if self._imu is None:
+            self._imu = DisplacementIntegrator(self.config.dt, self.config.imu_f_cut, channels=3)
+            if self._imu_saved is not None:
+                self._imu.load_state(self._imu_saved)
+        start = self._imu.samples_seen
+        d = self._imu.update(a)
+        settle_n = int(self._imu.settle_time_s / self.config.dt)
+        settling = (start + np.arange(az.size)) < settle_n
+        x, y = d[0], d[1]
+        if heading_deg is not None:
+            x, y = _rotate(x, y, heading_deg, az.size)
+        return self._estimate(x, y, d[2], settling)
+
+    # ------------------------------------------------------------------ core
+    def _estimate(self, x, y, z, settling) -> Estimate:
+        c = self.config
+        n = z.size
+        if n == 0:
+            e = np.empty(0)
+            return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
+        p = np.empty((3, n + 2))
+        p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
+        fresh = self._hist is None
+        p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
+        x_off = np.hypot(c.span + x, y) - c.span
+        t_qs, h, v, qflags = self.quasi_static(x_off, z)
+        flags = np.array(qflags, dtype=np.uint8)
+        total, axial, drag, angle = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        self._jerk_y = _dynamic_core(
+            p, c.span, c.height, c.dt,
+            np.ascontiguousarray(t_qs, dtype=float), np.ascontiguousarray(h, dtype=float),
+            np.ascontiguousarray(v, dtype=float), flags,
+            self._axial_mode, self._axial_gain, c.drag is not None, self._drag_k, self._drag_b,
+            self._jerk_y, self._tan_flat, total, axial, drag, angle,
+        )
+        if settling is not None:
+            flags[settling] |= np.uint8(Flag.SETTLING)
+        if fresh:
+            flags[:2] |= np.uint8(Flag.SETTLING)
+        self._hist = p[:, -2:].copy()
+        self._seen += n
+        return Estimate(total, np.asarray(t_qs, dtype=float), axial, drag, angle, flags)
+
+
+def _rotate(x, y, heading_deg, n):
+    hd = np.asarray(heading_deg, dtype=float)
+    if not np.all(np.isfinite(hd)) or hd.ndim > 1 or (hd.ndim == 1 and hd.size != n):
+        raise ValueError("heading_deg must be finite, a scalar or one value per sample")
+    ch, sh = np.cos(np.radians(hd)), np.sin(np.radians(hd))
+    return ch * x - sh * y, sh * x + ch * y
+
+
+def catenary_estimator(
+    line: Line,
+    span: float,
+    height: float,
+    dt: float,
+    mass_per_length: float,
+    drag_cd: float,
+    drag_diameter: float,
+    rho: float = 1025.0,
+    x_range: tuple[float, float] = (-3.0, 3.5),
+    z_range: tuple[float, float] = (-2.0, 2.0),
+    table_rtol: float = 1e-3,
+    anchor_uplift_limit_N: float = 0.0,
+    axial_model: str = "finite",
+    jerk: bool = True,
+) -> tuple[EstimatorConfig, CatenaryQuasiStatic]:
+    """Estimator configuration and quasi-static model for a catenary mooring ``line``.
+
+    Builds the catenary TensionTable over the nominal fairlead position plus ``x_range`` /
+    ``z_range`` (m) and the jerk model from the static shape there: span l = ``span``,
+    alpha = sag / chord of the line's profile (:func:`models.dynamics.form_parameter`), EA =
+    the series stiffness of the segments, L / sum(L_i / EA_i) (inextensible segments add no
+    compliance; an all-inextensible line gives mu = 0, seed 001 eq 45). ``jerk=False`` leaves
+    the jerk model out (required for a line that is nearly straight at the nominal position,
+    alpha < 0.01, where the flat-cord drag theory has no meaning).
+    """
+    xr, zr = _check_range("x_range", x_range), _check_range("z_range", z_range)
+    table = TensionTable(
+        line, (span + xr[0], span + xr[1]), (max(height + zr[0], 0.0), height + zr[1]),
+        rtol=table_rtol,
+    )
+    qs = CatenaryQuasiStatic(table, span, height, anchor_uplift_limit_N)
+    prof = solve(line, float(span), float(height)).profile(200)
+    alpha, _ = form_parameter(prof.x, prof.z)
+    compliance = sum(seg.length / seg.ea for seg in line.segments)
+    ea = line.length / compliance if compliance > 0 else math.inf
+    cord = None
+    if jerk:
+        if alpha < 0.01:
+            raise ValueError(
+                f"the line is nearly straight at span {span!r} m (sag/chord {alpha:.4f}): "
+                "the jerk model does not apply; pass jerk=False"
+            )
+        cord = ElasticDragCord(
+            c=drag_constant(drag_cd, drag_diameter, rho), span=float(span),
+            alpha=alpha, axial_stiffness=ea, length=line.length,
+        )
+    cfg = EstimatorConfig(
+        dt=dt, span=float(span), height=float(height), line_length=line.length,
+        mass_per_length=mass_per_length, ea=ea,
+        axial_model=axial_model, drag=cord,
+    )
+    return cfg, qs
+
+
+def seed004_estimator(
+    dt: float = 0.05, span: float = 29.0, **options
+) -> tuple[EstimatorConfig, CatenaryQuasiStatic]:
+    """The VAPS mooring of seed 004 (models.catenary.vaps_mooring, 23 m) with a fairlead at
+    ``span`` m from the anchor. ASSUMPTIONS (the report gives none of these): mean offset
+    29 m (the 40 m line then holds ~220 N and goes taut ~3.5 m further out); drag on the
+    bare 31 mm cable, C_D = 1.2, fresh water; in-air mass 1.10 kg/m (as the catenary
+    module assumes); anchor uplift capacity 1000 N (the floated line lifts the anchor by
+    ~575 N at rest, by design). ``options`` override :func:`catenary_estimator` arguments."""
+    kw = dict(mass_per_length=1.10, drag_cd=1.2, drag_diameter=0.031, rho=1000.0,
+              anchor_uplift_limit_N=1000.0)
+    kw.update(options)
+    return catenary_estimator(vaps_mooring(), span, VAPS_DEPTH, dt, **kw)
+
+
+def simulate_tension(
+    heave: ArrayLike,
+    surge: ArrayLike,
+    sway: ArrayLike,
+    config: EstimatorConfig,
+    quasi_static: QuasiStatic,
+) -> Estimate:
+    """Batch tension series for a whole motion record (e.g. :func:`models.waves.buoy_motion`),
+    sampled at ``config.dt``: one call of a fresh estimator."""
+    return MotionTensionEstimator(config, quasi_static).update(heave, surge, sway)

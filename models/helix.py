@@ -1,0 +1,304 @@
+"""Helical conductor stress in a centre-core electro-mechanical cable.
+
+Seed 004 (VAPS mooring cable study, 1981), Appendix 4 and programs CABLE1/2/3, after
+Knapp (1975). A wire-rope core carries the tension T (times ``core_load_share``); it
+stretches by e_c = T / (A_c E_c) and twists by theta = G_c T P over one helix pitch P.
+The conductor helix (radius R, circumference C = 2 pi R, lay angle a = atan(C / P)) is
+deformed to pitch P' = P (1 + e_c) and circumference C' = 2 pi R' +/- R' theta, with
+``+`` when the conductor lay has the same hand as the core twist (the VAPS failure
+case: both left) and ``-`` when opposite. The strained lay angle is a' = atan(C' / P').
+
+Axial (Knapp) stress, App. 4:      sigma_a = E_i | cos(a) / cos(a') (1 + e_c) - 1 |
+Bending stress, App. 4:            sigma_b = E_i d/(2R) sin(a) [sin(a') - sin(a) cos(a) (1 + e_c) / cos(a')]
+Shear stress from twist, App. 4:   tau = E_i / (2 (1 + nu)) | d sin(a) cos(a) / (2R) [cos(a')/cos(a) - cos(a)/cos(a') (1 + e_c)] |
+Ductile combination, App. 4:       sigma = sqrt((sigma_a + sigma_b)^2 + 3 tau^2)
+
+The primes in the bending and shear formulas are lost in the OCR; they are restored so
+that both terms vanish in the unstrained cable. The seed states these terms are of order
+1e-3 of the axial term for its cable and neglects them; so does the default here.
+
+Since cos(a) / cos(a') = cos(a) sqrt(1 + tan^2 a'), the axial term is evaluated as
+E_i | cos(a) sqrt((1 + e_c)^2 + (C' / P)^2) - 1 |, which needs no trigonometry per sample
+(the hot path of the monitor evaluates it at every tension sample).
+
+Public API
+----------
+- ``HelixCable`` (frozen dataclass), ``HelixCable.vaps_biw()``
+- ``conductor_stress(tension_N, cable, lay="left", combined=False, backend="auto") -> ndarray``
+  [Pa]; NaN/inf tension raises ValueError
+- ``tension_for_stress(stress_Pa, cable, lay="left") -> ndarray`` [N], the inverse
+  ("equivalent cable load" of the seed's predicted-failure table)
+- ``cable_load(tension_N, stress_Pa, cable) -> ndarray`` [N], CABLE2/3's "cable load"
+- ``sweep_helix_diameter(cable, tension_N, diameters_m) -> HelixSweep`` (CABLE2)
+- ``sweep_pitch(cable, tension_N, pitches_m) -> HelixSweep`` (CABLE3)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+
+from models._jit import compile_loop
+
+Lay = Literal["left", "right"]
+
+
+@dataclass(frozen=True)
+class HelixCable:
+    """A centre-core cable: wire-rope core plus one helical conductor layer (SI units).
+
+    ``core_twist_modulus`` is the core rotation per unit length per unit tension
+    [rad / (N m)]; ``core_twist_hand`` is the hand in which tension twists the core.
+    ``core_compressibility`` [m/N] shrinks the helix radius by c * T (seed 004 takes the
+    core as incompressible, c = 0).
+    """
+
+    core_area_m2: float
+    core_modulus_Pa: float
+    core_twist_modulus: float
+    pitch_m: float
+    helix_radius_m: float
+    conductor_modulus_Pa: float
+    conductor_area_m2: float
+    conductor_wire_diameter_m: float
+    poisson_ratio: float
+    core_twist_hand: Lay = "left"
+    core_load_share: float = 1.0
+    core_compressibility: float = 0.0
+
+    def __post_init__(self) -> None:
+        positive = ("core_area_m2", "core_modulus_Pa", "pitch_m", "helix_radius_m",
+                    "conductor_modulus_Pa", "conductor_area_m2", "conductor_wire_diameter_m")
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise ValueError(f"HelixCable.{name} must be a finite positive number, got {value!r}")
+        if not (np.isfinite(self.core_twist_modulus) and self.core_twist_modulus >= 0):
+            raise ValueError(f"HelixCable.core_twist_modulus must be >= 0, got {self.core_twist_modulus!r}")
+        if not (0.0 < self.core_load_share <= 1.0):
+            raise ValueError(f"HelixCable.core_load_share must be in (0, 1], got {self.core_load_share!r}")
+        if not (np.isfinite(self.core_compressibility) and self.core_compressibility >= 0):
+            raise ValueError(f"HelixCable.core_compressibility must be >= 0, got {self.core_compressibility!r}")
+        if not (-1.0 < self.poisson_ratio < 0.5):
+            raise ValueError(f"HelixCable.poisson_ratio must be in (-1, 0.5), got {self.poisson_ratio!r}")
+        _check_lay(self.core_twist_hand, "core_twist_hand")
+
+    @classmethod
+    def vaps_biw(cls) -> "HelixCable":
+        """The B.I.W. VAPS cable of seed 004, section 4 (conductor E_i = 19.5 GPa).
+
+        The conductor metal area (16 mm^2) is CABLE2's DATA value; the wire diameter
+        (0.07 mm) is App. 4's figure for #22 AWG as printed; Poisson's ratio 0.34 is a
+        handbook value for copper (the seed gives none).
+        """
+        return cls(core_area_m2=42.1e-6, core_modulus_Pa=81.4e9, core_twist_modulus=24.4e-6,
+                   pitch_m=0.174, helix_radius_m=9.2e-3, conductor_modulus_Pa=19.5e9,
+                   conductor_area_m2=16.0e-6, conductor_wire_diameter_m=0.07e-3,
+                   poisson_ratio=0.34, core_twist_hand="left")
+
+    @property
+    def lay_angle_rad(self) -> float:
+        """Unstrained lay angle a = atan(2 pi R / P)."""
+        return float(np.arctan(2.0 * np.pi * self.helix_radius_m / self.pitch_m))
+
+    @cached_property
+    def _axial_coefficients(self) -> tuple[float, float, float, float]:
+        # (k, tan a, cos a, R G_c) so that e_c = k T and C'/P = tan a +/- R G_c T (c = 0)
+        k = self.core_load_share / (self.core_area_m2 * self.core_modulus_Pa)
+        tan_a = 2.0 * np.pi * self.helix_radius_m / self.pitch_m
+        cos_a = 1.0 / np.sqrt(1.0 + tan_a * tan_a)
+        rg = self.helix_radius_m * self.core_twist_modulus * self.core_load_share
+        return float(k), float(tan_a), float(cos_a), float(rg)
+
+
+@dataclass(frozen=True)
+class HelixSweep:
+    """Result of a CABLE2/CABLE3-style design sweep at one core tension (SI units)."""
+
+    helix_diameter_m: np.ndarray
+    pitch_m: np.ndarray
+    lay_angle_deg: np.ndarray
+    lay_takeup: np.ndarray
+    stress_left_Pa: np.ndarray
+    stress_right_Pa: np.ndarray
+    cable_load_left_N: np.ndarray
+    cable_load_right_N: np.ndarray
+
+
+def _check_lay(lay: str, what: str = "lay") -> None:
+    if lay not in ("left", "right"):
+        raise ValueError(f"{what} must be 'left' or 'right', got {lay!r}")
+
+
+def _as_tension(tension_N: np.ndarray | float) -> np.ndarray:
+    return _check_finite(np.asarray(tension_N, dtype=np.float64))
+
+
+def _check_finite(t: np.ndarray) -> np.ndarray:
+    if not np.all(np.isfinite(t)):
+        raise ValueError("tension_N contains NaN or inf")
+    return t
+
+
+def _strained_geometry(t: np.ndarray, cable: HelixCable, sign: float, pitch, radius):
+    """e_c, a, a' for tension t (broadcast against pitch and radius arrays)."""
+    share_t = cable.core_load_share * t
+    e_c = share_t / (cable.core_area_m2 * cable.core_modulus_Pa)
+    theta = cable.core_twist_modulus * share_t * pitch
+    r_strained = radius - cable.core_compressibility * share_t
+    a = np.arctan(2.0 * np.pi * radius / pitch)
+    a_s = np.arctan((2.0 * np.pi * r_strained + sign * r_strained * theta) / (pitch * (1.0 + e_c)))
+    return e_c, a, a_s
+
+
+def _lay_sign(lay: str, cable: HelixCable) -> float:
+    _check_lay(lay)
+    return 1.0 if lay == cable.core_twist_hand else -1.0
+
+
+def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay = "left",
+                     combined: bool = False, backend: Literal["auto", "numba", "numpy"] = "auto") -> np.ndarray:
+    """Conductor stress [Pa] for cable tension(s) ``tension_N`` [N] (seed 004 App. 4).
+
+    ``lay`` is the conductor lay hand; it tightens the helix when equal to
+    ``cable.core_twist_hand``. ``combined=False`` returns the axial (Knapp) stress,
+    ``combined=True`` the ductile combination sqrt((sa + sb)^2 + 3 tau^2).
+    Vectorised: returns a float64 array of the shape of ``tension_N``. The axial path
+    runs as one compiled loop when numba is available (``backend``), else as numpy;
+    both evaluate the same expression in the same order.
+    """
+    sign = _lay_sign(lay, cable)
+    t = np.asarray(tension_N, dtype=np.float64)
+    if combined or cable.core_compressibility != 0.0:
+        return _stress_general(_check_finite(t), cable, sign, cable.pitch_m, cable.helix_radius_m, combined)
+    k, tan_a, cos_a, rg = cable._axial_coefficients
+    if backend != "numpy" and _axial_compiled is not None:
+        flat = t.reshape(-1)
+        out = np.empty(flat.size)
+        bad = _axial_compiled(flat, k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa, out)
+    elif backend in ("auto", "numpy"):
+        # E |cos a * sqrt((1 + e_c)^2 + (C'/P)^2) - 1|; both terms are O(1): no overflow
+        a = 1.0 + k * t
+        b = tan_a + (sign * rg) * t
+        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * cable.conductor_modulus_Pa
+        bad = _first_bad(out.reshape(-1))
+    else:
+        raise ValueError(f"backend {backend!r} is not available")
+    if bad >= 0:
+        raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {bad})")
+    return out.reshape(t.shape)
+
+
+def _first_bad(out: np.ndarray) -> int:
+    """Index of the first non-finite stress (a NaN/inf tension propagates to it), or -1."""
+    if np.isfinite(np.sum(out)):
+        return -1
+    return int(np.flatnonzero(~np.isfinite(out))[0])
+
+
+def _axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
+    """Compiled twin of the numpy axial expression; returns the first bad index or -1.
+
+    The arithmetic loop has no branch so it vectorises; a NaN or inf tension shows up as
+    a non-finite stress, found by the second loop.
+    """
+    for i in range(t.shape[0]):
+        a = 1.0 + k * t[i]
+        b = tan_a + rg_signed * t[i]
+        out[i] = abs(cos_a * math.sqrt(a * a + b * b) - 1.0) * e_mod
+    for i in range(t.shape[0]):
+        if not math.isfinite(out[i]):
+            return i
+    return -1
+
+
+_axial_compiled = compile_loop(_axial_loop)
+
+
+def _stress_general(t: np.ndarray, cable: HelixCable, sign: float, pitch, radius,
+                    combined: bool) -> np.ndarray:
+    e_c, a, a_s = _strained_geometry(t, cable, sign, pitch, radius)
+    e_i = cable.conductor_modulus_Pa
+    strain_ratio = np.cos(a) / np.cos(a_s) * (1.0 + e_c)
+    sigma_a = e_i * np.abs(strain_ratio - 1.0)
+    if not combined:
+        return sigma_a
+    d_over_2r = cable.conductor_wire_diameter_m / (2.0 * radius)
+    sigma_b = e_i * d_over_2r * np.sin(a) * (np.sin(a_s) - np.sin(a) * strain_ratio)
+    g_i = e_i / (2.0 * (1.0 + cable.poisson_ratio))
+    tau = g_i * np.abs(d_over_2r * np.sin(a) * np.cos(a) * (np.cos(a_s) / np.cos(a) - strain_ratio))
+    return np.sqrt((sigma_a + sigma_b) ** 2 + 3.0 * tau ** 2)
+
+
+def cable_load(tension_N: np.ndarray | float, stress_Pa: np.ndarray | float,
+               cable: HelixCable) -> np.ndarray:
+    """CABLE2/3 "cable load" [N]: core load plus conductor stress times conductor area.
+
+    The listings multiply by COS(Alf) with Alf never assigned (= 0), i.e. by 1; so here.
+    """
+    return np.asarray(tension_N, dtype=np.float64) + np.asarray(stress_Pa) * cable.conductor_area_m2
+
+
+def tension_for_stress(stress_Pa: np.ndarray | float, cable: HelixCable, lay: Lay = "left",
+                       max_tension_N: float = 1e7) -> np.ndarray:
+    """Core tension [N] at which the axial conductor stress equals ``stress_Pa``.
+
+    The inverse of ``conductor_stress`` on [0, max_tension_N], where the stress grows
+    monotonically with tension for practical cables; solved by vectorised bisection to
+    machine precision. Used for the seed's "equivalent cable load" column.
+    """
+    s = np.asarray(stress_Pa, dtype=np.float64)
+    if not np.all(np.isfinite(s)) or np.any(s < 0):
+        raise ValueError("stress_Pa must be finite and >= 0")
+    top = conductor_stress(max_tension_N, cable, lay)
+    if np.any(s > top):
+        raise ValueError(f"stress_Pa exceeds the stress at max_tension_N={max_tension_N} N ({top:.6g} Pa)")
+    lo = np.zeros_like(s)
+    hi = np.full_like(s, max_tension_N)
+    for _ in range(200):  # bisection halves the bracket: 200 steps exhaust float64
+        mid = 0.5 * (lo + hi)
+        below = conductor_stress(mid, cable, lay) < s
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+        if np.all(hi - lo <= 4 * np.finfo(float).eps * np.maximum(hi, 1.0)):
+            break
+    return 0.5 * (lo + hi)
+
+
+def _sweep(cable: HelixCable, tension_N: float, pitch: np.ndarray, radius: np.ndarray) -> HelixSweep:
+    t = _as_tension(tension_N)
+    pitch = np.asarray(pitch, dtype=np.float64)
+    radius = np.asarray(radius, dtype=np.float64)
+    if np.any(pitch <= 0) or np.any(radius <= 0):
+        raise ValueError("pitches and helix diameters must be positive")
+    stresses = {lay: _stress_general(t, cable, _lay_sign(lay, cable), pitch, radius, False)
+                for lay in ("left", "right")}
+    circumference = 2.0 * np.pi * radius
+    pitch_b, radius_b = np.broadcast_arrays(pitch, radius)
+    return HelixSweep(
+        helix_diameter_m=2.0 * radius_b,
+        pitch_m=pitch_b,
+        lay_angle_deg=np.degrees(np.arctan(circumference / pitch)),
+        lay_takeup=np.hypot(pitch, circumference) / pitch,
+        stress_left_Pa=stresses["left"],
+        stress_right_Pa=stresses["right"],
+        cable_load_left_N=cable_load(t, stresses["left"], cable),
+        cable_load_right_N=cable_load(t, stresses["right"], cable),
+    )
+
+
+def sweep_helix_diameter(cable: HelixCable, tension_N: float, diameters_m: np.ndarray) -> HelixSweep:
+    """CABLE2: conductor stress versus helix diameter at the cable's pitch and one tension."""
+    return _sweep(cable, tension_N, np.full(np.shape(diameters_m), cable.pitch_m),
+                  0.5 * np.asarray(diameters_m, dtype=np.float64))
+
+
+def sweep_pitch(cable: HelixCable, tension_N: float, pitches_m: np.ndarray) -> HelixSweep:
+    """CABLE3: conductor stress versus pitch at the cable's helix radius and one tension."""
+    pitches = np.asarray(pitches_m, dtype=np.float64)
+    return _sweep(cable, tension_N, pitches, np.full(pitches.shape, cable.helix_radius_m))
+
