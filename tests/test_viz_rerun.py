@@ -1,4 +1,5 @@
-"""The Rerun sink: write an .rrd, read it back with rerun's chunk reader, check entities and values."""
+"""The Rerun sink: write an .rrd, read it back with rerun's chunk reader, check entities and
+values."""
 
 from __future__ import annotations
 
@@ -196,8 +197,9 @@ def test_position_watch_circle_and_cable_shape(tmp_path):
 
     def gnss(sink, k, step):
         if k == 3:
+            fix = {"lat_deg": np.array([45.0]), "lon_deg": np.array([-69.9995])}
             sink.on_block(SampleBlock("B1", "gnss", np.array([step.now_ns - 10], dtype=np.int64),
-                                      {"lat_deg": np.array([45.0]), "lon_deg": np.array([-69.9995])}))
+                                      fix))
 
     data, steps = record(tmp_path, opts, extra=gnss)
     (east, north), = data["position/buoy"]["Points2D:positions"][0]
@@ -247,7 +249,8 @@ def test_options_errors_name_the_key():
 
 def test_rrd_verifies_with_rerun_cli_and_has_blueprint(tmp_path):
     record(tmp_path, RerunOptions())
-    out = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "stats", str(tmp_path / "run.rrd")],
+    out = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "stats",
+                          str(tmp_path / "run.rrd")],
                          capture_output=True, text=True, timeout=120,
                          env=analytics_disabled_env(tmp_path / "cfg"))
     assert out.returncode == 0, out.stderr

@@ -31,8 +31,9 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"buoymon report: {exc}", file=sys.stderr)
         return 2
-    log.info("report written", extra={"fields": {"html": str(rendered.html_path),
-                                                 "png": [str(p) for p in rendered.png_paths.values()]}})
+    pngs = [str(p) for p in rendered.png_paths.values()]
+    log.info("report written",
+             extra={"fields": {"html": str(rendered.html_path), "png": pngs}})
     print(f"report: {rendered.html_path} (open it in a browser); plots: "
           f"{', '.join(p.name for p in rendered.png_paths.values())}")
     return 0

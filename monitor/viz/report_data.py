@@ -169,7 +169,8 @@ def _alert(i: int, a: Any) -> Alert:
 def parse_report(data: Any) -> Report:
     """Check a decoded report and convert it; ValueError names the first bad field."""
     d = _mapping(data, "top level")
-    for key in ("buoy_id", "time_start", "time_end", "samples", "tension_N", "components", "alerts"):
+    for key in ("buoy_id", "time_start", "time_end", "samples", "tension_N", "components",
+                "alerts"):
         if key not in d:
             raise ValueError(f"report: required field {key!r} is missing")
     samples = {}

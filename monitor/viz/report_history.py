@@ -109,7 +109,8 @@ class ReportHistory:
         if len(tb.idx):
             out["tension_history"] = {
                 "t_s": tb.t_s.tolist(), "min": tb.cols["min"].tolist(),
-                "mean": (tb.cols["sum"] / tb.cols["count"]).tolist(), "max": tb.cols["max"].tolist()}
+                "mean": (tb.cols["sum"] / tb.cols["count"]).tolist(),
+                "max": tb.cols["max"].tolist()}
         comps: dict[str, Any] = {}
         for name, d in self._damage.items():
             hist = self._hist[name]

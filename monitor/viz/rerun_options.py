@@ -68,8 +68,10 @@ class RerunOptions:
         for name in ("envelope_s", "slow_interval_s", "snapshot_interval_s", "shape_interval_s",
                      "flush_interval_s", "watch_circle_m"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-                raise ValueError(f"config error: rerun.{name} = {v!r}: must be a finite number >= 0")
+            if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                    or v < 0):
+                raise ValueError(
+                    f"config error: rerun.{name} = {v!r}: must be a finite number >= 0")
         for name, limit in (("anchor_lat_deg", 90.0), ("anchor_lon_deg", 180.0),
                             ("bearing_deg", 360.0)):
             v = getattr(self, name)
@@ -80,7 +82,8 @@ class RerunOptions:
                                  f"[-{limit:g}, {limit:g}]")
         if not isinstance(self.flush_samples, int) or self.flush_samples < 1:
             raise ValueError(
-                f"config error: rerun.flush_samples = {self.flush_samples!r}: must be an integer >= 1"
+                f"config error: rerun.flush_samples = {self.flush_samples!r}: "
+                "must be an integer >= 1"
             )
         for name in ("range_edges_Pa", "mean_edges_Pa"):
             edges = check_edges(getattr(self, name), f"config error: rerun.{name}")
@@ -94,8 +97,10 @@ class RerunOptions:
                 raise ValueError(
                     f"config error: rerun.{name} = {getattr(self, name)!r}: must be a string")
         if not isinstance(self.serve_web, bool):
-            raise ValueError(f"config error: rerun.serve_web = {self.serve_web!r}: must be true/false")
-        if self.connect and not self.connect.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+            raise ValueError(
+                f"config error: rerun.serve_web = {self.serve_web!r}: must be true/false")
+        schemes = ("rerun://", "rerun+http://", "rerun+https://")
+        if self.connect and not self.connect.startswith(schemes):
             raise ValueError(
                 f"config error: rerun.connect = {self.connect!r}: must be a rerun:// or "
                 "rerun+http(s):// URL, e.g. rerun+http://127.0.0.1:9876/proxy"
@@ -107,7 +112,8 @@ class RerunOptions:
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(section) - known)
         if unknown:
-            raise ValueError(f"config error: rerun.{unknown[0]}: unknown key (known: {sorted(known)})")
+            raise ValueError(
+                f"config error: rerun.{unknown[0]}: unknown key (known: {sorted(known)})")
         return cls(**section)
 
     def for_replay(self) -> "RerunOptions":

@@ -285,7 +285,8 @@ class RerunSink:
         health[1] += int(sum(step.rejected.values()))
         if step.load_source != self._source:
             self._source = step.load_source
-            self._rows[("tension/source", "state")].add(step.now_ns, self._samples, step.load_source)
+            self._rows[("tension/source", "state")].add(step.now_ns, self._samples,
+                                                        step.load_source)
         for record in step.alerts:
             self.on_alert(record)
         t = int(step.now_ns)
