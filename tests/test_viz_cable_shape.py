@@ -5,15 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-catenary = pytest.importorskip(
-    "models.catenary_inverse", reason="models.catenary (issue 4) has not landed on this branch")
-
-from models.catenary import VAPS_DEPTH, solve, vaps_mooring  # noqa: E402
-from monitor.viz.cable_shape import catenary_shape_provider  # noqa: E402
-from monitor.viz.rerun_options import RerunOptions  # noqa: E402
-from monitor.viz.rerun_outputs import open_recording  # noqa: E402
-from monitor.viz.rerun_sink import RerunSink  # noqa: E402
-from tests.viz_helpers import make_steps, read_rrd  # noqa: E402
+from models.catenary import VAPS_DEPTH, solve, vaps_mooring
+from monitor.viz.cable_shape import catenary_shape_provider
+from monitor.viz.rerun_options import RerunOptions
+from monitor.viz.rerun_outputs import open_recording
+from monitor.viz.rerun_sink import RerunSink
+from tests.viz_helpers import make_steps, read_rrd
 
 
 def test_profile_ends_at_the_fairlead_with_the_requested_tension(tmp_path):

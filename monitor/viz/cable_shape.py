@@ -8,18 +8,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from models.catenary import Line, span_from_top_tension
 from monitor.viz.rerun_sink import ShapeProvider
 
 
-def catenary_shape_provider(line, height_m: float, n_points: int = 40) -> ShapeProvider:
+def catenary_shape_provider(line: Line, height_m: float, n_points: int = 40) -> ShapeProvider:
     """A :data:`~monitor.viz.rerun_sink.ShapeProvider` for a ``models.catenary.Line``.
 
     ``height_m`` is the fairlead height above the anchor (the water depth for a surface buoy).
     The returned callable raises ValueError for a tension the line cannot have (the sink then
     skips that frame).
     """
-    from models.catenary_inverse import span_from_top_tension
-
     if not np.isfinite(height_m) or height_m <= 0:
         raise ValueError(f"cable shape: fairlead height {height_m!r} m must be > 0")
 
