@@ -7,7 +7,7 @@ import pytest
 
 from monitor.viz.html_report import write_report
 from monitor.viz.report_data import parse_report
-from monitor.viz.report_history import ReportHistory
+from monitor.viz.report_history import ReportHistory, sn_curve_field
 from tests.viz_helpers import T0_NS, make_steps
 
 
@@ -72,3 +72,23 @@ def test_bad_arguments():
         ReportHistory(max_points=1)
     with pytest.raises(ValueError, match="range_edges_Pa"):
         ReportHistory(range_edges_Pa=(1.0,))
+
+
+def test_sn_curve_field_from_the_fatigue_model():
+    from models.sn_curve import SNCurve
+
+    curve = SNCurve.vaps_copper()
+    f = sn_curve_field(curve, 80e6)
+    r = np.array(f["ranges_Pa"])
+    n = np.array([float(c) for c in f["cycles"]])
+    assert len(r) == 60 and r[0] == pytest.approx(80e3) and r[-1] == pytest.approx(240e6)
+    finite = np.isfinite(n)
+    assert finite.sum() > 10 and np.all(np.diff(n[finite]) < 0)  # fewer cycles at higher range
+    # a Basquin curve by hand: N = 10^log_a / S_MPa^m, S including the derating
+    b = SNCurve.basquin(m=4.0, log_a=12.0, derating=0.5)
+    g = sn_curve_field(b, 100e6, n=3)
+    s_mpa = np.array(g["ranges_Pa"]) * 0.5 / 1e6
+    np.testing.assert_allclose(g["cycles"], 1e12 / s_mpa**4, rtol=1e-12)
+    assert "endurance_Pa" not in g
+    with pytest.raises(ValueError, match="max_range_Pa"):
+        sn_curve_field(b, 0.0)

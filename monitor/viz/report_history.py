@@ -14,8 +14,27 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from models.sn_curve import SNCurve
 from monitor.events import StepResult
 from monitor.viz.cycle_histogram import DEFAULT_RANGE_EDGES_Pa, CycleHistogram, check_edges
+
+def sn_curve_field(curve: SNCurve, max_range_Pa: float, n: int = 60) -> dict[str, Any]:
+    """The report's ``components[name].sn_curve`` for a ``models.sn_curve.SNCurve``: cycles to
+    failure at ``n`` log-spaced nominal zero-mean stress ranges from ``max_range_Pa / 1000`` to
+    ``3 * max_range_Pa``, and the nominal endurance stress when the curve has one."""
+    if not np.isfinite(max_range_Pa) or max_range_Pa <= 0:
+        raise ValueError(f"max_range_Pa = {max_range_Pa!r}: must be > 0")
+    ranges = np.logspace(np.log10(max_range_Pa / 1000.0), np.log10(3.0 * max_range_Pa), n)
+    means = None if curve.mean_correction == "none" else np.zeros_like(ranges)
+    with np.errstate(over="ignore", divide="ignore"):  # N is inf far below the endurance
+        cycles = curve.cycles_to_failure(ranges, means)
+    out: dict[str, Any] = {"ranges_Pa": ranges.tolist(),
+                           # inf (below a cut-off) is written as the JSON-safe string "inf"
+                           "cycles": [c if np.isfinite(c) else "inf" for c in cycles.tolist()]}
+    if curve.endurance_MPa:
+        out["endurance_Pa"] = curve.endurance_MPa * 1e6 / (curve.scf * curve.derating)
+    return out
+
 
 _REDUCERS = {"min": np.minimum.reduceat, "max": np.maximum.reduceat, "sum": np.add.reduceat}
 
