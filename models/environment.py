@@ -17,9 +17,11 @@ any source of sea states:
   (:func:`models.waves.buoy_motion`) through the motion -> tension estimator, rainflow-counted
   (ASTM E1049, package ``rainflow``) and scaled to the row's duration: the dynamic
   estimate instead of the WAVFOR bound.
-* :meth:`LoadCycles.histogram` bins the cycles; :func:`damage` sums Miner damage against an
-  S-N curve (any object with ``cycles_to_failure(range_Pa)``, e.g. models.fatigue.SNCurve)
-  after an optional tension -> stress map (e.g. the helix model).
+* :meth:`LoadCycles.histogram` bins the cycles; :func:`damage` gives the Miner damage of each
+  entry against an S-N curve (``models.fatigue.SNCurve`` or any object with
+  ``damage_per_cycle(range_Pa, counts, mean_Pa)``) after an optional tension -> stress map
+  (e.g. ``models.helix.conductor_stress``); per storm with :func:`damage_per_row`, per year
+  with :func:`annual_damage`.
 """
 
 from __future__ import annotations
@@ -43,8 +45,10 @@ TZ_OVER_TP_JONSWAP = 0.7782
 LoadRange = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]
 
 
-class CyclesToFailure(Protocol):
-    def cycles_to_failure(self, range_Pa: ArrayLike) -> NDArray[np.float64]: ...
+class DamageCurve(Protocol):
+    def damage_per_cycle(
+        self, range_Pa: ArrayLike, counts: ArrayLike = 1.0, mean_Pa: ArrayLike | None = None
+    ) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True)
@@ -142,11 +146,13 @@ def sea_states_from_records(
 
 @dataclass(frozen=True)
 class LoadCycles:
-    """Load cycles as (range, count) pairs; ``row`` = the sea-state row each came from."""
+    """Load cycles as (range, count) pairs (N); ``row`` = the sea-state row each came from;
+    ``means`` = the cycle mean loads (N) where known, else None."""
 
     ranges: NDArray[np.float64]
     counts: NDArray[np.float64]
     row: NDArray[np.int64]
+    means: NDArray[np.float64] | None = None
 
     @property
     def total_cycles(self) -> float:
@@ -182,6 +188,7 @@ def load_cycles(
     tz_over_tp: float = TZ_OVER_TP_JONSWAP,
     n_heights: int = 40,
     max_height_ratio: float = 2.5,
+    zero_to_peak: bool = False,
 ) -> LoadCycles:
     """Waves per sea state and their load ranges (see the module docstring).
 
@@ -189,7 +196,8 @@ def load_cycles(
     (Tz = tz_over_tp x Tp). For ``"rayleigh"`` the individual heights are discretised into
     ``n_heights`` equal bins up to ``max_height_ratio`` x Hs (the tail beyond holds
     exp(-2 x 2.5^2) = 4e-6 of the waves and is put in the last bin), each at its
-    probability-weighted RMS height.
+    probability-weighted RMS height. ``zero_to_peak``: each cycle goes from zero load to its
+    range (mean = range / 2), as seed 004 read its WAVFOR bound and ran its lab test.
     """
     if period_is == "tz":
         tz = table.period
@@ -223,7 +231,7 @@ def load_cycles(
     rng = np.asarray(load_range(h, t), dtype=float)
     if rng.shape != h.shape or not np.all(np.isfinite(rng)) or np.any(rng < 0):
         raise ValueError("load_range must return one finite range >= 0 per wave")
-    return LoadCycles(ranges=rng, counts=n, row=row)
+    return LoadCycles(ranges=rng, counts=n, row=row, means=0.5 * rng if zero_to_peak else None)
 
 
 def simulated_load_cycles(
@@ -244,38 +252,42 @@ def simulated_load_cycles(
     """
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"duration_s must be > 0, got {duration_s!r}")
-    ranges, counts, rows = [], [], []
+    ranges, means, counts, rows = [], [], [], []
     for i in np.flatnonzero((table.hours > 0) & (table.height > 0)):
         m = buoy_motion(float(table.height[i]), float(table.period[i]), duration_s, config.dt,
                         seed + int(i), depth=depth, direction_deg=direction_deg, gamma=gamma)
         est = simulate_tension(m.heave, m.surge, m.sway, config, quasi_static)
-        cyc = np.array([(r, c) for r, _, c, _, _ in rainflow.extract_cycles(est.tension)])
+        cyc = np.array([(r, mn, c) for r, mn, c, _, _ in rainflow.extract_cycles(est.tension)])
         if cyc.size == 0:
             continue
         scale = table.hours[i] * 3600.0 / duration_s
         ranges.append(cyc[:, 0])
-        counts.append(cyc[:, 1] * scale)
+        means.append(cyc[:, 1])
+        counts.append(cyc[:, 2] * scale)
         rows.append(np.full(cyc.shape[0], i))
     if not ranges:
-        return LoadCycles(np.empty(0), np.empty(0), np.empty(0, np.int64))
-    return LoadCycles(np.concatenate(ranges), np.concatenate(counts), np.concatenate(rows))
+        return LoadCycles(np.empty(0), np.empty(0), np.empty(0, np.int64), np.empty(0))
+    return LoadCycles(
+        np.concatenate(ranges), np.concatenate(counts), np.concatenate(rows),
+        np.concatenate(means),
+    )
 
 
 def damage(
     cycles: LoadCycles,
-    sn_curve: CyclesToFailure,
+    sn_curve: DamageCurve,
     to_stress: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
-    """Palmgren-Miner damage of each load cycle entry: counts / N(stress range).
+    """Palmgren-Miner damage of each load-cycle entry: counts / N(stress range).
 
-    ``to_stress`` maps a tension range (N) to a stress range (Pa), e.g. the helix model;
-    None = the ranges are already stresses. Sum the result for the total, or use
-    :func:`damage_per_row` for per-storm figures.
+    ``to_stress`` maps a tension (N) to a stress (Pa), applied to the ranges and, where
+    known, the means (valid for a stress proportional to tension, as the helix model is
+    for T >= 0); None = the loads are already stresses. The S-N curve applies its own
+    factors (scf, derating, dff) and mean-stress correction. Sum the result for the total.
     """
-    s = cycles.ranges if to_stress is None else np.asarray(to_stress(cycles.ranges), dtype=float)
-    n_fail = np.asarray(sn_curve.cycles_to_failure(s), dtype=float)
-    with np.errstate(divide="ignore"):
-        return np.where(np.isinf(n_fail), 0.0, cycles.counts / n_fail)
+    conv = (lambda a: a) if to_stress is None else (lambda a: np.asarray(to_stress(a), float))
+    mean = None if cycles.means is None else conv(cycles.means)
+    return np.asarray(sn_curve.damage_per_cycle(conv(cycles.ranges), cycles.counts, mean), float)
 
 
 def damage_per_row(

@@ -7,9 +7,9 @@ Estimated tension = quasi-static catenary tension at the instantaneous fairlead 
 * Quasi-static: any vectorised ``quasi_static(x_offset_m, z_heave_m) -> (T, H, V, flags)``
   (N, N, N, uint8 :class:`Flag` bits). ``x_offset_m`` is the horizontal anchor -> fairlead
   distance minus the nominal span (sway included: the line turns with the buoy), ``z_heave_m``
-  the fairlead rise. :class:`LinearisedQuasiStatic` (from a 2x2 end stiffness) and
-  :class:`QuasiStaticGrid` (a bilinear table built once from any slow solver, e.g. the
-  catenary) are provided.
+  the fairlead rise. Provided: :class:`CatenaryQuasiStatic` (the catenary's precomputed
+  TensionTable, :func:`catenary_estimator`, :func:`seed004_estimator`) and
+  :class:`LinearisedQuasiStatic` (from a 2x2 end stiffness, for small motions).
 * Axial, along the cable tangent at the top (angle atan2(V, H)): ``"finite"`` = the
   short-line limit of EA k U cot(kL), i.e. (m L / 3) x tangential acceleration;
   ``"infinite"`` = impedance sqrt(EA m) x tangential speed (a long, non-reflecting line);
@@ -36,7 +36,15 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from models.dynamics import ElasticDragCord, axial_impedance, finite_line_added_mass, jerk_step
+from models.catenary import VAPS_DEPTH, Line, TensionTable, solve, vaps_mooring
+from models.dynamics import (
+    ElasticDragCord,
+    axial_impedance,
+    drag_constant,
+    finite_line_added_mass,
+    form_parameter,
+    jerk_step,
+)
 from models.imu import DisplacementIntegrator
 
 
@@ -75,7 +83,7 @@ class LinearisedQuasiStatic:
     """Small-motion quasi-static mooring: fairlead tension components linear in the offset.
 
     H = h0 + dH/dx x + dH/dz z, V = v0 + dV/dx x + dV/dz z (the catenary's end stiffness at
-    the mean position), T = hypot(H, V). H <= 0 or T <= 0 is flagged SLACK (and clipped);
+    the mean position), T = hypot(H, V). H <= 0 is flagged SLACK (H clipped to 0, V to >= 0);
     positions outside ``x_range`` / ``z_range`` are flagged OUT_OF_RANGE.
     """
 
@@ -107,76 +115,48 @@ class LinearisedQuasiStatic:
         return np.hypot(h, v), h, v, flags
 
 
-@numba.njit(cache=True)
-def _bilinear(x, z, x0, dx, z0, dz, hs, vs, fs, out_t, out_h, out_v, out_f, range_bit):
-    nx, nz = hs.shape
-    for k in range(x.size):
-        fx = (x[k] - x0) / dx
-        fz = (z[k] - z0) / dz
-        flag = 0
-        if fx < 0.0 or fx > nx - 1.0 or fz < 0.0 or fz > nz - 1.0:
-            flag = range_bit
-        fx = min(max(fx, 0.0), nx - 1.0)
-        fz = min(max(fz, 0.0), nz - 1.0)
-        i = min(int(fx), nx - 2)
-        j = min(int(fz), nz - 2)
-        u = fx - i
-        w = fz - j
-        a, b, c, d = (1 - u) * (1 - w), u * (1 - w), (1 - u) * w, u * w
-        h = a * hs[i, j] + b * hs[i + 1, j] + c * hs[i, j + 1] + d * hs[i + 1, j + 1]
-        v = a * vs[i, j] + b * vs[i + 1, j] + c * vs[i, j + 1] + d * vs[i + 1, j + 1]
-        out_h[k] = h
-        out_v[k] = v
-        out_t[k] = math.sqrt(h * h + v * v)
-        out_f[k] = flag | fs[i, j] | fs[i + 1, j] | fs[i, j + 1] | fs[i + 1, j + 1]
+class CatenaryQuasiStatic:
+    """Quasi-static model from the catenary (models.catenary.TensionTable) of a mooring line
+    around a nominal fairlead position ``span`` (m from the anchor), ``height`` (m above it).
 
-
-@dataclass(frozen=True)
-class QuasiStaticGrid:
-    """A quasi-static model tabulated on a regular (x_offset, z) grid, bilinear in between.
-
-    Built once from any vectorised ``quasi_static`` (e.g. the catenary solver) so the
-    estimator's per-sample cost is a few array operations. H and V are interpolated and
-    T = hypot(H, V) (more accurate than interpolating T near slack). Flags are OR-ed over
-    the four surrounding nodes; positions outside the grid are clamped to its edge and flagged
-    OUT_OF_RANGE.
+    Positions outside the table are clamped to its edge and flagged OUT_OF_RANGE. SLACK: the
+    horizontal tension vanishes (a slack column). ANCHOR_LIFTED: the line pulls the anchor
+    up by more than ``anchor_uplift_limit_N`` (vertical equilibrium of the whole line:
+    V_anchor = max(0, V_top - line weight), friction being horizontal).
     """
 
-    x: NDArray[np.float64]
-    z: NDArray[np.float64]
-    h: NDArray[np.float64]
-    v: NDArray[np.float64]
-    flags: NDArray[np.uint8]
+    def __init__(
+        self,
+        table: TensionTable,
+        span: float,
+        height: float,
+        anchor_uplift_limit_N: float = 0.0,
+    ):
+        if not (table.x[0] <= span <= table.x[-1] and table.z[0] <= height <= table.z[-1]):
+            raise ValueError(
+                f"nominal fairlead (span {span!r}, height {height!r}) is outside the table"
+            )
+        if not anchor_uplift_limit_N >= 0:
+            raise ValueError(f"anchor_uplift_limit_N must be >= 0, got {anchor_uplift_limit_N!r}")
+        self.table = table
+        self.span = float(span)
+        self.height = float(height)
+        self.anchor_uplift_limit_N = float(anchor_uplift_limit_N)
+        self._line_weight = table.line.weight
+        self._box = (table.x[0], table.x[-1], table.z[0], table.z[-1])
 
-    @classmethod
-    def from_function(
-        cls, quasi_static: QuasiStatic, x: ArrayLike, z: ArrayLike
-    ) -> QuasiStaticGrid:
-        xg = np.asarray(x, dtype=float)
-        zg = np.asarray(z, dtype=float)
-        for name, g in (("x", xg), ("z", zg)):
-            if g.ndim != 1 or g.size < 2 or not np.all(np.isfinite(g)):
-                raise ValueError(f"grid {name} must be a finite 1-D array of >= 2 points")
-            if not np.allclose(np.diff(g), g[1] - g[0], rtol=1e-9, atol=0) or g[1] <= g[0]:
-                raise ValueError(f"grid {name} must be increasing and evenly spaced")
-        xx, zz = np.meshgrid(xg, zg, indexing="ij")
-        _, h, v, f = quasi_static(xx.ravel(), zz.ravel())
-        shape = xx.shape
-        return cls(
-            x=xg, z=zg,
-            h=np.asarray(h, float).reshape(shape),
-            v=np.asarray(v, float).reshape(shape),
-            flags=np.asarray(f, np.uint8).reshape(shape),
-        )
-
-    def __call__(self, x: NDArray[np.float64], z: NDArray[np.float64]):
-        x = np.ascontiguousarray(x, dtype=float)
-        z = np.ascontiguousarray(z, dtype=float)
-        n = x.size
-        t, h, v, f = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.uint8)
-        _bilinear(x, z, self.x[0], self.x[1] - self.x[0], self.z[0], self.z[1] - self.z[0],
-                  self.h, self.v, self.flags, t, h, v, f, np.uint8(Flag.OUT_OF_RANGE))
-        return t, h, v, f
+    def __call__(self, x_offset: NDArray[np.float64], z_heave: NDArray[np.float64]):
+        x0, x1, z0, z1 = self._box
+        xs = self.span + x_offset
+        zs = self.height + z_heave
+        xc = np.clip(xs, x0, x1)
+        zc = np.clip(zs, z0, z1)
+        f = self.table.forces(xc, zc)
+        flags = ((xc != xs) | (zc != zs)).astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
+        flags |= (f.h <= 0.0).astype(np.uint8) * np.uint8(Flag.SLACK)
+        lifted = f.v - self._line_weight > self.anchor_uplift_limit_N
+        flags |= lifted.astype(np.uint8) * np.uint8(Flag.ANCHOR_LIFTED)
+        return f.t, f.h, f.v, flags
 
 
 @dataclass(frozen=True)
@@ -185,7 +165,7 @@ class EstimatorConfig:
 
     span: nominal horizontal anchor -> fairlead distance (m); height: fairlead above the
     anchor at zero heave (m); line_length (m); mass_per_length: in-air mass (kg/m) for axial
-    inertia; ea: axial stiffness (N); axial_model: "finite" | "infinite" | "none"; drag: the
+    inertia; ea: axial stiffness (N, inf = inextensible); axial_model: "finite" | "infinite" | "none"; drag: the
     jerk model (None: off); flat_cord_max_deg: top angle above which FLAT_CORD is flagged when
     the jerk model is on; imu_f_cut: high-pass corner (Hz) of the IMU integrator.
     """
@@ -204,8 +184,11 @@ class EstimatorConfig:
     def __post_init__(self) -> None:
         for name in ("dt", "span", "height", "line_length", "mass_per_length", "ea"):
             v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            finite = math.isfinite(v) if name != "ea" else not math.isnan(v)
+            if not (isinstance(v, (int, float)) and finite and v > 0):
                 raise ValueError(f"EstimatorConfig.{name} must be finite and > 0, got {v!r}")
+        if self.axial_model == "infinite" and math.isinf(self.ea):
+            raise ValueError("EstimatorConfig.axial_model 'infinite' needs a finite ea")
         if self.axial_model not in ("finite", "infinite", "none"):
             raise ValueError(
                 "EstimatorConfig.axial_model must be finite|infinite|none, "
@@ -468,6 +451,76 @@ def _rotate(x, y, heading_deg, n):
         raise ValueError("heading_deg must be finite, a scalar or one value per sample")
     ch, sh = np.cos(np.radians(hd)), np.sin(np.radians(hd))
     return ch * x - sh * y, sh * x + ch * y
+
+
+def catenary_estimator(
+    line: Line,
+    span: float,
+    height: float,
+    dt: float,
+    mass_per_length: float,
+    drag_cd: float,
+    drag_diameter: float,
+    rho: float = 1025.0,
+    x_range: tuple[float, float] = (-3.0, 3.5),
+    z_range: tuple[float, float] = (-2.0, 2.0),
+    table_rtol: float = 1e-3,
+    anchor_uplift_limit_N: float = 0.0,
+    axial_model: str = "finite",
+    jerk: bool = True,
+) -> tuple[EstimatorConfig, CatenaryQuasiStatic]:
+    """Estimator configuration and quasi-static model for a catenary mooring ``line``.
+
+    Builds the catenary TensionTable over the nominal fairlead position plus ``x_range`` /
+    ``z_range`` (m) and the jerk model from the static shape there: span l = ``span``,
+    alpha = sag / chord of the line's profile (:func:`models.dynamics.form_parameter`), EA =
+    the series stiffness of the segments, L / sum(L_i / EA_i) (inextensible segments add no
+    compliance; an all-inextensible line gives mu = 0, seed 001 eq 45). ``jerk=False`` leaves
+    the jerk model out (required for a line that is nearly straight at the nominal position,
+    alpha < 0.01, where the flat-cord drag theory has no meaning).
+    """
+    xr, zr = _check_range("x_range", x_range), _check_range("z_range", z_range)
+    table = TensionTable(
+        line, (span + xr[0], span + xr[1]), (max(height + zr[0], 0.0), height + zr[1]),
+        rtol=table_rtol,
+    )
+    qs = CatenaryQuasiStatic(table, span, height, anchor_uplift_limit_N)
+    prof = solve(line, float(span), float(height)).profile(200)
+    alpha, _ = form_parameter(prof.x, prof.z)
+    compliance = sum(seg.length / seg.ea for seg in line.segments)
+    ea = line.length / compliance if compliance > 0 else math.inf
+    cord = None
+    if jerk:
+        if alpha < 0.01:
+            raise ValueError(
+                f"the line is nearly straight at span {span!r} m (sag/chord {alpha:.4f}): "
+                "the jerk model does not apply; pass jerk=False"
+            )
+        cord = ElasticDragCord(
+            c=drag_constant(drag_cd, drag_diameter, rho), span=float(span),
+            alpha=alpha, axial_stiffness=ea, length=line.length,
+        )
+    cfg = EstimatorConfig(
+        dt=dt, span=float(span), height=float(height), line_length=line.length,
+        mass_per_length=mass_per_length, ea=ea,
+        axial_model=axial_model, drag=cord,
+    )
+    return cfg, qs
+
+
+def seed004_estimator(
+    dt: float = 0.05, span: float = 29.0, **options
+) -> tuple[EstimatorConfig, CatenaryQuasiStatic]:
+    """The VAPS mooring of seed 004 (models.catenary.vaps_mooring, 23 m) with a fairlead at
+    ``span`` m from the anchor. ASSUMPTIONS (the report gives none of these): mean offset
+    29 m (the 40 m line then holds ~220 N and goes taut ~3.5 m further out); drag on the
+    bare 31 mm cable, C_D = 1.2, fresh water; in-air mass 1.10 kg/m (as the catenary
+    module assumes); anchor uplift capacity 1000 N (the floated line lifts the anchor by
+    ~575 N at rest, by design). ``options`` override :func:`catenary_estimator` arguments."""
+    kw = dict(mass_per_length=1.10, drag_cd=1.2, drag_diameter=0.031, rho=1000.0,
+              anchor_uplift_limit_N=1000.0)
+    kw.update(options)
+    return catenary_estimator(vaps_mooring(), span, VAPS_DEPTH, dt, **kw)
 
 
 def simulate_tension(

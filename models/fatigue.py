@@ -11,10 +11,9 @@ The monitor's hot path per block of tension samples::
     stress = conductor_stress(tension_N, cable, lay)          # models.helix
     ranges, means, counts = rainflow.feed(stress)
     miner.add_cycles(ranges, counts, means, time_s=t_end)
-    r, m, c = rainflow.residue_half_cycles()                   # when a fresh figure is wanted
-    miner.set_provisional(r, c, m)
+    miner.set_provisional_from(rainflow)                       # when a fresh figure is wanted
 
-Note the orders: the rainflow returns (ranges, means, counts); the accumulator takes
+Note the orders: the rainflow returns (ranges, means, counts); ``add_cycles`` takes
 (ranges, counts, means) so that means may be omitted for mean-free curves.
 """
 
@@ -37,6 +36,5 @@ def damage(stress_series_Pa, sn_curve: SNCurve, hysteresis: float = 0.0, include
     ranges, means, counts = rainflow.feed(np.asarray(stress_series_Pa, dtype=np.float64))
     miner.add_cycles(ranges, counts, means)
     if include_residue:
-        r, m, c = rainflow.residue_half_cycles()
-        miner.set_provisional(r, c, m)
+        miner.set_provisional_from(rainflow)
     return miner.damage

@@ -18,13 +18,14 @@ that both terms vanish in the unstrained cable. The seed states these terms are 
 1e-3 of the axial term for its cable and neglects them; so does the default here.
 
 Since cos(a) / cos(a') = cos(a) sqrt(1 + tan^2 a'), the axial term is evaluated as
-E_i | cos(a) hypot(1 + e_c, (C' / P)) - 1 |, which needs no trigonometry per sample
+E_i | cos(a) sqrt((1 + e_c)^2 + (C' / P)^2) - 1 |, which needs no trigonometry per sample
 (the hot path of the monitor evaluates it at every tension sample).
 
 Public API
 ----------
 - ``HelixCable`` (frozen dataclass), ``HelixCable.vaps_biw()``
-- ``conductor_stress(tension_N, cable, lay="left", combined=False) -> ndarray`` [Pa]
+- ``conductor_stress(tension_N, cable, lay="left", combined=False, backend="auto") -> ndarray``
+  [Pa]; NaN/inf tension raises ValueError
 - ``tension_for_stress(stress_Pa, cable, lay="left") -> ndarray`` [N], the inverse
   ("equivalent cable load" of the seed's predicted-failure table)
 - ``cable_load(tension_N, stress_Pa, cable) -> ndarray`` [N], CABLE2/3's "cable load"
@@ -179,24 +180,39 @@ def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay 
         flat = t.reshape(-1)
         out = np.empty(flat.size)
         bad = _axial_compiled(flat, k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa, out)
-        if bad >= 0:
-            raise ValueError(f"tension_N contains NaN or inf (index {bad})")
-        return out.reshape(t.shape)
-    if backend not in ("auto", "numpy"):
+    elif backend in ("auto", "numpy"):
+        # E |cos a * sqrt((1 + e_c)^2 + (C'/P)^2) - 1|; both terms are O(1): no overflow
+        a = 1.0 + k * t
+        b = tan_a + (sign * rg) * t
+        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * cable.conductor_modulus_Pa
+        bad = _first_bad(out.reshape(-1))
+    else:
         raise ValueError(f"backend {backend!r} is not available")
-    t = _check_finite(t)
-    # E |cos a * hypot(1 + e_c, C'/P) - 1|
-    hyp = np.hypot(1.0 + k * t, tan_a + (sign * rg) * t)
-    return np.abs(cos_a * hyp - 1.0) * cable.conductor_modulus_Pa
+    if bad >= 0:
+        raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {bad})")
+    return out.reshape(t.shape)
+
+
+def _first_bad(out: np.ndarray) -> int:
+    """Index of the first non-finite stress (a NaN/inf tension propagates to it), or -1."""
+    if np.isfinite(np.sum(out)):
+        return -1
+    return int(np.flatnonzero(~np.isfinite(out))[0])
 
 
 def _axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
-    """Compiled twin of the numpy axial expression; returns the first bad index or -1."""
+    """Compiled twin of the numpy axial expression; returns the first bad index or -1.
+
+    The arithmetic loop has no branch so it vectorises; a NaN or inf tension shows up as
+    a non-finite stress, found by the second loop.
+    """
     for i in range(t.shape[0]):
-        v = t[i]
-        if not math.isfinite(v):
+        a = 1.0 + k * t[i]
+        b = tan_a + rg_signed * t[i]
+        out[i] = abs(cos_a * math.sqrt(a * a + b * b) - 1.0) * e_mod
+    for i in range(t.shape[0]):
+        if not math.isfinite(out[i]):
             return i
-        out[i] = abs(cos_a * math.hypot(1.0 + k * v, tan_a + rg_signed * v) - 1.0) * e_mod
     return -1
 
 

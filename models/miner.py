@@ -7,6 +7,7 @@ rate_buckets=24, reference_cycles=1e7, backend="auto")``
       (seconds, any epoch, non-decreasing) dates them for the damage rate.
   ``set_provisional(ranges_Pa, counts, means_Pa=None) -> float``
       replace the provisional damage (the rainflow residue's half cycles).
+  ``set_provisional_from(rainflow) -> float``  the same from a ``StreamingRainflow``.
   ``damage_committed``, ``damage_provisional``, ``damage`` (= committed + provisional)
   ``damage_rate_per_day``   committed damage per day over the last ``rate_window_s``
   ``remaining_life_days``   (1 - damage) / rate (inf while the rate is zero)
@@ -33,21 +34,21 @@ from typing import Literal
 
 import numpy as np
 
-from models.sn_curve import SNCurve
-
 from models._jit import compile_loop
+from models.sn_curve import SNCurve
 
 _DAY_S = 86400.0
 _STATE_VERSION = 1
 
 
-def _commit_loop(ranges, counts, params, table, committed):
+def _commit_loop(ranges, counts, params, table, inv_width, committed):
     """Add each cycle's damage in order and bin it. Returns (committed, added, cycles, bad).
 
-    ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., coef_0.., bounds_0..]
-    (segment i: damage = count * coef_i * S**m_i; bounds ascending, MPa); ``table`` row 0
-    holds the histogram edges, row 1 the counts (last = overflow). ``bad`` is -1, or the
-    index of the first invalid cycle, in which case nothing has been changed.
+    ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., ln coef_0.., bounds_0..]
+    (segment i: damage = count * exp(m_i ln S + ln coef_i); bounds ascending, MPa);
+    ``table`` row 0 holds the histogram edges, row 1 the counts (last = overflow);
+    ``inv_width`` > 0 marks uniform edges (direct bin index, then an exact check).
+    ``bad`` is -1, or the index of the first invalid cycle; then nothing has changed.
     """
     n = ranges.shape[0]
     for i in range(n):
@@ -68,21 +69,28 @@ def _commit_loop(ranges, counts, params, table, committed):
                 seg -= 1
         d = 0.0
         if s >= cutoff:
-            d = counts[i] * (params[3 + nseg + seg] * s ** params[3 + seg])
+            d = counts[i] * math.exp(params[3 + seg] * math.log(s) + params[3 + nseg + seg])
         committed += d
         cycles += counts[i]
         r = ranges[i]
         if r >= top:
             table[1, nb - 1] += counts[i]
         elif r >= table[0, 0]:
-            lo = 0
-            hi = nb - 1
-            while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
-                mid = (lo + hi) >> 1
-                if r >= table[0, mid]:
-                    lo = mid
-                else:
-                    hi = mid
+            if inv_width > 0.0:  # uniform edges: direct index, then exact against the edges
+                lo = min(int((r - table[0, 0]) * inv_width), nb - 2)
+                while r < table[0, lo]:
+                    lo -= 1
+                while r >= table[0, lo + 1]:
+                    lo += 1
+            else:
+                lo = 0
+                hi = nb - 1
+                while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
+                    mid = (lo + hi) >> 1
+                    if r >= table[0, mid]:
+                        lo = mid
+                    else:
+                        hi = mid
             table[1, lo] += counts[i]
     return committed, committed - start, cycles, -1
 
@@ -138,7 +146,12 @@ class MinerAccumulator:
         # mean-free curves scale the raw ranges straight to the curve's MPa
         self._scale = c.scf * c.derating / 1e6
         self._needs_means = c.mean_correction != "none"
-        self._params = np.concatenate(([self._scale, self._cutoff, m.size], m, self._seg_coef, bounds))
+        with np.errstate(divide="ignore"):
+            self._params = np.concatenate(([self._scale, self._cutoff, m.size], m, np.log(self._seg_coef), bounds))
+        edges = self._table[0]
+        width = (edges[-1] - edges[0]) / (edges.size - 1)
+        uniform = np.allclose(np.diff(edges), width, rtol=1e-9, atol=0.0)
+        self._inv_width = 1.0 / width if uniform else 0.0
 
     @property
     def _edges(self) -> np.ndarray:
@@ -167,7 +180,8 @@ class MinerAccumulator:
             # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
             added = self._commit_numpy(r, n, self.sn_curve.effective_range_MPa(r, means_Pa))
         elif self.backend == "numba":
-            committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._committed)
+            committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._inv_width,
+                                                             self._committed)
             if bad >= 0:
                 raise ValueError(f"cycle {bad} has an invalid range or count ({r[bad]!r}, {n[bad]!r})")
             self._committed = committed
@@ -184,7 +198,9 @@ class MinerAccumulator:
         if bad.size:
             raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
         seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
-        d = n * (self._seg_coef[seg] * np.power(s, self._seg_m[seg]))
+        lncoef = self._params[3 + self._seg_m.size: 3 + 2 * self._seg_m.size]
+        with np.errstate(divide="ignore"):  # ln 0 = -inf gives exp(-inf) = 0 damage
+            d = n * np.exp(self._seg_m[seg] * np.log(s) + lncoef[seg])
         d = np.where(s >= self._cutoff, d, 0.0)
         start = self._committed
         # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
@@ -201,6 +217,11 @@ class MinerAccumulator:
                                            np.asarray(counts, dtype=np.float64), means_Pa)
         self._provisional = float(np.sum(d))
         return self._provisional
+
+    def set_provisional_from(self, rainflow) -> float:
+        """Provisional damage from a ``StreamingRainflow``'s residue; return it."""
+        ranges, means, counts = rainflow.residue_half_cycles()
+        return self.set_provisional(ranges, counts, means)
 
     def _date(self, added: float, t: float) -> None:
         if self._t_first is None:

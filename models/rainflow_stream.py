@@ -5,8 +5,10 @@
       arrays in closure order (counts are all 1.0: four-point counting closes whole cycles).
   ``residue``                    open turning points (numpy array), oldest first; the last
                                  element is the running extreme, which later data may extend.
-  ``residue_half_cycles() -> (ranges, means, counts)``  the residue as ASTM half cycles
-                                 (each consecutive pair, count 0.5).
+  ``residue_half_cycles() -> (ranges, means, counts)``  the residue counted as ASTM E1049
+                                 would at the end of the series: half cycles (0.5), plus a
+                                 full cycle (1.0) where ASTM's three-point rule pairs two
+                                 residue ranges.
   ``state() -> dict`` / ``StreamingRainflow.from_state(dict)``  small, JSON-serialisable;
                                  floats are stored as Python floats so a JSON round trip
                                  restores the counter bit for bit.
@@ -23,9 +25,10 @@ cycle never depends on later samples, the cycles and the order in which they clo
 same for any split of the series into blocks; together with the residue half cycles they
 total the ASTM E1049 (``rainflow.extract_cycles``) counts for every (range, mean).
 
-Two backends give identical results: ``"numba"`` runs one compiled loop over the samples
-(a few microseconds per call); ``"numpy"`` extracts monotone-run ends with vectorised
-numpy and runs the same state machine in Python over those only. ``"auto"`` picks numba
+Two backends give identical results: ``"numba"`` compiles ``_feed_loop`` (a few
+microseconds per call); ``"numpy"`` extracts monotone-run ends with vectorised numpy and
+runs the same state machine, uncompiled, over those only (the gate gives the same turning
+points on run ends as on all samples, because a run's end is its farthest point). ``"auto"`` picks numba
 when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
 counted.
 """
@@ -46,21 +49,31 @@ _NS, _CAND, _DIR, _HYST, _STARTED, _HEADER = 0, 1, 2, 3, 4, 5
 _STATE_VERSION = 1
 
 
+_CHUNK = 2048  # samples per pass: turning points of a chunk stay in cache
+
+
 def _feed_loop(st, x):
     """Process samples ``x`` into state ``st``; return (cycles (3, k), samples consumed).
 
     Returns consumed = -(i + 1) without touching ``st`` if x[i] is not finite, and
-    consumed < len(x) when the stack storage in ``st`` is full (the caller grows it and
-    calls again with the rest). Written so numba compiles it; also valid Python.
+    consumed < len(x) when the stack storage in ``st`` may overflow (the caller grows it
+    and calls again with the rest). Per chunk, a branch-free pass finds the confirmed
+    turning points, then the four-point stack consumes them; noise makes the branches of
+    a one-pass loop unpredictable. Written so numba compiles it; also valid Python.
     """
     n = x.shape[0]
-    for i in range(n):
-        if not math.isfinite(x[i]):
-            return np.empty((3, 0)), -(i + 1)
-    cap = min(n // 2 + 2, 1024)
-    out = np.empty((3, cap))
-    k = 0
+    bad = False
+    for i in range(n):  # x - x is 0 for finite x, NaN otherwise; an OR reduction vectorises
+        bad |= (x[i] - x[i]) != 0.0
+    if bad:
+        for i in range(n):
+            if not math.isfinite(x[i]):
+                return np.empty((3, 0)), -(i + 1)
     ns = int(st[_NS])
+    # each closed cycle removes two stack points, so this bounds the cycles of this call;
+    # only the used prefix of each row is ever touched (fresh pages are costly)
+    out = np.empty((3, (ns + n) // 2 + 2))
+    k = 0
     cand = st[_CAND]
     dirn = st[_DIR]
     hyst = st[_HYST]
@@ -72,18 +85,25 @@ def _feed_loop(st, x):
         cand = x[0]
         st[_STARTED] = 1.0
         i = 1
-    while i < n:
-        v = x[i]
-        if dirn == 0.0:
-            if abs(v - cand) > hyst:
-                dirn = 1.0 if v > cand else -1.0
-                cand = v
-        elif (v - cand) * dirn > 0.0:
-            cand = v
-        elif (cand - v) * dirn > hyst:
-            if ns == limit:
-                break
-            st[_HEADER + ns] = cand
+    while i < n and dirn == 0.0:  # until the signal first leaves the start by > hysteresis
+        if abs(x[i] - cand) > hyst:
+            dirn = 1.0 if x[i] > cand else -1.0
+            cand = x[i]
+        i += 1
+    tp = np.empty(min(_CHUNK, n))
+    while i < n and ns + _CHUNK <= limit:
+        end = min(i + _CHUNK, n)
+        m = 0
+        for j in range(i, end):
+            v = x[j]
+            d = (v - cand) * dirn
+            rev = -d > hyst  # retreat beyond the gate: cand is a turning point
+            tp[m] = cand
+            m += 1 if rev else 0
+            dirn = -dirn if rev else dirn
+            cand = v if (rev or d > 0.0) else cand
+        for j in range(m):
+            st[_HEADER + ns] = tp[j]
             ns += 1
             while ns >= 4:
                 a = st[_HEADER + ns - 4]
@@ -92,10 +112,6 @@ def _feed_loop(st, x):
                 d = st[_HEADER + ns - 1]
                 r = abs(b - c)
                 if r <= abs(a - b) and r <= abs(c - d):
-                    if k == out.shape[1]:
-                        bigger = np.empty((3, 2 * k))
-                        bigger[:, :k] = out
-                        out = bigger
                     out[0, k] = r
                     out[1, k] = 0.5 * (b + c)
                     out[2, k] = 1.0
@@ -104,9 +120,7 @@ def _feed_loop(st, x):
                     ns -= 2
                 else:
                     break
-            dirn = -dirn
-            cand = v
-        i += 1
+        i = end
     st[_NS] = ns
     st[_CAND] = cand
     st[_DIR] = dirn
@@ -151,7 +165,7 @@ def _feed_numpy(st: np.ndarray, x: np.ndarray):
 class StreamingRainflow:
     """Incremental four-point rainflow counter (see module docstring for the API)."""
 
-    def __init__(self, hysteresis: float = 0.0, backend: Backend = "auto", _capacity: int = 64):
+    def __init__(self, hysteresis: float = 0.0, backend: Backend = "auto", _capacity: int = 4 * _CHUNK):
         if not (isinstance(hysteresis, (int, float)) and math.isfinite(hysteresis) and hysteresis >= 0):
             raise ValueError(f"hysteresis must be a finite number >= 0, got {hysteresis!r}")
         if backend == "auto":
@@ -162,7 +176,7 @@ class StreamingRainflow:
             raise ValueError("backend='numba' requested but numba is not importable")
         self.backend = backend
         self._feed = _feed_compiled if backend == "numba" else _feed_numpy
-        self._st = np.zeros(_HEADER + max(int(_capacity), 4))
+        self._st = np.zeros(_HEADER + max(int(_capacity), 2 * _CHUNK))
         self._st[_HYST] = float(hysteresis)
         self._samples = 0
 
@@ -184,8 +198,8 @@ class StreamingRainflow:
         x = np.asarray(block, dtype=np.float64)
         if x.ndim != 1:
             x = x.reshape(-1) if x.ndim == 0 else _reject_shape(x)
-        if self.backend == "numpy" and self._st.size - _HEADER < int(self._st[_NS]) + x.size + 2:
-            self._grow(int(self._st[_NS]) + x.size + 2)
+        if self.backend == "numpy" and self._st.size - _HEADER < int(self._st[_NS]) + x.size + _CHUNK:
+            self._grow(int(self._st[_NS]) + x.size + _CHUNK)
         cycles, used = self._feed(self._st, x)
         if used < 0:
             raise ValueError(f"stress block contains NaN or inf at index {-used - 1}; block not counted")
@@ -239,7 +253,7 @@ class StreamingRainflow:
         stack = [float(v) for v in state["stack"]]
         if state["direction"] not in (-1, 0, 1) or not all(math.isfinite(v) for v in stack):
             raise ValueError("corrupt StreamingRainflow state")
-        rf = cls(hysteresis=float(state["hysteresis"]), backend=backend, _capacity=2 * len(stack) + 64)
+        rf = cls(hysteresis=float(state["hysteresis"]), backend=backend, _capacity=2 * len(stack) + 4 * _CHUNK)
         rf._st[_NS] = len(stack)
         rf._st[_CAND] = float(state["candidate"])
         rf._st[_DIR] = float(state["direction"])

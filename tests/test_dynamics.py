@@ -36,7 +36,10 @@ def test_seed002_longitudinal_tension_cases():
             kw = {"horizontal_speed": case["ship_speed_kn"] * KNOT_FT_S}
         if "dPdt_ft_per_s" in case:
             assert dyn.tangential_speed(alpha, **kw) == pytest.approx(case["dPdt_ft_per_s"], rel=0.01)
-        for bound, key in (("twist_unrestrained", "T_unrestrained_lb"), ("twist_restrained", "T_restrained_lb")):
+        for bound, key in (
+            ("twist_unrestrained", "T_unrestrained_lb"),
+            ("twist_restrained", "T_restrained_lb"),
+        ):
             t = dyn.longitudinal_tension(z[bound], alpha, **kw)
             assert t == pytest.approx(case[key], rel=0.01), (case["case"], bound)
 
@@ -62,25 +65,33 @@ def test_impedance_and_finite_line():
     omega = 2 * math.pi / 5.0
     amp = dyn.finite_line_tension_amplitude(omega, 0.1, ea, m, length)
     spring = ea * 0.1 / length
-    assert amp == pytest.approx(spring - dyn.finite_line_added_mass(m, length) * omega**2 * 0.1, rel=1e-7)
+    inertia = dyn.finite_line_added_mass(m, length) * omega**2 * 0.1
+    assert amp == pytest.approx(spring - inertia, rel=1e-7)
     assert dyn.finite_line_tension_amplitude(0.0, 0.1, ea, m, length) == pytest.approx(spring)
     # k L = pi / 4: cot = 1, amplitude = EA k U exactly.
     w4 = math.pi / 4 * c1 / length
-    assert dyn.finite_line_tension_amplitude(w4, 0.1, ea, m, length) == pytest.approx(ea * w4 / c1 * 0.1, rel=1e-12)
+    got = dyn.finite_line_tension_amplitude(w4, 0.1, ea, m, length)
+    assert got == pytest.approx(ea * w4 / c1 * 0.1, rel=1e-12)
 
 
 @needs_shared
 def test_seed001_appendix_dynamic_tension():
     ref = _ref("seed001_anchor_chain.json")
     inp, exp = ref["inputs"], ref["expected"]
-    t0, w, depth = inp["horizontal_force_per_chain_t"] * 1000, inp["chain_weight_kgf_per_m"], inp["depth_m"]
+    t0 = inp["horizontal_force_per_chain_t"] * 1000
+    w, depth = inp["chain_weight_kgf_per_m"], inp["depth_m"]
     # Static part by hand (seed 001 eqs for the chain on the seabed; the solver is in catenary).
     s = depth * math.sqrt(2 * t0 / (w * depth) + 1)
     t_static = t0 + w * depth
     assert s == pytest.approx(exp["suspended_length_m"], abs=0.6)
     assert t_static / 1000 == pytest.approx(exp["static_top_tension_t"], abs=0.05)
     # The paper carries the rounded 160 m into the dynamics.
-    cord = dyn.ElasticDragCord(c=inp["drag_c"], span=exp["suspended_length_m"], alpha=inp["form_parameter_alpha"], axial_stiffness=inp["elasticity_Ed2_kgf"])
+    cord = dyn.ElasticDragCord(
+        c=inp["drag_c"],
+        span=exp["suspended_length_m"],
+        alpha=inp["form_parameter_alpha"],
+        axial_stiffness=inp["elasticity_Ed2_kgf"],
+    )
     # Paper: speed ratio 0.64 read from Fig. 8 -> 27.2 t (cube on 1/alpha restored).
     dt = cord.tension_increment(exp["speed_ratio_fig8"] * inp["bow_speed_m_per_s"])
     assert dt == pytest.approx(exp["dynamic_tension_kgf"], rel=0.01)
@@ -153,3 +164,16 @@ def test_form_parameter():
     x = np.linspace(0, xs, 20001)
     alpha, _ = dyn.form_parameter(x, 120 * (np.cosh(x / 120) - 1))
     assert alpha == pytest.approx(0.1191, abs=2e-4)
+
+
+def test_seed004_line_resonates_in_its_wave_band():
+    """VAPS line at ~220 N (seed004_estimator's nominal position), 1.10 kg/m plus the added
+    mass of a 31 mm cylinder in fresh water (0.755 kg/m): T1 = 2 L / c = 7.35 s, inside the
+    WAVFOR table's periods (3.6 ... 9.65 s): the 6.9 and 7.45 s waves are flagged."""
+    m = 1.10 + 1000.0 * math.pi / 4 * 0.031**2
+    periods = np.array([3.6, 4.15, 4.7, 5.25, 5.8, 6.35, 6.9, 7.45, 8.0, 9.65])
+    scr = dyn.resonance_screen(periods, 220.0, m, 40.0, n_modes=3, band=0.08)
+    assert scr.natural_periods[0] == pytest.approx(80.0 / math.sqrt(220.0 / m), rel=1e-12)
+    assert scr.natural_periods[0] == pytest.approx(7.35, abs=0.01)
+    np.testing.assert_array_equal(periods[scr.near], [3.6, 6.9, 7.45])  # 3.6 s: mode 2 (3.67 s)
+    assert scr.nearest_mode[0] == 2 and np.all(scr.nearest_mode[6:8] == 1)

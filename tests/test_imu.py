@@ -50,7 +50,8 @@ def test_streaming_blocks_with_bias_and_drift(motion):
     s1.update(np.vstack([a[:500]] * 3))
     s2 = imu.DisplacementIntegrator(0.05, 0.03, channels=3)
     s2.load_state(s1.state())
-    np.testing.assert_array_equal(s1.update(np.vstack([a[500:900]] * 3)), s2.update(np.vstack([a[500:900]] * 3)))
+    block = np.vstack([a[500:900]] * 3)
+    np.testing.assert_array_equal(s1.update(block), s2.update(block))
 
 
 def test_bad_input():

@@ -30,8 +30,7 @@ def _replay(stress, cuts, curve, backend="auto", roundtrips=()):
             miner = MinerAccumulator.from_state(json.loads(json.dumps(miner.state())), backend=backend)
         r, m, c = rf.feed(block)
         miner.add_cycles(r, c, m, time_s=float(i))
-    r, m, c = rf.residue_half_cycles()
-    miner.set_provisional(r, c, m)
+    miner.set_provisional_from(rf)
     return miner
 
 
@@ -129,6 +128,13 @@ def test_histogram_fixed_edges_and_equivalent_range():
     np.testing.assert_array_equal(e, edges)
     np.testing.assert_array_equal(h, [1.5, 3.0])
     assert overflow == 4.0
+    # uniform edges take a direct-index path: values exactly on (inexact) edges
+    edges = np.linspace(0.0, 0.7e6, 8)  # 0.1e6 steps are not exact in binary
+    for backend in ("numba", "numpy"):
+        uniform = MinerAccumulator(curve, histogram_edges_Pa=edges, backend=backend)
+        uniform.add_cycles(np.concatenate((edges, np.nextafter(edges[1:], 0))), np.ones(15))
+        np.testing.assert_array_equal(uniform.histogram[1], [2.0] * 7)
+        assert uniform.histogram[2] == 1.0
     # hand value: S_eq = (sum n S^3 / N_ref)^(1/3) for a single slope
     expected = (np.sum(counts * (ranges / 1e6) ** 3) / 1e6) ** (1 / 3) * 1e6
     assert miner.equivalent_stress_range() == pytest.approx(expected, rel=1e-12)
@@ -137,7 +143,10 @@ def test_histogram_fixed_edges_and_equivalent_range():
 
 def test_provisional_is_replaced_not_added():
     miner = MinerAccumulator(SNCurve.dnv_chain_studless())
-    miner.set_provisional(np.array([50e6]), np.array([0.5]))
+    rf = StreamingRainflow()
+    rf.feed(np.array([0.0, 50e6, 0.0, 10e6]))  # residue 0, 50, 0, 10 MPa: half cycles
+    first = miner.set_provisional_from(rf)
+    assert first == pytest.approx((0.5 + 0.5) / 4.8e5 + 0.5 / (6e10 / 10 ** 3), rel=1e-12)
     p = miner.set_provisional(np.array([50e6]), np.array([0.5]))
     assert miner.damage_provisional == p == pytest.approx(0.5 / 4.8e5, rel=1e-12)
     assert miner.damage == miner.damage_committed + p
