@@ -239,7 +239,7 @@ class DaemonProcess:
             os.unlink(self.notify_path)
 
 
-def query_state(port: int, timeout: float = 5.0, buoy: str = BUOY) -> dict[str, Any] | None:
+def query_state(port: int, timeout: float = 10.0, buoy: str = BUOY) -> dict[str, Any] | None:
     """The daemon's ``monitor/state`` answer, or None if it did not answer."""
     from monitor import zenoh_io
     from monitor.daemon_config import ZenohConfig

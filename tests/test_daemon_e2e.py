@@ -179,7 +179,7 @@ def test_live_over_zenoh_equals_replay_of_the_recording(tmp_path):
         assert pub.returncode == 0 and out.strip() == str(len(blocks)), err
         wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
                          buoy=BUOY)
-        time.sleep(0.5)
+        time.sleep(1.0)  # alerts go out before the reply that ended the wait: margin only
         sub.undeclare()
     assert d.terminate() == 0
     published = []  # alert PUTs (a clearing alert is a DELETE, with an empty payload)
@@ -407,7 +407,9 @@ def test_stale_tension_fails_over_to_the_motion_estimate_and_back(tmp_path):
 def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_path):
     port = free_port()
     blocks = synthetic_blocks(120)
-    cfg = write_config(tmp_path, port, load_source="measured")
+    # [record] also makes the daemon record (to rec/); its flush interval of 1 s applies to
+    # `buoymon record` too, so the test can see when everything has been written
+    cfg = write_config(tmp_path, port, load_source="measured", record=True)
     config = load_config(cfg)
     d = start_daemon(cfg, tmp_path)
     out_dir = tmp_path / "recorded"
@@ -421,7 +423,10 @@ def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_p
         publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=None)
         wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
                          buoy=BUOY)
-    time.sleep(1.0)
+    deadline = time.monotonic() + 60  # until the recorder has flushed the last block
+    while not _recorded_up_to(out_dir, blocks[-1].t_last_ns):
+        assert time.monotonic() < deadline, "recorder never wrote the last block"
+        time.sleep(0.2)
     rec.terminate()
     assert rec.wait(30) == 0, rec.stderr.read()
     assert d.terminate() == 0
@@ -431,6 +436,12 @@ def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_p
     assert statuses and statuses[-1]["buoy_id"] == BUOY
     live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
     assert committed(replayed_figures(config, files)) == committed(live)
+
+
+def _recorded_up_to(directory: Path, t_ns: int) -> bool:
+    """True once files being written (no footer yet) hold a sample at ``t_ns``."""
+    files = sorted(directory.glob("*.mcap"))
+    return bool(files) and any(b.t_last_ns >= t_ns for b in iter_blocks([str(f) for f in files]))
 
 
 @pytest.mark.parametrize("section, message", [
