@@ -127,3 +127,24 @@ def test_restart_resumes_from_the_checkpoint(tmp_path):
     assert cp.state["pipeline"]["total"] == expected_total(blocks)
     assert cp.state["pipeline"]["accepted"]["tension"] == 400
     assert cp.state["pipeline"]["rejected"]["tension"]["duplicate"] == 200
+
+
+def test_a_backlog_does_not_starve_status_and_checkpoints(tmp_path):
+    """200 blocks arrive at once and take 20 ms each: status keeps coming during the 4 s."""
+    port = free_port()
+    state = tmp_path / "state.sqlite"
+    cfg = write_config(tmp_path / "cfg.toml", port, state, checkpoint_s=0.5)
+    d = DaemonProcess([sys.executable, HARNESS, "run", str(cfg), "0.02"], tmp_path)
+    d.wait_for("READY=1")
+    q = queue.SimpleQueue()
+    client = ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",))
+    with zenoh_io.open_session(client) as s:
+        sub = zenoh_io.declare_enqueuing_subscriber(s, zenoh_io.status_key(BUOY), q)
+        subprocess.run([sys.executable, HARNESS, "publish", f"tcp/127.0.0.1:{port}", "200",
+                        "0"], env=ENV, check=True, capture_output=True, timeout=60)
+        docs = _statuses(q, lambda doc: doc["counters"]["messages"] == 200)
+        sub.undeclare()
+    during = {doc["counters"]["messages"] for doc in docs if 0 < doc["counters"]["messages"] < 200}
+    assert len(during) >= 8  # about 4 per second of backlog
+    assert max(doc["queue_depth"] for doc in docs) > 50  # there was a backlog
+    assert d.terminate() == 0
