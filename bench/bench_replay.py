@@ -1,0 +1,189 @@
+"""End-to-end replay benchmark (issue 2): a simulated N-day log through the pipeline core.
+
+Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy in a 1.5 m,
+5.25 s sea with noise) with replay.writer, then measures:
+
+* replay: ``replay.reader.LogReader`` -> ``Pipeline`` with the default configuration, in a
+  child process so its peak RSS is its own; tension samples per second and times real time;
+* peak memory of a 1-day replay against the N-day one (must stay within 10 %);
+* the naive baseline: decode message by message with mcap's reader, then
+  ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
+  it holds everything in memory), in tension samples per second.
+
+Usage: python bench/bench_replay.py [--days 30] [--baseline-days 1] [--dir DIR [--reuse]] [--keep]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+S = 1_000_000_000
+T0 = 1_600_000_000 * S
+BUOY = "vaps"
+
+
+def write_log(path: Path, days: float, seed: int = 4) -> int:
+    """Write the synthetic log hour by hour (flat memory); return the tension sample count."""
+    from replay.writer import LogWriter, Series
+
+    rng = np.random.default_rng(seed)
+    # a 1.5 m, 5.25 s sea as a sum of a few wave components, plus slow drift and noise
+    periods = np.array([4.4, 5.0, 5.25, 5.6, 6.3, 8.0])
+    amps = np.array([400.0, 900.0, 1400.0, 900.0, 500.0, 250.0])
+    phases = rng.uniform(0, 2 * np.pi, periods.size)
+    n_tension = 0
+    with LogWriter(path) as w:
+        for hour in range(int(np.ceil(days * 24))):
+            t0 = T0 + hour * 3600 * S
+            series = []
+            for sensor, hz in (("tension", 20), ("imu", 10)):
+                n = 3600 * hz
+                t = t0 + (np.arange(n, dtype=np.int64) * S) // hz
+                x = (t - T0) / S
+                wave = np.sin(2 * np.pi * x[None, :] / periods[:, None] + phases[:, None])
+                if sensor == "tension":
+                    v = 5000.0 + amps @ wave + 300 * np.sin(2 * np.pi * x / 600) + rng.normal(0, 50, n)
+                    values = v[None, :]
+                    n_tension += n
+                else:
+                    az = (amps / 1400.0) @ wave
+                    values = np.stack([rng.normal(0, 0.05, n), rng.normal(0, 0.05, n), az])
+                series.append(Series(BUOY, sensor, t, values))
+            w.write_series(series, block_ns=S, recv_delay_ns=50_000_000)
+    return n_tension
+
+
+def child_replay(path: str, rules: bool) -> None:
+    """Run in a child process: replay, print figures as JSON (with this process's peak RSS)."""
+    from monitor.config import config_with, default_config
+    from replay.reader import LogReader
+    from replay.runner import run_blocks
+
+    config = default_config()
+    if not rules:
+        config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
+                                             if k != "rule"})
+    start, cpu = time.perf_counter(), time.process_time()
+    reader = LogReader([path])
+    pipeline, result = run_blocks(config, reader)
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    rep = pipeline.report()
+    print(json.dumps({
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "tension_samples": rep["samples"]["tension"]["accepted"],
+        "all_samples": result.samples,
+        "damage_committed": rep["components"]["conductor"]["damage_committed"],
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }))
+
+
+def replay_in_child(path: Path, rules: bool = True) -> dict:
+    cmd = [sys.executable, __file__, "--child-replay", str(path)] + ([] if rules else ["--no-rules"])
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def naive_baseline(path: Path) -> tuple[float, int, float]:
+    """Decode every message with mcap's reader and protobuf, then ASTM rainflow on it all.
+    Returns (CPU seconds, tension samples, damage)."""
+    import rainflow
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+    from mcap.reader import make_reader
+
+    from models import fatigue, helix
+
+    start = time.process_time()
+    parts = []
+    with open(path, "rb") as f:
+        classes = {}
+        for schema, channel, msg in make_reader(f).iter_messages(log_time_order=False):
+            if not channel.topic.endswith("/tension"):
+                continue
+            cls = classes.get(schema.id)
+            if cls is None:
+                fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+                pool = descriptor_pool.DescriptorPool()
+                for fd in fds.file:
+                    pool.Add(fd)
+                cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+                classes[schema.id] = cls
+            m = cls.FromString(msg.data)
+            parts.append(np.asarray(m.tension_N, dtype=np.float64))
+    tension = np.concatenate(parts)
+    stress = helix.conductor_stress(tension, helix.HelixCable.vaps_biw(), lay="left")
+    cycles = np.array([(r, c) for r, _, c, _, _ in rainflow.extract_cycles(stress)])
+    sn = fatigue.SNCurve.vaps_copper()
+    damage = float(np.sum(sn.damage_per_cycle(cycles[:, 0], cycles[:, 1])))
+    return time.process_time() - start, tension.shape[0], damage
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--days", type=float, default=30.0)
+    ap.add_argument("--baseline-days", type=float, default=1.0)
+    ap.add_argument("--dir", help="where to write the logs (default: a temporary directory)")
+    ap.add_argument("--keep", action="store_true", help="keep the generated logs")
+    ap.add_argument("--reuse", action="store_true", help="reuse logs already in --dir")
+    ap.add_argument("--child-replay", help=argparse.SUPPRESS)
+    ap.add_argument("--no-rules", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child_replay:
+        child_replay(args.child_replay, rules=not args.no_rules)
+        return
+    work = Path(args.dir or tempfile.mkdtemp(prefix="bench_replay_"))
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        t = time.perf_counter()
+        big, small = work / f"log_{args.days:g}d.mcap", work / "log_1d.mcap"
+        if not (args.reuse and big.exists() and small.exists()):
+            write_log(big, args.days)
+            write_log(small, 1.0)
+        print(f"{args.days:g}-day log: {big.stat().st_size / 1e6:.0f} MB "
+              f"(written or found in {time.perf_counter() - t:.1f} s)")
+        r_big = replay_in_child(big)
+        r_small = replay_in_child(small)
+        r_plain = replay_in_child(big, rules=False)
+        for label, r in (("default config", r_big), ("no alert rules", r_plain)):
+            rr = r["tension_samples"] / r["wall_s"]
+            print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s wall, "
+                  f"{r['cpu_s']:.2f} s CPU; {rr / 1e6:.2f} M tension samples/s wall, "
+                  f"{r['tension_samples'] / r['cpu_s'] / 1e6:.2f} M/s per CPU second "
+                  f"({r['all_samples'] / r['wall_s'] / 1e6:.2f} M samples/s all streams), "
+                  f"{rr / 20:,.0f} x real time; target >= 3 M/s")
+        growth = r_big["peak_rss_mb"] / r_small["peak_rss_mb"] - 1
+        print(f"peak RSS: 1 d {r_small['peak_rss_mb']:.0f} MB, {args.days:g} d "
+              f"{r_big['peak_rss_mb']:.0f} MB ({growth:+.1%}); target within 10 %")
+        base_log = small if args.baseline_days == 1.0 else work / "log_baseline.mcap"
+        if base_log != small:
+            write_log(base_log, args.baseline_days)
+        wall, n, damage = naive_baseline(base_log)
+        base_rate = n / wall
+        ours = replay_in_child(base_log)
+        ours_rate = ours["tension_samples"] / ours["cpu_s"]
+        print(f"naive baseline ({args.baseline_days:g} d, mcap per message + rainflow): "
+              f"{base_rate / 1e6:.3f} M tension samples/s per CPU second; the pipeline on the "
+              f"same log {ours_rate / 1e6:.2f} M/s, {ours_rate / base_rate:.1f} x faster; "
+              "target >= 20 x")
+        print(f"damage check on the baseline log: naive {damage:.6e} (ASTM incl. residue), "
+              f"pipeline committed {ours['damage_committed']:.6e}")
+    finally:
+        if not args.keep and not args.dir:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

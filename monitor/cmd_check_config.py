@@ -1,0 +1,34 @@
+"""``buoymon check-config CFG.toml``: validate a configuration file and summarise it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from monitor.config import ConfigError, load_config, run_section_parsers
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("check-config", help="validate a configuration file")
+    p.add_argument("config", help="TOML configuration file")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        config = load_config(args.config)
+        sections = run_section_parsers(config)
+    except ConfigError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    comps = ", ".join(
+        f"{c.name} ({c.kind}{', ' + c.lay + ' lay' if c.lay else ''}, {c.sn_curve.preset or 'table'})"
+        for c in config.components
+    )
+    print(f"{args.config}: ok")
+    print(f"  buoy {config.buoy.id}: {config.mooring.length_m:g} m line in "
+          f"{config.mooring.depth_m:g} m of water; load source {config.load.source}")
+    print(f"  components: {comps}")
+    for name, status in sections.items():
+        print(f"  [{name}] {status}")
+    return 0

@@ -1,0 +1,146 @@
+"""Multi-stream ordering: turn blocks arriving in any interleaving into sensor-time slabs.
+
+The rule (why live and replay agree): the pipeline processes sensor time in slabs ``(W', W]``
+and never processes a sample before every GATING stream is known up to that sample's time.
+Each stream has a watermark::
+
+    newest  = newest sample time received on any stream
+    wm(s)   = max(newest time received on s, newest - horizon)
+
+and ``W = min(wm(s) for s in gating streams)``. All buffered samples of ALL streams with
+``t <= W`` are released as one slab, each stream's samples sorted by time (stable, so a
+duplicate stays behind its original and is the copy rejected). Everything downstream is a
+function of the samples in time order, so the results do not depend on how samples were cut
+into blocks or interleaved, as long as no stream lags the newest data by more than
+``horizon``: a silent stream (a dead sensor) is passed by after the horizon instead of stalling
+everything, and samples that then arrive, at or before the processed time, are rejected as
+``time_backwards``. Memory is bounded by the horizon.
+
+Gating streams: the LOAD streams (tension, and the motion stream when the estimator is used)
+always gate, even before their first sample. Other streams (gnss, waves, ...) gate in replay
+(``gate_all``: the log holds them all, coalesced per channel, with ``[ordering]
+replay_horizon_s``). Live (``[ordering] horizon_s``), they gate only while active (newest
+sample within the horizon), so a low-rate or absent stream never delays the fatigue chain;
+their health figures then reflect what had arrived when a tick was evaluated.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from monitor.blocks import SENSOR_FIELDS, SampleBlock
+
+# canonical processing order of streams inside one slab
+SENSOR_ORDER: tuple[str, ...] = tuple(SENSOR_FIELDS)
+_NEVER = np.iinfo(np.int64).min
+
+
+class Slab(dict):
+    """``{sensor: (t_ns int64 (n,), values float64 (n_fields, n))}``, samples sorted by time."""
+
+
+class ReorderBuffer:
+    """Per-stream buffers of received samples and the watermark rule above."""
+
+    def __init__(self, load_streams: Sequence[str], horizon_ns: int, gate_all: bool = False,
+                 state: Mapping[str, Any] | None = None) -> None:
+        self.load_streams = tuple(load_streams)
+        self.horizon_ns = int(horizon_ns)
+        self.gate_all = gate_all
+        self._pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {s: [] for s in SENSOR_ORDER}
+        self.received_max: dict[str, int] = {}
+        self._in_order = dict.fromkeys(SENSOR_ORDER, True)
+        if state is not None:
+            self.received_max = {k: int(v) for k, v in state["received_max"].items()}
+            for sensor, (t, values) in state["pending"].items():
+                t = np.array(t, dtype=np.int64)
+                self._pending[sensor].append(
+                    (t, np.array(values, dtype=np.float64).reshape(len(SENSOR_FIELDS[sensor]), -1)))
+                self._in_order[sensor] = not bool(np.any(t[1:] < t[:-1]))
+
+    def push(self, block: SampleBlock) -> None:
+        if len(block) == 0:
+            return
+        t = block.t_ns
+        values = np.stack([block.fields[f] for f in SENSOR_FIELDS[block.sensor]])
+        parts = self._pending[block.sensor]
+        # the usual case: sorted blocks arriving in order; then take() never re-sorts
+        if self._in_order[block.sensor] and (
+                (parts and t[0] < parts[-1][0][-1]) or bool(np.any(t[1:] < t[:-1]))):
+            self._in_order[block.sensor] = False
+        parts.append((t, values))
+        newest = int(t.max())
+        self.received_max[block.sensor] = max(self.received_max.get(block.sensor, _NEVER), newest)
+
+    @property
+    def newest_ns(self) -> int | None:
+        return max(self.received_max.values()) if self.received_max else None
+
+    def watermark(self) -> int | None:
+        """Sensor time up to which every gating stream is known (None before any data)."""
+        newest = self.newest_ns
+        if newest is None:
+            return None
+        floor = newest - self.horizon_ns
+        marks = [newest]
+        for s in SENSOR_ORDER:
+            received = self.received_max.get(s)
+            if s in self.load_streams or self.gate_all:
+                marks.append(max(_NEVER if received is None else received, floor))
+            elif received is not None and received >= floor:
+                marks.append(received)
+        return min(marks)
+
+    def end_of_data(self) -> int | None:
+        """Newest time of the slowest load stream that has delivered data (for a final flush)."""
+        seen = [self.received_max[s] for s in self.load_streams if s in self.received_max]
+        if seen:
+            return min(seen)
+        return self.newest_ns
+
+    def take(self, upto_ns: int | None) -> Slab:
+        """Remove and return every buffered sample with ``t <= upto_ns`` (all if None)."""
+        slab = Slab()
+        for sensor in SENSOR_ORDER:
+            parts = self._pending[sensor]
+            if not parts:
+                continue
+            if not self._in_order[sensor]:
+                t = np.concatenate([p[0] for p in parts])
+                values = np.concatenate([p[1] for p in parts], axis=1)
+                order = np.argsort(t, kind="stable")
+                parts = [(t[order], values[:, order])]
+                self._in_order[sensor] = True
+            # parts are sorted and in order: the samples taken are a prefix of them
+            taken, rest = [], []
+            for t, values in parts:
+                if upto_ns is None or t[-1] <= upto_ns:
+                    taken.append((t, values))
+                elif t[0] > upto_ns:
+                    rest.append((t, values))
+                else:
+                    cut = int(np.searchsorted(t, upto_ns, side="right"))
+                    taken.append((t[:cut], values[:, :cut]))
+                    rest.append((t[cut:], values[:, cut:]))
+            self._pending[sensor] = rest
+            if len(taken) == 1:
+                slab[sensor] = taken[0]
+            elif taken:
+                slab[sensor] = (np.concatenate([p[0] for p in taken]),
+                                np.concatenate([p[1] for p in taken], axis=1))
+        return slab
+
+    def buffered(self) -> int:
+        return sum(p[0].shape[0] for parts in self._pending.values() for p in parts)
+
+    def state(self) -> dict[str, Any]:
+        pending = {}
+        for sensor in SENSOR_ORDER:
+            parts = self._pending[sensor]
+            if parts:
+                t = np.concatenate([p[0] for p in parts])
+                values = np.concatenate([p[1] for p in parts], axis=1)
+                pending[sensor] = [t.tolist(), values.ravel().tolist()]
+        return {"received_max": dict(self.received_max), "pending": pending}

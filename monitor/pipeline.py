@@ -1,0 +1,534 @@
+"""The pipeline core shared by ``buoymon replay`` and the daemon.
+
+``Pipeline.process(block)`` takes :class:`~monitor.blocks.SampleBlock` objects of one buoy in
+any interleaving and block size and runs, on sensor time only::
+
+    ordering (watermark slabs) -> validate -> motion estimate -> load source ->
+    stress per component -> streaming rainflow -> Miner damage (per alert tick) ->
+    alert rules on the fixed tick grid -> StepResult to the sinks
+
+Determinism: every stage is a function of the samples in time order with its memory carried
+across blocks (see monitor.ordering, monitor.validate, monitor.load_source,
+monitor.components), so the same samples give the same committed damage and alert history
+whichever driver cuts them into blocks. ``state()`` is complete and JSON-serialisable;
+``Pipeline(config, state=s)`` continues exactly where ``s`` was taken.
+
+Alert ticks: tick ``k`` covers sensor time ``((k-1) I, k I]`` with ``I = [alerts]
+eval_interval_s``. A tick is evaluated once the ordering watermark has passed its end (or, at
+``flush()``, once the slowest stream's data has); the trailing partial tick of a log waits for
+data that would complete it, so a log replayed in parts gives the same history as one pass.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Iterable, Mapping, Protocol
+
+import numpy as np
+
+from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.components import Component, build_cable, endurance_stress_Pa
+from monitor.config import Config
+from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
+from monitor.load_source import ESTIMATED, MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
+from monitor.ordering import SENSOR_ORDER, ReorderBuffer
+from monitor.validate import REASONS, StreamValidator
+
+STATE_VERSION = 1
+ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
+_NEVER = np.iinfo(np.int64).min
+
+
+class AlertEngineLike(Protocol):
+    """What the pipeline needs from monitor.alerts.engine.AlertEngine."""
+
+    def evaluate(self, obs: Observation) -> list[Any]: ...
+
+    def state(self) -> dict[str, Any]: ...
+
+
+def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, float | None],
+                       state: Mapping[str, Any] | None) -> AlertEngineLike:
+    """The ``[alerts]`` rules engine, restored from ``state`` if given.
+
+    ``endurance_Pa`` maps each component to its derated endurance stress (None if it has none).
+    """
+    from monitor.alerts.engine import AlertEngine
+
+    components = {name: {"endurance_stress_Pa": e} for name, e in endurance_Pa.items()}
+    if state:
+        return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
+    return AlertEngine.from_config(config.section("alerts"), buoy_id, components)
+
+
+def alert_to_dict(record: Any) -> dict[str, Any]:
+    if hasattr(record, "to_dict"):
+        return record.to_dict()
+    if dataclasses.is_dataclass(record):
+        return dataclasses.asdict(record)
+    return dict(record)
+
+
+# no load samples: (t_ns, tension_N, source); shared, never written to
+_NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+class _TensionStats:
+    """Streaming min/mean/max/p99 of the fatigue load on a fixed histogram (flat memory)."""
+
+    BINS = 65536
+
+    def __init__(self, lo: float, hi: float, state: Mapping[str, Any] | None = None) -> None:
+        self.lo, self.hi = lo, hi
+        self.width = (hi - lo) / self.BINS
+        self.hist = np.zeros(self.BINS, dtype=np.int64)
+        self.n = {"measured": 0, "estimated": 0}
+        self.total_mN = 0  # exact integer sum (millinewtons): the mean is split-invariant
+        self.min = math.inf
+        self.max = -math.inf
+        if state is not None:
+            idx, counts = state["hist"]
+            self.hist[np.array(idx, dtype=np.int64)] = np.array(counts, dtype=np.int64)
+            self.n = dict(state["n"])
+            self.total_mN = int(state["total_mN"])
+            self.min = math.inf if state["min"] is None else float(state["min"])
+            self.max = -math.inf if state["max"] is None else float(state["max"])
+
+    def add(self, v: np.ndarray, src: np.ndarray) -> None:
+        if v.shape[0] == 0:
+            return
+        bins = np.clip(((v - self.lo) / self.width).astype(np.int64), 0, self.BINS - 1)
+        first = int(bins.min())  # count over the occupied range only: blocks are small
+        counts = np.bincount(bins - first)
+        self.hist[first:first + counts.shape[0]] += counts
+        n_meas = int(np.count_nonzero(src == MEASURED))
+        self.n["measured"] += n_meas
+        self.n["estimated"] += v.shape[0] - n_meas
+        self.total_mN += int(np.rint(v * 1e3).astype(np.int64).sum())
+        self.min = min(self.min, float(v.min()))
+        self.max = max(self.max, float(v.max()))
+
+    def summary(self) -> dict[str, Any]:
+        count = self.n["measured"] + self.n["estimated"]
+        if count == 0:
+            return {"min": None, "mean": None, "max": None, "p99": None,
+                    "samples_measured": 0, "samples_estimated": 0}
+        k = int(np.searchsorted(np.cumsum(self.hist), math.ceil(0.99 * count)))
+        p99 = min(max(self.lo + (k + 0.5) * self.width, self.min), self.max)
+        return {"min": self.min, "mean": self.total_mN / 1e3 / count, "max": self.max, "p99": p99,
+                "samples_measured": self.n["measured"], "samples_estimated": self.n["estimated"]}
+
+    def state(self) -> dict[str, Any]:
+        idx = np.flatnonzero(self.hist)
+        return {"hist": [idx.tolist(), self.hist[idx].tolist()], "n": dict(self.n),
+                "total_mN": self.total_mN, "min": _finite_or_none(self.min),
+                "max": _finite_or_none(self.max)}
+
+
+class _StreamSlab:
+    """One stream's share of a slab with its verdicts, and its health at each tick end."""
+
+    def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
+                 validator_before: tuple[int, dict[str, int], bool, int]) -> None:
+        self.t, self.codes = t, codes
+        if codes.any():
+            ok = codes == 0
+            self.acc_t, self.acc_values, self.rej_t = t[ok], values[:, ok], t[~ok]
+        else:  # the usual case: no copies
+            self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
+        self._before = validator_before
+        self._ticks: tuple[np.ndarray, ...] | None = None
+
+    @staticmethod
+    def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
+        return v.accepted, dict(v.rejected), v.has_last, v.last_t_ns
+
+    def counts_after(self, lo: int) -> tuple[int, int]:
+        """Samples received and rejected with time after ``lo``."""
+        return (self.t.shape[0] - int(np.searchsorted(self.t, lo, side="right")),
+                self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
+
+    def prepare(self, ends: np.ndarray) -> None:
+        """Vectorised health at every tick end of this slab (cumulative counts and last time)."""
+        cut = np.searchsorted(self.t, ends, side="right")
+        rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+        by_reason = None
+        if self.rej_t.shape[0]:
+            by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
+                                  for i in range(1, len(REASONS) + 1)])
+        k = np.searchsorted(self.acc_t, ends, side="right")
+        last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
+                        self._before[3])
+        self._ticks = (cut, rej_cut, by_reason, k, last)
+
+    def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
+        """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
+        (the caller adds what earlier slabs contributed to the same tick) for ``k = 0``."""
+        accepted, rejected, has_last, last_t = self._before
+        cut, rej_cut, by_reason, n_acc, last = self._ticks
+        if n_acc[k]:
+            has_last, last_t = True, int(last[k])
+        received = int(cut[k] - (cut[k - 1] if k else 0))
+        rejected_tick = int(rej_cut[k] - (rej_cut[k - 1] if k else 0))
+        return StreamObs(
+            last_t_ns=last_t if has_last else 0,
+            stale=not has_last or now - last_t > stale_ns,
+            accepted=accepted + int(n_acc[k]),
+            rejected=rejected if by_reason is None else
+            {r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
+            rejected_in_tick=rejected_tick, received_in_tick=received,
+        )
+
+
+class _LazyComponents(Mapping[str, ComponentObs]):
+    """Per-tick component figures, computed only for the components a rule looks at."""
+
+    def __init__(self, components: Mapping[str, Component], stresses: Mapping[str, np.ndarray]):
+        self._components, self._stresses = components, stresses
+        self._done: dict[str, ComponentObs] = {}
+
+    def __getitem__(self, name: str) -> ComponentObs:
+        obs = self._done.get(name)
+        if obs is None:
+            f = self._components[name].figures()
+            s = self._stresses[name]
+            obs = self._done[name] = ComponentObs(
+                f["damage"], f["damage_committed"], f["damage_rate_per_day"],
+                f["remaining_life_days"], float(s.max()) if s.shape[0] else math.nan)
+        return obs
+
+    def __iter__(self):
+        return iter(self._components)
+
+    def __len__(self) -> int:
+        return len(self._components)
+
+
+class Pipeline:
+    """The fatigue-monitoring core for one buoy. See the module docstring."""
+
+    def __init__(self, config: Config, sinks: Iterable[Sink] = (),
+                 state: Mapping[str, Any] | None = None, *, horizon_s: float | None = None,
+                 gate_all: bool = False) -> None:
+        if state is not None and state.get("version") != STATE_VERSION:
+            raise ValueError(f"pipeline state version {state.get('version')!r} is not "
+                             f"{STATE_VERSION}; cannot restore")
+        st = state or {}
+        self.config = config
+        self.buoy_id = config.buoy.id
+        self.sinks = list(sinks)
+        self.tick_ns = int(round(config.alerts.eval_interval_s * 1e9))
+        cable = build_cable(config)
+        self.components = {
+            c.name: Component(c, cable, config.fatigue, st.get("components", {}).get(c.name))
+            for c in config.components
+        }
+        self.validators = {
+            s: StreamValidator(s, config.validate[s], st.get("validators", {}).get(s))
+            for s in SENSOR_ORDER
+        }
+        self.selector = LoadSelector(config.load, st.get("load"))
+        self.motion_sensor = config.load.motion_sensor
+        self.estimator = (build_estimator(config, st.get("estimator"))
+                          if config.load.source != "measured" else None)
+        load_streams = []
+        if config.load.source != "estimated":
+            load_streams.append("tension")
+        if self.estimator is not None:
+            load_streams.append(self.motion_sensor)
+        horizon = config.ordering.horizon_s if horizon_s is None else horizon_s
+        self.reorder = ReorderBuffer(load_streams or ["tension"], int(round(horizon * 1e9)),
+                                     gate_all, st.get("reorder"))
+        # sensor time processed so far by watermark (not by flush): older samples are late
+        self.processed_ns = int(st.get("processed_ns", _NEVER))
+        self.alerts = build_alert_engine(
+            config, self.buoy_id,
+            {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
+            st.get("alerts"))
+        # without rules there is nothing to evaluate: skip building the per-tick observations
+        rule_keys = getattr(self.alerts, "rule_keys", None)
+        self._has_rules = rule_keys is None or bool(rule_keys())
+        lim = config.validate["tension"].fields["tension_N"]
+        self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
+        self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
+        self.next_tick_ns: int | None = st.get("next_tick_ns")
+        # per-stream counts in the tick being filled: {sensor: [received, rejected]}
+        self.tick_counts: dict[str, list[int]] = {s: list(v) for s, v in st.get("tick_counts", {}).items()}
+        self.last = dict(st.get("last", {"measured_N": None, "estimated_N": None,
+                                          "source": "none", "now_ns": 0,
+                                          "load_t_ns": None, "load_src": 0,
+                                          "time_start_ns": None, "time_end_ns": None}))
+        self.new_alerts: list[Any] = []
+        # load samples of the tick not yet evaluated: (t_ns, tension_N, source)
+        self.open_tick = _NO_LOAD if "open_tick" not in st else (
+            np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
+            np.array(st["open_tick"][2], np.int8))
+        self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
+
+    # ------------------------------------------------------------------ driving
+    @classmethod
+    def from_state(cls, config: Config, state: Mapping[str, Any], sinks: Iterable[Sink] = (),
+                   **kwargs: Any) -> "Pipeline":
+        return cls(config, sinks, state, **kwargs)
+
+    def process(self, block: SampleBlock) -> StepResult:
+        """Buffer one block and process everything the ordering watermark now allows."""
+        if block.buoy_id != self.buoy_id:
+            raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
+                             f"{self.buoy_id!r}")
+        self.reorder.push(block)
+        upto = self.reorder.watermark()
+        return self._advance(block.sensor, upto, upto)
+
+    def flush(self) -> StepResult:
+        """End of input: process every buffered sample; evaluate ticks the data completes."""
+        return self._advance("flush", None, self.reorder.end_of_data())
+
+    def close(self) -> None:
+        for sink in self.sinks:
+            sink.close()
+
+    # ------------------------------------------------------------------ core step
+    def _advance(self, sensor: str, upto: int | None, tick_limit: int | None) -> StepResult:
+        slab = self.reorder.take(upto)
+        streams: dict[str, _StreamSlab] = {}
+        n_acc = 0
+        rejected = dict.fromkeys(REASONS, 0)
+        for s, (t, values) in slab.items():
+            validator = self.validators[s]
+            before = _StreamSlab.before(validator)
+            codes = validator.check(t, values, max(self.processed_ns, self.taken_upto.get(s, _NEVER)))
+            self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
+            streams[s] = info = _StreamSlab(t, values, codes, before)
+            n_acc += info.acc_t.shape[0]
+            for i, reason in enumerate(REASONS, start=1):
+                rejected[reason] += int(np.count_nonzero(codes == i))
+            if info.acc_t.shape[0]:
+                first, last = int(info.acc_t[0]), int(info.acc_t[-1])
+                start = self.last["time_start_ns"]
+                self.last["time_start_ns"] = first if start is None else min(start, first)
+                end = self.last["time_end_ns"]
+                self.last["time_end_ns"] = last if end is None else max(end, last)
+        m_t, m_v = np.zeros(0, np.int64), np.zeros(0)
+        if "tension" in streams:
+            m_t, m_v = streams["tension"].acc_t, streams["tension"].acc_values[0]
+        e_t, e_v = np.zeros(0, np.int64), np.zeros(0)
+        if self.estimator is not None and self.motion_sensor in streams:
+            info = streams[self.motion_sensor]
+            if info.acc_t.shape[0]:
+                fields = dict(zip(SENSOR_FIELDS[self.motion_sensor], info.acc_values))
+                e_t, e_v = self.estimator.feed(info.acc_t, fields)
+        t, v, src = self.selector.select(m_t, m_v, e_t, e_v)
+        self.stats.add(v, src)
+        if m_t.shape[0]:
+            self.last["measured_N"] = float(m_v[-1])
+        if e_t.shape[0]:
+            self.last["estimated_N"] = float(e_v[-1])
+        stresses = {name: c.stress(v) for name, c in self.components.items()}
+        self.new_alerts = []
+        closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit)
+        if t.shape[0]:
+            self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
+        if upto is not None:
+            self.processed_ns = max(self.processed_ns, upto)
+        now = upto if upto is not None else tick_limit
+        if now is not None:
+            self.last["now_ns"] = max(self.last["now_ns"], now)
+        self.last["source"] = self._source_at(self.last["now_ns"])
+        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected)
+        for sink in self.sinks:
+            sink.on_step(step)
+        return step
+
+    def _source_at(self, now: int) -> str:
+        """The load source of the newest load sample, "none" once it is older than stale_after_s."""
+        t = self.last["load_t_ns"]
+        if t is None or now - t > self.selector.stale_ns:
+            return "none"
+        return SOURCE_NAMES[self.last["load_src"]]
+
+    def _feed_by_tick(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                      stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
+                      tick_limit: int | None) -> dict[str, list[np.ndarray]]:
+        """Feed the rainflow tick by tick, committing damage and evaluating alerts at tick ends."""
+        closed: dict[str, list[tuple[np.ndarray, ...]]] = {n: [] for n in self.components}
+        if self.next_tick_ns is None and streams:
+            first = min(int(x.t[0]) for x in streams.values())
+            self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
+        ends: np.ndarray = np.zeros(0, np.int64)
+        if (tick_limit is not None and self.next_tick_ns is not None
+                and tick_limit >= self.next_tick_ns):
+            k = (tick_limit - self.next_tick_ns) // self.tick_ns
+            ends = self.next_tick_ns + self.tick_ns * np.arange(k + 1, dtype=np.int64)
+        cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
+        evaluate = self._has_rules and ends.shape[0] > 0
+        if evaluate:
+            for info in streams.values():
+                info.prepare(ends)
+        start, prev_end = 0, _NEVER
+        comps = list(self.components.items())
+        for k in range(ends.shape[0] + 1):
+            stop = int(cuts[k])
+            if stop > start:
+                for name, comp in comps:
+                    closed[name].append(comp.feed(stresses[name][start:stop]))
+            if k == ends.shape[0]:
+                break
+            end = int(ends[k])
+            for _, comp in comps:
+                comp.commit(end)
+            if stop > start:
+                self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
+            if evaluate:
+                tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
+                ss = {n: stresses[n][start:stop] for n in self.components}
+                if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
+                    tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
+                    ss = {n: c.stress(tv) for n, c in self.components.items()}
+                self._evaluate(k, end, tt, tv, ts, ss, streams)
+            self.open_tick = _NO_LOAD
+            start, prev_end = stop, end
+        if ends.shape[0]:
+            self.next_tick_ns = int(ends[-1]) + self.tick_ns
+            self.tick_counts = {}
+        if stop > start:
+            self.open_tick = tuple(np.concatenate([o, x[start:]])
+                                   for o, x in zip(self.open_tick, (t, v, src)))
+        for s, info in streams.items():
+            # what this slab adds to the tick still open
+            received, rej = info.counts_after(prev_end)
+            counts = self.tick_counts.setdefault(s, [0, 0])
+            counts[0] += received
+            counts[1] += rej
+        return {n: [np.concatenate(parts) for parts in zip(*cycles)] if cycles
+                else [np.zeros(0)] * 3 for n, cycles in closed.items()}
+
+    def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                  stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
+        """Evaluate the alert rules at the end of the slab's ``k``-th tick."""
+        if src.shape[0] and src[0] == src[-1] and bool(np.all(src == src[0])):
+            mean = float(v.mean())
+            meas, est = (mean, math.nan) if src[0] == MEASURED else (math.nan, mean)
+        else:
+            m, e = v[src == MEASURED], v[src == ESTIMATED]
+            meas = float(m.mean()) if m.shape[0] else math.nan
+            est = float(e.mean()) if e.shape[0] else math.nan
+        obs = Observation(
+            buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
+            load_source=self._source_at(end), load_t_ns=t, tension_N=v,
+            measured_tension_N=meas, estimated_tension_N=est,
+            components=_LazyComponents(self.components, stresses),
+            streams=self._stream_obs(end, streams, k),
+        )
+        for rec in self.alerts.evaluate(obs):
+            self.new_alerts.append(rec)
+            self.alert_history.append(alert_to_dict(rec))
+        del self.alert_history[:-ALERT_HISTORY_LIMIT]
+
+    def _stream_obs(self, now: int, streams: Mapping[str, _StreamSlab] | None = None,
+                    k: int = 0) -> dict[str, StreamObs]:
+        """Stream health at ``now`` (the end of the slab's ``k``-th tick, or any time when
+        ``streams`` is None): totals up to ``now`` and counts within the tick."""
+        out = {}
+        for s, val in self.validators.items():
+            stale_ns = self.config.validate[s].stale_after_s * 1e9
+            info = None if streams is None else streams.get(s)
+            if info is not None:
+                obs = info.tick(k, now, stale_ns)
+            else:
+                obs = StreamObs(
+                    last_t_ns=val.last_t_ns if val.has_last else 0,
+                    stale=not val.has_last or now - val.last_t_ns > stale_ns,
+                    accepted=val.accepted, rejected=dict(val.rejected),
+                    rejected_in_tick=0, received_in_tick=0)
+            if k == 0 and streams is not None and s in self.tick_counts:
+                # samples of earlier slabs that fell into this same tick
+                received, rejected = self.tick_counts.pop(s)
+                obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
+                                          rejected_in_tick=obs.rejected_in_tick + rejected)
+            out[s] = obs
+        return out
+
+    def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
+              stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],
+              n_acc: int, rejected: Mapping[str, int]) -> StepResult:
+        comps = {}
+        for name, comp in self.components.items():
+            f = comp.figures()
+            r, m, c = closed[name]
+            comps[name] = ComponentStep(
+                name=name, stress_Pa=stresses[name], ranges_Pa=r, means_Pa=m, counts=c,
+                damage=f["damage"], damage_committed=f["damage_committed"],
+                damage_rate_per_day=f["damage_rate_per_day"],
+                remaining_life_days=f["remaining_life_days"], max_stress_Pa=f["max_stress_Pa"],
+            )
+        nan = math.nan
+        return StepResult(
+            buoy_id=self.buoy_id, sensor=sensor, now_ns=self.last["now_ns"], t_ns=t, tension_N=v,
+            load_source=self.last["source"],
+            measured_tension_N=nan if self.last["measured_N"] is None else self.last["measured_N"],
+            estimated_tension_N=nan if self.last["estimated_N"] is None else self.last["estimated_N"],
+            components=comps, accepted=n_acc, rejected=dict(rejected),
+            alerts=list(self.new_alerts),
+        )
+
+    # ------------------------------------------------------------------ outputs
+    def status(self) -> dict[str, Any]:
+        """Current figures for the daemon's periodic status message (JSON-serialisable)."""
+        now = self.last["now_ns"]
+        return {
+            "buoy_id": self.buoy_id,
+            "now_ns": now,
+            "load_source": self.last["source"],
+            "measured_tension_N": self.last["measured_N"],
+            "estimated_tension_N": self.last["estimated_N"],
+            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+                           for n, c in self.components.items()},
+            "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,
+                            "rejected": dict(o.rejected)}
+                        for s, o in self._stream_obs(now).items()},
+            "buffered_samples": self.reorder.buffered(),
+            "next_tick_ns": self.next_tick_ns,
+        }
+
+    def report(self) -> dict[str, Any]:
+        """The replay report's pipeline part (see replay.report for the full contract)."""
+        return {
+            "buoy_id": self.buoy_id,
+            "time_start_ns": self.last["time_start_ns"],
+            "time_end_ns": self.last["time_end_ns"],
+            "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected)}
+                        for s, val in self.validators.items()
+                        if val.accepted or any(val.rejected.values())},
+            "tension_N": self.stats.summary(),
+            "load_source": self.last["source"],
+            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+                           for n, c in self.components.items()},
+            "alerts": list(self.alert_history),
+        }
+
+    def state(self) -> dict[str, Any]:
+        """Everything needed to continue exactly from here (JSON-serialisable)."""
+        return {
+            "version": STATE_VERSION,
+            "buoy_id": self.buoy_id,
+            "components": {n: c.state() for n, c in self.components.items()},
+            "validators": {s: v.state() for s, v in self.validators.items()},
+            "load": self.selector.state(),
+            "estimator": self.estimator.state() if self.estimator is not None else None,
+            "reorder": self.reorder.state(),
+            "alerts": self.alerts.state(),
+            "stats": self.stats.state(),
+            "taken_upto": dict(self.taken_upto),
+            "processed_ns": self.processed_ns,
+            "next_tick_ns": self.next_tick_ns,
+            "tick_counts": {s: list(c) for s, c in self.tick_counts.items()},
+            "open_tick": [a.tolist() for a in self.open_tick],
+            "last": dict(self.last),
+            "alert_history": list(self.alert_history),
+        }

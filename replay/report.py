@@ -1,0 +1,148 @@
+"""The replay report: a stable JSON contract, and its human-readable summary.
+
+Stable fields (``report_version`` 1; new fields may be added, these keep their meaning):
+
+``buoy_id``                          the buoy
+``time_start`` / ``time_end``        first / last accepted sample, ISO 8601 UTC (null if none),
+                                     also as ``time_start_ns`` / ``time_end_ns``
+``samples``                          per channel (sensor): ``accepted``, ``rejected`` =
+                                     {nan, out_of_range, spike, duplicate, time_backwards}
+``tension_N``                        the fatigue load series: ``min``, ``mean``, ``max``, ``p99``
+                                     (p99 on a fixed histogram, ~3 N bins), and how many samples
+                                     were ``samples_measured`` / ``samples_estimated``
+``components``                       {name: ``damage`` (committed + open residue as half cycles),
+                                     ``damage_committed`` (Miner sum of closed cycles),
+                                     ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
+                                     ``remaining_life_days`` (null = no damage rate yet),
+                                     ``kind``, ``lay``}
+``alerts``                           alert transitions (monitor.alerts records as dicts)
+``inputs``                           files read and the reader's statistics (lost data)
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from monitor.config import Config
+
+REPORT_VERSION = 1
+
+
+def iso_utc(t_ns: int | None) -> str | None:
+    if t_ns is None:
+        return None
+    dt = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=timezone.utc)
+    return dt.strftime("%Y-%m-%dT%H:%M:%S") + f".{(t_ns % 1_000_000_000) // 1_000_000:03d}Z"
+
+
+def _strict(obj: Any) -> Any:
+    """Strict JSON: NaN and infinities become null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {str(k): _strict(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_strict(v) for v in obj]
+    return obj
+
+
+def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Sequence[str],
+                 read_stats: Mapping[str, Any] | None) -> dict[str, Any]:
+    """Assemble the report from ``Pipeline.report()`` and what the reader saw."""
+    comps = {}
+    by_name = {c.name: c for c in config.components}
+    for name, figures in pipeline_report["components"].items():
+        c = by_name[name]
+        comps[name] = {
+            "damage": figures["damage"],
+            "damage_committed": figures["damage_committed"],
+            "cycles": figures["cycles"],
+            "max_stress_Pa": figures["max_stress_Pa"],
+            "damage_rate_per_day": figures["damage_rate_per_day"],
+            "remaining_life_days": figures["remaining_life_days"],
+            "kind": c.kind,
+            "lay": c.lay,
+        }
+    return _strict({
+        "report_version": REPORT_VERSION,
+        "buoy_id": pipeline_report["buoy_id"],
+        "time_start": iso_utc(pipeline_report["time_start_ns"]),
+        "time_end": iso_utc(pipeline_report["time_end_ns"]),
+        "time_start_ns": pipeline_report["time_start_ns"],
+        "time_end_ns": pipeline_report["time_end_ns"],
+        "samples": pipeline_report["samples"],
+        "tension_N": pipeline_report["tension_N"],
+        "load_source_at_end": pipeline_report["load_source"],
+        "components": comps,
+        "alerts": pipeline_report["alerts"],
+        "inputs": {"files": list(inputs), "read": dict(read_stats or {})},
+        "config": config.source,
+    })
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write, fsync, rename over ``path``, fsync the directory: all or nothing after a crash."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    dir_fd = os.open(path.parent, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
+
+
+def write_report(path: str | Path, report: Mapping[str, Any]) -> None:
+    atomic_write_text(path, json.dumps(report, indent=2, allow_nan=False) + "\n")
+
+
+def _num(x: float | None, fmt: str) -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def summary_text(report: Mapping[str, Any]) -> str:
+    """A few lines for a person: what was read, the load, the damage per component, alerts."""
+    lines = [f"buoy {report['buoy_id']}: {report['time_start'] or '-'} .. {report['time_end'] or '-'}"]
+    for sensor, s in report["samples"].items():
+        rej = {k: v for k, v in s["rejected"].items() if v}
+        rej_text = ", ".join(f"{k} {v}" for k, v in rej.items()) or "none"
+        lines.append(f"  {sensor:8s} {s['accepted']:>12,d} samples accepted; rejected: {rej_text}")
+    t = report["tension_N"]
+    lines.append(f"  tension  min {_num(t['min'], '.0f')} N, mean {_num(t['mean'], '.0f')} N, "
+                 f"max {_num(t['max'], '.0f')} N, p99 {_num(t['p99'], '.0f')} N "
+                 f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated)")
+    lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
+                 f"{'max stress':>11s} {'life left':>11s}")
+    for name, c in report["components"].items():
+        life = c["remaining_life_days"]
+        lines.append(
+            f"  {name:24s} {c['damage']:11.3e} {c['damage_committed']:11.3e} "
+            f"{c['cycles']:10.0f} {_num(c['max_stress_Pa'] and c['max_stress_Pa'] / 1e6, '8.1f')} MPa "
+            f"{'-' if life is None else format(life, '.3g') + ' d':>11s}"
+        )
+    lines.append(f"  alerts: {len(report['alerts'])} transition(s)")
+    read = report["inputs"]["read"]
+    damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
+                                       "bad_payloads", "late", "duplicates")}
+    damage = {k: v for k, v in damage.items() if v}
+    if damage or read.get("incomplete_files"):
+        lines.append("  damaged input: " + ", ".join(f"{k.replace('_', ' ')} {v}"
+                                                    for k, v in damage.items())
+                     + (f"; {len(read['incomplete_files'])} file(s) without footer"
+                        if read.get("incomplete_files") else ""))
+    return "\n".join(lines)

@@ -1,0 +1,134 @@
+"""Configuration: the shipped seed 004 default, and one test per invalid-config case."""
+
+import copy
+import tomllib
+from importlib import resources
+
+import pytest
+
+from monitor.cli import main
+from monitor.config import (ConfigError, config_with, default_config, load_config, parse_config,
+                            run_section_parsers)
+
+
+def shipped() -> dict:
+    return tomllib.loads(resources.files("monitor").joinpath("vaps_seed004.toml").read_text())
+
+
+def test_default_is_the_seed_004_mooring():
+    c = default_config()
+    assert c.buoy.id == "vaps"
+    assert c.mooring.depth_m == 23.0 and c.mooring.length_m == 40.0
+    assert c.mooring.preset == "vaps_seed004" and c.mooring.segments == ()
+    assert c.mooring.span_m == 29.0 and c.load.motion_rate_hz == 10.0
+    assert c.cable.preset == "vaps_biw" and not c.cable.overrides
+    (comp,) = c.components
+    assert (comp.kind, comp.lay, comp.sn_curve.preset) == ("conductor", "left", "vaps_copper")
+    assert c.load.source == "auto" and c.load.stale_after_s == 5.0
+    assert c.alerts.eval_interval_s == 10.0
+    assert c.validate["tension"].fields["tension_N"].max_rate_per_s == 5.0e5
+    assert c.validate["tension"].stale_after_s == c.load.stale_after_s
+    assert c.validate["gnss"].stale_after_s == 60.0
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d["component"][0].update(lay="up"),
+     "config error: component[0].lay = 'up': must be one of ['left', 'right']"),
+    (lambda d: d["component"][0].update(layy="left"),
+     "config error: component[0]: unknown key(s) ['layy']"),
+    (lambda d: d["component"][0].update(dff=-1),
+     "config error: component[0].dff = -1.0: must be > 0"),
+    (lambda d: d["component"][0].update(kind="axial"),
+     "config error: component[0].area_m2 is missing"),
+    (lambda d: d["component"][0].update(mean_stress="goodman"),
+     "config error: component[0].mean_stress = 'goodman': needs ultimate_Pa"),
+    (lambda d: d["component"].append(dict(d["component"][0])),
+     "config error: component[1].name = 'conductor': duplicate name"),
+    (lambda d: d.update(component=[]),
+     "config error: component: at least one [[component]] is required"),
+    (lambda d: d["load"].update(source="guess"),
+     "config error: load.source = 'guess': must be one of ['auto', 'measured', 'estimated']"),
+    (lambda d: d["load"].update(stale_after_s="5"),
+     "config error: load.stale_after_s = '5': must be a number"),
+    (lambda d: d["validate"]["tension"]["tension_N"].update(max=-6000.0),
+     "config error: validate.tension.tension_N.max = -6000.0: must be > min (-5000)"),
+    (lambda d: d["validate"].update(sonar={}),
+     "config error: validate.sonar = {}: unknown sensor"),
+    (lambda d: d["buoy"].update(id="a/b"),
+     "config error: buoy.id = 'a/b': buoy id 'a/b' must be"),
+    (lambda d: d["mooring"].update(depth_m=45.0),
+     "config error: mooring.depth_m = 45.0: deeper than the line is long (40 m)"),
+    (lambda d: d["mooring"].update(span_m=41.0),
+     "config error: mooring.span_m = 41.0: must be shorter than the line (40 m)"),
+    (lambda d: d["mooring"].update(preset="nope"),
+     "config error: mooring.preset = 'nope': must be one of ['vaps_seed004']"),
+    (lambda d: d["alerts"].update(eval_interval_s=0),
+     "config error: alerts.eval_interval_s = 0.0: must be > 0"),
+    (lambda d: d["fatigue"].update(histogram_edges_Pa=[0.0, 2.0, 1.0]),
+     "config error: fatigue.histogram_edges_Pa = [0.0, 2.0, 1.0]: must be strictly increasing"),
+    (lambda d: d.update(zenohh={}),
+     "config error: unknown section(s) ['zenohh']"),
+    (lambda d: d["ordering"].update(horizon_s=float("nan")),
+     "config error: ordering.horizon_s = nan: must be a finite number"),
+])
+def test_invalid_values_name_the_key_and_value(mutate, message):
+    data = copy.deepcopy(shipped())
+    mutate(data)
+    with pytest.raises(ConfigError) as exc:
+        parse_config(data)
+    assert str(exc.value).startswith(message), str(exc.value)
+
+
+def test_explicit_segments_replace_the_preset():
+    data = shipped()
+    del data["mooring"]["preset"], data["mooring"]["span_m"]
+    data["mooring"]["segment"] = [
+        {"name": "chain", "length_m": 30.0, "weight_N_per_m": 400.0, "ea_N": 5e8, "diameter_m": 0.05},
+    ]
+    with pytest.raises(ConfigError, match="mooring.span_m is missing"):
+        parse_config(data)
+    data["mooring"]["span_m"] = 12.0
+    c = parse_config(data)
+    assert c.mooring.length_m == 30.0 and c.mooring.depth_m == 23.0
+    assert c.mooring.segments[0].weight_N_per_m == 400.0
+    data["mooring"]["preset"] = "vaps_seed004"
+    with pytest.raises(ConfigError, match="mooring.preset = 'vaps_seed004': give either"):
+        parse_config(data)
+
+
+def test_config_with_adds_a_component_and_revalidates():
+    c = default_config()
+    both = config_with(c, component=[*c.raw["component"], {**c.raw["component"][0],
+                                                            "name": "right", "lay": "right"}])
+    assert [(x.name, x.lay) for x in both.components] == [("conductor", "left"), ("right", "right")]
+    with pytest.raises(ConfigError, match="component\\[0\\].lay"):
+        config_with(c, component=[{**c.raw["component"][0], "lay": 3}])
+
+
+def test_file_errors(tmp_path):
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[buoy\nid = 1\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(bad)
+
+
+def test_check_config_command(tmp_path, capsys):
+    path = resources.files("monitor").joinpath("vaps_seed004.toml")
+    assert main(["check-config", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "ok" in out and "conductor (conductor, left lay, vaps_copper)" in out
+    assert "40 m line in 23 m of water" in out
+    bad = tmp_path / "bad.toml"
+    bad.write_text(path.read_text().replace('lay = "left"', 'lay = "sideways"'))
+    assert main(["check-config", str(bad)]) == 2
+    assert "component[0].lay = 'sideways'" in capsys.readouterr().err
+
+
+def test_external_sections_are_checked_by_their_owner_or_reported_unchecked():
+    c = config_with(default_config(), zenoh={"mode": "peer"})
+    results = run_section_parsers(c)
+    assert set(results) == {"alerts", "zenoh"}
+    for name, status in results.items():
+        assert status == "ok" or status.startswith("not checked:"), (name, status)

@@ -1,0 +1,88 @@
+"""Sample validation: one test per rejection reason, split invariance, spike recovery."""
+
+import math
+
+import numpy as np
+
+from monitor.config import FieldLimits, SensorLimits
+from monitor.validate import REASONS, StreamValidator
+
+S = 1_000_000_000
+LIMITS = SensorLimits({"tension_N": FieldLimits(-100.0, 10_000.0, 1_000.0)}, stale_after_s=5.0)
+NEVER = np.iinfo(np.int64).min
+
+
+def verdicts(t_s, v, state=None, floor=NEVER):
+    val = StreamValidator("tension", LIMITS, state)
+    t = (np.asarray(t_s, dtype=np.float64) * S).astype(np.int64)
+    codes = val.check(t, np.asarray(v, dtype=np.float64)[None, :], floor)
+    return [("ok" if c == 0 else REASONS[c - 1]) for c in codes], val
+
+
+def test_each_reason_is_detected_and_counted():
+    # 1 kN/s allowed: +50 N in 0.1 s is 500 N/s (ok); +500 N in 0.1 s is 5 kN/s (spike)
+    # verdicts compare with the last ACCEPTED sample (t = 0.1 until t = 0.5)
+    t = [0.0, 0.1, 0.2, 0.3, 0.1, 0.05, 0.4, 0.5, 0.6]
+    v = [1000, 1050, math.nan, 1550, 1050, 1050, 20_000, 1100, 1120]
+    got, val = verdicts(t, v)
+    assert got == ["ok", "ok", "nan", "spike", "duplicate", "time_backwards", "out_of_range",
+                   "ok", "ok"]
+    assert val.accepted == 4
+    assert val.rejected == {"nan": 1, "out_of_range": 1, "spike": 1, "duplicate": 1,
+                            "time_backwards": 1}
+    assert val.last_t_ns == int(0.6 * S) and val.last_values[0] == 1120
+
+
+def test_duplicate_of_last_accepted_time_wins_over_other_checks():
+    got, _ = verdicts([1.0, 1.0, 1.0], [5.0, math.nan, 1e9])
+    assert got == ["ok", "duplicate", "duplicate"]
+
+
+def test_spike_compares_with_last_accepted_sample_so_a_step_is_accepted_later():
+    # a genuine 3 kN step: rejected until 1 kN/s * elapsed covers it (3 s after the last good)
+    t = np.arange(0, 5.01, 0.5)
+    v = np.where(t < 1.0, 1000.0, 4000.0)
+    got, _ = verdicts(t, v)
+    # last accepted at t=0.5 (1000 N); 4000 N is accepted once (t - 0.5) * 1000 >= 3000
+    assert got == ["ok", "ok", "spike", "spike", "spike", "spike", "spike", "ok", "ok", "ok", "ok"]
+
+
+def test_samples_at_or_before_the_processed_floor_are_time_backwards():
+    got, _ = verdicts([1.0, 2.0, 3.0], [1.0, 1.0, 1.0], floor=2 * S)
+    assert got == ["time_backwards", "time_backwards", "ok"]
+
+
+def test_verdicts_and_state_are_split_invariant():
+    rng = np.random.default_rng(7)
+    n = 5000
+    t = np.sort(rng.integers(0, 500 * S, n)).astype(np.int64)
+    t[rng.integers(1, n, 100)] -= S  # some time going backwards
+    v = 2000 + 500 * np.sin(np.arange(n) / 30) + rng.normal(0, 20, n)
+    v[rng.integers(0, n, 50)] = np.nan
+    v[rng.integers(0, n, 50)] += 3000  # spikes
+    v[rng.integers(0, n, 20)] = 50_000  # out of range
+    dup = rng.integers(1, n, 50)
+    t[dup] = t[dup - 1]
+    one = StreamValidator("tension", LIMITS)
+    ref = one.check(t, v[None, :], NEVER)
+    counts = np.bincount(ref, minlength=6)
+    assert all(counts[1:] > 0), counts  # every reason occurs
+    for trial in range(5):
+        cuts = np.sort(rng.choice(np.arange(1, n), size=rng.integers(1, 60), replace=False))
+        val = StreamValidator("tension", LIMITS)
+        parts = []
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, n]):
+            parts.append(val.check(t[a:b], v[None, a:b], NEVER))
+            val = StreamValidator("tension", LIMITS, val.state())  # restore at every cut
+        np.testing.assert_array_equal(np.concatenate(parts), ref)
+        assert val.state() == one.state()
+
+
+def test_multi_field_sample_is_rejected_if_any_field_is_bad():
+    limits = SensorLimits({f: FieldLimits(-10.0, 10.0, math.inf)
+                           for f in ("heave_m", "surge_m", "sway_m")}, 5.0)
+    val = StreamValidator("motion", limits)
+    t = np.array([0, S, 2 * S], dtype=np.int64)
+    values = np.array([[0.0, 1.0, 2.0], [0.0, math.inf, 2.0], [0.0, 1.0, 11.0]])
+    codes = val.check(t, values, NEVER)
+    assert [REASONS[c - 1] if c else "ok" for c in codes] == ["ok", "nan", "out_of_range"]
