@@ -1,0 +1,237 @@
+"""Benchmark of the live daemon (`buoymon run`) fed over Zenoh on loopback.
+
+Two runs against a real daemon process:
+
+1. Real time: 20 Hz tension, 10 Hz IMU and 1 Hz GNSS in 1-s blocks for ``--seconds``. Prints
+   the daemon's CPU use (% of one core, from /proc after a warm-up), its RSS, and the
+   sample-to-status latency: from the put of a block to the first status that counts it as
+   processed (p50/p99/max). The sensor-time lag of the status (ordering waits for the slowest
+   stream) is printed separately.
+2. Accelerated: ``--days`` of the same streams in ``--block-s`` blocks as fast as the daemon
+   takes them (the publisher keeps at most a few blocks in flight), with the daemon's RSS
+   sampled every simulated day: flat memory means the last day's RSS is within a few percent
+   of the first's.
+
+Usage: PYTHONPATH=. python bench/bench_daemon.py [--seconds 60] [--days 30] [--block-s 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import queue
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from monitor import zenoh_io  # noqa: E402
+from monitor.blocks import SampleBlock  # noqa: E402
+from monitor.daemon_config import ZenohConfig  # noqa: E402
+
+T0_NS = 1_750_000_000 * 10**9
+RATES = {"tension": 20, "imu": 10, "gnss": 1}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def blocks_at(buoy: str, k: int, block_s: int, rng: np.random.Generator) -> list[SampleBlock]:
+    """Block ``k`` of each stream: a heave-driven tension, IMU acceleration and GNSS fix."""
+    out = []
+    for sensor, hz in RATES.items():
+        n = block_s * hz
+        t = T0_NS + (k * n + np.arange(n, dtype=np.int64)) * (10**9 // hz)
+        ts = (t - T0_NS) / 1e9
+        w = 2 * np.pi / 5.25
+        heave = 0.5 * np.sin(w * ts) + 0.2 * np.sin(1.7 * w * ts + 1.0)
+        if sensor == "tension":
+            f = {"tension_N": 3000.0 + 1000.0 * heave + 20.0 * rng.standard_normal(n)}
+        elif sensor == "imu":
+            az = -(w**2) * heave
+            f = {"accel_x_mps2": 0.2 * az, "accel_y_mps2": 0.01 * rng.standard_normal(n),
+                 "accel_z_mps2": az}
+        else:
+            f = {"lat_deg": np.full(n, 41.85) + 1e-6 * rng.standard_normal(n),
+                 "lon_deg": np.full(n, -82.4) + 1e-6 * rng.standard_normal(n)}
+        out.append(SampleBlock(buoy, sensor, t, f))
+    return out
+
+
+def proc_stats(pid: int) -> tuple[float, float, float]:
+    """(cpu seconds, RSS MB, peak RSS MB) of a process."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    status = Path(f"/proc/{pid}/status").read_text()
+    kb = {ln.split(":")[0]: int(ln.split()[1]) for ln in status.splitlines()
+          if ln.startswith(("VmRSS", "VmHWM"))}
+    return cpu, kb["VmRSS"] / 1024, kb["VmHWM"] / 1024
+
+
+def start_daemon(tmp: Path, port: int, load_source: str) -> tuple[subprocess.Popen, str]:
+    shipped = (REPO / "monitor" / "vaps_seed004.toml").read_text()
+    cfg = tmp / "bench.toml"
+    cfg.write_text(shipped.replace('source = "auto"', f'source = "{load_source}"', 1)
+                   + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
+                   f'[state]\npath = "{tmp / "state.sqlite"}"\ncheckpoint_interval_s = 10.0\n')
+    buoy = "vaps"
+    proc = subprocess.Popen([sys.executable, "-m", "monitor.cli", "--log-level", "warning",
+                             "run", "--config", str(cfg)], cwd=tmp,
+                            env={**os.environ, "PYTHONPATH": str(REPO)},
+                            stderr=open(tmp / "daemon.log", "w"))
+    return proc, buoy
+
+
+class Client:
+    def __init__(self, port: int, buoy: str) -> None:
+        zc = ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",))
+        for _ in range(100):  # the daemon takes a moment to listen
+            try:
+                self.session = zenoh_io.open_session(zc)
+                break
+            except Exception:
+                time.sleep(0.1)
+        self.codec = zenoh_io.ProtobufCodec()
+        self.q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+        self.sub = zenoh_io.declare_enqueuing_subscriber(
+            self.session, zenoh_io.status_key(buoy), self.q)
+        self.pubs = {s: zenoh_io.declare_data_publisher(self.session, f"buoy/{buoy}/sensor/{s}")
+                     for s in RATES}
+        deadline = time.monotonic() + 60
+        while not all(p.matching_status for p in self.pubs.values()):
+            if time.monotonic() > deadline:
+                raise SystemExit("daemon did not subscribe within 60 s")
+            time.sleep(0.05)
+        self.sent = 0
+
+    def put(self, block: SampleBlock) -> None:
+        self.pubs[block.sensor].put(self.codec.encode(block))
+        self.sent += 1
+
+    def statuses(self) -> list[tuple[float, dict]]:
+        out = []
+        while not self.q.empty():
+            _, _, payload, recv_ns = self.q.get()
+            out.append((recv_ns / 1e9, json.loads(payload)))
+        return out
+
+    def close(self) -> None:
+        for p in self.pubs.values():
+            p.undeclare()
+        self.sub.undeclare()
+        self.session.close()
+
+
+def realtime(client: Client, buoy: str, pid: int, seconds: int, warmup: int) -> None:
+    rng = np.random.default_rng(1)
+    put_wall: list[float] = []  # wall time of each message's put, by message number
+    put_t: list[int] = []  # sensor time of each message's last sample
+    start = time.time()
+    cpu0 = None
+    lat, lag = [], []
+    done = 0
+    for k in range(seconds + warmup):
+        due = start + k + 1  # a block goes out when its last sample is due
+        time.sleep(max(0.0, due - time.time()))
+        if k == warmup:
+            cpu0, t0 = proc_stats(pid)[0], time.time()
+        for b in blocks_at(buoy, k, 1, rng):
+            put_wall.append(time.time())
+            put_t.append(b.t_last_ns)
+            client.put(b)
+        for recv, doc in client.statuses():
+            m = doc["counters"]["messages"]
+            while done < m:
+                if done >= 3 * warmup:
+                    lat.append(recv - put_wall[done])
+                    if os.environ.get("BENCH_DEBUG") and lat[-1] > 0.1:
+                        print("slow", done, lat[-1], doc["counters"], doc.get("queue_depth"))
+                done += 1
+            if k >= warmup and doc.get("now_ns"):
+                lag.append(recv - (doc["now_ns"] - T0_NS) / 1e9 - start)
+    cpu1, t1 = proc_stats(pid)[0], time.time()
+    time.sleep(1.0)
+    _, rss, hwm = proc_stats(pid)
+    lat_ms = np.array(lat) * 1e3
+    print(f"real time, {seconds} s after {warmup} s warm-up: 20 Hz tension + 10 Hz IMU + 1 Hz GNSS")
+    print(f"  daemon CPU           {100 * (cpu1 - cpu0) / (t1 - t0):6.2f} % of one core")
+    print(f"  daemon RSS           {rss:6.1f} MB (peak {hwm:.1f} MB)")
+    print(f"  sample-to-status     p50 {np.percentile(lat_ms, 50):6.1f} ms  p99 "
+          f"{np.percentile(lat_ms, 99):6.1f} ms  max {lat_ms.max():6.1f} ms  (n={lat_ms.size})")
+    if lag:
+        lg = np.array(lag)
+        print(f"  status sensor-time lag behind wall clock: median {np.median(lg):.2f} s "
+              f"(ordering waits for every gating stream's next block)")
+
+
+def accelerated(client: Client, buoy: str, pid: int, days: float, block_s: int,
+                first: int) -> None:
+    rng = np.random.default_rng(2)
+    per_day = 86400 // block_s
+    n_blocks = int(days * per_day)
+    in_flight = 200 * len(RATES)
+    processed = 0
+    samples: list[tuple[float, float]] = []
+    t0 = time.time()
+    for k in range(first, first + n_blocks):
+        for b in blocks_at(buoy, k, block_s, rng):
+            client.put(b)
+        while client.sent - processed > in_flight:  # keep the daemon's queue short
+            for _, doc in client.statuses():
+                processed = max(processed, doc["counters"]["messages"])
+            time.sleep(0.002)
+        if (k - first + 1) % per_day == 0:
+            samples.append(((k - first + 1) / per_day, proc_stats(pid)[1]))
+    wall = time.time() - t0
+    print(f"accelerated, {days:g} days in {block_s}-s blocks: {wall:.1f} s wall "
+          f"({days * 86400 / wall:,.0f} x real time)")
+    for day, rss in samples:
+        if day in (1, 2, 5) or day % 10 == 0 or day == samples[-1][0]:
+            print(f"  day {day:5.0f}: RSS {rss:6.1f} MB")
+    if len(samples) >= 2:
+        print(f"  RSS growth from day 1 to day {samples[-1][0]:.0f}: "
+              f"{100 * (samples[-1][1] / samples[0][1] - 1):+.1f} %")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=int, default=60)
+    ap.add_argument("--warmup", type=int, default=10)
+    ap.add_argument("--days", type=float, default=30.0)
+    ap.add_argument("--block-s", type=int, default=60)
+    ap.add_argument("--load-source", default="auto", choices=["auto", "measured", "estimated"])
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmpd:
+        tmp = Path(tmpd)
+        port = free_port()
+        proc, buoy = start_daemon(tmp, port, args.load_source)
+        client = Client(port, buoy)
+        try:
+            realtime(client, buoy, proc.pid, args.seconds, args.warmup)
+            if args.days > 0:
+                first = args.seconds + args.warmup  # continue the same sensor timeline
+                accelerated(client, buoy, proc.pid, args.days, args.block_s,
+                            -(-first // args.block_s))
+        finally:
+            client.close()
+            proc.terminate()
+            proc.wait(60)
+        if proc.returncode:
+            print((tmp / "daemon.log").read_text()[-3000:])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

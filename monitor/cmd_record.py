@@ -1,0 +1,104 @@
+"""``buoymon record --config CFG -o DIR``: record a buoy's Zenoh traffic to MCAP.
+
+Subscribes to everything under ``buoy/<id>/`` (sensors, status, alerts) and writes each
+message byte for byte to hourly-rotated MCAP files in DIR (``[record]`` rotate_s and
+flush_interval_s apply), until SIGTERM/SIGINT. Sensor topics get the log format's protobuf
+schema, so the files replay with ``buoymon replay``; JSON topics get a jsonschema channel.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import queue
+import signal
+import threading
+import tomllib
+from dataclasses import replace
+
+from monitor.blocks import parse_sensor_topic, validate_buoy_id
+from monitor.cmd_run import load_daemon_config
+from monitor.daemon_config import ZenohConfig
+from monitor.recorder import JSON_OBJECT, McapRecorder
+from monitor import zenoh_io
+
+log = logging.getLogger("buoymon.record")
+
+
+def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    p = sub.add_parser("record", help="record a buoy's Zenoh traffic to MCAP files",
+                       description=__doc__.split("\n\n")[1])
+    p.add_argument("--config", required=True, metavar="CFG.toml", help="configuration file")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory")
+    p.set_defaults(func=run)
+
+
+def client_side(zc: ZenohConfig) -> ZenohConfig:
+    """The recorder joins the daemon's network: it connects to the configured endpoints (the
+    daemon's listen endpoints when none are given to connect to) and listens on nothing."""
+    return replace(zc, listen=(), connect=zc.connect or zc.listen)
+
+
+def recorder_token_key(buoy_id: str) -> str:
+    return f"buoy/{validate_buoy_id(buoy_id)}/recorder/alive"
+
+
+def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
+           stop: threading.Event, codec: zenoh_io.BlockCodec) -> int:
+    """Record until ``stop`` is set; returns the number of messages written."""
+    q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+    with zenoh_io.open_session(zc) as session:
+        sub = zenoh_io.declare_enqueuing_subscriber(session, f"buoy/{buoy_id}/**", q)
+        # tells the shore (and tests) that this buoy's traffic is being recorded
+        token = session.liveliness().declare_token(recorder_token_key(buoy_id))
+        try:
+            while not stop.is_set():
+                try:
+                    _, key, payload, recv_ns = q.get(timeout=0.2)
+                except queue.Empty:
+                    recorder.maybe_flush()
+                    continue
+                _write(recorder, codec, key, payload, recv_ns)
+        finally:
+            token.undeclare()
+            sub.undeclare()
+            while not q.empty():
+                _, key, payload, recv_ns = q.get_nowait()
+                _write(recorder, codec, key, payload, recv_ns)
+            recorder.close()
+    return recorder.messages
+
+
+def _write(recorder: McapRecorder, codec: zenoh_io.BlockCodec, key: str, payload: bytes,
+           recv_ns: int) -> None:
+    try:
+        parse_sensor_topic(key)
+    except ValueError:  # status, alerts, anything else: JSON documents
+        if payload:  # an empty payload is a DELETE (a cleared alert): no document to keep
+            recorder.write(key, payload, JSON_OBJECT, recv_ns, recv_ns)
+        return
+    try:
+        block = codec.decode(key, payload, recv_ns)
+    except ValueError as exc:
+        log.warning("undecodable sensor message not recorded",
+                    extra={"fields": {"key": key, "error": str(exc)}})
+        return
+    recorder.write(key, payload, codec.channel_spec(block.sensor), recv_ns, block.t_first_ns)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        dcfg = load_daemon_config(args.config)
+        with open(args.config, "rb") as f:
+            buoy_id = validate_buoy_id(tomllib.load(f).get("buoy", {}).get("id", ""))
+    except (ValueError, OSError) as exc:
+        log.error(f"config error: {args.config}: {exc}" if "config error" not in str(exc)
+                  else str(exc))
+        return 2
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda signum, frame: stop.set())
+    recorder = McapRecorder(args.output, dcfg.record.rotate_s, dcfg.record.flush_interval_s)
+    n = record(buoy_id, client_side(dcfg.zenoh), recorder, stop, zenoh_io.default_codec())
+    log.info("recording stopped", extra={"fields": {"messages": n, "files": recorder.files}})
+    return 0

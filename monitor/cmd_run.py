@@ -1,0 +1,86 @@
+"""``buoymon run --config CFG.toml``: the live monitoring daemon (see :mod:`monitor.daemon`)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import tomllib
+from typing import Any
+
+from monitor.daemon import Daemon
+from monitor.daemon_config import DaemonConfig, parse_daemon_sections
+
+log = logging.getLogger("buoymon.run")
+
+
+def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
+    p = sub.add_parser("run", help="run the live monitoring daemon (Zenoh in, status out)",
+                       description="Subscribe to buoy/<id>/sensor/**, run the pipeline core, "
+                       "publish buoy/<id>/monitor/status, checkpoint state crash-safely.")
+    p.add_argument("--config", required=True, metavar="CFG.toml", help="configuration file")
+    p.set_defaults(func=run)
+
+
+def load_daemon_config(path: str) -> DaemonConfig:
+    """The daemon's sections of the configuration file (ValueError naming key and value)."""
+    with open(path, "rb") as f:
+        try:
+            raw = tomllib.load(f)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"config error: {path}: {exc}") from None
+    return parse_daemon_sections(raw)
+
+
+def build_daemon(path: str) -> Daemon:
+    """Load and validate the whole configuration, then build (not start) the daemon."""
+    from monitor.config import load_config  # noqa: PLC0415 (heavy: models, numba)
+    from monitor.pipeline import Pipeline  # noqa: PLC0415
+    from monitor.zenoh_io import default_codec  # noqa: PLC0415
+
+    cfg = load_config(path)
+    dcfg = load_daemon_config(path)
+
+    def make_pipeline(state: Any, sinks: Any) -> Pipeline:
+        return Pipeline(cfg, list(sinks), state)
+
+    def attach(session: Any, pipeline: Pipeline) -> list[AlertDelivery]:
+        if not hasattr(pipeline.alerts, "apply_command"):  # no alert rules engine installed
+            return []
+        return [AlertDelivery(session, pipeline, cfg.raw.get("alerts", {}))]
+
+    return Daemon(cfg.buoy.id, dcfg, make_pipeline, default_codec(), attach=attach)
+
+
+class AlertDelivery:
+    """Alert transitions to Zenoh (and webhook/e-mail via the outbox); operator commands
+    (``buoymon alerts ack|reset``) applied on the daemon's thread between blocks."""
+
+    def __init__(self, session: Any, pipeline: Any, alerts_raw: Any) -> None:
+        from monitor.alerts.config import AlertsConfig  # noqa: PLC0415
+        from monitor.alerts.delivery import OutboxSink, ZenohAlertSink  # noqa: PLC0415
+
+        self.engine = pipeline.alerts
+        self.zenoh = ZenohAlertSink(session, pipeline.buoy_id, active=self.engine.active())
+        self.outbox = OutboxSink.from_config(AlertsConfig.from_dict(alerts_raw, "alerts"))
+        pipeline.sinks.extend(s for s in (self.zenoh, self.outbox) if s is not None)
+
+    def poll(self) -> None:
+        self.zenoh.apply_commands(self.engine)
+
+    def close(self) -> None:
+        self.zenoh.close()
+        if self.outbox is not None:
+            self.outbox.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        daemon = build_daemon(args.config)
+    except (ValueError, OSError) as exc:
+        log.error(str(exc))
+        return 2
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda signum, frame: daemon.stop())
+    daemon.run()
+    return 0

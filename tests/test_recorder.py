@@ -1,0 +1,102 @@
+"""MCAP recorder: hourly rotation, periodic flush + fsync, files of a killed recorder replay."""
+
+import os
+import signal
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, make_reader
+
+from monitor.recorder import JSON_OBJECT, ChannelSpec, McapRecorder
+
+REPO = Path(__file__).resolve().parents[1]
+H = 3_600_000_000_000  # one hour in ns
+T0 = 1_700_000_000 * 1_000_000_000 // H * H  # a whole hour
+SPEC = ChannelSpec("buoymon.v1.TensionBlock", "protobuf", b"\x0a\x00", "protobuf")
+
+
+def _read(path, salvage=False):
+    with open(path, "rb") as f:
+        if not salvage:
+            return [(c.topic, s.encoding, s.name, m.log_time, m.publish_time, m.data)
+                    for s, c, m in make_reader(f).iter_messages()]
+        out = []
+        try:
+            for s, c, m in NonSeekingReader(f).iter_messages(log_time_order=False):
+                out.append((c.topic, m.log_time, m.data))
+        except (McapError, EOFError, struct.error):
+            pass  # the truncated tail after the last flush
+        return out
+
+
+def test_rotates_hourly_and_keeps_payloads_and_times(tmp_path):
+    rec = McapRecorder(tmp_path, rotate_s=3600, flush_interval_s=5)
+    times = [T0 + k * 30 * 60 * 1_000_000_000 for k in range(5)]  # every 30 min over 2 h
+    for i, t in enumerate(times):
+        rec.write("buoy/b1/sensor/tension", b"p%d" % i, SPEC, t, t - 1000)
+        rec.write("buoy/b1/monitor/status", b'{"i":%d}' % i, JSON_OBJECT, t + 1, 0)
+    rec.close()
+    names = [os.path.basename(p) for p in rec.files]
+    assert names == ["buoymon-20231114T220000Z.mcap", "buoymon-20231114T230000Z.mcap",
+                     "buoymon-20231115T000000Z.mcap"]
+    per_file = [_read(p) for p in rec.files]
+    assert [len(m) for m in per_file] == [4, 4, 2]
+    topic, enc, name, log_t, pub_t, data = per_file[1][0]
+    assert (topic, enc, name, log_t, pub_t, data) == (
+        "buoy/b1/sensor/tension", "protobuf", "buoymon.v1.TensionBlock", times[2],
+        times[2] - 1000, b"p2")
+    status = per_file[1][1]
+    assert status[1:3] == ("jsonschema", "buoymon.v1.Json")
+    assert status[4] == times[2] + 1  # publish_time 0 would mean "unset": log time is used
+    assert rec.messages == 10
+
+
+def test_restart_in_the_same_hour_never_overwrites(tmp_path):
+    for k in range(2):
+        rec = McapRecorder(tmp_path)
+        rec.write("t", b"x", JSON_OBJECT, T0 + k, T0 + k)
+        rec.close()
+    assert sorted(os.listdir(tmp_path)) == ["buoymon-20231114T220000Z-1.mcap",
+                                            "buoymon-20231114T220000Z.mcap"]
+
+
+def test_flush_interval_is_in_log_time(tmp_path):
+    rec = McapRecorder(tmp_path, flush_interval_s=2)
+    rec.write("t", b"a", JSON_OBJECT, T0, T0)  # first write flushes (nothing flushed before)
+    rec.write("t", b"b", JSON_OBJECT, T0 + 1_000_000_000, T0)
+    assert not rec.maybe_flush(T0 + 1_500_000_000)
+    assert rec.maybe_flush(T0 + 2_000_000_000)
+    assert not rec.maybe_flush(T0 + 9_000_000_000)  # nothing new to flush
+    rec.close()
+
+
+_KILLED = """
+import sys, time
+from monitor.recorder import JSON_OBJECT, McapRecorder
+rec = McapRecorder(sys.argv[1], flush_interval_s=3600)
+t0 = int(sys.argv[2])
+for i in range(300):
+    rec.write("buoy/b1/sensor/tension", b"msg%04d" % i + b"." * 200, JSON_OBJECT, t0 + i, t0 + i)
+rec.flush()
+for i in range(300, 350):  # written after the last flush: may be lost, must not break the rest
+    rec.write("buoy/b1/sensor/tension", b"msg%04d" % i, JSON_OBJECT, t0 + i, t0 + i)
+print("flushed", flush=True)
+time.sleep(60)
+"""
+
+
+def test_file_of_a_killed_recorder_salvages_to_the_last_flush(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED, str(tmp_path), str(T0)], env=env,
+                            stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "flushed"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    (path,) = [tmp_path / p for p in os.listdir(tmp_path)]
+    got = _read(path, salvage=True)
+    assert len(got) >= 300
+    assert [m[2][:7] for m in got[:300]] == [b"msg%04d" % i for i in range(300)]
+    assert [m[1] for m in got[:300]] == [T0 + i for i in range(300)]
