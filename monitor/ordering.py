@@ -57,7 +57,7 @@ class ReorderBuffer:
             for sensor, (t, values) in state["pending"].items():
                 t = np.array(t, dtype=np.int64)
                 self._pending[sensor].append(
-                    (t, np.array(values, dtype=np.float64).reshape(len(SENSOR_FIELDS[sensor]), -1)))
+                    (t, np.array(values, dtype=np.float64).reshape(len(SENSOR_FIELDS[sensor]), -1)))  # null -> NaN
                 self._in_order[sensor] = not bool(np.any(t[1:] < t[:-1]))
 
     def push(self, block: SampleBlock) -> None:
@@ -141,6 +141,9 @@ class ReorderBuffer:
             parts = self._pending[sensor]
             if parts:
                 t = np.concatenate([p[0] for p in parts])
-                values = np.concatenate([p[1] for p in parts], axis=1)
-                pending[sensor] = [t.tolist(), values.ravel().tolist()]
+                values = np.concatenate([p[1] for p in parts], axis=1).ravel()
+                # strict JSON: NaN/inf (not validated yet) become null, read back as NaN,
+                # which validation rejects with the same reason ("nan")
+                flat = [v if np.isfinite(v) else None for v in values.tolist()]
+                pending[sensor] = [t.tolist(), flat]
         return {"received_max": dict(self.received_max), "pending": pending}

@@ -227,6 +227,28 @@ def test_reordered_blocks_within_the_horizon_and_late_blocks(hooks):
     assert p.report()["samples"]["tension"]["rejected"]["time_backwards"] == len(late)
 
 
+def test_state_with_buffered_bad_samples_is_strict_json():
+    config = default_config()
+    blocks = blocks_interleaved(sea(120), 1)
+    live = Pipeline(config)
+    cut = next(i for i, b in enumerate(blocks) if i > 200 and b.sensor == "tension")
+    for b in blocks[:cut]:
+        live.process(b)
+    bad = blocks[cut]
+    values = bad.fields["tension_N"].copy()
+    values[3], values[5] = np.nan, np.inf
+    live.process(SampleBlock("vaps", "tension", bad.t_ns, {"tension_N": values}))
+    state = live.state()
+    assert state["reorder"]["pending"]["tension"][1].count(None) == 2  # still buffered
+    restored = Pipeline(config, state=json.loads(json.dumps(state, allow_nan=False)))
+    for p in (live, restored):
+        for b in blocks[cut + 1:]:
+            p.process(b)
+        p.flush()
+    assert restored.report() == live.report()
+    assert live.report()["samples"]["tension"]["rejected"]["nan"] >= 2
+
+
 def test_state_is_strict_json_and_blocks_of_another_buoy_are_refused():
     config = default_config()
     p, _ = run(config, blocks_interleaved(sea(60), 1))
