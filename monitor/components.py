@@ -208,6 +208,16 @@ class Component:
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
         }
 
+    def warm_up(self) -> None:
+        """Run the compiled kernels once on throwaway objects (a process's first numba call
+        costs a second or more), so a restarted daemon processes its first block promptly."""
+        stress = (helix.conductor_stress(np.array([1000.0, 2000.0, 1000.0]), self._cable,
+                                         lay=self.cfg.lay)
+                  if self.cfg.kind == "conductor" else np.array([1e6, 2e6, 1e6]))
+        fatigue.StreamingRainflow().feed(stress)
+        fatigue.MinerAccumulator(self.sn_curve).add_cycles(np.ones(1), np.ones(1), np.zeros(1),
+                                                           time_s=0.0)
+
     def state(self) -> dict[str, Any]:
         return {
             "rainflow": self.rainflow.state(),
