@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -79,13 +80,17 @@ class WebViewer:
     grpc_url: str
 
     def stop(self, timeout_s: float = 10.0) -> None:
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait()
+        """End the viewer and the server it forks (both are in the viewer's process group)."""
+        try:
+            os.killpg(self.process.pid, signal.SIGTERM)
+            self.process.wait(timeout_s)
+        except (ProcessLookupError, subprocess.TimeoutExpired):
+            pass
+        try:  # the forked server can outlive its parent: end whatever is left of the group
+            os.killpg(self.process.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.process.wait()
 
 
 def _wait_listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
@@ -110,8 +115,10 @@ def serve_web_viewer(options: RerunOptions, config_home: Path | None = None,
         "--server-memory-limit", options.server_memory_limit,
         *[str(p) for p in recordings],
     ]
+    # own process group: `rerun` forks its server, and stop() must end both
     proc = subprocess.Popen(cmd, env=analytics_disabled_env(config_home),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
     try:
         _wait_listening(options.grpc_port, proc, timeout_s)
         _wait_listening(options.web_port, proc, timeout_s)
