@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from replay.simulate import SimConfig, simulate
+from replay.simulate import LOAD_MODELS, SimConfig, simulate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -27,6 +27,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--mean-span", type=float, default=31.0,
                    help="mean horizontal anchor -> buoy distance in m, the steady drift "
                         "(default 31; the 40 m line in 23 m of water is straight at 32.7)")
+    p.add_argument("--load-model", choices=LOAD_MODELS, default="catenary",
+                   help="how line tension follows from the sea: 'catenary' = buoy motion -> "
+                        "catenary + axial dynamics (default); 'wavfor' = the seed 004 WAVFOR "
+                        "wave force on the held-fixed buoy plus the static pretension, an upper "
+                        "bound")
     p.add_argument("--dropouts", type=float, default=0.0,
                    help="probability that a 1 s block of a stream is lost (default 0)")
     p.add_argument("--spikes", type=float, default=0.0,
@@ -40,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
                         buoy_id=args.buoy_id, start=args.start, dropouts=args.dropouts,
-                        spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span)
+                        spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span,
+                        load_model=args.load_model)
     except ValueError as e:
         print(f"buoymon simulate: {e}", file=sys.stderr)
         return 2
