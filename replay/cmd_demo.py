@@ -84,7 +84,8 @@ def comparison(report: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from monitor.cli import main as cli_main
-    from replay.cmd_replay import build_sinks
+    from monitor.viz.pipeline_sinks import open_rerun
+    from replay.cmd_replay import write_html
     from replay.report import summary_text, write_report
     from replay.runner import replay_logs
 
@@ -103,8 +104,11 @@ def run(args: argparse.Namespace) -> int:
         return rc
     print("Replaying it through the monitor ...", flush=True)
     config = demo_config()
-    result = replay_logs(config, [log_path], sinks=build_sinks(args, config))
+    rrd_path = out / f"{config.buoy.id}.rrd"
+    result = replay_logs(config, [log_path], sinks=[open_rerun(config, rrd=rrd_path, replay=True)],
+                         plot_fields=True)
     write_report(report_path, result.report)
+    html_path, *pngs = write_html(str(out / "report.html"), result.report)
     print()
     print(summary_text(result.report))
     print()
@@ -113,10 +117,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"Done in {time.monotonic() - start:.0f} s. Outputs in {out}/:")
     print(f"  {log_path}    the simulated log (MCAP; `buoymon replay` it, or open it in Foxglove)")
     print(f"  {report_path}    the fatigue report (JSON)")
-    extras = [p for p in sorted(out.iterdir())
-              if p not in (log_path, report_path) and not p.name.startswith(".")]
-    for extra in extras:
-        print(f"  {extra}")
-    if not extras:
-        print("  (no visual outputs were configured for this run)")
+    print(f"  {html_path}    the fatigue report as a page: open it in a browser")
+    print(f"  {rrd_path}    the Rerun recording: `buoymon view {rrd_path}` "
+          "(web viewer on http://127.0.0.1:9090; --native for the desktop viewer)")
+    print(f"  {len(pngs)} plots as PNG beside the page: {', '.join(Path(p).name for p in pngs)}")
     return 0
