@@ -59,10 +59,11 @@ def build_daemon(path: str) -> Daemon:
 def rerun_sinks(cfg: Any) -> list[Any]:
     """The live Rerun sink when ``[rerun]`` asks for an output (rrd, connect, serve_web); none
     otherwise. A viewer that cannot be reached costs the dashboard, never the monitoring."""
-    from monitor.viz.pipeline_sinks import open_rerun, rerun_configured  # noqa: PLC0415
+    section = cfg.raw.get("rerun") or {}
+    if not any(section.get(k) for k in ("rrd", "connect", "serve_web")):
+        return []  # not configured: rerun is not even imported
+    from monitor.viz.pipeline_sinks import open_rerun  # noqa: PLC0415
 
-    if not rerun_configured(cfg):
-        return []
     try:
         return [open_rerun(cfg)]
     except (ValueError, RuntimeError, OSError) as exc:

@@ -69,12 +69,6 @@ def rerun_options(config: Config) -> RerunOptions:
     return replace(opts, **fill)
 
 
-def rerun_configured(config: Config) -> bool:
-    """True if ``[rerun]`` asks for an output (``rrd``, ``connect`` or ``serve_web``)."""
-    opts = rerun_options(config)
-    return bool(opts.rrd or opts.connect or opts.serve_web)
-
-
 class ViewerSink:
     """A Rerun sink that also stops the web viewer it was served with when it is closed."""
 
