@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rrd", metavar="FILE.rrd",
                    help="also write a Rerun recording (open it with `buoymon view FILE.rrd`)")
     p.add_argument("--html", metavar="FILE.html",
-                   help="also write the HTML fatigue report (and its plots as PNG beside it)")
+                   help="also write the HTML fatigue report (and its plots as PNG beside it); "
+                        "the --report JSON then carries the plot fields too")
     p.set_defaults(func=run)
 
 
@@ -66,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks, speed=speed,
                              show_progress=False if args.no_progress else None,
-                             plot_fields=bool(args.report or args.html))
+                             plot_fields=bool(args.html))
     except (FileNotFoundError, ValueError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 1

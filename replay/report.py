@@ -19,8 +19,11 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
 ``inputs``                           files read and the reader's statistics (lost data)
 ``design_life_years``                the configured design life
 
-Optional plot fields (``buoymon replay --html`` / ``--report``, docs/REPORT_FORMAT.md):
-``tension_history`` and per component ``damage_history``, ``histogram``, ``sn_curve``.
+Optional plot fields (with ``buoymon replay --html``, also in the ``--report`` JSON then, so
+``buoymon report`` can draw it again; docs/REPORT_FORMAT.md): ``tension_history`` and per
+component ``damage_history``, ``histogram``, ``sn_curve``. They describe this replay only (a
+log replayed in parts with ``--state`` has each part's history), so they are left out of a
+plain ``--report``, whose components stay equal between split and one-pass replays.
 """
 
 from __future__ import annotations
@@ -153,7 +156,7 @@ def summary_text(report: Mapping[str, Any]) -> str:
         peak = c["max_stress_Pa"]
         lines.append(
             f"  {name:24s} {c['damage']:11.3e} {c['damage_committed']:11.3e} "
-            f"{c['cycles']:10.0f} {_num(peak if isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
+            f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
             f"{life if life == '-' else life + ' d':>11s}"
         )
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)")
