@@ -126,6 +126,8 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     origin: list[float] = []
+    # raw GNSS blocks go to the sinks that draw them (the Rerun position view)
+    block_sinks = [s.on_block for s in sinks if hasattr(s, "on_block")]
     start = time.perf_counter()
     for block in blocks:
         if pipeline is None:
@@ -140,6 +142,8 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         if speed is not None:
             _pace(block, speed, origin)
         pipeline.process(block)
+        for on_block in block_sinks:
+            on_block(block)
         n_blocks += 1
         n_samples += len(block)
         if progress is not None:
@@ -175,9 +179,16 @@ def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
 
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
                 sinks: Sequence[Sink] = (), speed: float | None = None,
-                show_progress: bool | None = None) -> ReplayResult:
-    """Replay MCAP logs (files or directories) through the pipeline; return the report."""
+                show_progress: bool | None = None, plot_fields: bool = False) -> ReplayResult:
+    """Replay MCAP logs (files or directories) through the pipeline; return the report.
+
+    ``plot_fields`` adds the report's optional plot fields (docs/REPORT_FORMAT.md: tension and
+    damage histories, rainflow histograms, S-N curves) for ``buoymon report`` / ``--html``.
+    """
+    from monitor.viz.pipeline_sinks import report_plot_fields
+    from monitor.viz.report_history import ReportHistory
     from replay.reader import LogReader, time_span
+    from replay.report import add_plot_fields
 
     files = collect_logs(paths)
     state = load_state(state_path)
@@ -187,10 +198,14 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
     # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
     source = LogReader(files, coalesce=speed is None)
-    pipeline, result = run_blocks(config, source, state=state, sinks=sinks, speed=speed,
+    history = ReportHistory() if plot_fields else None
+    all_sinks = [*sinks, history] if history is not None else list(sinks)
+    pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,
                                   progress=progress)
     result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
                                  read_summary(source.stats))
+    if history is not None:
+        add_plot_fields(result.report, report_plot_fields(history, pipeline.components))
     if result.ignored_blocks:
         result.report["inputs"]["ignored_blocks_of_other_buoys"] = result.ignored_blocks
     if state_path is not None:

@@ -145,12 +145,14 @@ def plot_life(r: Report) -> Figure | None:
     cap = float(np.max(life[finite])) * 10 if finite.any() else 100.0
     if r.design_life_years:
         cap = max(cap, r.design_life_years * 10)
-    shown = np.where(finite, life, cap)
-    colours = ["#2b8cbe" if f else "#bdbdbd" for f in finite]
+    spent = life == 0  # damage >= 1: no life left
+    floor = float(np.min(life[finite])) / 10 if finite.any() else 1e-3
+    shown = np.where(finite, life, np.where(spent, floor, cap))
+    colours = ["#2b8cbe" if f else "#d62828" if s else "#bdbdbd" for f, s in zip(finite, spent)]
     ax.barh(names, shown, color=colours)
-    for y, (v, f) in enumerate(zip(life, finite)):
-        ax.text(shown[y], y, f" {v:.3g} y" if f else " no damage accrued", va="center",
-                fontsize=8)
+    for y, (v, f, s) in enumerate(zip(life, finite, spent)):
+        text = f" {v:.3g} y" if f else " none left (damage >= 1)" if s else " no damage accrued"
+        ax.text(shown[y], y, text, va="center", fontsize=8)
     if r.design_life_years:
         ax.axvline(r.design_life_years, color="#d62828", ls="--",
                    label=f"design life {r.design_life_years:g} y")
