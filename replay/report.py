@@ -30,12 +30,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from monitor.atomic_file import atomic_write_text
 from monitor.config import Config
 
 REPORT_VERSION = 1
@@ -104,27 +103,6 @@ def add_plot_fields(report: dict[str, Any], fields: Mapping[str, Any]) -> None:
     for name, extra in fields.get("components", {}).items():
         if name in report["components"]:
             report["components"][name].update(_strict(extra))
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write, fsync, rename over ``path``, fsync the directory: all or nothing after a crash."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    dir_fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(dir_fd)
-    finally:
-        os.close(dir_fd)
 
 
 def write_report(path: str | Path, report: Mapping[str, Any]) -> None:

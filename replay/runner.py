@@ -21,7 +21,8 @@ from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
 from monitor.events import Sink
 from monitor.pipeline import Pipeline
-from replay.report import atomic_write_text, build_report
+from monitor.atomic_file import atomic_write_text
+from replay.report import build_report
 
 log = logging.getLogger(__name__)
 
