@@ -234,15 +234,38 @@ class SNCurve:
             s = _mean_corrected(s, sm, self.mean_correction, self.ultimate_Pa, self.walker_gamma)
         return s * (self.derating / _MPA)
 
+    @cached_property
+    def _power_law(self) -> tuple[np.ndarray, np.ndarray | float, np.ndarray]:
+        """(m, dff / a per segment, ascending bounds in MPa): the per-cycle damage factors,
+        computed once. A single segment keeps a scalar coefficient (numpy's scalar power,
+        as evaluated before this cache existed: the values stay bit-identical)."""
+        m, log_a, bounds = self._segments
+        coef = self.dff * 10.0 ** -log_a[0] if m.size == 1 else self.dff * 10.0 ** -log_a
+        return m, coef, bounds
+
     def damage_per_cycle(self, range_Pa, counts=1.0, mean_Pa=None) -> np.ndarray:
         """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa."""
-        s = self.effective_range_MPa(range_Pa, mean_Pa)
-        m, log_a, bounds = self._segments
+        return self._damage_of(self.effective_range_MPa(range_Pa, mean_Pa), counts)
+
+    def damage_of_valid(self, range_Pa: np.ndarray, counts: np.ndarray,
+                        mean_Pa: np.ndarray) -> np.ndarray:
+        """``damage_per_cycle`` for float64 arrays the caller knows to be finite with
+        ranges >= 0 (e.g. rainflow of validated stresses): the same values without the
+        input checks, for hot loops over a handful of cycles."""
+        s = range_Pa * self.scf
+        if self.mean_correction != "none":
+            s = _mean_corrected(s, mean_Pa * self.scf, self.mean_correction, self.ultimate_Pa,
+                                self.walker_gamma)
+        return self._damage_of(s * (self.derating / _MPA), counts)
+
+    def _damage_of(self, s: np.ndarray, counts) -> np.ndarray:
+        """Damage of effective ranges ``s`` (MPa, see ``effective_range_MPa``) times counts."""
+        m, coef, bounds = self._power_law
         if m.size == 1:
-            d = np.power(s, m[0]) * (self.dff * 10.0 ** -log_a[0])
+            d = np.power(s, m[0]) * coef
         else:
             seg = m.size - 1 - np.searchsorted(bounds, s, side="right")
-            d = np.power(s, m[seg]) * (self.dff * 10.0 ** -log_a[seg])
+            d = np.power(s, m[seg]) * coef[seg]
         if self.low_stress == "cutoff":
             d = np.where(s < self.endurance_MPa, 0.0, d)
         return d * np.asarray(counts, dtype=np.float64)
