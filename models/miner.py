@@ -134,6 +134,7 @@ class MinerAccumulator:
         self._t_first: float | None = None
         self._t_last: float | None = None
         self._buckets: dict[int, float] = {}
+        self._rate: float | None = None  # damage_rate_per_day until the next dated commit
         self._setup_kernel()
 
     def _setup_kernel(self) -> None:
@@ -224,6 +225,7 @@ class MinerAccumulator:
         return self.set_provisional(ranges, counts, means)
 
     def _date(self, added: float, t: float) -> None:
+        self._rate = None
         if self._t_first is None:
             self._t_first = t
         self._t_last = t
@@ -254,6 +256,11 @@ class MinerAccumulator:
     @property
     def damage_rate_per_day(self) -> float:
         """Committed damage per day over the last window (0 until time has passed)."""
+        if self._rate is None:  # read at every alert tick: computed once per dated commit
+            self._rate = self._rate_per_day()
+        return self._rate
+
+    def _rate_per_day(self) -> float:
         if self._t_last is None or self._t_last <= self._t_first:
             return 0.0
         width = self.rate_window_s / self.rate_buckets
@@ -319,4 +326,5 @@ class MinerAccumulator:
         acc._t_first = None if state["t_first"] is None else float(state["t_first"])
         acc._t_last = None if state["t_last"] is None else float(state["t_last"])
         acc._buckets = {int(k): float(v) for k, v in state["buckets"]}
+        acc._rate = None
         return acc
