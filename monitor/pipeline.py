@@ -74,6 +74,12 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
 _NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
 
 
+def _mean(x: np.ndarray) -> float:
+    """``float(x.mean())`` (NaN if empty) without ndarray.mean's overhead: numpy's mean is
+    the same pairwise ``add.reduce`` divided by the count, so the value is identical."""
+    return float(np.add.reduce(x)) / x.shape[0] if x.shape[0] else math.nan
+
+
 def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -207,6 +213,31 @@ class _LazyComponents(Mapping[str, ComponentObs]):
 
     def __len__(self) -> int:
         return len(self._components)
+
+
+class _LazyStreams(Mapping[str, StreamObs]):
+    """Per-tick stream health, computed only for the streams a rule looks at (each at most
+    once: the first slab tick also takes the counts earlier slabs left for it)."""
+
+    def __init__(self, pipeline: "Pipeline", now: int, streams: Mapping[str, _StreamSlab],
+                 k: int) -> None:
+        self._pipeline, self._now, self._streams, self._k = pipeline, now, streams, k
+        self._done: dict[str, StreamObs] = {}
+
+    def __getitem__(self, name: str) -> StreamObs:
+        obs = self._done.get(name)
+        if obs is None:
+            if name not in self._pipeline.validators:
+                raise KeyError(name)
+            obs = self._done[name] = self._pipeline._stream_one(name, self._now, self._streams,
+                                                                self._k)
+        return obs
+
+    def __iter__(self):
+        return iter(self._pipeline.validators)
+
+    def __len__(self) -> int:
+        return len(self._pipeline.validators)
 
 
 class Pipeline:
@@ -423,54 +454,57 @@ class Pipeline:
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                   stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
         """Evaluate the alert rules at the end of the slab's ``k``-th tick."""
-        if src.shape[0] and src[0] == src[-1] and bool(np.all(src == src[0])):
-            mean = float(v.mean())
-            meas, est = (mean, math.nan) if src[0] == MEASURED else (math.nan, mean)
+        measured = src == MEASURED
+        n_meas = int(np.count_nonzero(measured))
+        if n_meas == src.shape[0]:  # the usual cases: one source, no copies
+            meas, est = _mean(v), math.nan
+        elif n_meas == 0:
+            meas, est = math.nan, _mean(v)
         else:
-            m, e = v[src == MEASURED], v[src == ESTIMATED]
-            meas = float(m.mean()) if m.shape[0] else math.nan
-            est = float(e.mean()) if e.shape[0] else math.nan
+            meas, est = _mean(v[measured]), _mean(v[src == ESTIMATED])
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
             measured_tension_N=meas, estimated_tension_N=est,
             components=_LazyComponents(self.components, stresses),
-            streams=self._stream_obs(end, streams, k),
+            streams=_LazyStreams(self, end, streams, k),
         )
         for rec in self.alerts.evaluate(obs):
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
         del self.alert_history[:-ALERT_HISTORY_LIMIT]
 
-    def _stream_obs(self, now: int, streams: Mapping[str, _StreamSlab] | None = None,
-                    k: int = 0) -> dict[str, StreamObs]:
-        """Stream health at ``now`` (the end of the slab's ``k``-th tick, or any time when
-        ``streams`` is None): totals up to ``now`` and counts within the tick."""
-        out = {}
-        for s, val in self.validators.items():
-            stale_ns = self._stale_ns[s]
-            info = None if streams is None else streams.get(s)
-            if info is not None:
-                obs = info.tick(k, now, stale_ns)
-            else:  # nothing new on this stream: reuse the last answer while it holds
-                stale = not val.has_last or now - val.last_t_ns > stale_ns
-                key = (val.accepted, val.last_t_ns, stale, sum(val.rejected.values()))
-                cached = self._idle_obs.get(s)
-                if cached is not None and cached[0] == key:
-                    obs = cached[1]
-                else:
-                    obs = StreamObs(
-                        last_t_ns=val.last_t_ns if val.has_last else 0, stale=stale,
-                        accepted=val.accepted, rejected=dict(val.rejected),
-                        rejected_in_tick=0, received_in_tick=0)
-                    self._idle_obs[s] = (key, obs)
-            if k == 0 and streams is not None and s in self.tick_counts:
-                # samples of earlier slabs that fell into this same tick
-                received, rejected = self.tick_counts.pop(s)
-                obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
-                                          rejected_in_tick=obs.rejected_in_tick + rejected)
-            out[s] = obs
-        return out
+    def _stream_obs(self, now: int) -> dict[str, StreamObs]:
+        """Stream health of every stream at any time ``now`` (totals, no tick counts)."""
+        return {s: self._stream_one(s, now, None, 0) for s in self.validators}
+
+    def _stream_one(self, s: str, now: int, streams: Mapping[str, _StreamSlab] | None,
+                    k: int) -> StreamObs:
+        """Health of stream ``s`` at ``now`` (the end of the slab's ``k``-th tick, or any time
+        when ``streams`` is None): totals up to ``now`` and counts within the tick."""
+        val = self.validators[s]
+        stale_ns = self._stale_ns[s]
+        info = None if streams is None else streams.get(s)
+        if info is not None:
+            obs = info.tick(k, now, stale_ns)
+        else:  # nothing new on this stream: reuse the last answer while it holds
+            stale = not val.has_last or now - val.last_t_ns > stale_ns
+            key = (val.accepted, val.last_t_ns, stale, sum(val.rejected.values()))
+            cached = self._idle_obs.get(s)
+            if cached is not None and cached[0] == key:
+                obs = cached[1]
+            else:
+                obs = StreamObs(
+                    last_t_ns=val.last_t_ns if val.has_last else 0, stale=stale,
+                    accepted=val.accepted, rejected=dict(val.rejected),
+                    rejected_in_tick=0, received_in_tick=0)
+                self._idle_obs[s] = (key, obs)
+        if k == 0 and streams is not None and s in self.tick_counts:
+            # samples of earlier slabs that fell into this same tick
+            received, rejected = self.tick_counts.pop(s)
+            obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
+                                      rejected_in_tick=obs.rejected_in_tick + rejected)
+        return obs
 
     def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
               stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],
