@@ -135,6 +135,7 @@ class MinerAccumulator:
         self._t_last: float | None = None
         self._buckets: dict[int, float] = {}
         self._rate: float | None = None  # damage_rate_per_day until the next dated commit
+        self._older: tuple[int, float] | None = None  # (newest bucket, sum of the older ones)
         self._setup_kernel()
 
     def _setup_kernel(self) -> None:
@@ -265,7 +266,16 @@ class MinerAccumulator:
             return 0.0
         width = self.rate_window_s / self.rate_buckets
         newest = math.floor(self._t_last / width)
-        in_window = sum(v for k, v in self._buckets.items() if k > newest - self.rate_buckets)
+        last = self._buckets.get(newest)
+        if last is None or next(reversed(self._buckets)) != newest:  # not from _date: sum all
+            in_window = sum(v for k, v in self._buckets.items() if k > newest - self.rate_buckets)
+        else:
+            # buckets are dated in time order, so the newest is summed last and only it changes
+            # between commits: the sum of the older ones (in the same order) is kept per newest
+            if self._older is None or self._older[0] != newest:
+                self._older = (newest, sum(v for k, v in self._buckets.items()
+                                           if newest - self.rate_buckets < k < newest))
+            in_window = self._older[1] + last
         # the window's buckets span from the oldest kept bucket's start to now
         span = min(self._t_last - self._t_first, self._t_last - (newest - self.rate_buckets + 1) * width)
         return in_window / span * _DAY_S if span > 0 else 0.0
@@ -326,5 +336,5 @@ class MinerAccumulator:
         acc._t_first = None if state["t_first"] is None else float(state["t_first"])
         acc._t_last = None if state["t_last"] is None else float(state["t_last"])
         acc._buckets = {int(k): float(v) for k, v in state["buckets"]}
-        acc._rate = None
+        acc._rate = acc._older = None
         return acc
