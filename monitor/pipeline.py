@@ -148,7 +148,7 @@ class _StreamSlab:
         else:  # the usual case: no copies
             self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
         self._before = validator_before
-        self._ticks: tuple[np.ndarray, ...] | None = None
+        self._ticks: tuple[list | None, ...] | None = None
 
     @staticmethod
     def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
@@ -170,7 +170,9 @@ class _StreamSlab:
         k = np.searchsorted(self.acc_t, ends, side="right")
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         self._before[3])
-        self._ticks = (cut, rej_cut, by_reason, k, last)
+        # python ints: the per-tick reads below are then cheap
+        self._ticks = (cut.tolist(), rej_cut.tolist(),
+                       None if by_reason is None else by_reason.tolist(), k.tolist(), last.tolist())
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
@@ -178,15 +180,15 @@ class _StreamSlab:
         accepted, rejected, has_last, last_t = self._before
         cut, rej_cut, by_reason, n_acc, last = self._ticks
         if n_acc[k]:
-            has_last, last_t = True, int(last[k])
-        received = int(cut[k] - (cut[k - 1] if k else 0))
-        rejected_tick = int(rej_cut[k] - (rej_cut[k - 1] if k else 0))
+            has_last, last_t = True, last[k]
+        received = cut[k] - (cut[k - 1] if k else 0)
+        rejected_tick = rej_cut[k] - (rej_cut[k - 1] if k else 0)
         return StreamObs(
             last_t_ns=last_t if has_last else 0,
             stale=not has_last or now - last_t > stale_ns,
-            accepted=accepted + int(n_acc[k]),
+            accepted=accepted + n_acc[k],
             rejected=rejected if by_reason is None else
-            {r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
+            {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)},
             rejected_in_tick=rejected_tick, received_in_tick=received,
         )
 
@@ -415,14 +417,15 @@ class Pipeline:
                 info.prepare(ends)
         start, prev_end = 0, _NEVER
         comps = list(self.components.items())
+        cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
         for k in range(ends.shape[0] + 1):
-            stop = int(cuts[k])
+            stop = cuts_l[k]
             if stop > start:
                 for name, comp in comps:
                     closed[name].append(comp.feed(stresses[name][start:stop]))
             if k == ends.shape[0]:
                 break
-            end = int(ends[k])
+            end = ends_l[k]
             for _, comp in comps:
                 comp.commit(end)
             if stop > start:
