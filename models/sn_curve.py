@@ -257,11 +257,10 @@ class SNCurve:
         if self.mean_correction == "none":
             # one compiled pass for everything but the power (numpy's power, whose last bits
             # differ from libm's on SIMD builds, keeps the values identical)
-            m, coef, bounds = self._power_law
-            s, m_seg, coef_seg = _segment_terms(range_Pa, self.scf, self.derating / _MPA, bounds,
-                                                m, np.atleast_1d(coef), self._cutoff_MPa)
+            scalar_m, args = self._terms_args
+            s, m_seg, coef_seg = _segment_terms(range_Pa, *args)
             # a single slope stays a scalar exponent: numpy special-cases some (2, 0.5)
-            d = np.power(s, m[0] if m.size == 1 else m_seg)
+            d = np.power(s, m_seg if scalar_m is None else scalar_m)
             d *= coef_seg
             d *= counts
             return d
@@ -270,9 +269,13 @@ class SNCurve:
         return self._damage_of(s * (self.derating / _MPA), counts)
 
     @cached_property
-    def _cutoff_MPa(self) -> float:
-        """Effective ranges below this give no damage (-inf: no cut-off)."""
-        return float(self.endurance_MPa) if self.low_stress == "cutoff" else -np.inf
+    def _terms_args(self) -> tuple[float | None, tuple]:
+        """(the slope if there is one segment, the arguments of ``_segment_terms`` after the
+        ranges); ranges below the cut-off (-inf: none) give no damage."""
+        m, coef, bounds = self._power_law
+        cutoff = float(self.endurance_MPa) if self.low_stress == "cutoff" else -np.inf
+        return (m[0] if m.size == 1 else None), (
+            self.scf, self.derating / _MPA, bounds, m, np.atleast_1d(coef), cutoff)
 
     def _damage_of(self, s: np.ndarray, counts) -> np.ndarray:
         """Damage of effective ranges ``s`` (MPa, see ``effective_range_MPa``) times counts."""
