@@ -21,6 +21,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from models import fatigue, helix
+from models._jit import compile_loop
 from monitor.config import ComponentConfig, Config, FatigueConfig
 
 
@@ -72,6 +73,47 @@ def build_cable(config: Config) -> Any:
 _EMPTY = np.zeros(0)
 
 
+def _residue_plan(stack, c, points):
+    """The cycles ``ResidueDamage`` must evaluate for residue ``stack`` + running extreme
+    ``c``, given the cached stack ``points``: returns ``(r, m, counts, used, first, top, k)``
+    where the first ``used`` entries of ``r, m, counts`` are the half cycles of the ranges of
+    ``stack`` from index ``first`` on (``k`` of them, not cached yet), the full cycles the
+    running extreme closes, and the half cycle ``X``; ranges ``[0, top)`` stay half cycles."""
+    n = stack.shape[0]
+    keep = min(points.shape[0], n)
+    for i in range(keep):
+        if points[i] != stack[i]:
+            keep = i
+            break
+    ranges = np.abs(stack[1:] - stack[:-1])
+    # ASTM's start point after S: the rising ranges before it were emitted as half cycles
+    start = max(n - 2, 0)
+    for i in range(n - 2):
+        if ranges[i + 1] < ranges[i]:
+            start = i
+            break
+    first = max(keep - 1, 0)
+    k = n - 1 - first
+    size = k + n // 2 + 1
+    r, m, counts = np.empty(size), np.empty(size), np.empty(size)
+    for i in range(k):
+        r[i] = ranges[first + i]
+        m[i] = 0.5 * (stack[first + i] + stack[first + i + 1])
+        counts[i] = 0.5
+    # the running extreme closes the falling ranges at the top that are not larger
+    used, top, x = k, n - 1, abs(c - stack[n - 1])
+    while top - start >= 2 and x >= ranges[top - 1]:
+        r[used], m[used], counts[used] = ranges[top - 1], 0.5 * (stack[top] + stack[top - 1]), 1.0
+        used += 1
+        top -= 2
+        x = abs(c - stack[top])
+    r[used], m[used], counts[used] = x, 0.5 * (c + stack[top]), 0.5
+    return r, m, counts, used + 1, first, top, k
+
+
+_residue_plan_compiled = compile_loop(_residue_plan)
+
+
 class ResidueDamage:
     """Damage of the open rainflow residue counted as ASTM E1049 would, i.e. exactly
     ``sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())`` summed, but cheap enough
@@ -86,48 +128,28 @@ class ResidueDamage:
     points (or, when ``Y`` holds the start point, stops with ``Y`` as a half cycle). Every
     remaining range, and ``X``, is a half cycle. So the damage is the half-cycle damage of a
     prefix of ``S``'s ranges, plus a few cycles at the top; the per-range damages of ``S`` are
-    cached while its points are unchanged, and a tick costs one small S-N evaluation.
+    cached while its points are unchanged, and a tick costs one compiled walk over ``S``
+    (``_residue_plan``) and one small S-N evaluation.
     """
 
     def __init__(self, sn_curve: Any) -> None:
         self.sn_curve = sn_curve
         self._points = _EMPTY  # the stack S whose per-range damages are cached
         self._half = _EMPTY  # damage of each range of S as a half cycle
+        self._plan = _residue_plan_compiled or _residue_plan
 
     def __call__(self, residue: np.ndarray) -> float:
         if residue.shape[0] < 2:
             return 0.0
-        stack, c = residue[:-1], float(residue[-1])  # residue is a fresh array: no copy
-        n = stack.shape[0]
-        keep = min(self._points.shape[0], n)
-        if keep:
-            same = self._points[:keep] == stack[:keep]
-            if not same.all():
-                keep = int(np.argmin(same))
-        ranges = np.abs(np.diff(stack))
-        falling = np.flatnonzero(ranges[1:] < ranges[:-1])
-        # ASTM's start point after S: the rising ranges before it were emitted as half cycles
-        start = int(falling[0]) if falling.shape[0] else max(n - 2, 0)
-        # the running extreme closes the falling ranges at the top that are not larger
-        top, x = n - 1, abs(c - float(stack[-1]))
-        full: list[tuple[float, float]] = []
-        while top - start >= 2 and x >= ranges[top - 1]:
-            full.append((float(ranges[top - 1]), 0.5 * (float(stack[top]) + float(stack[top - 1]))))
-            top -= 2
-            x = abs(c - float(stack[top]))
-        # one S-N evaluation: ranges of S not cached yet (half cycles), the full cycles, X
-        first = max(keep - 1, 0)
-        k, nf = n - 1 - first, len(full)
-        r, m, counts = np.empty(k + nf + 1), np.empty(k + nf + 1), np.empty(k + nf + 1)
-        r[:k], m[:k], counts[:k] = ranges[first:], 0.5 * (stack[first:-1] + stack[first + 1:]), 0.5
-        for i, (fr, fm) in enumerate(full, start=k):
-            r[i], m[i], counts[i] = fr, fm, 1.0
-        r[-1], m[-1], counts[-1] = x, 0.5 * (c + float(stack[top])), 0.5
-        d = self.sn_curve.damage_per_cycle(r, counts, m)
+        stack = residue[:-1]  # residue is a fresh array: no copy
+        r, m, counts, used, first, top, k = self._plan(stack, float(residue[-1]), self._points)
+        # residues of validated (finite) stresses: ranges finite and >= 0
+        d = self.sn_curve.damage_of_valid(r[:used], counts[:used], m[:used])
         self._half = np.concatenate([self._half[:first], d[:k]]) if first else d[:k]
         self._points = stack
         # sums over fixed arrays in a fixed order: the same value however the cache was filled
-        return float(np.sum(self._half[:top])) + math.fsum(d[k:].tolist())
+        # (np.add.reduce is np.sum without its wrapper: the same pairwise sum)
+        return float(np.add.reduce(self._half[:top])) + math.fsum(d[k:].tolist())
 
 
 class Component:

@@ -74,6 +74,12 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
 _NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
 
 
+def _mean(x: np.ndarray) -> float:
+    """``float(x.mean())`` (NaN if empty) without ndarray.mean's overhead: numpy's mean is
+    the same pairwise ``add.reduce`` divided by the count, so the value is identical."""
+    return float(np.add.reduce(x)) / x.shape[0] if x.shape[0] else math.nan
+
+
 def _finite_or_none(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
@@ -142,7 +148,7 @@ class _StreamSlab:
         else:  # the usual case: no copies
             self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
         self._before = validator_before
-        self._ticks: tuple[np.ndarray, ...] | None = None
+        self._ticks: tuple[list | None, ...] | None = None
 
     @staticmethod
     def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
@@ -164,7 +170,9 @@ class _StreamSlab:
         k = np.searchsorted(self.acc_t, ends, side="right")
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         self._before[3])
-        self._ticks = (cut, rej_cut, by_reason, k, last)
+        # python ints: the per-tick reads below are then cheap
+        self._ticks = (cut.tolist(), rej_cut.tolist(),
+                       None if by_reason is None else by_reason.tolist(), k.tolist(), last.tolist())
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
@@ -172,15 +180,15 @@ class _StreamSlab:
         accepted, rejected, has_last, last_t = self._before
         cut, rej_cut, by_reason, n_acc, last = self._ticks
         if n_acc[k]:
-            has_last, last_t = True, int(last[k])
-        received = int(cut[k] - (cut[k - 1] if k else 0))
-        rejected_tick = int(rej_cut[k] - (rej_cut[k - 1] if k else 0))
+            has_last, last_t = True, last[k]
+        received = cut[k] - (cut[k - 1] if k else 0)
+        rejected_tick = rej_cut[k] - (rej_cut[k - 1] if k else 0)
         return StreamObs(
             last_t_ns=last_t if has_last else 0,
             stale=not has_last or now - last_t > stale_ns,
-            accepted=accepted + int(n_acc[k]),
+            accepted=accepted + n_acc[k],
             rejected=rejected if by_reason is None else
-            {r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
+            {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)},
             rejected_in_tick=rejected_tick, received_in_tick=received,
         )
 
@@ -207,6 +215,31 @@ class _LazyComponents(Mapping[str, ComponentObs]):
 
     def __len__(self) -> int:
         return len(self._components)
+
+
+class _LazyStreams(Mapping[str, StreamObs]):
+    """Per-tick stream health, computed only for the streams a rule looks at (each at most
+    once: the first slab tick also takes the counts earlier slabs left for it)."""
+
+    def __init__(self, pipeline: "Pipeline", now: int, streams: Mapping[str, _StreamSlab],
+                 k: int) -> None:
+        self._pipeline, self._now, self._streams, self._k = pipeline, now, streams, k
+        self._done: dict[str, StreamObs] = {}
+
+    def __getitem__(self, name: str) -> StreamObs:
+        obs = self._done.get(name)
+        if obs is None:
+            if name not in self._pipeline.validators:
+                raise KeyError(name)
+            obs = self._done[name] = self._pipeline._stream_one(name, self._now, self._streams,
+                                                                self._k)
+        return obs
+
+    def __iter__(self):
+        return iter(self._pipeline.validators)
+
+    def __len__(self) -> int:
+        return len(self._pipeline.validators)
 
 
 class Pipeline:
@@ -384,14 +417,15 @@ class Pipeline:
                 info.prepare(ends)
         start, prev_end = 0, _NEVER
         comps = list(self.components.items())
+        cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
         for k in range(ends.shape[0] + 1):
-            stop = int(cuts[k])
+            stop = cuts_l[k]
             if stop > start:
                 for name, comp in comps:
                     closed[name].append(comp.feed(stresses[name][start:stop]))
             if k == ends.shape[0]:
                 break
-            end = int(ends[k])
+            end = ends_l[k]
             for _, comp in comps:
                 comp.commit(end)
             if stop > start:
@@ -423,54 +457,57 @@ class Pipeline:
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                   stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
         """Evaluate the alert rules at the end of the slab's ``k``-th tick."""
-        if src.shape[0] and src[0] == src[-1] and bool(np.all(src == src[0])):
-            mean = float(v.mean())
-            meas, est = (mean, math.nan) if src[0] == MEASURED else (math.nan, mean)
+        measured = src == MEASURED
+        n_meas = int(np.count_nonzero(measured))
+        if n_meas == src.shape[0]:  # the usual cases: one source, no copies
+            meas, est = _mean(v), math.nan
+        elif n_meas == 0:
+            meas, est = math.nan, _mean(v)
         else:
-            m, e = v[src == MEASURED], v[src == ESTIMATED]
-            meas = float(m.mean()) if m.shape[0] else math.nan
-            est = float(e.mean()) if e.shape[0] else math.nan
+            meas, est = _mean(v[measured]), _mean(v[src == ESTIMATED])
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
             measured_tension_N=meas, estimated_tension_N=est,
             components=_LazyComponents(self.components, stresses),
-            streams=self._stream_obs(end, streams, k),
+            streams=_LazyStreams(self, end, streams, k),
         )
         for rec in self.alerts.evaluate(obs):
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
         del self.alert_history[:-ALERT_HISTORY_LIMIT]
 
-    def _stream_obs(self, now: int, streams: Mapping[str, _StreamSlab] | None = None,
-                    k: int = 0) -> dict[str, StreamObs]:
-        """Stream health at ``now`` (the end of the slab's ``k``-th tick, or any time when
-        ``streams`` is None): totals up to ``now`` and counts within the tick."""
-        out = {}
-        for s, val in self.validators.items():
-            stale_ns = self._stale_ns[s]
-            info = None if streams is None else streams.get(s)
-            if info is not None:
-                obs = info.tick(k, now, stale_ns)
-            else:  # nothing new on this stream: reuse the last answer while it holds
-                stale = not val.has_last or now - val.last_t_ns > stale_ns
-                key = (val.accepted, val.last_t_ns, stale, sum(val.rejected.values()))
-                cached = self._idle_obs.get(s)
-                if cached is not None and cached[0] == key:
-                    obs = cached[1]
-                else:
-                    obs = StreamObs(
-                        last_t_ns=val.last_t_ns if val.has_last else 0, stale=stale,
-                        accepted=val.accepted, rejected=dict(val.rejected),
-                        rejected_in_tick=0, received_in_tick=0)
-                    self._idle_obs[s] = (key, obs)
-            if k == 0 and streams is not None and s in self.tick_counts:
-                # samples of earlier slabs that fell into this same tick
-                received, rejected = self.tick_counts.pop(s)
-                obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
-                                          rejected_in_tick=obs.rejected_in_tick + rejected)
-            out[s] = obs
-        return out
+    def _stream_obs(self, now: int) -> dict[str, StreamObs]:
+        """Stream health of every stream at any time ``now`` (totals, no tick counts)."""
+        return {s: self._stream_one(s, now, None, 0) for s in self.validators}
+
+    def _stream_one(self, s: str, now: int, streams: Mapping[str, _StreamSlab] | None,
+                    k: int) -> StreamObs:
+        """Health of stream ``s`` at ``now`` (the end of the slab's ``k``-th tick, or any time
+        when ``streams`` is None): totals up to ``now`` and counts within the tick."""
+        val = self.validators[s]
+        stale_ns = self._stale_ns[s]
+        info = None if streams is None else streams.get(s)
+        if info is not None:
+            obs = info.tick(k, now, stale_ns)
+        else:  # nothing new on this stream: reuse the last answer while it holds
+            stale = not val.has_last or now - val.last_t_ns > stale_ns
+            key = (val.accepted, val.last_t_ns, stale, sum(val.rejected.values()))
+            cached = self._idle_obs.get(s)
+            if cached is not None and cached[0] == key:
+                obs = cached[1]
+            else:
+                obs = StreamObs(
+                    last_t_ns=val.last_t_ns if val.has_last else 0, stale=stale,
+                    accepted=val.accepted, rejected=dict(val.rejected),
+                    rejected_in_tick=0, received_in_tick=0)
+                self._idle_obs[s] = (key, obs)
+        if k == 0 and streams is not None and s in self.tick_counts:
+            # samples of earlier slabs that fell into this same tick
+            received, rejected = self.tick_counts.pop(s)
+            obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
+                                      rejected_in_tick=obs.rejected_in_tick + rejected)
+        return obs
 
     def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
               stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],
