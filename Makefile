@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench clean chromium
 
 $(VENV)/.created:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH"; exit 1; }
@@ -23,7 +23,14 @@ $(VENV)/.installed-test: $(VENV)/.created pyproject.toml
 demo: $(VENV)/.installed
 	$(VENV)/bin/buoymon demo --out out/demo
 
-test: $(VENV)/.installed-test
+# the HTML report test renders in headless Chromium (Debian package); install it when missing
+chromium:
+	@test -x /usr/bin/chromium || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	  else echo "note: /usr/bin/chromium missing and cannot install it; its test will skip"; fi; }
+
+test: $(VENV)/.installed-test chromium
 	$(PY) -m pytest -q
 
 # every benchmark script prints its figures (the 30-day replay takes a few minutes)

@@ -94,8 +94,9 @@ def main() -> None:
         t0, c0 = time.perf_counter(), time.process_time()
         n = 0
         with open(path, "rb") as f:
-            # the streaming reader: the indexed one loads per-file indexes first and is slower
-            for _ in NonSeekingReader(f).iter_messages():
+            # streaming, file order: the indexed reader and log-time ordering load whole-file
+            # indexes or messages first
+            for _ in NonSeekingReader(f).iter_messages(log_time_order=False):
                 n += 1
                 if n >= args.baseline_messages:
                     break

@@ -134,6 +134,8 @@ class MinerAccumulator:
         self._t_first: float | None = None
         self._t_last: float | None = None
         self._buckets: dict[int, float] = {}
+        self._rate: float | None = None  # damage_rate_per_day until the next dated commit
+        self._older: tuple[int, float] | None = None  # (newest bucket, sum of the older ones)
         self._setup_kernel()
 
     def _setup_kernel(self) -> None:
@@ -224,6 +226,7 @@ class MinerAccumulator:
         return self.set_provisional(ranges, counts, means)
 
     def _date(self, added: float, t: float) -> None:
+        self._rate = None
         if self._t_first is None:
             self._t_first = t
         self._t_last = t
@@ -254,11 +257,25 @@ class MinerAccumulator:
     @property
     def damage_rate_per_day(self) -> float:
         """Committed damage per day over the last window (0 until time has passed)."""
+        if self._rate is None:  # read at every alert tick: computed once per dated commit
+            self._rate = self._rate_per_day()
+        return self._rate
+
+    def _rate_per_day(self) -> float:
         if self._t_last is None or self._t_last <= self._t_first:
             return 0.0
         width = self.rate_window_s / self.rate_buckets
         newest = math.floor(self._t_last / width)
-        in_window = sum(v for k, v in self._buckets.items() if k > newest - self.rate_buckets)
+        last = self._buckets.get(newest)
+        if last is None or next(reversed(self._buckets)) != newest:  # not from _date: sum all
+            in_window = sum(v for k, v in self._buckets.items() if k > newest - self.rate_buckets)
+        else:
+            # buckets are dated in time order, so the newest is summed last and only it changes
+            # between commits: the sum of the older ones (in the same order) is kept per newest
+            if self._older is None or self._older[0] != newest:
+                self._older = (newest, sum(v for k, v in self._buckets.items()
+                                           if newest - self.rate_buckets < k < newest))
+            in_window = self._older[1] + last
         # the window's buckets span from the oldest kept bucket's start to now
         span = min(self._t_last - self._t_first, self._t_last - (newest - self.rate_buckets + 1) * width)
         return in_window / span * _DAY_S if span > 0 else 0.0
@@ -319,4 +336,5 @@ class MinerAccumulator:
         acc._t_first = None if state["t_first"] is None else float(state["t_first"])
         acc._t_last = None if state["t_last"] is None else float(state["t_last"])
         acc._buckets = {int(k): float(v) for k, v in state["buckets"]}
+        acc._rate = acc._older = None
         return acc

@@ -322,6 +322,10 @@ class BuoyMotion:
     accel_x: NDArray[np.float64]
     accel_y: NDArray[np.float64]
     accel_z: NDArray[np.float64]
+    # velocities (m/s); for a perfect follower also the surface water-particle velocity
+    vel_x: NDArray[np.float64]
+    vel_y: NDArray[np.float64]
+    vel_z: NDArray[np.float64]
 
 
 def heave_rao(
@@ -362,7 +366,8 @@ def buoy_motion(
     Per component: heave = RAO x elevation (:func:`heave_rao`); horizontal displacement
     = -i coth(kh) x elevation (the surface particle orbit). Accelerations are the exact
     second derivatives (-omega^2 x displacement), gravity excluded: the same frame and units
-    as the ``imu`` sensor. Deterministic for ``seed``.
+    as the ``imu`` sensor; velocities the first (i omega x displacement). Deterministic for
+    ``seed``.
     """
     if not math.isfinite(direction_deg):
         raise ValueError(f"direction_deg must be finite, got {direction_deg!r}")
@@ -375,6 +380,7 @@ def buoy_motion(
     horiz = -1j * coth * np.where(omega > 0.0, 1.0, 0.0)
     b = math.radians(direction_deg)
     acc = -(omega**2)
+    vel = 1j * omega
     return BuoyMotion(
         t=np.arange(comp.n) * comp.dt,
         heave=comp.synthesize(rao),
@@ -383,4 +389,7 @@ def buoy_motion(
         accel_x=comp.synthesize(acc * horiz * math.cos(b)),
         accel_y=comp.synthesize(acc * horiz * math.sin(b)),
         accel_z=comp.synthesize(acc * rao),
+        vel_x=comp.synthesize(vel * horiz * math.cos(b)),
+        vel_y=comp.synthesize(vel * horiz * math.sin(b)),
+        vel_z=comp.synthesize(vel * rao),
     )

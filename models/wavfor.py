@@ -122,13 +122,27 @@ def wavfor(
     w_max = a * g * k_over_omega * np.tanh(k * h)
     du_max = a * g * k
     dw_max = a * g * k * np.sinh(k * (a + h)) / np.cosh(k * h)
+    zero = np.zeros_like(u_max)
+    return WavforResult(crest=morison_force(u_max, zero, zero, dw_max, buoy),
+                        node=morison_force(zero, w_max, du_max, zero, buoy))
+
+
+def morison_force(u: ArrayLike, w: ArrayLike, du_dt: ArrayLike, dw_dt: ArrayLike,
+                  buoy: WavforBuoy = WavforBuoy()) -> WaveForce:
+    """WAVFOR's force on the held-fixed buoy from the water-particle kinematics at the buoy.
+
+    F_H = rho Ci Vol du/dt + 1/2 rho Cd_h S_h |u| u, F_V = rho Ci Vol dw/dt + 1/2 rho Cd_v S_v
+    |w| w (seed 004 App. 6). :func:`wavfor` evaluates it at the crest and the node of a regular
+    wave; a time series of kinematics (e.g. an irregular sea's) gives the force history.
+    Vectorised; velocities in m/s, accelerations in m/s^2, forces in N.
+    """
+    arrays = [np.asarray(x, dtype=float) for x in (u, w, du_dt, dw_dt)]
+    for name, x in zip(("u", "w", "du_dt", "dw_dt"), arrays):
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"morison_force: {name} must be finite")
+    uu, ww, du, dw = arrays
     inertia = buoy.rho * buoy.ci * buoy.volume
-    crest = WaveForce(
-        horizontal=0.5 * buoy.rho * buoy.cd_h * buoy.s_h * np.abs(u_max) * u_max,
-        vertical=inertia * dw_max,
+    return WaveForce(
+        horizontal=inertia * du + 0.5 * buoy.rho * buoy.cd_h * buoy.s_h * np.abs(uu) * uu,
+        vertical=inertia * dw + 0.5 * buoy.rho * buoy.cd_v * buoy.s_v * np.abs(ww) * ww,
     )
-    node = WaveForce(
-        horizontal=inertia * du_max,
-        vertical=0.5 * buoy.rho * buoy.cd_v * buoy.s_v * np.abs(w_max) * w_max,
-    )
-    return WavforResult(crest=crest, node=node)

@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "record": "monitor.cmd_record",
     "alerts": "monitor.alerts.cmd_alerts",
     "report": "monitor.viz.cmd_report",
+    "view": "monitor.viz.cmd_view",
 }
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from monitor.config import ConfigError, load_config, run_section_parsers
+from monitor.config import load_config, run_section_parsers
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +18,13 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = load_config(args.config)
         sections = run_section_parsers(config)
-    except ConfigError as exc:
+        # the model objects the pipeline will build: S-N curves, the cable
+        from monitor.components import build_cable, build_sn_curve
+
+        build_cable(config)
+        for component in config.components:
+            build_sn_curve(component)
+    except ValueError as exc:  # ConfigError, or a model rejecting a configured value
         print(exc, file=sys.stderr)
         return 2
     comps = ", ".join(

@@ -41,15 +41,51 @@ def build_daemon(path: str) -> Daemon:
     cfg = load_config(path)
     dcfg = load_daemon_config(path)
 
-    def make_pipeline(state: Any, sinks: Any) -> Pipeline:
-        return Pipeline(cfg, list(sinks), state)
+    visual: list[Any] = []
 
-    def attach(session: Any, pipeline: Pipeline) -> list[AlertDelivery]:
-        if not hasattr(pipeline.alerts, "apply_command"):  # no alert rules engine installed
-            return []
-        return [AlertDelivery(session, pipeline, cfg.raw.get("alerts", {}))]
+    def make_pipeline(state: Any, sinks: Any) -> Pipeline:
+        visual.extend(rerun_sinks(cfg))
+        return Pipeline(cfg, [*sinks, *visual], state)
+
+    def attach(session: Any, pipeline: Pipeline) -> list[Any]:
+        out: list[Any] = [ClosingSinks(visual)]  # flushed and closed when the daemon stops
+        if hasattr(pipeline.alerts, "apply_command"):  # an alert rules engine is installed
+            out.append(AlertDelivery(session, pipeline, cfg.raw.get("alerts", {})))
+        return out
 
     return Daemon(cfg.buoy.id, dcfg, make_pipeline, default_codec(), attach=attach)
+
+
+def rerun_sinks(cfg: Any) -> list[Any]:
+    """The live Rerun sink when ``[rerun]`` asks for an output (rrd, connect, serve_web); none
+    otherwise. A viewer that cannot be reached costs the dashboard, never the monitoring."""
+    section = cfg.raw.get("rerun") or {}
+    if not any(section.get(k) for k in ("rrd", "connect", "serve_web")):
+        return []  # not configured: rerun is not even imported
+    from monitor.viz.pipeline_sinks import open_rerun  # noqa: PLC0415
+
+    try:
+        return [open_rerun(cfg)]
+    except (ValueError, RuntimeError, OSError) as exc:
+        log.error("rerun output not started: %s", exc)
+        return []
+
+
+class ClosingSinks:
+    """Daemon extension closing sinks (the Rerun output) at shutdown."""
+
+    def __init__(self, sinks: list[Any]) -> None:
+        self.sinks = sinks
+
+    def poll(self) -> None:
+        """Nothing to do between blocks."""
+
+    def close(self) -> None:
+        for sink in self.sinks:
+            try:
+                sink.close()
+            except Exception as exc:  # noqa: BLE001 (a viewer gone away must not stop shutdown)
+                log.error("closing %s: %s", type(sink).__name__, exc)
 
 
 class AlertDelivery:

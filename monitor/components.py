@@ -4,11 +4,12 @@ A thin adapter over ``models.helix`` and ``models.fatigue`` so the pipeline sees
 interface per ``[[component]]``: conductors get the helix stress of their lay
 (``models.helix.conductor_stress``), axial members ``tension / area_m2``.
 
-Damage bookkeeping keeps the result independent of block sizes, to the last bit: cycles closed
-by the rainflow are held as *pending* until the alert tick that contains their closing sample
-ends, and only then added to the Miner accumulator, one addition per tick. Tick boundaries are
-a fixed sensor-time grid, so the floating-point summation order is the same for any split of
-the data. Pending cycles (at most one tick's worth) are part of the saved state.
+Damage bookkeeping is independent of block sizes: cycles closed by the rainflow are held as
+*pending* until the alert tick that contains their closing sample ends, and then committed to
+the Miner accumulator dated at the tick end. Tick ends are a fixed sensor-time grid, so the
+committed damage (a sequential sum in closure order) and the damage rate (bucketed by those
+dates) are the same for any split of the data. Pending cycles (at most one tick's worth) are
+part of the saved state; figures read between ticks include them.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from models import fatigue, helix
+from models._jit import compile_loop
 from monitor.config import ComponentConfig, Config, FatigueConfig
 
 
@@ -71,6 +73,85 @@ def build_cable(config: Config) -> Any:
 _EMPTY = np.zeros(0)
 
 
+def _residue_plan(stack, c, points):
+    """The cycles ``ResidueDamage`` must evaluate for residue ``stack`` + running extreme
+    ``c``, given the cached stack ``points``: returns ``(r, m, counts, used, first, top, k)``
+    where the first ``used`` entries of ``r, m, counts`` are the half cycles of the ranges of
+    ``stack`` from index ``first`` on (``k`` of them, not cached yet), the full cycles the
+    running extreme closes, and the half cycle ``X``; ranges ``[0, top)`` stay half cycles."""
+    n = stack.shape[0]
+    keep = min(points.shape[0], n)
+    for i in range(keep):
+        if points[i] != stack[i]:
+            keep = i
+            break
+    ranges = np.abs(stack[1:] - stack[:-1])
+    # ASTM's start point after S: the rising ranges before it were emitted as half cycles
+    start = max(n - 2, 0)
+    for i in range(n - 2):
+        if ranges[i + 1] < ranges[i]:
+            start = i
+            break
+    first = max(keep - 1, 0)
+    k = n - 1 - first
+    size = k + n // 2 + 1
+    r, m, counts = np.empty(size), np.empty(size), np.empty(size)
+    for i in range(k):
+        r[i] = ranges[first + i]
+        m[i] = 0.5 * (stack[first + i] + stack[first + i + 1])
+        counts[i] = 0.5
+    # the running extreme closes the falling ranges at the top that are not larger
+    used, top, x = k, n - 1, abs(c - stack[n - 1])
+    while top - start >= 2 and x >= ranges[top - 1]:
+        r[used], m[used], counts[used] = ranges[top - 1], 0.5 * (stack[top] + stack[top - 1]), 1.0
+        used += 1
+        top -= 2
+        x = abs(c - stack[top])
+    r[used], m[used], counts[used] = x, 0.5 * (c + stack[top]), 0.5
+    return r, m, counts, used + 1, first, top, k
+
+
+_residue_plan_compiled = compile_loop(_residue_plan)
+
+
+class ResidueDamage:
+    """Damage of the open rainflow residue counted as ASTM E1049 would, i.e. exactly
+    ``sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())`` summed, but cheap enough
+    to evaluate at every alert tick.
+
+    Why it can be incremental: the residue is the four-point stack ``S`` followed by the
+    running extreme ``c``. In ``S`` no inner range is smaller than or equal to both neighbours
+    (it would have closed), so the ranges rise to a peak and then fall; ASTM's three-point
+    pass over ``S`` therefore closes only the rising ranges, each containing the start point
+    (half cycles), and keeps the falling ones. Only ``c`` can close more: from the top, while
+    ``X = |c - top| >= Y`` (the last range) it closes ``Y`` as a full cycle and drops its two
+    points (or, when ``Y`` holds the start point, stops with ``Y`` as a half cycle). Every
+    remaining range, and ``X``, is a half cycle. So the damage is the half-cycle damage of a
+    prefix of ``S``'s ranges, plus a few cycles at the top; the per-range damages of ``S`` are
+    cached while its points are unchanged, and a tick costs one compiled walk over ``S``
+    (``_residue_plan``) and one small S-N evaluation.
+    """
+
+    def __init__(self, sn_curve: Any) -> None:
+        self.sn_curve = sn_curve
+        self._points = _EMPTY  # the stack S whose per-range damages are cached
+        self._half = _EMPTY  # damage of each range of S as a half cycle
+        self._plan = _residue_plan_compiled or _residue_plan
+
+    def __call__(self, residue: np.ndarray) -> float:
+        if residue.shape[0] < 2:
+            return 0.0
+        stack = residue[:-1]  # residue is a fresh array: no copy
+        r, m, counts, used, first, top, k = self._plan(stack, float(residue[-1]), self._points)
+        # residues of validated (finite) stresses: ranges finite and >= 0
+        d = self.sn_curve.damage_of_valid(r[:used], counts[:used], m[:used])
+        self._half = np.concatenate([self._half[:first], d[:k]]) if first else d[:k]
+        self._points = stack
+        # sums over fixed arrays in a fixed order: the same value however the cache was filled
+        # (np.add.reduce is np.sum without its wrapper: the same pairwise sum)
+        return float(np.add.reduce(self._half[:top])) + math.fsum(d[k:].tolist())
+
+
 class Component:
     """Stress, rainflow and damage of one ``[[component]]``."""
 
@@ -94,17 +175,22 @@ class Component:
             self._pending = [np.array(v, dtype=np.float64) for v in state["pending"]]
             peak = state["max_stress_Pa"]
             self.max_stress_Pa = -math.inf if peak is None else float(peak)
+        self._residue_damage = ResidueDamage(self.sn_curve)
 
     def stress(self, tension_N: np.ndarray) -> np.ndarray:
+        """Stress of the component under the load samples; records the peak."""
         if self.cfg.kind == "conductor":
-            return helix.conductor_stress(tension_N, self._cable, lay=self.cfg.lay)
-        return tension_N / self.cfg.area_m2
+            stress = helix.conductor_stress(tension_N, self._cable, lay=self.cfg.lay)
+        else:
+            stress = tension_N / self.cfg.area_m2
+        if stress.shape[0]:
+            self.max_stress_Pa = max(self.max_stress_Pa, float(stress.max()))
+        return stress
 
     def feed(self, stress_Pa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rainflow the next stress samples; returns the cycles they closed (kept pending)."""
         if stress_Pa.shape[0] == 0:
             return _EMPTY, _EMPTY, _EMPTY
-        self.max_stress_Pa = max(self.max_stress_Pa, float(stress_Pa.max()))
         ranges, means, counts = self.rainflow.feed(stress_Pa)
         if ranges.shape[0]:
             if self._pending[0].shape[0]:
@@ -132,16 +218,27 @@ class Component:
         and not accumulated, so reading figures never changes the state.
         """
         committed = self.miner.damage_committed + self._damage(*self._pending)
-        damage = committed + self._damage(*self.rainflow.residue_half_cycles())
+        damage = committed + self._residue_damage(self.rainflow.residue)
         rate = float(self.miner.damage_rate_per_day)
         return {
             "damage": damage,
             "damage_committed": committed,
             "damage_rate_per_day": rate,
             "remaining_life_days": max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf,
-            "cycles": float(self.miner.total_cycles + float(np.sum(self._pending[2]))),
+            "cycles": float(self.miner.total_cycles) + (
+                float(self._pending[2].sum()) if self._pending[2].shape[0] else 0.0),
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
         }
+
+    def warm_up(self) -> None:
+        """Run the compiled kernels once on throwaway objects (a process's first numba call
+        costs a second or more), so a restarted daemon processes its first block promptly."""
+        stress = (helix.conductor_stress(np.array([1000.0, 2000.0, 1000.0]), self._cable,
+                                         lay=self.cfg.lay)
+                  if self.cfg.kind == "conductor" else np.array([1e6, 2e6, 1e6]))
+        fatigue.StreamingRainflow().feed(stress)
+        fatigue.MinerAccumulator(self.sn_curve).add_cycles(np.ones(1), np.ones(1), np.zeros(1),
+                                                           time_s=0.0)
 
     def state(self) -> dict[str, Any]:
         return {

@@ -8,9 +8,9 @@ Every model parameter lives in one file (see docs/ARCHITECTURE.md for the layout
 
 This module parses the sections the pipeline core needs (``buoy``, ``mooring``, ``cable``,
 ``component``, ``fatigue``, ``load``, ``validate``, ``ordering`` and the ``alerts`` timing keys).
-Sections owned by other modules (``zenoh``, ``state``, ``record``, ``rerun``, ``outputs``, the
-alert rules) are kept as raw tables in :attr:`Config.raw`; their owners parse them with
-:class:`SectionReader`, and ``buoymon check-config`` runs every parser listed in
+Sections owned by other modules (``zenoh``, ``state``, ``record``, ``health``, ``rerun``, the
+alert rules) are kept as raw tables (:meth:`Config.section`) for their owners to parse
+(:class:`SectionReader` helps), and ``buoymon check-config`` runs every parser listed in
 :data:`SECTION_PARSERS`, so one command validates the whole file.
 """
 
@@ -38,7 +38,6 @@ SECTION_PARSERS: dict[str, str] = {
     "record": "monitor.daemon_config:RecordConfig.from_dict",
     "health": "monitor.daemon_config:HealthConfig.from_dict",
     "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
-    "outputs": "monitor.viz.report:parse_outputs_config",
 }
 
 CORE_SECTIONS = (

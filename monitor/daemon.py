@@ -37,6 +37,7 @@ log = logging.getLogger("buoymon.daemon")
 # status is re-published after new data at most this often (bounds the cost of bursts)
 _MIN_STATUS_GAP_S = 0.02
 _IDLE_WAIT_S = 0.2
+_MAX_TURN_S = 0.25  # longest stretch of queued work between periodic duties
 
 
 class PipelineLike(Protocol):
@@ -202,7 +203,9 @@ class Daemon:
                 item = None
             if item is not None:
                 self._handle(item)
-                self._drain()
+                # a backlog is worked off in slices so status, checkpoints and the watchdog
+                # keep their pace
+                self._drain(time.monotonic() + _MAX_TURN_S)
             now = time.monotonic()
             if (now - self._last_status_mono >= zc.status_interval_s
                     or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
@@ -220,8 +223,9 @@ class Daemon:
             self.notifier.watchdog()
             self._last_watchdog = now
 
-    def _drain(self) -> None:
-        while True:
+    def _drain(self, until_mono: float = float("inf")) -> None:
+        """Handle queued items until the queue is empty or ``until_mono`` has passed."""
+        while time.monotonic() < until_mono:
             try:
                 item = self._q.get_nowait()
             except queue.Empty:

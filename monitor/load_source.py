@@ -18,15 +18,11 @@ same for any split of the data into blocks.
 from __future__ import annotations
 
 import functools
-import importlib
-import logging
 from typing import Any, Mapping, Protocol
 
 import numpy as np
 
 from monitor.config import Config, LoadConfig, MooringConfig
-
-log = logging.getLogger(__name__)
 
 MEASURED, ESTIMATED = 1, 2
 SOURCE_NAMES = {0: "none", MEASURED: "measured", ESTIMATED: "estimated"}
@@ -83,24 +79,19 @@ class _ModelsEstimator:
         return self.model.state.to_dict()
 
 
-def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
-    """The motion estimator for this mooring, or None when models.estimator is not installed.
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator:
+    """The motion estimator of ``config``'s mooring, continuing from ``state`` if given.
 
     The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
     uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
     mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
     """
-    try:
-        est = importlib.import_module("models.estimator")
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("models.estimator", "models"):
-            raise
-        log.warning("models.estimator is not installed: no motion-based tension estimate")
-        return None
+    from models import estimator
+
     est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
-    saved = None if not state else est.EstimatorState.from_dict(dict(state))
-    model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
-    return _ModelsEstimator(est, model, config.load.motion_sensor)
+    saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
+    model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
+    return _ModelsEstimator(estimator, model, config.load.motion_sensor)
 
 
 class LoadSelector:
@@ -139,117 +130,6 @@ class LoadSelector:
         src = np.concatenate([measured[2], np.full(int(use.sum()), ESTIMATED, np.int8)])
         order = np.argsort(t, kind="stable")
         return t[order], v[order], src[order]
-
-    def state(self) -> dict[str, Any]: ...
-
-
-@functools.lru_cache(maxsize=8)
-def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
-    """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
-    a second), so built once per mooring and step and shared by every estimator."""
-    from models import catenary, estimator
-
-    m = mooring
-    if m.preset == "vaps_seed004":
-        return estimator.seed004_estimator(dt=dt, span=m.span_m)
-    line = catenary.Line(segments=tuple(
-        catenary.Segment(s.length_m, s.weight_N_per_m, s.ea_N, s.name) for s in m.segments))
-    mass = sum(abs(s.weight_N_per_m) * s.length_m for s in m.segments) / m.length_m / 9.81
-    return estimator.catenary_estimator(
-        line, m.span_m, m.depth_m, dt, mass_per_length=1.15 * mass, drag_cd=1.2,
-        drag_diameter=m.segments[-1].diameter_m)
-
-
-class _ModelsEstimator:
-    """Adapter over ``models.estimator.MotionTensionEstimator`` for one motion stream.
-
-    The model works on a fixed time step (``[load] motion_rate_hz``); samples it flags as
-    SETTLING (the IMU integrator warming up, a stream's first samples) give no estimate.
-    """
-
-    def __init__(self, est_module: Any, model: Any, sensor: str) -> None:
-        self._flags = est_module.Flag
-        self.model, self.sensor = model, sensor
-
-    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        if self.sensor == "imu":
-            e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
-                                        fields["accel_z_mps2"])
-        else:
-            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"])
-        ok = (e.flags & np.uint8(self._flags.SETTLING)) == 0
-        return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok]
-
-    def state(self) -> dict[str, Any]:
-        return self.model.state.to_dict()
-
-
-def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator | None:
-    """The motion estimator for this mooring, or None when models.estimator is not installed.
-
-    The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
-    uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
-    mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
-    """
-    try:
-        est = importlib.import_module("models.estimator")
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("models.estimator", "models"):
-            raise
-        log.warning("models.estimator is not installed: no motion-based tension estimate")
-        return None
-    est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
-    saved = None if not state else est.EstimatorState.from_dict(dict(state))
-    model = est.MotionTensionEstimator(est_cfg, quasi_static, saved)
-    return _ModelsEstimator(est, model, config.load.motion_sensor)
-
-
-class LoadSelector:
-    """Merges measured and estimated tension into the one fatigue load series."""
-
-    def __init__(self, cfg: LoadConfig, state: Mapping[str, Any] | None = None) -> None:
-        self.mode = cfg.source
-        self.stale_ns = int(round(cfg.stale_after_s * 1e9))
-        self.last_measured_ns: int | None = None
-        if state is not None and state["last_measured_ns"] is not None:
-            self.last_measured_ns = int(state["last_measured_ns"])
-
-    def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED."""
-        if self.mode == "estimated":
-            return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
-        prev = self.last_measured_ns
-        if m_t.shape[0]:
-            self.last_measured_ns = int(m_t[-1])
-        measured = (m_t, m_v, np.full(m_t.shape, MEASURED, np.int8))
-        if self.mode == "measured" or e_t.shape[0] == 0:
-            return measured
-        # latest accepted tension time at or before each estimated sample
-        idx = np.searchsorted(m_t, e_t, side="right") - 1
-        never = idx < 0
-        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
-        if prev is not None:
-            latest = np.where(never, np.int64(prev), latest)
-            never[:] = False
-        use = never | (e_t - latest > self.stale_ns)
-        if not use.any():
-            return measured
-        t = np.concatenate([m_t, e_t[use]])
-        v = np.concatenate([m_v, e_v[use]])
-        src = np.concatenate([measured[2], np.full(int(use.sum()), ESTIMATED, np.int8)])
-        order = np.argsort(t, kind="stable")
-        return t[order], v[order], src[order]
-
-    def current(self, now_ns: int, estimate_available: bool) -> str:
-        """The source feeding fatigue at ``now_ns``."""
-        if self.mode != "estimated" and self.last_measured_ns is not None and (
-            now_ns - self.last_measured_ns <= self.stale_ns
-        ):
-            return "measured"
-        if self.mode != "measured" and estimate_available:
-            return "estimated"
-        return "none"
 
     def state(self) -> dict[str, Any]:
         return {"last_measured_ns": self.last_measured_ns}

@@ -51,20 +51,27 @@ class ReorderBuffer:
         self.gate_all = gate_all
         self._pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {s: [] for s in SENSOR_ORDER}
         self.received_max: dict[str, int] = {}
+        self._in_order = dict.fromkeys(SENSOR_ORDER, True)
         if state is not None:
             self.received_max = {k: int(v) for k, v in state["received_max"].items()}
             for sensor, (t, values) in state["pending"].items():
+                t = np.array(t, dtype=np.int64)
                 self._pending[sensor].append(
-                    (np.array(t, dtype=np.int64),
-                     np.array(values, dtype=np.float64).reshape(len(SENSOR_FIELDS[sensor]), -1))
-                )
+                    (t, np.array(values, dtype=np.float64).reshape(len(SENSOR_FIELDS[sensor]), -1)))  # null -> NaN
+                self._in_order[sensor] = not bool(np.any(t[1:] < t[:-1]))
 
     def push(self, block: SampleBlock) -> None:
         if len(block) == 0:
             return
+        t = block.t_ns
         values = np.stack([block.fields[f] for f in SENSOR_FIELDS[block.sensor]])
-        self._pending[block.sensor].append((block.t_ns, values))
-        newest = int(block.t_ns.max())
+        parts = self._pending[block.sensor]
+        # the usual case: sorted blocks arriving in order; then take() never re-sorts
+        if self._in_order[block.sensor] and (
+                (parts and t[0] < parts[-1][0][-1]) or bool(np.any(t[1:] < t[:-1]))):
+            self._in_order[block.sensor] = False
+        parts.append((t, values))
+        newest = int(t.max())
         self.received_max[block.sensor] = max(self.received_max.get(block.sensor, _NEVER), newest)
 
     @property
@@ -100,18 +107,29 @@ class ReorderBuffer:
             parts = self._pending[sensor]
             if not parts:
                 continue
-            if len(parts) == 1:
-                t, values = parts[0]
-            else:
+            if not self._in_order[sensor]:
                 t = np.concatenate([p[0] for p in parts])
                 values = np.concatenate([p[1] for p in parts], axis=1)
-            if t.shape[0] > 1 and bool(np.any(t[1:] < t[:-1])):
                 order = np.argsort(t, kind="stable")
-                t, values = t[order], values[:, order]
-            cut = t.shape[0] if upto_ns is None else int(np.searchsorted(t, upto_ns, side="right"))
-            self._pending[sensor] = [(t[cut:], values[:, cut:])] if cut < t.shape[0] else []
-            if cut:
-                slab[sensor] = (t[:cut], values[:, :cut])
+                parts = [(t[order], values[:, order])]
+                self._in_order[sensor] = True
+            # parts are sorted and in order: the samples taken are a prefix of them
+            taken, rest = [], []
+            for t, values in parts:
+                if upto_ns is None or t[-1] <= upto_ns:
+                    taken.append((t, values))
+                elif t[0] > upto_ns:
+                    rest.append((t, values))
+                else:
+                    cut = int(np.searchsorted(t, upto_ns, side="right"))
+                    taken.append((t[:cut], values[:, :cut]))
+                    rest.append((t[cut:], values[:, cut:]))
+            self._pending[sensor] = rest
+            if len(taken) == 1:
+                slab[sensor] = taken[0]
+            elif taken:
+                slab[sensor] = (np.concatenate([p[0] for p in taken]),
+                                np.concatenate([p[1] for p in taken], axis=1))
         return slab
 
     def buffered(self) -> int:
@@ -123,6 +141,9 @@ class ReorderBuffer:
             parts = self._pending[sensor]
             if parts:
                 t = np.concatenate([p[0] for p in parts])
-                values = np.concatenate([p[1] for p in parts], axis=1)
-                pending[sensor] = [t.tolist(), values.ravel().tolist()]
+                values = np.concatenate([p[1] for p in parts], axis=1).ravel()
+                # strict JSON: NaN/inf (not validated yet) become null, read back as NaN,
+                # which validation rejects with the same reason ("nan")
+                flat = [v if np.isfinite(v) else None for v in values.tolist()]
+                pending[sensor] = [t.tolist(), flat]
         return {"received_max": dict(self.received_max), "pending": pending}

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Iterable, Mapping, Protocol, Sequence
+from typing import Any, Iterable, Mapping, Protocol
 
 import numpy as np
 
@@ -48,28 +48,14 @@ class AlertEngineLike(Protocol):
     def state(self) -> dict[str, Any]: ...
 
 
-class NullAlertEngine:
-    """Used when monitor.alerts is not installed: no rules, no alerts."""
-
-    def evaluate(self, obs: Observation) -> list[Any]:
-        return []
-
-    def state(self) -> dict[str, Any]:
-        return {}
-
-
 def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, float | None],
                        state: Mapping[str, Any] | None) -> AlertEngineLike:
-    """The ``[alerts]`` rules engine (monitor.alerts), or a no-op one if that is not installed.
+    """The ``[alerts]`` rules engine, restored from ``state`` if given.
 
     ``endurance_Pa`` maps each component to its derated endurance stress (None if it has none).
     """
-    try:
-        from monitor.alerts.engine import AlertEngine
-    except ModuleNotFoundError as exc:
-        if exc.name not in ("monitor.alerts", "monitor.alerts.engine"):
-            raise
-        return NullAlertEngine()
+    from monitor.alerts.engine import AlertEngine
+
     components = {name: {"endurance_stress_Pa": e} for name, e in endurance_Pa.items()}
     if state:
         return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
@@ -84,8 +70,14 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
     return dict(record)
 
 
-def _empty_load() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8)
+# no load samples: (t_ns, tension_N, source); shared, never written to
+_NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
+
+
+def _mean(x: np.ndarray) -> float:
+    """``float(x.mean())`` (NaN if empty) without ndarray.mean's overhead: numpy's mean is
+    the same pairwise ``add.reduce`` divided by the count, so the value is identical."""
+    return float(np.add.reduce(x)) / x.shape[0] if x.shape[0] else math.nan
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -117,7 +109,9 @@ class _TensionStats:
         if v.shape[0] == 0:
             return
         bins = np.clip(((v - self.lo) / self.width).astype(np.int64), 0, self.BINS - 1)
-        self.hist += np.bincount(bins, minlength=self.BINS)
+        first = int(bins.min())  # count over the occupied range only: blocks are small
+        counts = np.bincount(bins - first)
+        self.hist[first:first + counts.shape[0]] += counts
         n_meas = int(np.count_nonzero(src == MEASURED))
         self.n["measured"] += n_meas
         self.n["estimated"] += v.shape[0] - n_meas
@@ -154,7 +148,7 @@ class _StreamSlab:
         else:  # the usual case: no copies
             self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
         self._before = validator_before
-        self._ticks: tuple[np.ndarray, ...] | None = None
+        self._ticks: tuple[list | None, ...] | None = None
 
     @staticmethod
     def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
@@ -176,7 +170,9 @@ class _StreamSlab:
         k = np.searchsorted(self.acc_t, ends, side="right")
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         self._before[3])
-        self._ticks = (cut, rej_cut, by_reason, k, last)
+        # python ints: the per-tick reads below are then cheap
+        self._ticks = (cut.tolist(), rej_cut.tolist(),
+                       None if by_reason is None else by_reason.tolist(), k.tolist(), last.tolist())
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
@@ -184,15 +180,15 @@ class _StreamSlab:
         accepted, rejected, has_last, last_t = self._before
         cut, rej_cut, by_reason, n_acc, last = self._ticks
         if n_acc[k]:
-            has_last, last_t = True, int(last[k])
-        received = int(cut[k] - (cut[k - 1] if k else 0))
-        rejected_tick = int(rej_cut[k] - (rej_cut[k - 1] if k else 0))
+            has_last, last_t = True, last[k]
+        received = cut[k] - (cut[k - 1] if k else 0)
+        rejected_tick = rej_cut[k] - (rej_cut[k - 1] if k else 0)
         return StreamObs(
             last_t_ns=last_t if has_last else 0,
             stale=not has_last or now - last_t > stale_ns,
-            accepted=accepted + int(n_acc[k]),
+            accepted=accepted + n_acc[k],
             rejected=rejected if by_reason is None else
-            {r: rejected[r] + int(by_reason[i, k]) for i, r in enumerate(REASONS)},
+            {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)},
             rejected_in_tick=rejected_tick, received_in_tick=received,
         )
 
@@ -221,6 +217,31 @@ class _LazyComponents(Mapping[str, ComponentObs]):
         return len(self._components)
 
 
+class _LazyStreams(Mapping[str, StreamObs]):
+    """Per-tick stream health, computed only for the streams a rule looks at (each at most
+    once: the first slab tick also takes the counts earlier slabs left for it)."""
+
+    def __init__(self, pipeline: "Pipeline", now: int, streams: Mapping[str, _StreamSlab],
+                 k: int) -> None:
+        self._pipeline, self._now, self._streams, self._k = pipeline, now, streams, k
+        self._done: dict[str, StreamObs] = {}
+
+    def __getitem__(self, name: str) -> StreamObs:
+        obs = self._done.get(name)
+        if obs is None:
+            if name not in self._pipeline.validators:
+                raise KeyError(name)
+            obs = self._done[name] = self._pipeline._stream_one(name, self._now, self._streams,
+                                                                self._k)
+        return obs
+
+    def __iter__(self):
+        return iter(self._pipeline.validators)
+
+    def __len__(self) -> int:
+        return len(self._pipeline.validators)
+
+
 class Pipeline:
     """The fatigue-monitoring core for one buoy. See the module docstring."""
 
@@ -244,6 +265,8 @@ class Pipeline:
             s: StreamValidator(s, config.validate[s], st.get("validators", {}).get(s))
             for s in SENSOR_ORDER
         }
+        self._stale_ns = {s: config.validate[s].stale_after_s * 1e9 for s in SENSOR_ORDER}
+        self._idle_obs: dict[str, tuple[tuple, StreamObs]] = {}
         self.selector = LoadSelector(config.load, st.get("load"))
         self.motion_sensor = config.load.motion_sensor
         self.estimator = (build_estimator(config, st.get("estimator"))
@@ -262,9 +285,9 @@ class Pipeline:
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
             st.get("alerts"))
+        # without rules there is nothing to evaluate: skip building the per-tick observations
         rule_keys = getattr(self.alerts, "rule_keys", None)
-        self._has_rules = not isinstance(self.alerts, NullAlertEngine) and (
-            rule_keys is None or bool(rule_keys()))
+        self._has_rules = rule_keys is None or bool(rule_keys())
         lim = config.validate["tension"].fields["tension_N"]
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
@@ -277,10 +300,20 @@ class Pipeline:
                                           "time_start_ns": None, "time_end_ns": None}))
         self.new_alerts: list[Any] = []
         # load samples of the tick not yet evaluated: (t_ns, tension_N, source)
-        self.open_tick = _empty_load() if "open_tick" not in st else (
+        self.open_tick = _NO_LOAD if "open_tick" not in st else (
             np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
             np.array(st["open_tick"][2], np.int8))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Pay the compiled kernels' first-call cost now (over a second for the first numba
+        call in a process), before a daemon reports ready: the first block after a restart is
+        then processed at once. Touches no state."""
+        tension = self.validators["tension"]
+        tension.check(np.zeros(0, np.int64), np.zeros((1, 0)), _NEVER)
+        for comp in self.components.values():
+            comp.warm_up()
 
     # ------------------------------------------------------------------ driving
     @classmethod
@@ -368,7 +401,7 @@ class Pipeline:
                       stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
                       tick_limit: int | None) -> dict[str, list[np.ndarray]]:
         """Feed the rainflow tick by tick, committing damage and evaluating alerts at tick ends."""
-        closed: dict[str, list[list[np.ndarray]]] = {n: [[], [], []] for n in self.components}
+        closed: dict[str, list[tuple[np.ndarray, ...]]] = {n: [] for n in self.components}
         if self.next_tick_ns is None and streams:
             first = min(int(x.t[0]) for x in streams.values())
             self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
@@ -383,17 +416,19 @@ class Pipeline:
             for info in streams.values():
                 info.prepare(ends)
         start, prev_end = 0, _NEVER
+        comps = list(self.components.items())
+        cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
         for k in range(ends.shape[0] + 1):
-            stop = int(cuts[k])
-            for name, comp in self.components.items():
-                for acc, part in zip(closed[name], comp.feed(stresses[name][start:stop])):
-                    acc.append(part)
+            stop = cuts_l[k]
+            if stop > start:
+                for name, comp in comps:
+                    closed[name].append(comp.feed(stresses[name][start:stop]))
             if k == ends.shape[0]:
                 break
-            end = int(ends[k])
-            for comp in self.components.values():
+            end = ends_l[k]
+            for _, comp in comps:
                 comp.commit(end)
-            if t[start:stop].shape[0]:
+            if stop > start:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
             if evaluate:
                 tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
@@ -402,7 +437,7 @@ class Pipeline:
                     tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
                     ss = {n: c.stress(tv) for n, c in self.components.items()}
                 self._evaluate(k, end, tt, tv, ts, ss, streams)
-            self.open_tick = _empty_load()
+            self.open_tick = _NO_LOAD
             start, prev_end = stop, end
         if ends.shape[0]:
             self.next_tick_ns = int(ends[-1]) + self.tick_ns
@@ -416,54 +451,63 @@ class Pipeline:
             counts = self.tick_counts.setdefault(s, [0, 0])
             counts[0] += received
             counts[1] += rej
-        return {n: [np.concatenate(c) if c else np.zeros(0) for c in v3]
-                for n, v3 in closed.items()}
+        return {n: [np.concatenate(parts) for parts in zip(*cycles)] if cycles
+                else [np.zeros(0)] * 3 for n, cycles in closed.items()}
 
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                   stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
         """Evaluate the alert rules at the end of the slab's ``k``-th tick."""
-        if src.shape[0] and src[0] == src[-1] and bool(np.all(src == src[0])):
-            mean = float(v.mean())
-            meas, est = (mean, math.nan) if src[0] == MEASURED else (math.nan, mean)
+        measured = src == MEASURED
+        n_meas = int(np.count_nonzero(measured))
+        if n_meas == src.shape[0]:  # the usual cases: one source, no copies
+            meas, est = _mean(v), math.nan
+        elif n_meas == 0:
+            meas, est = math.nan, _mean(v)
         else:
-            m, e = v[src == MEASURED], v[src == ESTIMATED]
-            meas = float(m.mean()) if m.shape[0] else math.nan
-            est = float(e.mean()) if e.shape[0] else math.nan
+            meas, est = _mean(v[measured]), _mean(v[src == ESTIMATED])
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
             measured_tension_N=meas, estimated_tension_N=est,
             components=_LazyComponents(self.components, stresses),
-            streams=self._stream_obs(end, streams, k),
+            streams=_LazyStreams(self, end, streams, k),
         )
         for rec in self.alerts.evaluate(obs):
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
         del self.alert_history[:-ALERT_HISTORY_LIMIT]
 
-    def _stream_obs(self, now: int, streams: Mapping[str, _StreamSlab] | None = None,
-                    k: int = 0) -> dict[str, StreamObs]:
-        """Stream health at ``now`` (the end of the slab's ``k``-th tick, or any time when
-        ``streams`` is None): totals up to ``now`` and counts within the tick."""
-        out = {}
-        for s, val in self.validators.items():
-            stale_ns = self.config.validate[s].stale_after_s * 1e9
-            info = None if streams is None else streams.get(s)
-            if info is not None:
-                obs = info.tick(k, now, stale_ns)
+    def _stream_obs(self, now: int) -> dict[str, StreamObs]:
+        """Stream health of every stream at any time ``now`` (totals, no tick counts)."""
+        return {s: self._stream_one(s, now, None, 0) for s in self.validators}
+
+    def _stream_one(self, s: str, now: int, streams: Mapping[str, _StreamSlab] | None,
+                    k: int) -> StreamObs:
+        """Health of stream ``s`` at ``now`` (the end of the slab's ``k``-th tick, or any time
+        when ``streams`` is None): totals up to ``now`` and counts within the tick."""
+        val = self.validators[s]
+        stale_ns = self._stale_ns[s]
+        info = None if streams is None else streams.get(s)
+        if info is not None:
+            obs = info.tick(k, now, stale_ns)
+        else:  # nothing new on this stream: reuse the last answer while it holds
+            stale = not val.has_last or now - val.last_t_ns > stale_ns
+            key = (val.accepted, val.last_t_ns, stale, sum(val.rejected.values()))
+            cached = self._idle_obs.get(s)
+            if cached is not None and cached[0] == key:
+                obs = cached[1]
             else:
                 obs = StreamObs(
-                    last_t_ns=val.last_t_ns if val.has_last else 0,
-                    stale=not val.has_last or now - val.last_t_ns > stale_ns,
+                    last_t_ns=val.last_t_ns if val.has_last else 0, stale=stale,
                     accepted=val.accepted, rejected=dict(val.rejected),
                     rejected_in_tick=0, received_in_tick=0)
-            if k == 0 and streams is not None and s in self.tick_counts:
-                # samples of earlier slabs that fell into this same tick
-                received, rejected = self.tick_counts.pop(s)
-                obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
-                                          rejected_in_tick=obs.rejected_in_tick + rejected)
-            out[s] = obs
-        return out
+                self._idle_obs[s] = (key, obs)
+        if k == 0 and streams is not None and s in self.tick_counts:
+            # samples of earlier slabs that fell into this same tick
+            received, rejected = self.tick_counts.pop(s)
+            obs = dataclasses.replace(obs, received_in_tick=obs.received_in_tick + received,
+                                      rejected_in_tick=obs.rejected_in_tick + rejected)
+        return obs
 
     def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
               stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],

@@ -58,7 +58,8 @@ def _check(args: argparse.Namespace) -> str | None:
     if args.cluster and "://" not in args.cluster:
         return f"--cluster {args.cluster!r}: must be a scheduler address like tcp://HOST:PORT"
     for opt, value in (("--state", args.state), ("--realtime", args.realtime),
-                       ("--speed", args.speed)):
+                       ("--speed", args.speed), ("--rrd", getattr(args, "rrd", None)),
+                       ("--html", getattr(args, "html", None))):
         if value:
             return f"{opt} applies to one buoy; not with several buoys or fleet options"
     return None

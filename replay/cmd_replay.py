@@ -21,13 +21,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     pace.add_argument("--realtime", action="store_true", help="pace the replay at sensor time")
     pace.add_argument("--speed", type=float, metavar="X", help="pace at X times real time")
     p.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
+    p.add_argument("--rrd", metavar="FILE.rrd",
+                   help="also write a Rerun recording (open it with `buoymon view FILE.rrd`)")
+    p.add_argument("--html", metavar="FILE.html",
+                   help="also write the HTML fatigue report (and its plots as PNG beside it); "
+                        "the --report JSON then carries the plot fields too")
     cmd_fleet.add_arguments(p)
     p.set_defaults(func=run)
 
 
 def build_sinks(args: argparse.Namespace, config: Any) -> list[Sink]:
-    """Output sinks for this replay (the hook where Rerun/HTML outputs plug in)."""
-    return []
+    """Output sinks for this replay: the Rerun recording of ``--rrd`` (bulk preset)."""
+    if not getattr(args, "rrd", None):
+        return []
+    from monitor.viz.pipeline_sinks import open_rerun
+
+    return [open_rerun(config, rrd=args.rrd, replay=True)]
+
+
+def write_html(path: str, report: dict) -> list[str]:
+    """Render the report as HTML + PNGs; the paths written."""
+    from monitor.viz.html_report import write_report as write_html_report
+    from monitor.viz.report_data import parse_report
+
+    rendered = write_html_report(parse_report(report), path)
+    return [str(rendered.html_path), *map(str, rendered.png_paths.values())]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,9 +64,14 @@ def run(args: argparse.Namespace) -> int:
         return cmd_fleet.run(args, config)
     speed = 1.0 if args.realtime else args.speed
     try:
-        result = replay_logs(config, args.logs, state_path=args.state,
-                             sinks=build_sinks(args, config), speed=speed,
-                             show_progress=False if args.no_progress else None)
+        sinks = build_sinks(args, config)
+    except (ValueError, RuntimeError) as exc:
+        print(f"replay: --rrd {args.rrd}: {exc}", file=sys.stderr)
+        return 2
+    try:
+        result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks, speed=speed,
+                             show_progress=False if args.no_progress else None,
+                             plot_fields=bool(args.html))
     except (FileNotFoundError, ValueError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 1
@@ -57,6 +80,10 @@ def run(args: argparse.Namespace) -> int:
     print(summary_text(result.report))
     if args.report:
         print(f"report: {args.report}")
+    if args.rrd:
+        print(f"rerun recording: {args.rrd} (open it with `buoymon view {args.rrd}`)")
+    if args.html and result.samples:
+        print(f"html report: {write_html(args.html, result.report)[0]} (open it in a browser)")
     if result.samples == 0:
         print("replay: nothing could be read", file=sys.stderr)
         return 1

@@ -13,22 +13,28 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
-                                     ``remaining_life_days`` (null = no damage rate yet),
+                                     ``remaining_life_days`` ("inf" = nothing accrues),
                                      ``kind``, ``lay``}
 ``alerts``                           alert transitions (monitor.alerts records as dicts)
 ``inputs``                           files read and the reader's statistics (lost data)
+``design_life_years``                the configured design life
+
+Optional plot fields (with ``buoymon replay --html``, also in the ``--report`` JSON then, so
+``buoymon report`` can draw it again; docs/REPORT_FORMAT.md): ``tension_history`` and per
+component ``damage_history``, ``histogram``, ``sn_curve``. They describe this replay only (a
+log replayed in parts with ``--state`` has each part's history), so they are left out of a
+plain ``--report``, whose components stay equal between split and one-pass replays.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from monitor.atomic_file import atomic_write_text
 from monitor.config import Config
 
 REPORT_VERSION = 1
@@ -42,9 +48,10 @@ def iso_utc(t_ns: int | None) -> str | None:
 
 
 def _strict(obj: Any) -> Any:
-    """Strict JSON: NaN and infinities become null."""
+    """Strict JSON: NaN and infinities become the strings "nan", "inf", "-inf" (the form
+    docs/REPORT_FORMAT.md lets readers expect; strict JSON has no literal for them)."""
     if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
+        return obj if math.isfinite(obj) else str(obj)
     if isinstance(obj, Mapping):
         return {str(k): _strict(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -72,6 +79,7 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
     return _strict({
         "report_version": REPORT_VERSION,
         "buoy_id": pipeline_report["buoy_id"],
+        "design_life_years": config.buoy.design_life_years,
         "time_start": iso_utc(pipeline_report["time_start_ns"]),
         "time_end": iso_utc(pipeline_report["time_end_ns"]),
         "time_start_ns": pipeline_report["time_start_ns"],
@@ -86,33 +94,26 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
     })
 
 
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write, fsync, rename over ``path``, fsync the directory: all or nothing after a crash."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    dir_fd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(dir_fd)
-    finally:
-        os.close(dir_fd)
+def add_plot_fields(report: dict[str, Any], fields: Mapping[str, Any]) -> None:
+    """Merge the optional plot fields (``ReportHistory.fields()`` + S-N curves) into a report,
+    in place; components the report does not list are ignored."""
+    for key, value in fields.items():
+        if key != "components":
+            report[key] = _strict(value)
+    for name, extra in fields.get("components", {}).items():
+        if name in report["components"]:
+            report["components"][name].update(_strict(extra))
 
 
 def write_report(path: str | Path, report: Mapping[str, Any]) -> None:
     atomic_write_text(path, json.dumps(report, indent=2, allow_nan=False) + "\n")
 
 
-def _num(x: float | None, fmt: str) -> str:
-    return "-" if x is None else format(x, fmt)
+def _num(x: float | str | None, fmt: str) -> str:
+    """A report number for people: "-" when absent or not a number, "inf" as is."""
+    if x is None or (isinstance(x, str) and x != "inf"):
+        return "-"
+    return format(float(x), fmt)
 
 
 def summary_text(report: Mapping[str, Any]) -> str:
@@ -129,11 +130,12 @@ def summary_text(report: Mapping[str, Any]) -> str:
     lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
                  f"{'max stress':>11s} {'life left':>11s}")
     for name, c in report["components"].items():
-        life = c["remaining_life_days"]
+        life = _num(c["remaining_life_days"], ".3g")
+        peak = c["max_stress_Pa"]
         lines.append(
             f"  {name:24s} {c['damage']:11.3e} {c['damage_committed']:11.3e} "
-            f"{c['cycles']:10.0f} {_num(c['max_stress_Pa'] and c['max_stress_Pa'] / 1e6, '8.1f')} MPa "
-            f"{'-' if life is None else format(life, '.3g') + ' d':>11s}"
+            f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
+            f"{life if life == '-' else life + ' d':>11s}"
         )
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)")
     read = report["inputs"]["read"]

@@ -15,19 +15,21 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence, TextIO
+from typing import Any, Iterable, Sequence, TextIO
 
 from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
 from monitor.events import Sink
 from monitor.pipeline import Pipeline
-from replay.report import atomic_write_text, build_report
+from monitor.atomic_file import atomic_write_text
+from replay.report import build_report
 
 log = logging.getLogger(__name__)
 
 
 def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
-    """Expand directories to their ``*.mcap`` files (sorted); missing paths are errors."""
+    """Expand directories to their ``*.mcap`` files (sorted). A missing path is logged and
+    skipped (the others are still replayed); FileNotFoundError if nothing is left."""
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
@@ -35,7 +37,9 @@ def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
         elif p.exists():
             out.append(p)
         else:
-            raise FileNotFoundError(f"replay: {p} does not exist")
+            log.error("replay: %s does not exist; skipped", p)
+    if not out:
+        raise FileNotFoundError(f"no log files in {[str(p) for p in paths]}")
     return out
 
 
@@ -116,15 +120,17 @@ def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | No
 def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | None = None,
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None) -> tuple[Pipeline, ReplayResult]:
-    """Feed blocks into a pipeline (built at the first block: its buoy id may override the
-    config's when the config is the default); flush at the end."""
-    it: Iterator[SampleBlock] = iter(blocks)
+    """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
+    block, whose buoy id replaces the config's (with a warning) unless a state is continued;
+    blocks of other buoys are counted and skipped."""
     pipeline: Pipeline | None = None
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     origin: list[float] = []
+    # raw GNSS blocks go to the sinks that draw them (the Rerun position view)
+    block_sinks = [s.on_block for s in sinks if hasattr(s, "on_block")]
     start = time.perf_counter()
-    for block in it:
+    for block in blocks:
         if pipeline is None:
             if block.buoy_id != config.buoy.id and state is None:
                 log.warning("log is for buoy %r, config for %r: replaying as %r",
@@ -137,6 +143,8 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         if speed is not None:
             _pace(block, speed, origin)
         pipeline.process(block)
+        for on_block in block_sinks:
+            on_block(block)
         n_blocks += 1
         n_samples += len(block)
         if progress is not None:
@@ -149,22 +157,6 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         progress.close()
     result = ReplayResult({}, n_blocks, n_samples, time.perf_counter() - start, ignored)
     return pipeline, result
-
-
-def _span_ns(paths: Sequence[Path]) -> int | None:
-    """Sensor-time span of the logs from their summaries (None if any is unreadable)."""
-    try:
-        from mcap.reader import make_reader
-
-        lo, hi = None, None
-        for p in paths:
-            with open(p, "rb") as f:
-                stats = make_reader(f).get_summary().statistics
-            lo = stats.message_start_time if lo is None else min(lo, stats.message_start_time)
-            hi = stats.message_end_time if hi is None else max(hi, stats.message_end_time)
-        return None if lo is None else int(hi - lo)
-    except Exception:  # a damaged file has no summary: the bar just shows hours done
-        return None
 
 
 def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
@@ -188,20 +180,33 @@ def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
 
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
                 sinks: Sequence[Sink] = (), speed: float | None = None,
-                show_progress: bool | None = None) -> ReplayResult:
-    """Replay MCAP logs (files or directories) through the pipeline; return the report."""
-    from replay.reader import LogReader
+                show_progress: bool | None = None, plot_fields: bool = False) -> ReplayResult:
+    """Replay MCAP logs (files or directories) through the pipeline; return the report.
+
+    ``plot_fields`` adds the report's optional plot fields (docs/REPORT_FORMAT.md: tension and
+    damage histories, rainflow histograms, S-N curves) for ``buoymon report`` / ``--html``.
+    """
+    from monitor.viz.pipeline_sinks import report_plot_fields
+    from monitor.viz.report_history import ReportHistory
+    from replay.reader import LogReader, time_span
+    from replay.report import add_plot_fields
 
     files = collect_logs(paths)
     state = load_state(state_path)
     if show_progress is None:
         show_progress = sys.stderr.isatty()
-    progress = Progress(sys.stderr, _span_ns(files) if show_progress else None, show_progress)
-    source = LogReader(files)
-    pipeline, result = run_blocks(config, source, state=state, sinks=sinks, speed=speed,
+    span = time_span(files) if show_progress else None
+    progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
+    # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
+    source = LogReader(files, coalesce=speed is None)
+    history = ReportHistory() if plot_fields else None
+    all_sinks = [*sinks, history] if history is not None else list(sinks)
+    pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,
                                   progress=progress)
     result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
                                  read_summary(source.stats))
+    if history is not None:
+        add_plot_fields(result.report, report_plot_fields(history, pipeline.components))
     if result.ignored_blocks:
         result.report["inputs"]["ignored_blocks_of_other_buoys"] = result.ignored_blocks
     if state_path is not None:

@@ -7,8 +7,24 @@ Chain (per hour of sensor time, so memory does not grow with the log's length):
    has its own seed (derived from ``seed`` and the hour index); consecutive hours are joined by
    an energy-preserving cross-fade over the overlap (weights cos, sin of 0..pi/2) so the series
    stays stationary and continuous without one huge FFT.
-2. Tension: the streaming motion -> tension estimator of :mod:`models.estimator` (quasi-static
-   catenary of the mooring + axial dynamics), fed hour after hour with its state carried.
+2. Tension, by the configured ``load_model``:
+
+   ``"catenary"`` (default): the streaming motion -> tension estimator of
+   :mod:`models.estimator` (quasi-static catenary of the mooring + axial dynamics), fed hour
+   after hour with its state carried. The buoy follows the waves freely, so the line only
+   feels the buoy's excursions: a few hundred N on average for a 1.5 m sea.
+
+   ``"wavfor"``: the seed 004 study's own load estimate (App. 6, WAVFOR) in the time domain.
+   The buoy is held fixed and the cable supplies the Morison inertia + drag force
+   (:func:`models.wavfor.morison_force`) of the SAME irregular sea's water-particle
+   kinematics at the buoy (the surface orbit of :func:`models.waves.buoy_motion`):
+   T = max(0, T0 + F_x cos(phi) + F_z sin(phi)), with T0 and phi the static top tension and
+   its angle above horizontal of the mooring at the mean span (the wave force pulling the
+   buoy away from the anchor along the line stretches it; the line cannot push, so it goes
+   slack instead: 0-to-F cycles like the seed's lab test). Wave components shorter than
+   ``wavfor_min_wavelength_m`` (twice the 8.5 m hull) are left out: Morison's held-fixed
+   force assumes waves long compared with the hull, and shorter ones average out over it.
+   Like WAVFOR itself this is an upper bound of the cable force.
 3. Sensors: tension 20 Hz, IMU accelerations 10 Hz, motion displacements 10 Hz, GNSS 1 Hz
    (anchor position + offset + noise), wave statistics every 30 min (Hs, Tp estimated from the
    last 30 min of heave by :func:`models.waves.sea_state_from_heave`), each with Gaussian
@@ -40,6 +56,7 @@ OVERLAP_S = 60.0
 EARTH_RADIUS_M = 6_371_008.8
 _STREAM_IDS = {"sea": 0, "tension": 1, "imu": 2, "motion": 3, "gnss": 4, "waves": 5}
 _PURPOSE_IDS = {"noise": 0, "dropouts": 1, "spikes": 2, "nans": 3}
+LOAD_MODELS = ("catenary", "wavfor")
 
 
 @dataclass(frozen=True)
@@ -67,9 +84,14 @@ class SimConfig:
     link_delay_s: float = 0.2
     waves_interval_s: float = 1800.0
     mean_span_m: float = 31.0  # mean horizontal anchor -> buoy distance (steady drift)
+    load_model: str = "catenary"  # "catenary" | "wavfor" (see the module docstring)
+    wavfor_min_wavelength_m: float = 17.0  # shorter wave components exert no net force
 
     def __post_init__(self) -> None:
-        for name in ("hours", "hs_m", "tp_s", "depth_m", "waves_interval_s", "mean_span_m"):
+        if self.load_model not in LOAD_MODELS:
+            raise ValueError(f"load_model = {self.load_model!r}: must be one of {list(LOAD_MODELS)}")
+        for name in ("hours", "hs_m", "tp_s", "depth_m", "waves_interval_s", "mean_span_m",
+                     "wavfor_min_wavelength_m"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} = {v!r}: must be a finite number > 0")
@@ -99,13 +121,15 @@ class SimSummary:
     start_ns: int = 0
     end_ns: int = 0
     tension_N: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # min, mean, max
+    load_model: str = "catenary"
 
     def text(self) -> str:
         lo, mean, hi = self.tension_N
         per = ", ".join(f"{k} {v:,}" for k, v in self.samples.items())
         return (f"wrote {self.messages:,} messages to {self.path}\n"
                 f"samples: {per}\n"
-                f"line tension (noise-free): min {lo:,.0f} N, mean {mean:,.0f} N, max {hi:,.0f} N")
+                f"line tension (noise-free, {self.load_model} load model): min {lo:,.0f} N, "
+                f"mean {mean:,.0f} N, max {hi:,.0f} N")
 
 
 def _rng(cfg: SimConfig, hour: int, stream: str, purpose: str) -> np.random.Generator:
@@ -117,13 +141,35 @@ def _hour_seed(cfg: SimConfig, hour: int) -> int:
 
 
 class _Sea:
-    """Continuous 20 Hz buoy motion, produced hour by hour with cross-faded joins."""
+    """Continuous 20 Hz buoy motion, produced hour by hour with cross-faded joins.
+
+    With the ``wavfor`` load model it also gives the water-particle kinematics at the buoy
+    (``u``, ``w``, ``du_dt``, ``dw_dt``: along the mooring and up) without the wave components
+    shorter than ``cfg.wavfor_min_wavelength_m``. Each hour's synthesized series is periodic
+    over its length, so dropping those FFT bins is exactly dropping the components.
+    """
 
     FIELDS = ("heave", "surge", "sway", "accel_x", "accel_y", "accel_z")
+    KINEMATICS = {"u": "vel_x", "w": "vel_z", "du_dt": "accel_x", "dw_dt": "accel_z"}
 
     def __init__(self, cfg: SimConfig):
         self.cfg = cfg
         self.tail: dict[str, np.ndarray] | None = None
+        self.fields = self.FIELDS + (tuple(self.KINEMATICS) if cfg.load_model == "wavfor" else ())
+
+    def _kinematics(self, m) -> dict[str, np.ndarray]:
+        """Particle kinematics at the buoy, wave components too short for the hull removed."""
+        from models.waves import G_STANDARD
+
+        k_max = 2.0 * math.pi / self.cfg.wavfor_min_wavelength_m
+        f_max = math.sqrt(G_STANDARD * k_max * math.tanh(k_max * self.cfg.depth_m)) / (2 * math.pi)
+        out = {}
+        for name, src in self.KINEMATICS.items():
+            x = np.asarray(getattr(m, src))
+            spec = np.fft.rfft(x)
+            spec[np.fft.rfftfreq(x.shape[0], 1.0 / BASE_HZ) > f_max] = 0.0
+            out[name] = np.fft.irfft(spec, x.shape[0])
+        return out
 
     def next(self, hour: int, n: int) -> dict[str, np.ndarray]:
         """The next ``n`` samples (at 20 Hz) of every motion field."""
@@ -134,14 +180,17 @@ class _Sea:
         m = buoy_motion(cfg.hs_m, cfg.tp_s, (n + n_over) / BASE_HZ, 1.0 / BASE_HZ,
                         _hour_seed(cfg, hour), depth=cfg.depth_m,
                         direction_deg=cfg.wave_direction_deg)
-        seg = {f: np.asarray(getattr(m, f))[:n + n_over] for f in self.FIELDS}
-        out = {f: seg[f][:n].copy() for f in self.FIELDS}
+        full = {f: np.asarray(getattr(m, f)) for f in self.FIELDS}
+        if self.cfg.load_model == "wavfor":
+            full.update(self._kinematics(m))
+        seg = {f: full[f][:n + n_over] for f in self.fields}
+        out = {f: seg[f][:n].copy() for f in self.fields}
         if self.tail is not None:
             k = min(n, n_over)
             theta = 0.5 * math.pi * (np.arange(k) + 0.5) / n_over
-            for f in self.FIELDS:
+            for f in self.fields:
                 out[f][:k] = np.cos(theta) * self.tail[f][:k] + np.sin(theta) * out[f][:k]
-        self.tail = {f: seg[f][n:n + n_over] for f in self.FIELDS}
+        self.tail = {f: seg[f][n:n + n_over] for f in self.fields}
         return out
 
 
@@ -185,9 +234,25 @@ class _Mooring:
             EstimatorConfig(dt=1.0 / BASE_HZ, span=self.span_m, height=depth, line_length=length,
                             mass_per_length=self.MASS_PER_LENGTH, ea=line.segments[-1].ea),
             quasi_static)
+        h0, v0, t0 = (float(np.asarray(x).reshape(-1)[0])
+                      for x in table.top_tension(np.array([self.span_m]), np.array([depth])))
+        self.pretension_N, self.top_angle_rad = t0, math.atan2(v0, h0)
+        self.load_model = cfg.load_model
 
     def tension(self, motion: dict[str, np.ndarray]) -> np.ndarray:
+        if self.load_model == "wavfor":
+            return self._wavfor_tension(motion)
         return self._est.update(motion["heave"], motion["surge"], motion["sway"]).tension
+
+    def _wavfor_tension(self, motion: dict[str, np.ndarray]) -> np.ndarray:
+        """Static pretension + the held-fixed buoy's Morison force along the line (seed 004
+        App. 6 in the time domain); the line goes slack rather than push."""
+        from models.wavfor import morison_force
+
+        f = morison_force(motion["u"], motion["w"], motion["du_dt"], motion["dw_dt"])
+        along = (f.horizontal * math.cos(self.top_angle_rad)
+                 + f.vertical * math.sin(self.top_angle_rad))
+        return np.maximum(self.pretension_N + along, 0.0)
 
 
 def _faults(cfg: SimConfig, hour: int, stream: str, t: np.ndarray, vals: np.ndarray
@@ -235,7 +300,7 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
     total = int(round(cfg.hours * 3600 * BASE_HZ))
     per_hour = 3600 * BASE_HZ
     sea, mooring = _Sea(cfg), _Mooring(cfg)
-    summary = SimSummary(path=str(path), start_ns=start_ns)
+    summary = SimSummary(path=str(path), start_ns=start_ns, load_model=cfg.load_model)
     t_sum, t_min, t_max = 0.0, math.inf, -math.inf
     wave_n = int(round(cfg.waves_interval_s * BASE_HZ))
     heave_hist = np.empty(0)

@@ -1,6 +1,6 @@
 """Test harness for the daemon's mechanics, independent of the physics pipeline.
 
-``python tests/daemon_harness.py run CFG.toml`` runs a :class:`monitor.daemon.Daemon` for buoy
+``python tests/daemon_harness.py run CFG.toml [DELAY_S]`` runs a :class:`monitor.daemon.Daemon` for buoy
 ``b1`` with :class:`FakePipeline` (a sum of tension with the pipeline's per-stream
 re-delivery check) and :class:`FakeCodec`. ``python tests/daemon_harness.py publish ENDPOINT
 N SPEED`` plays ``N`` one-second tension blocks through :func:`monitor.publisher.publish_blocks`.
@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import signal
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -56,8 +57,9 @@ class FakePipeline:
     """Damage = sum of accepted tension samples / 1e9; samples at or before a stream's last
     time are rejected as duplicates, NaNs as nan: the contract the real pipeline keeps."""
 
-    def __init__(self, state: Any = None) -> None:
+    def __init__(self, state: Any = None, delay_s: float = 0.0) -> None:
         state = state or {}
+        self.delay_s = delay_s  # simulated processing time per block
         self.last_t = dict(state.get("last_t", {}))
         self.total = float(state.get("total", 0.0))
         self.accepted = dict(state.get("accepted", {}))
@@ -66,6 +68,7 @@ class FakePipeline:
     def process(self, block: SampleBlock) -> StepResult:
         if block.sensor == "waves":  # stands for any block the real pipeline refuses
             raise ValueError("waves blocks are refused by the fake pipeline")
+        time.sleep(self.delay_s)
         last = self.last_t.get(block.sensor, -1)
         new = block.t_ns > last
         ok = new & np.isfinite(block.fields["tension_N"]) if block.sensor == "tension" else new
@@ -131,8 +134,9 @@ def main(argv: list[str]) -> int:
 
     setup_logging("warning")
     if argv[0] == "run":
+        delay = float(argv[2]) if len(argv) > 2 else 0.0
         daemon = Daemon(BUOY, load_daemon_config(argv[1]),
-                        lambda state, sinks: FakePipeline(state), FakeCodec())
+                        lambda state, sinks: FakePipeline(state, delay), FakeCodec())
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: daemon.stop())
         daemon.run()
@@ -159,7 +163,6 @@ import os  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
 import threading  # noqa: E402
-import time  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(REPO)}
@@ -239,7 +242,7 @@ class DaemonProcess:
             os.unlink(self.notify_path)
 
 
-def query_state(port: int, timeout: float = 5.0, buoy: str = BUOY) -> dict[str, Any] | None:
+def query_state(port: int, timeout: float = 10.0, buoy: str = BUOY) -> dict[str, Any] | None:
     """The daemon's ``monitor/state`` answer, or None if it did not answer."""
     from monitor import zenoh_io
     from monitor.daemon_config import ZenohConfig

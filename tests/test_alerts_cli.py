@@ -15,6 +15,7 @@ from monitor.alerts.delivery import ZenohAlertSink, peer_config
 from monitor.alerts.engine import AlertEngine
 from monitor.cli import main
 from monitor.events import ComponentObs, Observation
+from waiting import wait_for
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
@@ -108,7 +109,7 @@ def test_daemon_over_zenoh_put_delete_list_ack_reset(capsys):
             sink.publish(eng.evaluate(tick(1, 0.05, 2.0)))       # damage_rate fires x2
             sink.publish(eng.evaluate(tick(2, 0.05, 0.5)))       # ... and clears x2
             sink.publish(eng.evaluate(tick(3, 0.2, 0.5)))        # damage_warning fires x2
-            assert _wait(lambda: len(seen) == 6)
+            assert wait_for(lambda: len(seen) == 6)
             assert seen == [
                 ("SampleKind.PUT", "buoy/b1/monitor/alert/damage_rate/left"),
                 ("SampleKind.PUT", "buoy/b1/monitor/alert/damage_rate/right"),
@@ -150,10 +151,3 @@ def test_daemon_absent_times_out(capsys):
     assert "no answer from buoy 'b1'" in capsys.readouterr().err
 
 
-def _wait(pred, timeout=10.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return False

@@ -17,6 +17,7 @@ from monitor.alerts.delivery import EmailSender, OutboxSink, WebhookSender
 from monitor.alerts.engine import AlertEngine
 from monitor.alerts.outbox import Outbox
 from monitor.events import ComponentObs, Observation
+from waiting import wait_for
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
@@ -61,13 +62,6 @@ class Receiver:
         self.server.server_close()
 
 
-def wait_for(pred, timeout=10.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def damage_records():

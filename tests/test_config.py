@@ -124,6 +124,13 @@ def test_check_config_command(tmp_path, capsys):
     bad.write_text(path.read_text().replace('lay = "left"', 'lay = "sideways"'))
     assert main(["check-config", str(bad)]) == 2
     assert "component[0].lay = 'sideways'" in capsys.readouterr().err
+    # values only the models can judge are checked too
+    bad.write_text(path.read_text().replace('sn_curve = "vaps_copper"', 'sn_curve = "brass"'))
+    assert main(["check-config", str(bad)]) == 2
+    assert "sn_curve = 'brass': not an SNCurve preset" in capsys.readouterr().err
+    bad.write_text(path.read_text().replace('preset = "vaps_biw"', 'preset = "vaps_biw"\nhelix_radius = 0.01'))
+    assert main(["check-config", str(bad)]) == 2
+    assert "config error: cable:" in capsys.readouterr().err
 
 
 def test_external_sections_are_checked_by_their_owner_or_reported_unchecked():

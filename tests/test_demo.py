@@ -2,14 +2,8 @@
 
 import json
 
-import pytest
-
-import standin_models
-
-standin_models.install()  # until models.helix / models.fatigue land on main
-
-from monitor.cli import main  # noqa: E402
-from replay.cmd_demo import AS_BUILT, OPPOSITE, comparison, demo_config  # noqa: E402
+from monitor.cli import main
+from replay.cmd_demo import AS_BUILT, OPPOSITE, comparison, demo_config
 
 
 def test_demo_config_has_both_lays_of_the_same_cable():
@@ -34,8 +28,6 @@ def test_comparison_text():
 
 
 def test_demo_end_to_end(tmp_path, capsys):
-    pytest.importorskip("replay.simulate")
-    pytest.importorskip("replay.reader")
     assert main(["demo", "--out", str(tmp_path), "--hours", "1"]) == 0
     out = capsys.readouterr().out
     report = json.loads((tmp_path / "report.json").read_text())

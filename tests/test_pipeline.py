@@ -8,16 +8,12 @@ import numpy as np
 import pytest
 import rainflow
 
-import standin_models
-
-standin_models.install()  # until models.helix / models.fatigue land on main
-
-from models import fatigue, helix  # noqa: E402
-from monitor import pipeline as pipeline_mod  # noqa: E402
-from monitor.blocks import SampleBlock  # noqa: E402
-from monitor.config import config_with, default_config  # noqa: E402
-from monitor.pipeline import Pipeline  # noqa: E402
-from synthetic_buoy import S, T0, blocks_interleaved, sea  # noqa: E402
+from models import fatigue, helix
+from monitor import pipeline as pipeline_mod
+from monitor.blocks import SampleBlock
+from monitor.config import config_with, default_config
+from monitor.pipeline import Pipeline
+from synthetic_buoy import S, T0, blocks_interleaved, sea
 
 
 class FakeEstimator:
@@ -231,6 +227,28 @@ def test_reordered_blocks_within_the_horizon_and_late_blocks(hooks):
     assert p.report()["samples"]["tension"]["rejected"]["time_backwards"] == len(late)
 
 
+def test_state_with_buffered_bad_samples_is_strict_json():
+    config = default_config()
+    blocks = blocks_interleaved(sea(120), 1)
+    live = Pipeline(config)
+    cut = next(i for i, b in enumerate(blocks) if i > 200 and b.sensor == "tension")
+    for b in blocks[:cut]:
+        live.process(b)
+    bad = blocks[cut]
+    values = bad.fields["tension_N"].copy()
+    values[3], values[5] = np.nan, np.inf
+    live.process(SampleBlock("vaps", "tension", bad.t_ns, {"tension_N": values}))
+    state = live.state()
+    assert state["reorder"]["pending"]["tension"][1].count(None) == 2  # still buffered
+    restored = Pipeline(config, state=json.loads(json.dumps(state, allow_nan=False)))
+    for p in (live, restored):
+        for b in blocks[cut + 1:]:
+            p.process(b)
+        p.flush()
+    assert restored.report() == live.report()
+    assert live.report()["samples"]["tension"]["rejected"]["nan"] >= 2
+
+
 def test_state_is_strict_json_and_blocks_of_another_buoy_are_refused():
     config = default_config()
     p, _ = run(config, blocks_interleaved(sea(60), 1))
@@ -244,7 +262,6 @@ def test_state_is_strict_json_and_blocks_of_another_buoy_are_refused():
 
 
 def test_models_estimator_adapter_is_split_invariant_and_restorable():
-    pytest.importorskip("models.estimator")
     from monitor.load_source import build_estimator
 
     config = default_config()
@@ -260,3 +277,35 @@ def test_models_estimator_adapter_is_split_invariant_and_restorable():
         parts.append(est.feed(t[a:a + 7], {k: v[a:a + 7] for k, v in imu.items()}))
     np.testing.assert_array_equal(np.concatenate([p[0] for p in parts]), ref_t)
     np.testing.assert_allclose(np.concatenate([p[1] for p in parts]), ref_v, rtol=1e-9)
+
+
+@pytest.mark.parametrize("hysteresis", [0.0, 2e6])
+def test_residue_damage_equals_the_astm_residue_at_every_block(hysteresis):
+    from monitor.components import ResidueDamage
+
+    rng = np.random.default_rng(11)
+    sn = fatigue.SNCurve.vaps_copper()
+    for trial in range(4):
+        x = np.cumsum(rng.normal(0, 4e6, 4000)) + 5e6 * np.sin(np.arange(4000) / 7)
+        rf, cached = fatigue.StreamingRainflow(hysteresis=hysteresis), ResidueDamage(sn)
+        cuts = np.sort(rng.choice(np.arange(1, 4000), 300, replace=False))
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, 4000]):
+            rf.feed(x[a:b])
+            r, m, c = rf.residue_half_cycles()
+            expected = float(np.sum(sn.damage_per_cycle(r, c, m)))
+            assert cached(rf.residue) == pytest.approx(expected, rel=1e-12, abs=1e-300)
+        assert expected > 0
+
+
+def test_estimator_for_a_line_given_as_segments():
+    from monitor.load_source import build_estimator
+
+    c = default_config()
+    chain = {"name": "chain", "length_m": 60.0, "weight_N_per_m": 300.0, "ea_N": 5e8,
+             "diameter_m": 0.05}
+    config = config_with(c, mooring={"segment": [chain], "depth_m": 23.0, "span_m": 50.0})
+    t, imu = sea(300)["imu"]
+    est_t, est_v = build_estimator(config).feed(t, imu)
+    assert est_t.shape[0] > 0.4 * t.shape[0]
+    # a 60 m chain of 300 N/m hanging 23 m: the top tension is at least its suspended weight
+    assert np.all(est_v > 300.0 * 23.0)

@@ -1,23 +1,17 @@
 """Replay: split replay with a state file equals one pass to the last bit; the report contract;
-the command line on real MCAP logs (once the log format has landed)."""
+the command line on real MCAP logs, including damaged ones."""
 
 import io
 import json
 from pathlib import Path
 
-import numpy as np
-import pytest
-
-import standin_models
-
-standin_models.install()  # until models.helix / models.fatigue land on main
-
-from monitor.blocks import SampleBlock  # noqa: E402
-from monitor.cli import main  # noqa: E402
-from monitor.config import config_with, default_config  # noqa: E402
-from replay.report import build_report, summary_text, write_report  # noqa: E402
-from replay.runner import Progress, load_state, run_blocks, save_state  # noqa: E402
-from synthetic_buoy import S, T0, blocks_interleaved, sea  # noqa: E402
+from monitor.blocks import SampleBlock
+from monitor.cli import main
+from monitor.config import config_with, default_config
+from replay.report import build_report, summary_text, write_report
+from replay.runner import Progress, load_state, run_blocks, save_state
+from replay.writer import LogWriter
+from synthetic_buoy import S, T0, blocks_interleaved, sea
 
 RULES = [
     {"kind": "damage_fraction", "name": "damage_warning", "threshold": 1e-6},
@@ -97,14 +91,12 @@ def test_buoy_of_the_log_replaces_the_default_config_buoy():
 
 # ------------------------------------------------------------------- on real MCAP logs
 def write_log(path: Path, blocks) -> None:
-    writer = pytest.importorskip("replay.writer")
-    with writer.LogWriter(path) as w:
+    with LogWriter(path) as w:
         for b in blocks:
             w.write_block(b, recv_ns=b.t_last_ns + 1)
 
 
 def test_replay_command_split_logs_and_state(tmp_path, capsys):
-    pytest.importorskip("replay.reader")
     blocks = blocks_interleaved(sea(1200), 1)
     cut = len(blocks) // 2
     write_log(tmp_path / "all.mcap", blocks)
@@ -122,18 +114,22 @@ def test_replay_command_split_logs_and_state(tmp_path, capsys):
     two = json.loads((tmp_path / "b.json").read_text())
     assert two["components"] == one["components"]
     assert two["samples"] == one["samples"]
+    # a missing file among others is skipped, not fatal
+    assert main(["replay", str(tmp_path / "all.mcap"), str(tmp_path / "gone.mcap"),
+                 "--report", str(tmp_path / "skip.json")]) == 0
+    assert json.loads((tmp_path / "skip.json").read_text())["components"] == one["components"]
     # a directory replays its files in order: the same as one pass
     assert main(["replay", str(tmp_path / "parts"), "--report", str(tmp_path / "dir.json")]) == 0
     assert json.loads((tmp_path / "dir.json").read_text())["components"] == one["components"]
 
 
 def test_replay_exits_non_zero_only_when_nothing_could_be_read(tmp_path, capsys):
-    pytest.importorskip("replay.reader")
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"not an mcap file at all" * 10)
     assert main(["replay", str(junk)]) == 1
     assert "nothing could be read" in capsys.readouterr().err
     assert main(["replay", str(tmp_path / "missing.mcap")]) == 1
+    assert "no log files" in capsys.readouterr().err
     # a log cut in the middle still replays what is intact
     write_log(tmp_path / "cut.mcap", blocks_interleaved(sea(600), 1))
     data = (tmp_path / "cut.mcap").read_bytes()
@@ -142,3 +138,18 @@ def test_replay_exits_non_zero_only_when_nothing_could_be_read(tmp_path, capsys)
     report = json.loads((tmp_path / "r.json").read_text())
     assert 0 < report["samples"]["tension"]["accepted"] < 600 * 20
     assert report["inputs"]["read"]["incomplete_files"]
+
+
+def test_paced_replay_follows_sensor_time():
+    import time
+
+    blocks = blocks_interleaved(sea(3), 1)
+    run_blocks(default_config(), blocks)  # warm-up: compiled code, the estimator's table
+    start = time.monotonic()
+    run_blocks(default_config(), blocks)
+    fast = time.monotonic() - start
+    start = time.monotonic()
+    run_blocks(default_config(), blocks, speed=4.0)
+    paced = time.monotonic() - start
+    # 3 s of data at 4 x real time: the last blocks start 2 s after the first, i.e. 0.5 s
+    assert paced - fast >= 0.45

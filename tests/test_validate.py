@@ -3,7 +3,6 @@
 import math
 
 import numpy as np
-import pytest
 
 from monitor.config import FieldLimits, SensorLimits
 from monitor.validate import REASONS, StreamValidator

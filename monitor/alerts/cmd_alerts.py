@@ -17,15 +17,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from monitor.alerts.engine import AlertEngine
+from monitor.atomic_file import atomic_write_text
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 
@@ -120,27 +119,8 @@ def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]
         return {"buoy": engine.buoy_id, "alerts": [r.to_dict() for r in engine.active()]}
     result = engine.apply_command(command)
     state["alerts"] = engine.state()
-    _write_atomic(path, json.dumps(state, allow_nan=False))
+    atomic_write_text(path, json.dumps(state, allow_nan=False))
     return result
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Replace ``path`` so that a crash leaves either the old or the new file, never half."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-    dfd = os.open(path.parent, os.O_RDONLY)
-    try:
-        os.fsync(dfd)
-    finally:
-        os.close(dfd)
 
 
 def _on_daemon(buoy: str, connect: list[str], timeout: float,

@@ -1,0 +1,45 @@
+"""The default Rerun dashboard: loads and damage on top, histograms and geometry in the middle,
+alerts and sensor health at the bottom. Entity paths are those of :mod:`monitor.viz.rerun_sink`.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import rerun.blueprint as rrb
+
+
+def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
+    """The dashboard for a buoy whose fatigue components are ``components``."""
+    loads = rrb.Horizontal(
+        rrb.TimeSeriesView(origin="/tension", name="Tension (N)"),
+        rrb.TimeSeriesView(origin="/stress", name="Conductor stress (Pa)"),
+    )
+    fatigue = rrb.Horizontal(
+        rrb.TimeSeriesView(origin="/damage", name="Miner damage (committed / provisional)"),
+        rrb.TimeSeriesView(origin="/damage_rate", name="Damage rate (1/day)"),
+        rrb.TimeSeriesView(origin="/remaining_life", name="Remaining life (days)"),
+    )
+    histograms = [rrb.BarChartView(origin=f"/rainflow/{c}/histogram",
+                                   name=f"Rainflow ranges: {c}") for c in components]
+    matrices = [rrb.TensorView(origin=f"/rainflow/{c}/range_mean",
+                               name=f"Range x mean: {c}") for c in components]
+    cycles = rrb.Tabs(*histograms, *matrices, name="Rainflow") if components else None
+    geometry = rrb.Horizontal(
+        *([cycles] if cycles is not None else []),
+        rrb.Spatial3DView(origin="/mooring", name="Mooring line (m)"),
+        rrb.Spatial2DView(origin="/position", name="Position and watch circle (m E/N)"),
+    )
+    status = rrb.Horizontal(
+        rrb.StateTimelineView(origin="/alerts/state", name="Alert states"),
+        rrb.TextLogView(origin="/alerts/log", name="Alert log"),
+        rrb.Vertical(
+            rrb.StateTimelineView(origin="/tension/source", name="Load source"),
+            rrb.TimeSeriesView(origin="/health", name="Sensor samples (accepted / rejected)"),
+        ),
+    )
+    return rrb.Blueprint(
+        rrb.Vertical(loads, fatigue, geometry, status, row_shares=[3, 3, 3, 2]),
+        rrb.TimePanel(timeline="sensor_time"),
+        collapse_panels=True,
+    )

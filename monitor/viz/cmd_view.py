@@ -1,0 +1,50 @@
+"""``buoymon view FILE.rrd``: open a recording in a Rerun viewer with analytics disabled.
+
+By default a web viewer is served on 127.0.0.1 (works on a headless server; open the printed
+URL, or tunnel the two ports with ssh -L); ``--native`` starts the desktop viewer instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("view", help="open .rrd recordings in a Rerun viewer (analytics off)")
+    p.add_argument("recordings", type=Path, nargs="+", help=".rrd files")
+    p.add_argument("--native", action="store_true", help="desktop viewer instead of web")
+    p.add_argument("--web-port", type=int, default=9090)
+    p.add_argument("--grpc-port", type=int, default=9876)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from monitor.viz.rerun_options import RerunOptions
+    from monitor.viz.rerun_outputs import analytics_disabled_env, rerun_command, serve_web_viewer
+
+    missing = [str(p) for p in args.recordings if not p.is_file()]
+    if missing:
+        print(f"buoymon view: no such recording: {', '.join(missing)}", file=sys.stderr)
+        return 2
+    if args.native:
+        # the desktop viewer also hosts a gRPC server, on all interfaces unless told otherwise
+        cmd = rerun_command() + ["--bind", "127.0.0.1", "--port", str(args.grpc_port),
+                                 *[str(p) for p in args.recordings]]
+        return subprocess.call(cmd, env=analytics_disabled_env())
+    try:
+        opts = RerunOptions(web_port=args.web_port, grpc_port=args.grpc_port)
+        viewer = serve_web_viewer(opts, recordings=tuple(args.recordings))
+    except (ValueError, RuntimeError) as exc:
+        print(f"buoymon view: {exc}", file=sys.stderr)
+        return 2
+    print(f"Rerun web viewer (127.0.0.1 only): {viewer.web_url}\nCtrl-C to stop.")
+    try:
+        viewer.process.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        viewer.stop()
+    return 0

@@ -1,0 +1,139 @@
+"""The static fatigue report: one self-contained HTML page plus the same plots as PNG files.
+
+Self-contained means no scripts and no external resources: the plots are PNG data URIs and the
+style sheet is inline, so the file can be mailed or archived and opens offline.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from monitor.viz.report_data import Report
+from monitor.viz.report_plots import PLOTS
+
+_TITLES = {
+    "tension": "Tension summary",
+    "damage": "Damage accumulation",
+    "histogram": "Rainflow histogram",
+    "sn": "S-N curve with the counted cycles",
+    "life": "Remaining life",
+    "alerts": "Alert timeline",
+}
+_MISSING = {
+    "damage": "no fatigue components in the report",
+    "histogram": "the report has no components[...].histogram (see docs/REPORT_FORMAT.md)",
+    "sn": "the report has no components[...].sn_curve (see docs/REPORT_FORMAT.md)",
+    "life": "no fatigue components in the report",
+}
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:2em;color:#222;max-width:1100px}
+h1{font-size:1.5em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;
+text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
+img{max-width:100%;border:1px solid #eee}.note{color:#777;font-style:italic}
+.critical{color:#d62828;font-weight:bold}.warning{color:#b07500;font-weight:bold}
+"""
+
+
+@dataclass(frozen=True)
+class RenderedReport:
+    """Where :func:`write_report` put things."""
+
+    html_path: Path
+    png_paths: dict[str, Path]
+
+
+def _iso(t_ns: int) -> str:
+    dt = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=timezone.utc)
+    return dt.strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def _fmt(x: float, unit: str = "", scale: float = 1.0) -> str:
+    if math.isnan(x):
+        return "n/a"
+    if math.isinf(x):
+        return "&infin;" if x > 0 else "-&infin;"
+    return f"{x / scale:.4g}{(' ' + unit) if unit else ''}"
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    head = "".join(f"<th>{h}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _summary(r: Report) -> str:
+    e = html.escape
+    parts = [f"<p>Buoy <b>{e(r.buoy_id)}</b>, sensor time {_iso(r.time_start_ns)} to "
+             f"{_iso(r.time_end_ns)} ({(r.time_end_ns - r.time_start_ns) / 86400e9:.3g} days)."
+             "</p>"]
+    parts.append(_table(
+        ["channel", "accepted", "rejected", "rejected by reason"],
+        [[e(ch), str(acc), str(sum(rej.values())),
+          e(", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) or "-")]
+         for ch, (acc, rej) in sorted(r.samples.items())]))
+    t = r.tension
+    parts.append(_table(["tension", "min", "mean", "p99", "max"],
+                        [["kN"] + [_fmt(t[k], scale=1e3) for k in ("min", "mean", "p99", "max")]]))
+    parts.append(_table(
+        ["component", "damage (committed)", "damage (incl. residue)", "cycles",
+         "max stress (MPa)", "damage rate (1/day)", "remaining life (years)"],
+        [[e(n), _fmt(c.damage_committed), _fmt(c.damage), _fmt(c.cycles),
+          _fmt(c.max_stress_Pa, scale=1e6), _fmt(c.damage_rate_per_day),
+          _fmt(c.remaining_life_days, scale=365.25)]
+         for n, c in sorted(r.components.items())]))
+    return "\n".join(parts)
+
+
+def _alert_table(r: Report) -> str:
+    if not r.alerts:
+        return "<p>No alerts were raised.</p>"
+    e = html.escape
+    rows = [[_iso(a.at_ns), f'<span class="{e(a.severity)}">{e(a.severity)}</span>',
+             e(a.event or a.state), e(a.rule), e(a.component), e(a.summary)]
+            for a in sorted(r.alerts, key=lambda a: a.at_ns)]
+    return _table(["time", "severity", "event", "rule", "component", "summary"], rows)
+
+
+def render_png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def write_report(report: Report, html_path: str | Path) -> RenderedReport:
+    """Write ``html_path`` and ``<stem>_<plot>.png`` beside it; returns the paths."""
+    html_path = Path(html_path)
+    html_path.parent.mkdir(parents=True, exist_ok=True)
+    sections, pngs = [], {}
+    for key, plot in PLOTS.items():
+        fig = plot(report)
+        title = _TITLES[key]
+        if fig is None:
+            sections.append(f"<h2>{title}</h2><p class='note'>Not shown: {_MISSING[key]}.</p>")
+            continue
+        data = render_png(fig)
+        png = html_path.with_name(f"{html_path.stem}_{key}.png")
+        png.write_bytes(data)
+        pngs[key] = png
+        uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+        sections.append(f"<h2>{title}</h2><img id='plot-{key}' alt='{title}' src='{uri}'>")
+        if key == "alerts":
+            sections.append(_alert_table(report))
+    title = f"Fatigue report: buoy {html.escape(report.buoy_id)}"
+    page = (
+        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+        f"<title>{title}</title><style>{_CSS}</style></head><body>"
+        f"<h1>{title}</h1>{_summary(report)}{''.join(sections)}"
+        "<p class='note'>Damage is a Miner sum (1 = predicted failure); 'committed' counts "
+        "closed rainflow cycles, 'incl. residue' adds the open cycles as half cycles.</p>"
+        "</body></html>\n"
+    )
+    html_path.write_text(page, encoding="utf-8")
+    return RenderedReport(html_path, pngs)

@@ -1,0 +1,213 @@
+"""Reading and checking the replay report JSON (format: docs/REPORT_FORMAT.md).
+
+Required fields are checked and a bad one is a ValueError naming it; optional plot fields that
+are absent become None so the renderer can leave their plots out.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from monitor.viz.alert_view import alert_fields
+
+
+def _num(value: Any, where: str) -> float:
+    """A JSON number, or one of the strings "inf", "-inf", "nan"; ValueError otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ValueError(f"report: {where} = {value!r}: expected a number")
+    if isinstance(value, str) and value.strip().lower() not in ("inf", "-inf", "+inf", "nan"):
+        raise ValueError(f"report: {where} = {value!r}: expected a number")
+    return float(value)
+
+
+def _array(value: Any, where: str, n: int | None = None) -> np.ndarray:
+    if not isinstance(value, (list, tuple)):
+        raise ValueError(f"report: {where}: expected a list of numbers, got {type(value).__name__}")
+    a = np.array([_num(v, f"{where}[{i}]") for i, v in enumerate(value)], dtype=float)
+    if n is not None and len(a) != n:
+        raise ValueError(f"report: {where}: expected {n} values, got {len(a)}")
+    return a
+
+
+def _mapping(value: Any, where: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise ValueError(f"report: {where}: expected an object, got {type(value).__name__}")
+    return value
+
+
+def parse_time_ns(value: Any, where: str) -> int:
+    """ISO 8601 string (naive = UTC), int ns or float s since the epoch -> int ns."""
+    if isinstance(value, str):
+        try:
+            dt = datetime.fromisoformat(value.replace("Z", "+00:00"))
+        except ValueError as exc:
+            raise ValueError(f"report: {where} = {value!r}: not an ISO 8601 time") from exc
+        if dt.tzinfo is None:
+            dt = dt.replace(tzinfo=timezone.utc)
+        whole = int(dt.replace(microsecond=0).timestamp())
+        return whole * 1_000_000_000 + dt.microsecond * 1000
+    if isinstance(value, int) and not isinstance(value, bool):
+        return value
+    if isinstance(value, float) and math.isfinite(value):
+        return int(round(value * 1e9))
+    raise ValueError(f"report: {where} = {value!r}: expected an ISO 8601 time or a number")
+
+
+@dataclass(frozen=True, eq=False)
+class Series:
+    """Time series with named columns, ``t_s`` in seconds since the epoch."""
+
+    t_s: np.ndarray
+    columns: Mapping[str, np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class Component:
+    name: str
+    damage: float
+    damage_committed: float
+    cycles: float
+    max_stress_Pa: float
+    damage_rate_per_day: float
+    remaining_life_days: float
+    damage_history: Series | None = None
+    hist_edges_Pa: np.ndarray | None = None
+    hist_counts: np.ndarray | None = None
+    sn_ranges_Pa: np.ndarray | None = None
+    sn_cycles: np.ndarray | None = None
+    sn_endurance_Pa: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Alert:
+    rule: str
+    component: str
+    severity: str
+    state: str
+    event: str
+    at_ns: int
+    starts_at_ns: int
+    ends_at_ns: int
+    summary: str
+
+
+@dataclass(frozen=True, eq=False)
+class Report:
+    buoy_id: str
+    time_start_ns: int
+    time_end_ns: int
+    samples: Mapping[str, tuple[int, Mapping[str, int]]]
+    tension: Mapping[str, float]
+    components: Mapping[str, Component]
+    alerts: list[Alert]
+    design_life_years: float | None = None
+    tension_history: Series | None = None
+
+
+def _series(value: Any, where: str, names: tuple[str, ...], required: tuple[str, ...]) -> Series:
+    m = _mapping(value, where)
+    if "t_s" not in m:
+        raise ValueError(f"report: {where}.t_s is missing")
+    t = _array(m["t_s"], f"{where}.t_s")
+    cols = {}
+    for name in names:
+        if name in m:
+            cols[name] = _array(m[name], f"{where}.{name}", len(t))
+        elif name in required:
+            raise ValueError(f"report: {where}.{name} is missing")
+    return Series(t, cols)
+
+
+def _component(name: str, c: Any) -> Component:
+    where = f"components.{name}"
+    c = _mapping(c, where)
+    try:
+        base = {k: _num(c[k], f"{where}.{k}") for k in (
+            "damage", "damage_committed", "cycles", "max_stress_Pa", "damage_rate_per_day",
+            "remaining_life_days")}
+    except KeyError as exc:
+        raise ValueError(f"report: {where}.{exc.args[0]} is missing") from exc
+    opt: dict[str, Any] = {}
+    if "damage_history" in c:
+        opt["damage_history"] = _series(c["damage_history"], f"{where}.damage_history",
+                                        ("damage_committed", "damage"), ("damage_committed",))
+    if "histogram" in c:
+        h = _mapping(c["histogram"], f"{where}.histogram")
+        edges = _array(h.get("edges_Pa"), f"{where}.histogram.edges_Pa")
+        if len(edges) < 2 or np.any(np.diff(edges) <= 0):
+            raise ValueError(f"report: {where}.histogram.edges_Pa: need >= 2 increasing edges")
+        opt["hist_edges_Pa"] = edges
+        opt["hist_counts"] = _array(h.get("counts"), f"{where}.histogram.counts", len(edges) - 1)
+    if "sn_curve" in c:
+        s = _mapping(c["sn_curve"], f"{where}.sn_curve")
+        ranges = _array(s.get("ranges_Pa"), f"{where}.sn_curve.ranges_Pa")
+        opt["sn_ranges_Pa"] = ranges
+        opt["sn_cycles"] = _array(s.get("cycles"), f"{where}.sn_curve.cycles", len(ranges))
+        if s.get("endurance_Pa") is not None:
+            opt["sn_endurance_Pa"] = _num(s["endurance_Pa"], f"{where}.sn_curve.endurance_Pa")
+    return Component(name=name, **base, **opt)
+
+
+def _alert(i: int, a: Any) -> Alert:
+    where = f"alerts[{i}]"
+    a = _mapping(a, where)
+    try:
+        f = alert_fields(a)
+        starts, ends = int(a.get("starts_at_ns") or f["at_ns"]), int(a.get("ends_at_ns") or 0)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"report: {where}: {exc}") from exc
+    return Alert(**f, starts_at_ns=starts, ends_at_ns=ends)
+
+
+def parse_report(data: Any) -> Report:
+    """Check a decoded report and convert it; ValueError names the first bad field."""
+    d = _mapping(data, "top level")
+    for key in ("buoy_id", "time_start", "time_end", "samples", "tension_N", "components",
+                "alerts"):
+        if key not in d:
+            raise ValueError(f"report: required field {key!r} is missing")
+    samples = {}
+    for ch, s in _mapping(d["samples"], "samples").items():
+        s = _mapping(s, f"samples.{ch}")
+        rejected = _mapping(s.get("rejected", {}), f"samples.{ch}.rejected")
+        samples[str(ch)] = (int(_num(s.get("accepted"), f"samples.{ch}.accepted")),
+                            {str(r): int(_num(n, f"samples.{ch}.rejected.{r}"))
+                             for r, n in rejected.items()})
+    t = _mapping(d["tension_N"], "tension_N")
+    tension = {k: _num(t.get(k), f"tension_N.{k}") for k in ("min", "mean", "max", "p99")}
+    comps = {str(n): _component(str(n), c)
+             for n, c in _mapping(d["components"], "components").items()}
+    if not isinstance(d["alerts"], list):
+        raise ValueError("report: alerts: expected a list")
+    life = d.get("design_life_years")
+    return Report(
+        buoy_id=str(d["buoy_id"]),
+        time_start_ns=parse_time_ns(d["time_start"], "time_start"),
+        time_end_ns=parse_time_ns(d["time_end"], "time_end"),
+        samples=samples, tension=tension, components=comps,
+        alerts=[_alert(i, a) for i, a in enumerate(d["alerts"])],
+        design_life_years=None if life is None else _num(life, "design_life_years"),
+        tension_history=(_series(d["tension_history"], "tension_history",
+                                 ("min", "mean", "max"), ("min", "mean", "max"))
+                         if "tension_history" in d else None),
+    )
+
+
+def load_report(path: str | Path) -> Report:
+    """Read and check a report file."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ValueError(f"report: cannot read {path}: {exc.strerror}") from exc
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"report: {path} is not valid JSON: {exc}") from exc
+    return parse_report(data)
