@@ -255,6 +255,10 @@ class Pipeline:
         self.config = config
         self.buoy_id = config.buoy.id
         self.sinks = list(sinks)
+        # optional sink hooks, called by the core so live and replay feed them alike: raw
+        # blocks (e.g. GNSS positions for the Rerun map) and each alert tick's observation
+        self._block_hooks = [s.on_block for s in self.sinks if hasattr(s, "on_block")]
+        self._tick_hooks = [s.on_observation for s in self.sinks if hasattr(s, "on_observation")]
         self.tick_ns = int(round(config.alerts.eval_interval_s * 1e9))
         cable = build_cable(config)
         self.components = {
@@ -327,6 +331,8 @@ class Pipeline:
             raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
                              f"{self.buoy_id!r}")
         self.reorder.push(block)
+        for hook in self._block_hooks:
+            hook(block)
         upto = self.reorder.watermark()
         return self._advance(block.sensor, upto, upto)
 
@@ -411,7 +417,7 @@ class Pipeline:
             k = (tick_limit - self.next_tick_ns) // self.tick_ns
             ends = self.next_tick_ns + self.tick_ns * np.arange(k + 1, dtype=np.int64)
         cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
-        evaluate = self._has_rules and ends.shape[0] > 0
+        evaluate = (self._has_rules or bool(self._tick_hooks)) and ends.shape[0] > 0
         if evaluate:
             for info in streams.values():
                 info.prepare(ends)
@@ -472,6 +478,8 @@ class Pipeline:
             components=_LazyComponents(self.components, stresses),
             streams=_LazyStreams(self, end, streams, k),
         )
+        for hook in self._tick_hooks:
+            hook(obs)
         for rec in self.alerts.evaluate(obs):
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))

@@ -127,8 +127,6 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     origin: list[float] = []
-    # raw GNSS blocks go to the sinks that draw them (the Rerun position view)
-    block_sinks = [s.on_block for s in sinks if hasattr(s, "on_block")]
     start = time.perf_counter()
     for block in blocks:
         if pipeline is None:
@@ -143,8 +141,6 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         if speed is not None:
             _pace(block, speed, origin)
         pipeline.process(block)
-        for on_block in block_sinks:
-            on_block(block)
         n_blocks += 1
         n_samples += len(block)
         if progress is not None:
