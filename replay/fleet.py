@@ -65,18 +65,6 @@ class BuoyJob:
 # ------------------------------------------------------------------------------ discovery
 
 
-def _log_files(paths: Iterable[str | Path]) -> list[Path]:
-    found: list[Path] = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            found.extend(sorted(p.rglob("*.mcap")))
-        elif p.is_file():
-            found.append(p)
-        else:
-            raise FileNotFoundError(f"no such log file or folder: {p}")
-    return found
-
-
 def _scan_buoys_and_start(path: Path) -> tuple[set[str], int | None]:
     """Read a file without a usable summary (damaged) for its buoys and first sensor time."""
     from replay.reader import LogReader
@@ -124,7 +112,9 @@ def discover(paths: Iterable[str | Path]) -> list[BuoyArchive]:
     """
     per_buoy: dict[str, list[tuple[int, str]]] = {}
     seen: set[Path] = set()
-    for path in _log_files(paths):
+    from replay.reader import expand_paths
+
+    for path in expand_paths(paths, recursive=True, missing="raise"):
         real = path.resolve()
         if real in seen:
             continue

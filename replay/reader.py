@@ -45,6 +45,7 @@ Ordering guarantees (deterministic for the same files in the same order):
 
 from __future__ import annotations
 
+import logging
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -58,6 +59,8 @@ import zstandard
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
 from replay import codec
+
+log = logging.getLogger(__name__)
 from replay.writer import (
     MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, OP_MESSAGE_INDEX,
     OP_SCHEMA, OP_STATISTICS,
@@ -110,11 +113,24 @@ class FileStats:
         return d
 
 
-def expand_paths(paths: Iterable[str | PathLike]) -> list[Path]:
-    """Files as given; a directory expands to its ``*.mcap`` files sorted by name."""
+def expand_paths(paths: Iterable[str | PathLike], *, recursive: bool = False,
+                 missing: str = "keep") -> list[Path]:
+    """Files as given; a directory expands to its ``*.mcap`` files sorted by name (with
+    ``recursive``, those of its sub-folders too). A path that does not exist is kept
+    (``missing="keep"``: reading it then reports it unreadable), logged and skipped
+    (``"skip"``) or a FileNotFoundError (``"raise"``)."""
+    if missing not in ("keep", "skip", "raise"):
+        raise ValueError(f"missing = {missing!r}: must be 'keep', 'skip' or 'raise'")
     out: list[Path] = []
     for p in map(Path, paths):
-        out.extend(sorted(p.glob("*.mcap")) if p.is_dir() else [p])
+        if p.is_dir():
+            out.extend(sorted(p.rglob("*.mcap") if recursive else p.glob("*.mcap")))
+        elif p.exists() or missing == "keep":
+            out.append(p)
+        elif missing == "raise":
+            raise FileNotFoundError(f"no such log file or folder: {p}")
+        else:
+            log.error("%s does not exist; skipped", p)
     return out
 
 

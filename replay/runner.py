@@ -30,14 +30,9 @@ log = logging.getLogger(__name__)
 def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
     """Expand directories to their ``*.mcap`` files (sorted). A missing path is logged and
     skipped (the others are still replayed); FileNotFoundError if nothing is left."""
-    out: list[Path] = []
-    for p in map(Path, paths):
-        if p.is_dir():
-            out.extend(sorted(p.glob("*.mcap")))
-        elif p.exists():
-            out.append(p)
-        else:
-            log.error("replay: %s does not exist; skipped", p)
+    from replay.reader import expand_paths
+
+    out = expand_paths(paths, missing="skip")
     if not out:
         raise FileNotFoundError(f"no log files in {[str(p) for p in paths]}")
     return out
