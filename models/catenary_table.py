@@ -18,19 +18,35 @@ from models.catenary_line import Line, broadcast_pair, solve
 
 
 @numba.njit(cache=True)
+def _cell(g, x, k):
+    """Index i in [0, len(g) - 2] with g[i] <= x < g[i + 1] (clamped at the ends), trying
+    ``k`` (the previous point's cell: estimates are consecutive samples) before a bisection."""
+    n = g.shape[0]
+    if 0 <= k <= n - 2 and g[k] <= x < g[k + 1]:
+        return k
+    lo = 0
+    hi = n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if x >= g[mid]:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@numba.njit(cache=True)
 def _hermite(xg, zg, coef, xs, zs, out, want_slopes):
     """Evaluate the bicubic Hermite tables `coef` (nq, nx, nz, 4: f, f_x, f_z, f_xz) at points;
     out (n, nq, 3): value, d/dx, d/dz."""
-    nx = xg.shape[0]
-    nz = zg.shape[0]
     nq = coef.shape[0]
+    i = -1
+    j = -1
     for p in range(xs.shape[0]):
         x = xs[p]
         z = zs[p]
-        i = np.searchsorted(xg, x, side="right") - 1
-        j = np.searchsorted(zg, z, side="right") - 1
-        i = min(max(i, 0), nx - 2)
-        j = min(max(j, 0), nz - 2)
+        i = _cell(xg, x, i)
+        j = _cell(zg, z, j)
         dx = xg[i + 1] - xg[i]
         dz = zg[j + 1] - zg[j]
         u = (x - xg[i]) / dx
@@ -48,42 +64,38 @@ def _hermite(xg, zg, coef, xs, zs, out, want_slopes):
         bv1 = v3 - 2 * v2 + v
         bv2 = -2 * v3 + 3 * v2
         bv3 = v3 - v2
-        du0 = 6 * u2 - 6 * u
-        du1 = 3 * u2 - 4 * u + 1
-        du2 = -6 * u2 + 6 * u
-        du3 = 3 * u2 - 2 * u
-        dv0 = 6 * v2 - 6 * v
-        dv1 = 3 * v2 - 4 * v + 1
-        dv2 = -6 * v2 + 6 * v
-        dv3 = 3 * v2 - 2 * v
         for q in range(nq):
-            c00 = coef[q, i, j]
-            c10 = coef[q, i + 1, j]
-            c01 = coef[q, i, j + 1]
-            c11 = coef[q, i + 1, j + 1]
-            # per corner: value, x-slope (scaled to u), z-slope (to v), cross
-            f = (bv0 * (bu0 * c00[0] + bu1 * dx * c00[1] + bu2 * c10[0] + bu3 * dx * c10[1])
-                 + bv1 * dz * (bu0 * c00[2] + bu1 * dx * c00[3] + bu2 * c10[2]
-                               + bu3 * dx * c10[3])
-                 + bv2 * (bu0 * c01[0] + bu1 * dx * c01[1] + bu2 * c11[0] + bu3 * dx * c11[1])
-                 + bv3 * dz * (bu0 * c01[2] + bu1 * dx * c01[3] + bu2 * c11[2]
-                               + bu3 * dx * c11[3]))
+            # per corner (i, j), (i+1, j), (i, j+1), (i+1, j+1): value, x-slope (scaled to
+            # u), z-slope (to v), cross
+            a0, a1, a2, a3 = coef[q, i, j, 0], coef[q, i, j, 1], coef[q, i, j, 2], coef[q, i, j, 3]
+            b0, b1, b2, b3 = (coef[q, i + 1, j, 0], coef[q, i + 1, j, 1], coef[q, i + 1, j, 2],
+                              coef[q, i + 1, j, 3])
+            c0, c1, c2, c3 = (coef[q, i, j + 1, 0], coef[q, i, j + 1, 1], coef[q, i, j + 1, 2],
+                              coef[q, i, j + 1, 3])
+            d0, d1, d2, d3 = (coef[q, i + 1, j + 1, 0], coef[q, i + 1, j + 1, 1],
+                              coef[q, i + 1, j + 1, 2], coef[q, i + 1, j + 1, 3])
+            f = (bv0 * (bu0 * a0 + bu1 * dx * a1 + bu2 * b0 + bu3 * dx * b1)
+                 + bv1 * dz * (bu0 * a2 + bu1 * dx * a3 + bu2 * b2 + bu3 * dx * b3)
+                 + bv2 * (bu0 * c0 + bu1 * dx * c1 + bu2 * d0 + bu3 * dx * d1)
+                 + bv3 * dz * (bu0 * c2 + bu1 * dx * c3 + bu2 * d2 + bu3 * dx * d3))
             out[p, q, 0] = f
             if want_slopes:
-                fu = (bv0 * (du0 * c00[0] + du1 * dx * c00[1] + du2 * c10[0] + du3 * dx * c10[1])
-                      + bv1 * dz * (du0 * c00[2] + du1 * dx * c00[3] + du2 * c10[2]
-                                    + du3 * dx * c10[3])
-                      + bv2 * (du0 * c01[0] + du1 * dx * c01[1] + du2 * c11[0]
-                               + du3 * dx * c11[1])
-                      + bv3 * dz * (du0 * c01[2] + du1 * dx * c01[3] + du2 * c11[2]
-                                    + du3 * dx * c11[3]))
-                fv = (dv0 * (bu0 * c00[0] + bu1 * dx * c00[1] + bu2 * c10[0] + bu3 * dx * c10[1])
-                      + dv1 * dz * (bu0 * c00[2] + bu1 * dx * c00[3] + bu2 * c10[2]
-                                    + bu3 * dx * c10[3])
-                      + dv2 * (bu0 * c01[0] + bu1 * dx * c01[1] + bu2 * c11[0]
-                               + bu3 * dx * c11[1])
-                      + dv3 * dz * (bu0 * c01[2] + bu1 * dx * c01[3] + bu2 * c11[2]
-                                    + bu3 * dx * c11[3]))
+                du0 = 6 * u2 - 6 * u
+                du1 = 3 * u2 - 4 * u + 1
+                du2 = -6 * u2 + 6 * u
+                du3 = 3 * u2 - 2 * u
+                dv0 = 6 * v2 - 6 * v
+                dv1 = 3 * v2 - 4 * v + 1
+                dv2 = -6 * v2 + 6 * v
+                dv3 = 3 * v2 - 2 * v
+                fu = (bv0 * (du0 * a0 + du1 * dx * a1 + du2 * b0 + du3 * dx * b1)
+                      + bv1 * dz * (du0 * a2 + du1 * dx * a3 + du2 * b2 + du3 * dx * b3)
+                      + bv2 * (du0 * c0 + du1 * dx * c1 + du2 * d0 + du3 * dx * d1)
+                      + bv3 * dz * (du0 * c2 + du1 * dx * c3 + du2 * d2 + du3 * dx * d3))
+                fv = (dv0 * (bu0 * a0 + bu1 * dx * a1 + bu2 * b0 + bu3 * dx * b1)
+                      + dv1 * dz * (bu0 * a2 + bu1 * dx * a3 + bu2 * b2 + bu3 * dx * b3)
+                      + dv2 * (bu0 * c0 + bu1 * dx * c1 + bu2 * d0 + bu3 * dx * d1)
+                      + dv3 * dz * (bu0 * c2 + bu1 * dx * c3 + bu2 * d2 + bu3 * dx * d3))
                 out[p, q, 1] = fu / dx
                 out[p, q, 2] = fv / dz
 

@@ -372,19 +372,24 @@ class MotionTensionEstimator:
         surge: ArrayLike,
         sway: ArrayLike,
         heading_deg: ArrayLike | None = None,
+        want: NDArray[np.bool_] | None = None,
     ) -> Estimate:
         """Estimate tension for a block of displacements (m) in the motion frame.
 
         ``heading_deg`` (optional, scalar or per sample): angle of the input's x-axis from the
         mooring's mean direction, counter-clockwise; the horizontal inputs are rotated into
         the mooring frame first (for buoy-frame displacements).
+        ``want`` (optional boolean mask, one per sample): the samples whose estimate is
+        needed; the others come back as NaN. The stream state advances over every sample
+        either way, so the wanted samples get exactly the values a full estimate gives (the
+        quasi-static lookup, most of the cost, is skipped for the rest).
         """
         z = _as_block("heave", heave, None)
         x = _as_block("surge", surge, z.size)
         y = _as_block("sway", sway, z.size)
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, z.size)
-        return self._estimate(x, y, z, settling=None)
+        return self._estimate(x, y, z, settling=None, want=_want_mask(want, z.size))
 
     def update_accel(
         self,
@@ -392,6 +397,7 @@ class MotionTensionEstimator:
         accel_y: ArrayLike,
         accel_z: ArrayLike,
         heading_deg: ArrayLike | None = None,
+        want: NDArray[np.bool_] | None = None,
     ) -> Estimate:
         """As :meth:`update` from IMU accelerations (m/s^2, gravity removed, motion frame),
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
@@ -412,10 +418,10 @@ class MotionTensionEstimator:
         x, y = d[0], d[1]
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, az.size)
-        return self._estimate(x, y, d[2], settling)
+        return self._estimate(x, y, d[2], settling, _want_mask(want, az.size))
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling) -> Estimate:
+    def _estimate(self, x, y, z, settling, want=None) -> Estimate:
         c = self.config
         n = z.size
         if n == 0:
@@ -426,8 +432,15 @@ class MotionTensionEstimator:
         fresh = self._hist is None
         p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
         x_off = np.hypot(c.span + x, y) - c.span
-        t_qs, h, v, qflags = self.quasi_static(x_off, z)
-        flags = np.array(qflags, dtype=np.uint8)
+        if want is None:
+            t_qs, h, v, qflags = self.quasi_static(x_off, z)
+            flags = np.array(qflags, dtype=np.uint8)
+        else:
+            # unwanted samples: NaN in, NaN out of the dynamic core (whose state only depends
+            # on the positions)
+            t_qs, h, v = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+            flags = np.zeros(n, np.uint8)
+            t_qs[want], h[want], v[want], flags[want] = self.quasi_static(x_off[want], z[want])
         total, axial, drag, angle = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         self._jerk_y = _dynamic_core(
             p, c.span, c.height, c.dt,
@@ -443,6 +456,16 @@ class MotionTensionEstimator:
         self._hist = p[:, -2:].copy()
         self._seen += n
         return Estimate(total, np.asarray(t_qs, dtype=float), axial, drag, angle, flags)
+
+
+def _want_mask(want, n: int) -> NDArray[np.bool_] | None:
+    if want is None:
+        return None
+    mask = np.asarray(want)
+    if mask.dtype != np.bool_ or mask.shape != (n,):
+        raise ValueError(f"want must be a boolean mask of {n} samples, got dtype {mask.dtype} "
+                         f"and shape {mask.shape}")
+    return mask
 
 
 def _rotate(x, y, heading_deg, n):

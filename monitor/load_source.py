@@ -31,8 +31,11 @@ SOURCE_NAMES = {0: "none", MEASURED: "measured", ESTIMATED: "estimated"}
 class MotionEstimator(Protocol):
     """What the pipeline needs from a motion -> tension estimator (adapter over models.estimator)."""
 
-    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Accepted motion samples in time order -> ``(t_ns, tension_N)`` of the estimate."""
+    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
+             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Accepted motion samples in time order -> ``(t_ns, tension_N)`` of the estimate;
+        only the samples in the boolean mask ``want`` (all if None) get a value, the others
+        are NaN."""
         ...
 
     def state(self) -> dict[str, Any]: ...
@@ -66,12 +69,14 @@ class _ModelsEstimator:
         self._flags = est_module.Flag
         self.model, self.sensor = model, sensor
 
-    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
+             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         if self.sensor == "imu":
             e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
-                                        fields["accel_z_mps2"])
+                                        fields["accel_z_mps2"], want=want)
         else:
-            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"])
+            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"],
+                                  want=want)
         ok = (e.flags & np.uint8(self._flags.SETTLING)) == 0
         return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok]
 
@@ -104,25 +109,31 @@ class LoadSelector:
         if state is not None and state["last_measured_ns"] is not None:
             self.last_measured_ns = int(state["last_measured_ns"])
 
+    def needed(self, m_t: np.ndarray, e_t: np.ndarray) -> np.ndarray:
+        """Boolean mask of the estimated samples at times ``e_t`` that :meth:`select` will
+        use with the measured times ``m_t`` of the same slab (pure: nothing changes)."""
+        if self.mode == "estimated":
+            return np.ones(e_t.shape, bool)
+        if self.mode == "measured" or e_t.shape[0] == 0:
+            return np.zeros(e_t.shape, bool)
+        # latest accepted tension time at or before each estimated sample
+        idx = np.searchsorted(m_t, e_t, side="right") - 1
+        never = idx < 0
+        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
+        if self.last_measured_ns is not None:
+            latest = np.where(never, np.int64(self.last_measured_ns), latest)
+            never[:] = False
+        return never | (e_t - latest > self.stale_ns)
+
     def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED."""
         if self.mode == "estimated":
             return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
-        prev = self.last_measured_ns
+        use = self.needed(m_t, e_t)
         if m_t.shape[0]:
             self.last_measured_ns = int(m_t[-1])
         measured = (m_t, m_v, np.full(m_t.shape, MEASURED, np.int8))
-        if self.mode == "measured" or e_t.shape[0] == 0:
-            return measured
-        # latest accepted tension time at or before each estimated sample
-        idx = np.searchsorted(m_t, e_t, side="right") - 1
-        never = idx < 0
-        latest = m_t[np.maximum(idx, 0)] if m_t.shape[0] else np.zeros(e_t.shape, np.int64)
-        if prev is not None:
-            latest = np.where(never, np.int64(prev), latest)
-            never[:] = False
-        use = never | (e_t - latest > self.stale_ns)
         if not use.any():
             return measured
         t = np.concatenate([m_t, e_t[use]])

@@ -373,7 +373,10 @@ class Pipeline:
             info = streams[self.motion_sensor]
             if info.acc_t.shape[0]:
                 fields = dict(zip(SENSOR_FIELDS[self.motion_sensor], info.acc_values))
-                e_t, e_v = self.estimator.feed(info.acc_t, fields)
+                # estimate only where it feeds fatigue, and the newest sample for the status
+                want = self.selector.needed(m_t, info.acc_t)
+                want[-1] = True
+                e_t, e_v = self.estimator.feed(info.acc_t, fields, want)
         t, v, src = self.selector.select(m_t, m_v, e_t, e_v)
         self.stats.add(v, src)
         if m_t.shape[0]:

@@ -191,6 +191,26 @@ def test_imu_path_matches_displacement_path():
     assert np.mean(tension[settled]) == pytest.approx(np.mean(ref[settled]), rel=0.01)
 
 
+def test_wanted_samples_only_are_estimated_exactly(vaps):
+    # the pipeline asks only for the samples that feed fatigue: those must be bit-identical
+    # to a full estimate, the rest NaN, and the stream state must advance the same
+    cfg, qs = vaps
+    m = waves.buoy_motion(1.5, 5.25, 120.0, DT, seed=2, depth=23.0)
+    full, part = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    rng = np.random.default_rng(0)
+    for i in range(0, m.t.size, 40):
+        sl = slice(i, i + 40)
+        want = rng.random(m.accel_z[sl].size) < 0.3
+        a = full.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl])
+        b = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want)
+        np.testing.assert_array_equal(b.tension[want], a.tension[want])
+        np.testing.assert_array_equal(b.flags[want], a.flags[want])
+        assert np.isnan(b.tension[~want]).all()
+    assert part.state.to_dict() == full.state.to_dict()
+    with pytest.raises(ValueError, match="want must be a boolean mask of 3 samples"):
+        part.update(np.zeros(3), np.zeros(3), np.zeros(3), want=np.ones(2, bool))
+
+
 @pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
 def test_real_spotter_record_through_seed004(vaps):
     """Measured motion of a moored Spotter (2.5 Hz, mm): one hour of the clean window gives a

@@ -19,8 +19,10 @@ from synthetic_buoy import S, T0, blocks_interleaved, sea
 class FakeEstimator:
     """Stateless stand-in for models.estimator: tension from vertical acceleration."""
 
-    def feed(self, t_ns, fields):
-        return t_ns, 5000.0 + 400.0 * fields["accel_z_mps2"]
+    def feed(self, t_ns, fields, want=None):
+        v = 5000.0 + 400.0 * fields["accel_z_mps2"]
+        # as the real estimator: unwanted samples are NaN (the pipeline must never use them)
+        return t_ns, v if want is None else np.where(want, v, np.nan)
 
     def state(self):
         return {}
