@@ -73,83 +73,77 @@ def build_cable(config: Config) -> Any:
 _EMPTY = np.zeros(0)
 
 
-def _residue_plan(stack, c, points):
-    """The cycles ``ResidueDamage`` must evaluate for residue ``stack`` + running extreme
-    ``c``, given the cached stack ``points``: returns ``(r, m, counts, used, first, top, k)``
-    where the first ``used`` entries of ``r, m, counts`` are the half cycles of the ranges of
-    ``stack`` from index ``first`` on (``k`` of them, not cached yet), the full cycles the
-    running extreme closes, and the half cycle ``X``; ranges ``[0, top)`` stay half cycles."""
-    n = stack.shape[0]
-    keep = min(points.shape[0], n)
-    for i in range(keep):
-        if points[i] != stack[i]:
-            keep = i
-            break
-    ranges = np.abs(stack[1:] - stack[:-1])
-    # ASTM's start point after S: the rising ranges before it were emitted as half cycles
-    start = max(n - 2, 0)
-    for i in range(n - 2):
-        if ranges[i + 1] < ranges[i]:
-            start = i
-            break
-    first = max(keep - 1, 0)
-    k = n - 1 - first
-    size = k + n // 2 + 1
-    r, m, counts = np.empty(size), np.empty(size), np.empty(size)
-    for i in range(k):
-        r[i] = ranges[first + i]
-        m[i] = 0.5 * (stack[first + i] + stack[first + i + 1])
-        counts[i] = 0.5
-    # the running extreme closes the falling ranges at the top that are not larger
-    used, top, x = k, n - 1, abs(c - stack[n - 1])
-    while top - start >= 2 and x >= ranges[top - 1]:
-        r[used], m[used], counts[used] = ranges[top - 1], 0.5 * (stack[top] + stack[top - 1]), 1.0
-        used += 1
-        top -= 2
-        x = abs(c - stack[top])
-    r[used], m[used], counts[used] = x, 0.5 * (c + stack[top]), 0.5
-    return r, m, counts, used + 1, first, top, k
+def _range_damage(r, scf, to_mpa, bounds, m, coef, cutoff):
+    """Damage of one cycle of range ``r`` (Pa), as ``SNCurve.damage_per_cycle`` computes it
+    without mean correction (the arguments after ``r`` are ``SNCurve._terms_args``)."""
+    s = r * scf
+    s = s * to_mpa
+    if s < cutoff:
+        return 0.0
+    seg = m.shape[0] - 1
+    for b in range(bounds.shape[0]):  # ascending knees
+        if bounds[b] <= s:
+            seg -= 1
+    return s ** m[seg] * coef[seg]
 
 
-_residue_plan_compiled = compile_loop(_residue_plan)
+_range_damage_compiled = compile_loop(_range_damage)
+
+
+def _residue_damage_loop(points, scf, to_mpa, bounds, m, coef, cutoff):
+    """Miner damage of the rainflow residue ``points`` counted as ASTM E1049's three-point
+    rule counts the end of a series (as ``StreamingRainflow.residue_half_cycles``): closed
+    ranges as full cycles, ranges holding the start point and the leftovers as half cycles;
+    summed in counting order."""
+    n = points.shape[0]
+    stack = np.empty(n)
+    top = 0
+    start = 0
+    total = 0.0
+    for p in range(n):
+        stack[top] = points[p]
+        top += 1
+        while top - start >= 3:
+            x = abs(stack[top - 1] - stack[top - 2])
+            y = abs(stack[top - 2] - stack[top - 3])
+            if x < y:
+                break
+            d = _range_damage_compiled(y, scf, to_mpa, bounds, m, coef, cutoff)
+            if top - start == 3:  # Y holds the starting point: a half cycle
+                total += 0.5 * d
+                start += 1
+            else:
+                total += d
+                stack[top - 3] = stack[top - 1]
+                top -= 2
+    for i in range(start, top - 1):
+        total += 0.5 * _range_damage_compiled(abs(stack[i] - stack[i + 1]), scf, to_mpa,
+                                              bounds, m, coef, cutoff)
+    return total
+
+
+_residue_damage_compiled = compile_loop(_residue_damage_loop)
 
 
 class ResidueDamage:
-    """Damage of the open rainflow residue counted as ASTM E1049 would, i.e. exactly
-    ``sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())`` summed, but cheap enough
-    to evaluate at every alert tick.
-
-    Why it can be incremental: the residue is the four-point stack ``S`` followed by the
-    running extreme ``c``. In ``S`` no inner range is smaller than or equal to both neighbours
-    (it would have closed), so the ranges rise to a peak and then fall; ASTM's three-point
-    pass over ``S`` therefore closes only the rising ranges, each containing the start point
-    (half cycles), and keeps the falling ones. Only ``c`` can close more: from the top, while
-    ``X = |c - top| >= Y`` (the last range) it closes ``Y`` as a full cycle and drops its two
-    points (or, when ``Y`` holds the start point, stops with ``Y`` as a half cycle). Every
-    remaining range, and ``X``, is a half cycle. So the damage is the half-cycle damage of a
-    prefix of ``S``'s ranges, plus a few cycles at the top; the per-range damages of ``S`` are
-    cached while its points are unchanged, and a tick costs one compiled walk over ``S``
-    (``_residue_plan``) and one small S-N evaluation.
+    """Damage of the open rainflow residue counted as ASTM E1049 would, i.e.
+    ``sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())`` summed (to rounding),
+    cheap enough to evaluate at every alert tick: one compiled pass over the residue's few
+    points for curves without mean-stress correction, the reference path otherwise.
     """
 
     def __init__(self, sn_curve: Any) -> None:
         self.sn_curve = sn_curve
-        self._points = _EMPTY  # the stack S whose per-range damages are cached
-        self._half = _EMPTY  # damage of each range of S as a half cycle
-        self._plan = _residue_plan_compiled or _residue_plan
+        self._args = None
+        if sn_curve.mean_correction == "none" and _residue_damage_compiled is not None:
+            self._args = sn_curve._terms_args[1]
 
-    def __call__(self, residue: np.ndarray) -> float:
-        if residue.shape[0] < 2:
-            return 0.0
-        stack = residue[:-1]  # residue is a fresh array: no copy
-        r, m, counts, used, first, top, k = self._plan(stack, float(residue[-1]), self._points)
-        # residues of validated (finite) stresses: ranges finite and >= 0
-        d = self.sn_curve.damage_of_valid(r[:used], counts[:used], m[:used])
-        self._half = np.concatenate([self._half[:first], d[:k]]) if first else d[:k]
-        self._points = stack
-        # sums over fixed arrays in a fixed order: the same value however the cache was filled
-        # (np.add.reduce is np.sum without its wrapper: the same pairwise sum)
-        return float(np.add.reduce(self._half[:top])) + math.fsum(d[k:].tolist())
+    def __call__(self, rainflow: fatigue.StreamingRainflow) -> float:
+        if self._args is None:
+            r, m, c = rainflow.residue_half_cycles()
+            return float(np.sum(self.sn_curve.damage_per_cycle(r, c, m)))
+        residue = rainflow.residue
+        return _residue_damage_compiled(residue, *self._args) if residue.shape[0] > 1 else 0.0
 
 
 class Component:
@@ -218,7 +212,7 @@ class Component:
         and not accumulated, so reading figures never changes the state.
         """
         committed = self.miner.damage_committed + self._damage(*self._pending)
-        damage = committed + self._residue_damage(self.rainflow.residue)
+        damage = committed + self._residue_damage(self.rainflow)
         rate = float(self.miner.damage_rate_per_day)
         return {
             "damage": damage,

@@ -116,6 +116,12 @@ class LoadSelector:
             return np.ones(e_t.shape, bool)
         if self.mode == "measured" or e_t.shape[0] == 0:
             return np.zeros(e_t.shape, bool)
+        prev = self.last_measured_ns
+        if (m_t.shape[0] and prev is not None and int(m_t[0]) - prev <= self.stale_ns
+                and (m_t.shape[0] == 1 or int(np.max(m_t[1:] - m_t[:-1])) <= self.stale_ns)):
+            # the usual case, the cell alive all along: only estimates more than stale_after_s
+            # past its newest sample are needed (the general rule below gives the same)
+            return e_t - m_t[-1] > self.stale_ns
         # latest accepted tension time at or before each estimated sample
         idx = np.searchsorted(m_t, e_t, side="right") - 1
         never = idx < 0

@@ -290,12 +290,17 @@ def test_residue_damage_equals_the_astm_residue_at_every_block(hysteresis):
     for trial in range(4):
         x = np.cumsum(rng.normal(0, 4e6, 4000)) + 5e6 * np.sin(np.arange(4000) / 7)
         rf, cached = fatigue.StreamingRainflow(hysteresis=hysteresis), ResidueDamage(sn)
+        sn_g = sn.with_factors(mean_correction="goodman", ultimate_Pa=250e6)
+        goodman = ResidueDamage(sn_g)
         cuts = np.sort(rng.choice(np.arange(1, 4000), 300, replace=False))
         for a, b in zip(np.r_[0, cuts], np.r_[cuts, 4000]):
             rf.feed(x[a:b])
             r, m, c = rf.residue_half_cycles()
             expected = float(np.sum(sn.damage_per_cycle(r, c, m)))
-            assert cached(rf.residue) == pytest.approx(expected, rel=1e-12, abs=1e-300)
+            assert cached(rf) == pytest.approx(expected, rel=1e-12, abs=1e-300)
+            # the mean-corrected (reference) path agrees too
+            assert goodman(rf) == pytest.approx(float(np.sum(sn_g.damage_per_cycle(r, c, m))),
+                                                rel=1e-12, abs=1e-300)
         assert expected > 0
 
 
