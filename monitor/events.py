@@ -121,3 +121,5 @@ class Observation:
     estimated_tension_N: float  # mean of the motion estimate in the tick (NaN if none)
     components: Mapping[str, ComponentObs]
     streams: Mapping[str, StreamObs]
+    # (min, max) of tension_N when the producer has it already (NaN if no samples)
+    tension_range_N: tuple[float, float] | None = None

@@ -31,7 +31,7 @@ from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.components import Component, build_cable, endurance_stress_Pa
 from monitor.config import Config
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
-from monitor.load_source import ESTIMATED, MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
+from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.validate import REASONS, StreamValidator
 
@@ -74,10 +74,52 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
 _NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
 
 
-def _mean(x: np.ndarray) -> float:
-    """``float(x.mean())`` (NaN if empty) without ndarray.mean's overhead: numpy's mean is
-    the same pairwise ``add.reduce`` divided by the count, so the value is identical."""
-    return float(np.add.reduce(x)) / x.shape[0] if x.shape[0] else math.nan
+class _TickLoad:
+    """Per-tick load figures of consecutive ticks in one pass (the tick loop then only
+    indexes lists): max and min tension, the mean of each source, each component's peak
+    stress. Tick ``k`` covers samples ``[starts[k], stops[k])``; every tick is reduced the
+    same way (sequential sums), whichever slab it came in."""
+
+    def __init__(self, v: np.ndarray, src: np.ndarray, stresses: Mapping[str, np.ndarray],
+                 starts: np.ndarray, stops: np.ndarray) -> None:
+        n = stops - starts
+        full = np.flatnonzero(n > 0)
+        k = starts.shape[0]
+        self.vmax, self.vmin = [math.nan] * k, [math.nan] * k
+        self.meas, self.est = [math.nan] * k, [math.nan] * k
+        self.smax = {name: [math.nan] * k for name in stresses}
+        if full.shape[0] == 0:
+            return
+        # the non-empty ticks are back to back: reduce over their span in one call each
+        at, end = starts[full], int(stops[full[-1]])
+        span = slice(0, end)
+        idx = full.tolist()
+        for out, vals in ((self.vmax, np.maximum.reduceat(v[span], at)),
+                          (self.vmin, np.minimum.reduceat(v[span], at))):
+            for i, x in zip(idx, vals.tolist()):
+                out[i] = x
+        for name, s in stresses.items():
+            out = self.smax[name]
+            for i, x in zip(idx, np.maximum.reduceat(s[span], at).tolist()):
+                out[i] = x
+        measured = src[span] == MEASURED
+        sums = np.add.reduceat(v[span], at).tolist()
+        n_meas = np.add.reduceat(measured.astype(np.int64), at).tolist()
+        for j, i in enumerate(idx):
+            count = int(n[i])
+            if n_meas[j] == count:  # the usual cases: one source
+                self.meas[i] = sums[j] / count
+            elif n_meas[j] == 0:
+                self.est[i] = sums[j] / count
+            else:
+                a, b = int(starts[i]), int(stops[i])
+                self.meas[i] = _seq_mean(v[a:b][measured[a:b]])
+                self.est[i] = _seq_mean(v[a:b][~measured[a:b]])
+
+
+def _seq_mean(x: np.ndarray) -> float:
+    """Mean by a sequential sum, as ``_TickLoad`` reduces whole ticks (NaN if empty)."""
+    return float(np.add.reduceat(x, [0])[0]) / x.shape[0] if x.shape[0] else math.nan
 
 
 def _finite_or_none(x: float) -> float | None:
@@ -196,18 +238,17 @@ class _StreamSlab:
 class _LazyComponents(Mapping[str, ComponentObs]):
     """Per-tick component figures, computed only for the components a rule looks at."""
 
-    def __init__(self, components: Mapping[str, Component], stresses: Mapping[str, np.ndarray]):
-        self._components, self._stresses = components, stresses
+    def __init__(self, components: Mapping[str, Component], peak_stress: Mapping[str, float]):
+        self._components, self._peak = components, peak_stress
         self._done: dict[str, ComponentObs] = {}
 
     def __getitem__(self, name: str) -> ComponentObs:
         obs = self._done.get(name)
         if obs is None:
             f = self._components[name].figures()
-            s = self._stresses[name]
             obs = self._done[name] = ComponentObs(
                 f["damage"], f["damage_committed"], f["damage_rate_per_day"],
-                f["remaining_life_days"], float(s.max()) if s.shape[0] else math.nan)
+                f["remaining_life_days"], self._peak[name])
         return obs
 
     def __iter__(self):
@@ -424,6 +465,7 @@ class Pipeline:
         if evaluate:
             for info in streams.values():
                 info.prepare(ends)
+            load = _TickLoad(v, src, stresses, np.append(0, cuts[:-2]), cuts[:-1])
         start, prev_end = 0, _NEVER
         comps = list(self.components.items())
         cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
@@ -441,11 +483,13 @@ class Pipeline:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
             if evaluate:
                 tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
-                ss = {n: stresses[n][start:stop] for n in self.components}
+                tick, j = load, k
                 if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
                     tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
-                    ss = {n: c.stress(tv) for n, c in self.components.items()}
-                self._evaluate(k, end, tt, tv, ts, ss, streams)
+                    tick = _TickLoad(tv, ts, {n: c.stress(tv) for n, c in self.components.items()},
+                                     np.zeros(1, np.int64), np.full(1, tv.shape[0]))
+                    j = 0
+                self._evaluate(k, end, tt, tv, tick, j, streams)
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
         if ends.shape[0]:
@@ -463,23 +507,18 @@ class Pipeline:
         return {n: [np.concatenate(parts) for parts in zip(*cycles)] if cycles
                 else [np.zeros(0)] * 3 for n, cycles in closed.items()}
 
-    def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
-                  stresses: Mapping[str, np.ndarray], streams: Mapping[str, _StreamSlab]) -> None:
-        """Evaluate the alert rules at the end of the slab's ``k``-th tick."""
-        measured = src == MEASURED
-        n_meas = int(np.count_nonzero(measured))
-        if n_meas == src.shape[0]:  # the usual cases: one source, no copies
-            meas, est = _mean(v), math.nan
-        elif n_meas == 0:
-            meas, est = math.nan, _mean(v)
-        else:
-            meas, est = _mean(v[measured]), _mean(v[src == ESTIMATED])
+    def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, load: _TickLoad,
+                  j: int, streams: Mapping[str, _StreamSlab]) -> None:
+        """Evaluate the alert rules at the end of the slab's ``k``-th tick (``load``'s
+        ``j``-th)."""
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
-            measured_tension_N=meas, estimated_tension_N=est,
-            components=_LazyComponents(self.components, stresses),
+            measured_tension_N=load.meas[j], estimated_tension_N=load.est[j],
+            components=_LazyComponents(self.components,
+                                       {n: peaks[j] for n, peaks in load.smax.items()}),
             streams=_LazyStreams(self, end, streams, k),
+            tension_range_N=(load.vmin[j], load.vmax[j]),
         )
         for hook in self._tick_hooks:
             hook(obs)

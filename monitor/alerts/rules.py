@@ -39,8 +39,7 @@ class TickStats:
 
     def __init__(self, obs: Observation) -> None:
         self.obs = obs
-        self._tmax: float | None = None
-        self._tmin: float | None = None
+        self._tmin, self._tmax = obs.tension_range_N or (None, None)
 
     @property
     def tension_max(self) -> float:
