@@ -251,6 +251,9 @@ class _LazyComponents(Mapping[str, ComponentObs]):
                 f["remaining_life_days"], self._peak[name])
         return obs
 
+    def get(self, name: str, default: Any = None) -> Any:  # Mapping.get, without its try/except
+        return self[name] if name in self._components else default
+
     def __iter__(self):
         return iter(self._components)
 
@@ -275,6 +278,9 @@ class _LazyStreams(Mapping[str, StreamObs]):
             obs = self._done[name] = self._pipeline._stream_one(name, self._now, self._streams,
                                                                 self._k)
         return obs
+
+    def get(self, name: str, default: Any = None) -> Any:
+        return self[name] if name in self._pipeline.validators else default
 
     def __iter__(self):
         return iter(self._pipeline.validators)
