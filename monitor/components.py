@@ -146,6 +146,16 @@ class ResidueDamage:
         return _residue_damage_compiled(residue, *self._args) if residue.shape[0] > 1 else 0.0
 
 
+@dataclasses.dataclass(frozen=True)
+class TickRun:
+    """What :meth:`Component.run_ticks` did: the closed cycles (ranges, means, counts) in
+    closure order, and per tick (damage, damage_committed, damage rate per day, remaining
+    life in days) at its end, if asked for."""
+
+    cycles: tuple[np.ndarray, np.ndarray, np.ndarray]
+    figures: list[tuple[float, float, float, float]]
+
+
 class Component:
     """Stress, rainflow and damage of one ``[[component]]``."""
 
@@ -199,6 +209,24 @@ class Component:
         ranges, means, counts = self._pending
         self.miner.add_cycles(ranges, counts, means, time_s=tick_end_ns / 1e9)
         self._pending = [_EMPTY, _EMPTY, _EMPTY]
+
+    def run_ticks(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],
+                  figures: bool = True) -> TickRun:
+        """Whole alert ticks: tick ``k`` takes ``stress_Pa[stops[k - 1]:stops[k]]`` (from 0
+        for the first) and ends at ``ends_ns[k]``, where its cycles (and those pending from
+        earlier blocks, first) are committed. ``figures`` asks for each tick's figures."""
+        parts, out, start = [], [], 0
+        for stop, end in zip(stops, ends_ns):
+            if stop > start:
+                parts.append(self.feed(stress_Pa[start:stop]))
+            self.commit(end)
+            if figures:
+                f = self.figures()
+                out.append((f["damage"], f["damage_committed"], f["damage_rate_per_day"],
+                            f["remaining_life_days"]))
+            start = stop
+        cycles = tuple(np.concatenate(p) for p in zip(*parts)) if parts else (_EMPTY,) * 3
+        return TickRun(cycles, out)
 
     def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
         if ranges.shape[0] == 0:

@@ -235,32 +235,6 @@ class _StreamSlab:
         )
 
 
-class _LazyComponents(Mapping[str, ComponentObs]):
-    """Per-tick component figures, computed only for the components a rule looks at."""
-
-    def __init__(self, components: Mapping[str, Component], peak_stress: Mapping[str, float]):
-        self._components, self._peak = components, peak_stress
-        self._done: dict[str, ComponentObs] = {}
-
-    def __getitem__(self, name: str) -> ComponentObs:
-        obs = self._done.get(name)
-        if obs is None:
-            f = self._components[name].figures()
-            obs = self._done[name] = ComponentObs(
-                f["damage"], f["damage_committed"], f["damage_rate_per_day"],
-                f["remaining_life_days"], self._peak[name])
-        return obs
-
-    def get(self, name: str, default: Any = None) -> Any:  # Mapping.get, without its try/except
-        return self[name] if name in self._components else default
-
-    def __iter__(self):
-        return iter(self._components)
-
-    def __len__(self) -> int:
-        return len(self._components)
-
-
 class _LazyStreams(Mapping[str, StreamObs]):
     """Per-tick stream health, computed only for the streams a rule looks at (each at most
     once: the first slab tick also takes the counts earlier slabs left for it)."""
@@ -473,18 +447,19 @@ class Pipeline:
                 info.prepare(ends)
             load = _TickLoad(v, src, stresses, np.append(0, cuts[:-2]), cuts[:-1])
         start, prev_end = 0, _NEVER
-        comps = list(self.components.items())
         cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
-        for k in range(ends.shape[0] + 1):
+        n_ticks = ends.shape[0]
+        # rainflow and Miner over the slab's whole ticks, with every tick's figures
+        figures = {}
+        for name, comp in self.components.items():
+            run = comp.run_ticks(stresses[name], cuts_l[:n_ticks], ends_l, evaluate)
+            figures[name] = run.figures
+            closed[name].append(run.cycles)
+        for k in range(n_ticks + 1):
             stop = cuts_l[k]
-            if stop > start:
-                for name, comp in comps:
-                    closed[name].append(comp.feed(stresses[name][start:stop]))
-            if k == ends.shape[0]:
+            if k == n_ticks:
                 break
             end = ends_l[k]
-            for _, comp in comps:
-                comp.commit(end)
             if stop > start:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
             if evaluate:
@@ -495,13 +470,17 @@ class Pipeline:
                     tick = _TickLoad(tv, ts, {n: c.stress(tv) for n, c in self.components.items()},
                                      np.zeros(1, np.int64), np.full(1, tv.shape[0]))
                     j = 0
-                self._evaluate(k, end, tt, tv, tick, j, streams)
+                self._evaluate(k, end, tt, tv, tick, j, streams,
+                               {n: f[k] for n, f in figures.items()})
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
         if ends.shape[0]:
             self.next_tick_ns = int(ends[-1]) + self.tick_ns
             self.tick_counts = {}
         if stop > start:
+            # the samples after the last tick end: their cycles wait for that tick's end
+            for name, comp in self.components.items():
+                closed[name].append(comp.feed(stresses[name][start:stop]))
             self.open_tick = tuple(np.concatenate([o, x[start:]])
                                    for o, x in zip(self.open_tick, (t, v, src)))
         for s, info in streams.items():
@@ -510,19 +489,19 @@ class Pipeline:
             counts = self.tick_counts.setdefault(s, [0, 0])
             counts[0] += received
             counts[1] += rej
-        return {n: [np.concatenate(parts) for parts in zip(*cycles)] if cycles
-                else [np.zeros(0)] * 3 for n, cycles in closed.items()}
+        return {n: [np.concatenate(parts) for parts in zip(*cycles)] for n, cycles in closed.items()}
 
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, load: _TickLoad,
-                  j: int, streams: Mapping[str, _StreamSlab]) -> None:
+                  j: int, streams: Mapping[str, _StreamSlab],
+                  figures: Mapping[str, tuple[float, float, float, float]]) -> None:
         """Evaluate the alert rules at the end of the slab's ``k``-th tick (``load``'s
-        ``j``-th)."""
+        ``j``-th); ``figures`` are each component's (damage, damage_committed, rate, life)
+        at that tick's end."""
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
             measured_tension_N=load.meas[j], estimated_tension_N=load.est[j],
-            components=_LazyComponents(self.components,
-                                       {n: peaks[j] for n, peaks in load.smax.items()}),
+            components={n: ComponentObs(*f, load.smax[n][j]) for n, f in figures.items()},
             streams=_LazyStreams(self, end, streams, k),
             tension_range_N=(load.vmin[j], load.vmax[j]),
         )
