@@ -42,7 +42,7 @@ from typing import Literal
 
 import numpy as np
 
-from models._jit import compile_loop
+from models._fatigue_loops import axial_compiled as _axial_compiled
 
 Lay = Literal["left", "right"]
 
@@ -198,25 +198,6 @@ def _first_bad(out: np.ndarray) -> int:
     if np.isfinite(np.sum(out)):
         return -1
     return int(np.flatnonzero(~np.isfinite(out))[0])
-
-
-def _axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
-    """Compiled twin of the numpy axial expression; returns the first bad index or -1.
-
-    The arithmetic loop has no branch so it vectorises; a NaN or inf tension shows up as
-    a non-finite stress, found by the second loop.
-    """
-    for i in range(t.shape[0]):
-        a = 1.0 + k * t[i]
-        b = tan_a + rg_signed * t[i]
-        out[i] = abs(cos_a * math.sqrt(a * a + b * b) - 1.0) * e_mod
-    for i in range(t.shape[0]):
-        if not math.isfinite(out[i]):
-            return i
-    return -1
-
-
-_axial_compiled = compile_loop(_axial_loop)
 
 
 def _stress_general(t: np.ndarray, cable: HelixCable, sign: float, pitch, radius,
