@@ -35,7 +35,6 @@ Public API
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
@@ -171,26 +170,38 @@ def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay 
     runs as one compiled loop when numba is available (``backend``), else as numpy;
     both evaluate the same expression in the same order.
     """
-    sign = _lay_sign(lay, cable)
     t = np.asarray(tension_N, dtype=np.float64)
-    if combined or cable.core_compressibility != 0.0:
-        return _stress_general(_check_finite(t), cable, sign, cable.pitch_m, cable.helix_radius_m, combined)
-    k, tan_a, cos_a, rg = cable._axial_coefficients
+    args = None if combined else axial_kernel_args(cable, lay)
+    if args is None:
+        return _stress_general(_check_finite(t), cable, _lay_sign(lay, cable), cable.pitch_m,
+                               cable.helix_radius_m, combined)
     if backend != "numpy" and _axial_compiled is not None:
         flat = t.reshape(-1)
         out = np.empty(flat.size)
-        bad = _axial_compiled(flat, k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa, out)
+        bad = _axial_compiled(flat, *args, out)
     elif backend in ("auto", "numpy"):
         # E |cos a * sqrt((1 + e_c)^2 + (C'/P)^2) - 1|; both terms are O(1): no overflow
+        k, tan_a, cos_a, rg_signed, e_mod = args
         a = 1.0 + k * t
-        b = tan_a + (sign * rg) * t
-        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * cable.conductor_modulus_Pa
+        b = tan_a + rg_signed * t
+        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * e_mod
         bad = _first_bad(out.reshape(-1))
     else:
         raise ValueError(f"backend {backend!r} is not available")
     if bad >= 0:
         raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {bad})")
     return out.reshape(t.shape)
+
+
+def axial_kernel_args(cable: HelixCable, lay: Lay) -> tuple[float, float, float, float, float] | None:
+    """(k, tan a, cos a, +-R G_c, E_i): the arguments of the compiled axial-stress kernel
+    (``_fatigue_loops.axial_stress``) for this cable and lay, or None when the axial
+    stress needs the general formula (a compressible core)."""
+    sign = _lay_sign(lay, cable)
+    if cable.core_compressibility != 0.0:
+        return None
+    k, tan_a, cos_a, rg = cable._axial_coefficients
+    return k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa
 
 
 def _first_bad(out: np.ndarray) -> int:

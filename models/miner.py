@@ -114,10 +114,7 @@ class MinerAccumulator:
         n = np.asarray(counts, dtype=np.float64)
         if n.shape != r.shape:
             n = np.broadcast_to(n, r.shape)
-        if time_s is not None:
-            time_s = float(time_s)
-            if not math.isfinite(time_s) or (self._t_last is not None and time_s < self._t_last):
-                raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
+        time_s = self._check_time(time_s)
         if r.size == 0:
             added = 0.0
         elif self._needs_means:
@@ -134,6 +131,23 @@ class MinerAccumulator:
             self._cycles += cycles
         else:
             added = self._commit_numpy(r, n, r * self._scale)
+        if time_s is not None:
+            self._date(added, time_s)
+        return added
+
+    def _check_time(self, time_s: float | None) -> float | None:
+        if time_s is not None:
+            time_s = float(time_s)
+            if not math.isfinite(time_s) or (self._t_last is not None and time_s < self._t_last):
+                raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
+        return time_s
+
+    def _take_kernel_totals(self, committed: float, cycles: float, time_s: float | None) -> float:
+        """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
+        ``_table`` (``models.fatigue_stream``); return the damage added."""
+        added = committed - self._committed
+        self._committed = committed
+        self._cycles += cycles
         if time_s is not None:
             self._date(added, time_s)
         return added

@@ -27,10 +27,10 @@ total the ASTM E1049 (``rainflow.extract_cycles``) counts for every (range, mean
 
 Two backends give identical results: ``"numba"`` compiles ``_fatigue_loops.feed_loop``
 (a few microseconds per call; per chunk of samples, a branch-free pass finds the confirmed
-turning points, then the four-point stack consumes them); ``"numpy"`` extracts monotone-run ends with vectorised numpy and
-runs the same state machine, uncompiled, over those only (the gate gives the same turning
-points on run ends as on all samples, because a run's end is its farthest point). ``"auto"`` picks numba
-when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
+turning points, then the four-point stack consumes them); ``"numpy"`` extracts
+monotone-run ends with vectorised numpy and runs the same state machine, uncompiled, over
+those only (the gate gives the same turning points on run ends as on all samples, because
+a run's end is its farthest point). ``"auto"`` picks numba when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
 counted.
 """
 
@@ -109,7 +109,8 @@ class StreamingRainflow:
     def samples(self) -> int:
         return self._samples
 
-    def _grow(self, need: int) -> None:
+    def _grow(self, need: int = 0) -> None:
+        """Room for ``need`` stack points, at least twice the present room."""
         bigger = np.zeros(_HEADER + max(need, 2 * (self._st.size - _HEADER)))
         bigger[: self._st.size] = self._st
         self._st = bigger
@@ -127,7 +128,7 @@ class StreamingRainflow:
         if used < x.size:  # compiled loop: stack storage full; grow and finish the block
             parts = [cycles]
             while used < x.size:
-                self._grow(2 * (self._st.size - _HEADER))
+                self._grow()
                 more, n = self._feed(self._st, x[used:])
                 parts.append(more)
                 used += n
