@@ -48,7 +48,7 @@ def log_det(x):
     log(1 + f) = f - f**2/2 + s (f**2/2 + R(s**2)), R a minimax polynomial.
     """
     sub = x < _TINY  # subnormals: scale into the normal range first
-    xn = select(sub, x * 18014398509481984.0, x)  # 2**54
+    xn = x * select(sub, 18014398509481984.0, 1.0)  # 2**54
     bits = float_bits(xn)
     e = (bits - _SQRT_HALF_BITS) >> 52
     f = bits_float(bits - (e << 52)) - 1.0

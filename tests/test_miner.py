@@ -61,7 +61,8 @@ def test_backends_agree(stress):
     curve = SNCurve.dnv_rp_c203("C", "seawater_cp", scf=3.0)
     a = _replay(stress, [5000], curve, "numba")
     b = _replay(stress, [5000], curve, "numpy")
-    assert a.damage_committed == pytest.approx(b.damage_committed, rel=1e-13)
+    # both evaluate log_det/exp_det (models._fatigue_loops) and sum in order: the same bits
+    assert a.damage_committed == b.damage_committed
     np.testing.assert_array_equal(a.histogram[1], b.histogram[1])
     assert a.histogram[2] == b.histogram[2]
 
