@@ -342,19 +342,14 @@ def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_wi
 
     The same computations, in the same order, as ``axial_loop``, ``feed_loop`` and
     ``commit_loop`` one after the other (hence the same bits), without the block-sized
-    intermediate arrays. Returns (committed, cycles, samples consumed); consumed =
-    -(i + 1) with nothing changed if the stress of t[i] is not finite, and consumed <
+    intermediate arrays. Returns (committed, cycles, samples consumed); consumed <
     len(t) when the stack storage may overflow (grow it and call again with the rest).
+    Each chunk's stresses are checked before the chunk is counted (one pass over the
+    tensions, not two): consumed = -(i + 1) if the stress of t[i] is not finite. Then
+    ``st[:HEADER + ns]`` and ``table[1]`` may hold the earlier chunks' changes, which the
+    caller undoes from a copy when ``t`` was longer than one chunk.
     """
     n = t.shape[0]
-    bad = False
-    for i in range(n):  # check the whole block first: a bad block counts nothing
-        s = axial_stress(t[i], k, tan_a, cos_a, rg_signed, e_mod)
-        bad |= (s - s) != 0.0
-    if bad:
-        for i in range(n):
-            if not math.isfinite(axial_stress(t[i], k, tan_a, cos_a, rg_signed, e_mod)):
-                return committed, 0.0, -(i + 1)
     ns = int(st[NS])
     cand = st[CAND]
     dirn = st[DIR]
@@ -375,6 +370,10 @@ def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_wi
         end = min(i + CHUNK, n)
         for j in range(end - i):
             stress[j] = axial_stress(t[i + j], k, tan_a, cos_a, rg_signed, e_mod)
+        if not _all_finite(stress[:end - i]):
+            for j in range(end - i):
+                if not math.isfinite(stress[j]):
+                    return committed, cycles, -(i + j + 1)
         j, ns, cand, dirn = _begin(st, stress, 0, end - i, ns, cand, dirn, hyst)
         m, cand, dirn = _turning_points(stress[j:end - i], cand, dirn, hyst, tp)
         ns, nc = _close_cycles(st, ns, tp, m, ranges, means, 0)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models._fatigue_loops import tension_compiled
+from models._fatigue_loops import CHUNK as _CHUNK, HEADER as _HEADER, NS as _NS, tension_compiled
 from models.helix import HelixCable, Lay, axial_kernel_args, conductor_stress
 from models.miner import MinerAccumulator
 from models.rainflow_stream import StreamingRainflow
@@ -59,16 +59,23 @@ class FatigueStream:
             return self.miner.add_cycles(ranges, counts, means, time_s=time_s)
         # the compiled pass works on the components' own state arrays (same package)
         rf, miner = self.rainflow, self.miner
-        committed, cycles, used = tension_compiled(t, *self._args, rf._st, miner._params, miner._table,
-                                                   miner._inv_width, miner._committed)
-        if used < 0:
-            raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {-used - 1}); "
-                             "block not counted")
-        while used < t.size:  # stack storage full: grow it and finish the block
-            rf._grow()
+        # a bad sample after the first chunk is found once earlier chunks are counted:
+        # keep what they may change (the state header and stack, the histogram)
+        undo = (rf._st[:_HEADER + int(rf._st[_NS])].copy(), miner._table[1].copy()) if t.size > _CHUNK else None
+        committed, cycles, used = miner._committed, 0.0, 0
+        while True:
             committed, more, n = tension_compiled(t[used:], *self._args, rf._st, miner._params, miner._table,
                                                   miner._inv_width, committed)
+            if n < 0:
+                if undo is not None:
+                    rf._st[:undo[0].size] = undo[0]
+                    miner._table[1] = undo[1]
+                raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {used - n - 1}); "
+                                 "block not counted")
             cycles += more
             used += n
+            if used == t.size:
+                break
+            rf._grow()  # stack storage full: grow it and finish the block
         rf._samples += t.size
         return miner._take_kernel_totals(committed, cycles, time_s)

@@ -133,6 +133,12 @@ def test_bad_blocks_count_nothing(tension):
         with pytest.raises(ValueError, match=f"index {index}"):
             stream.feed_tension(block, time_s=20.0)
         assert (stream.rainflow.state(), stream.miner.state()) == before
+    # in a late chunk of a long block, after the stack has grown
+    long_block = np.concatenate((np.tile([5e3, 7e3], 6000) * np.linspace(1.0, 0.9, 12000), tension[:3000]))
+    long_block[-100] = np.nan
+    with pytest.raises(ValueError, match=f"index {long_block.size - 100}"):
+        stream.feed_tension(long_block, time_s=20.0)
+    assert (stream.rainflow.state(), stream.miner.state()) == before
     with pytest.raises(ValueError, match="time_s"):
         stream.feed_tension(tension[3000:6000], time_s=5.0)  # earlier than the last commit
     assert (stream.rainflow.state(), stream.miner.state()) == before
