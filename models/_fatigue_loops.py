@@ -191,23 +191,25 @@ def _turning_points_h0(x, cand, dirn, tp):
 def _close_cycles(st, ns, tp, m, ranges, means, k):
     """Push turning points tp[:m] on the stack in ``st``, closing four-point cycles into
     ranges[k:], means[k:]. Returns (ns, k)."""
-    top = st[HEADER + ns - 1] if ns > 0 else 0.0
+    # the two top points live in registers (valid while ns >= 2); the point under test
+    # stays in one until it is pushed
+    top = st[HEADER + ns - 1]
+    below = st[HEADER + ns - 2]
     for j in range(m):
         d = tp[j]
-        # the point under test (d) stays in a register until it is pushed
         while ns >= 3:
-            c = top
-            b = st[HEADER + ns - 2]
-            r = abs(b - c)
-            if r <= abs(c - d) and r <= abs(st[HEADER + ns - 3] - b):
+            r = abs(below - top)
+            if (r <= abs(top - d)) & (r <= abs(st[HEADER + ns - 3] - below)):  # one branch, not two
                 ranges[k] = r
-                means[k] = 0.5 * (b + c)
+                means[k] = 0.5 * (below + top)
                 k += 1
                 ns -= 2
                 top = st[HEADER + ns - 1]
+                below = st[HEADER + ns - 2]
             else:
                 break
         st[HEADER + ns] = d
+        below = top
         top = d
         ns += 1
     return ns, k
