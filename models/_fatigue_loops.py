@@ -84,7 +84,7 @@ def exp_det(y):
     ki = float_bits(kd) - _SHIFT_BITS
     k1 = ki >> 1
     v = p * bits_float((k1 + 1023) << 52) * bits_float((ki - k1 + 1023) << 52)
-    return select(y == y, v, y)
+    return select(np.isnan(y), y, v)
 
 
 # ------------------------------------------------------------ conductor stress

@@ -27,7 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from models._fatigue_loops import CHUNK as _CHUNK, HEADER as _HEADER, NS as _NS, tension_compiled
+from models._fatigue_loops import CHUNK as _CHUNK
+from models._fatigue_loops import HEADER as _HEADER
+from models._fatigue_loops import NS as _NS
+from models._fatigue_loops import tension_compiled
 from models.helix import HelixCable, Lay, axial_kernel_args, conductor_stress
 from models.miner import MinerAccumulator
 from models.rainflow_stream import StreamingRainflow

@@ -34,7 +34,8 @@ from typing import Literal
 
 import numpy as np
 
-from models._fatigue_loops import commit_compiled as _commit_compiled, exp_det, log_det
+from models._fatigue_loops import commit_compiled as _commit_compiled
+from models._fatigue_loops import exp_det, log_det
 from models._jit import select
 from models.sn_curve import SNCurve
 

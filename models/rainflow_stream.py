@@ -42,9 +42,15 @@ from typing import Literal
 import numpy as np
 
 # the compiled loop and the layout of the state vector it shares with the numpy backend
-from models._fatigue_loops import CAND as _CAND, CHUNK as _CHUNK, DIR as _DIR, HEADER as _HEADER
-from models._fatigue_loops import HYST as _HYST, NS as _NS, STARTED as _STARTED
-from models._fatigue_loops import feed_compiled as _feed_compiled, feed_loop as _feed_loop
+from models._fatigue_loops import CAND as _CAND
+from models._fatigue_loops import CHUNK as _CHUNK
+from models._fatigue_loops import DIR as _DIR
+from models._fatigue_loops import HEADER as _HEADER
+from models._fatigue_loops import HYST as _HYST
+from models._fatigue_loops import NS as _NS
+from models._fatigue_loops import STARTED as _STARTED
+from models._fatigue_loops import feed_compiled as _feed_compiled
+from models._fatigue_loops import feed_loop as _feed_loop
 
 Backend = Literal["auto", "numba", "numpy"]
 
