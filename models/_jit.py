@@ -11,7 +11,9 @@ every compiled loop also runs as plain Python/numpy so the models work without i
 
 numba's disk cache only tracks the source file of the compiled function, so a ``jitable``
 building block must live in the same file as the loops that call it (else editing it
-would leave their cached machine code stale).
+would leave their cached machine code stale). The three scalar overloads below are the
+exception: they are compiled into callers elsewhere, so change them only together with a
+change to those files (or clear the ``__pycache__`` caches).
 """
 
 from __future__ import annotations
