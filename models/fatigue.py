@@ -3,6 +3,9 @@
 - ``SNCurve`` (``models.sn_curve``): S-N curves for stress RANGES in Pa.
 - ``StreamingRainflow`` (``models.rainflow_stream``): incremental four-point counting.
 - ``MinerAccumulator`` (``models.miner``): committed/provisional damage, rate, histogram.
+- ``FatigueStream`` (``models.fatigue_stream``): the three steps below fused in one
+  compiled pass per chunk, ``feed_tension(tension_N, time_s) -> damage added``; the same
+  bits as the separate calls, several times faster on large blocks.
 - ``damage(stress_series_Pa, sn_curve, hysteresis=0.0, include_residue=True) -> float``:
   one-shot Miner damage of a whole stress history.
 
@@ -21,11 +24,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from models.fatigue_stream import FatigueStream
 from models.miner import MinerAccumulator
 from models.rainflow_stream import StreamingRainflow
 from models.sn_curve import SNCurve
 
-__all__ = ["SNCurve", "StreamingRainflow", "MinerAccumulator", "damage"]
+__all__ = ["SNCurve", "StreamingRainflow", "MinerAccumulator", "FatigueStream", "damage"]
 
 
 def damage(stress_series_Pa, sn_curve: SNCurve, hysteresis: float = 0.0, include_residue: bool = True) -> float:

@@ -35,14 +35,13 @@ Public API
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
 
 import numpy as np
 
-from models._jit import compile_loop
+from models._fatigue_loops import axial_compiled as _axial_compiled
 
 Lay = Literal["left", "right"]
 
@@ -171,20 +170,21 @@ def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay 
     runs as one compiled loop when numba is available (``backend``), else as numpy;
     both evaluate the same expression in the same order.
     """
-    sign = _lay_sign(lay, cable)
     t = np.asarray(tension_N, dtype=np.float64)
-    if combined or cable.core_compressibility != 0.0:
-        return _stress_general(_check_finite(t), cable, sign, cable.pitch_m, cable.helix_radius_m, combined)
-    k, tan_a, cos_a, rg = cable._axial_coefficients
+    args = None if combined else axial_kernel_args(cable, lay)
+    if args is None:
+        return _stress_general(_check_finite(t), cable, _lay_sign(lay, cable), cable.pitch_m,
+                               cable.helix_radius_m, combined)
     if backend != "numpy" and _axial_compiled is not None:
         flat = t.reshape(-1)
         out = np.empty(flat.size)
-        bad = _axial_compiled(flat, k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa, out)
+        bad = _axial_compiled(flat, *args, out)
     elif backend in ("auto", "numpy"):
         # E |cos a * sqrt((1 + e_c)^2 + (C'/P)^2) - 1|; both terms are O(1): no overflow
+        k, tan_a, cos_a, rg_signed, e_mod = args
         a = 1.0 + k * t
-        b = tan_a + (sign * rg) * t
-        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * cable.conductor_modulus_Pa
+        b = tan_a + rg_signed * t
+        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * e_mod
         bad = _first_bad(out.reshape(-1))
     else:
         raise ValueError(f"backend {backend!r} is not available")
@@ -193,30 +193,22 @@ def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay 
     return out.reshape(t.shape)
 
 
+def axial_kernel_args(cable: HelixCable, lay: Lay) -> tuple[float, float, float, float, float] | None:
+    """(k, tan a, cos a, +-R G_c, E_i): the arguments of the compiled axial-stress kernel
+    (``_fatigue_loops.axial_stress``) for this cable and lay, or None when the axial
+    stress needs the general formula (a compressible core)."""
+    sign = _lay_sign(lay, cable)
+    if cable.core_compressibility != 0.0:
+        return None
+    k, tan_a, cos_a, rg = cable._axial_coefficients
+    return k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa
+
+
 def _first_bad(out: np.ndarray) -> int:
     """Index of the first non-finite stress (a NaN/inf tension propagates to it), or -1."""
     if np.isfinite(np.sum(out)):
         return -1
     return int(np.flatnonzero(~np.isfinite(out))[0])
-
-
-def _axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
-    """Compiled twin of the numpy axial expression; returns the first bad index or -1.
-
-    The arithmetic loop has no branch so it vectorises; a NaN or inf tension shows up as
-    a non-finite stress, found by the second loop.
-    """
-    for i in range(t.shape[0]):
-        a = 1.0 + k * t[i]
-        b = tan_a + rg_signed * t[i]
-        out[i] = abs(cos_a * math.sqrt(a * a + b * b) - 1.0) * e_mod
-    for i in range(t.shape[0]):
-        if not math.isfinite(out[i]):
-            return i
-    return -1
-
-
-_axial_compiled = compile_loop(_axial_loop)
 
 
 def _stress_general(t: np.ndarray, cable: HelixCable, sign: float, pitch, radius,

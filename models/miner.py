@@ -34,68 +34,13 @@ from typing import Literal
 
 import numpy as np
 
-from models._jit import compile_loop
+from models._fatigue_loops import commit_compiled as _commit_compiled
+from models._fatigue_loops import exp_det, log_det
+from models._jit import select
 from models.sn_curve import SNCurve
 
 _DAY_S = 86400.0
 _STATE_VERSION = 1
-
-
-def _commit_loop(ranges, counts, params, table, inv_width, committed):
-    """Add each cycle's damage in order and bin it. Returns (committed, added, cycles, bad).
-
-    ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., ln coef_0.., bounds_0..]
-    (segment i: damage = count * exp(m_i ln S + ln coef_i); bounds ascending, MPa);
-    ``table`` row 0 holds the histogram edges, row 1 the counts (last = overflow);
-    ``inv_width`` > 0 marks uniform edges (direct bin index, then an exact check).
-    ``bad`` is -1, or the index of the first invalid cycle; then nothing has changed.
-    """
-    n = ranges.shape[0]
-    for i in range(n):
-        if not (ranges[i] >= 0.0 and math.isfinite(ranges[i]) and counts[i] >= 0.0 and math.isfinite(counts[i])):
-            return committed, 0.0, 0.0, i
-    scale = params[0]
-    cutoff = params[1]
-    nseg = int(params[2])
-    nb = table.shape[1]
-    top = table[0, nb - 1]
-    start = committed
-    cycles = 0.0
-    for i in range(n):
-        s = ranges[i] * scale
-        seg = nseg - 1
-        for j in range(nseg - 1):  # a handful of knees: a linear scan is fastest
-            if s >= params[3 + 2 * nseg + j]:
-                seg -= 1
-        d = 0.0
-        if s >= cutoff:
-            d = counts[i] * math.exp(params[3 + seg] * math.log(s) + params[3 + nseg + seg])
-        committed += d
-        cycles += counts[i]
-        r = ranges[i]
-        if r >= top:
-            table[1, nb - 1] += counts[i]
-        elif r >= table[0, 0]:
-            if inv_width > 0.0:  # uniform edges: direct index, then exact against the edges
-                lo = min(int((r - table[0, 0]) * inv_width), nb - 2)
-                while r < table[0, lo]:
-                    lo -= 1
-                while r >= table[0, lo + 1]:
-                    lo += 1
-            else:
-                lo = 0
-                hi = nb - 1
-                while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
-                    mid = (lo + hi) >> 1
-                    if r >= table[0, mid]:
-                        lo = mid
-                    else:
-                        hi = mid
-            table[1, lo] += counts[i]
-    return committed, committed - start, cycles, -1
-
-
-_commit_compiled = compile_loop(_commit_loop)
 
 
 class MinerAccumulator:
@@ -170,10 +115,7 @@ class MinerAccumulator:
         n = np.asarray(counts, dtype=np.float64)
         if n.shape != r.shape:
             n = np.broadcast_to(n, r.shape)
-        if time_s is not None:
-            time_s = float(time_s)
-            if not math.isfinite(time_s) or (self._t_last is not None and time_s < self._t_last):
-                raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
+        time_s = self._check_time(time_s)
         if r.size == 0:
             added = 0.0
         elif self._needs_means:
@@ -194,6 +136,23 @@ class MinerAccumulator:
             self._date(added, time_s)
         return added
 
+    def _check_time(self, time_s: float | None) -> float | None:
+        if time_s is not None:
+            time_s = float(time_s)
+            if not math.isfinite(time_s) or (self._t_last is not None and time_s < self._t_last):
+                raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
+        return time_s
+
+    def _take_kernel_totals(self, committed: float, cycles: float, time_s: float | None) -> float:
+        """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
+        ``_table`` (``models.fatigue_stream``); return the damage added."""
+        added = committed - self._committed
+        self._committed = committed
+        self._cycles += cycles
+        if time_s is not None:
+            self._date(added, time_s)
+        return added
+
     def _commit_numpy(self, raw: np.ndarray, n: np.ndarray, s: np.ndarray) -> float:
         """numpy twin of the compiled loop; ``s`` are the curve's ranges in MPa."""
         bad = np.flatnonzero(~((raw >= 0) & np.isfinite(raw) & (n >= 0) & np.isfinite(n)))
@@ -201,9 +160,10 @@ class MinerAccumulator:
             raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
         seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
         lncoef = self._params[3 + self._seg_m.size: 3 + 2 * self._seg_m.size]
-        with np.errstate(divide="ignore"):  # ln 0 = -inf gives exp(-inf) = 0 damage
-            d = n * np.exp(self._seg_m[seg] * np.log(s) + lncoef[seg])
-        d = np.where(s >= self._cutoff, d, 0.0)
+        # the compiled loop's log and exp on arrays (the same bits); ln 0 = -inf gives
+        # exp(-inf) = 0 damage; both sides of the selects are evaluated
+        with np.errstate(over="ignore", invalid="ignore"):
+            d = select(s >= self._cutoff, n * exp_det(self._seg_m[seg] * log_det(s) + lncoef[seg]), 0.0)
         start = self._committed
         # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
         self._committed = float(np.cumsum(np.concatenate(([start], d)))[-1])

@@ -25,11 +25,12 @@ cycle never depends on later samples, the cycles and the order in which they clo
 same for any split of the series into blocks; together with the residue half cycles they
 total the ASTM E1049 (``rainflow.extract_cycles``) counts for every (range, mean).
 
-Two backends give identical results: ``"numba"`` compiles ``_feed_loop`` (a few
-microseconds per call); ``"numpy"`` extracts monotone-run ends with vectorised numpy and
-runs the same state machine, uncompiled, over those only (the gate gives the same turning
-points on run ends as on all samples, because a run's end is its farthest point). ``"auto"`` picks numba
-when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
+Two backends give identical results: ``"numba"`` compiles ``_fatigue_loops.feed_loop``
+(a few microseconds per call; per chunk of samples, a branch-free pass finds the confirmed
+turning points, then the four-point stack consumes them); ``"numpy"`` extracts
+monotone-run ends with vectorised numpy and runs the same state machine, uncompiled, over
+those only (the gate gives the same turning points on run ends as on all samples, because
+a run's end is its farthest point). ``"auto"`` picks numba when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
 counted.
 """
 
@@ -40,94 +41,20 @@ from typing import Literal
 
 import numpy as np
 
-from models._jit import compile_loop
+# the compiled loop and the layout of the state vector it shares with the numpy backend
+from models._fatigue_loops import CAND as _CAND
+from models._fatigue_loops import CHUNK as _CHUNK
+from models._fatigue_loops import DIR as _DIR
+from models._fatigue_loops import HEADER as _HEADER
+from models._fatigue_loops import HYST as _HYST
+from models._fatigue_loops import NS as _NS
+from models._fatigue_loops import STARTED as _STARTED
+from models._fatigue_loops import feed_compiled as _feed_compiled
+from models._fatigue_loops import feed_loop as _feed_loop
 
 Backend = Literal["auto", "numba", "numpy"]
 
-# Layout of the state vector shared by both backends: a header, then the stack.
-_NS, _CAND, _DIR, _HYST, _STARTED, _HEADER = 0, 1, 2, 3, 4, 5
 _STATE_VERSION = 1
-
-
-_CHUNK = 2048  # samples per pass: turning points of a chunk stay in cache
-
-
-def _feed_loop(st, x):
-    """Process samples ``x`` into state ``st``; return (cycles (3, k), samples consumed).
-
-    Returns consumed = -(i + 1) without touching ``st`` if x[i] is not finite, and
-    consumed < len(x) when the stack storage in ``st`` may overflow (the caller grows it
-    and calls again with the rest). Per chunk, a branch-free pass finds the confirmed
-    turning points, then the four-point stack consumes them; noise makes the branches of
-    a one-pass loop unpredictable. Written so numba compiles it; also valid Python.
-    """
-    n = x.shape[0]
-    bad = False
-    for i in range(n):  # x - x is 0 for finite x, NaN otherwise; an OR reduction vectorises
-        bad |= (x[i] - x[i]) != 0.0
-    if bad:
-        for i in range(n):
-            if not math.isfinite(x[i]):
-                return np.empty((3, 0)), -(i + 1)
-    ns = int(st[_NS])
-    # each closed cycle removes two stack points, so this bounds the cycles of this call;
-    # only the used prefix of each row is ever touched (fresh pages are costly)
-    out = np.empty((3, (ns + n) // 2 + 2))
-    k = 0
-    cand = st[_CAND]
-    dirn = st[_DIR]
-    hyst = st[_HYST]
-    limit = st.shape[0] - _HEADER
-    i = 0
-    if st[_STARTED] == 0.0 and n > 0:
-        st[_HEADER] = x[0]
-        ns = 1
-        cand = x[0]
-        st[_STARTED] = 1.0
-        i = 1
-    while i < n and dirn == 0.0:  # until the signal first leaves the start by > hysteresis
-        if abs(x[i] - cand) > hyst:
-            dirn = 1.0 if x[i] > cand else -1.0
-            cand = x[i]
-        i += 1
-    tp = np.empty(min(_CHUNK, n))
-    while i < n and ns + _CHUNK <= limit:
-        end = min(i + _CHUNK, n)
-        m = 0
-        for j in range(i, end):
-            v = x[j]
-            d = (v - cand) * dirn
-            rev = -d > hyst  # retreat beyond the gate: cand is a turning point
-            tp[m] = cand
-            m += 1 if rev else 0
-            dirn = -dirn if rev else dirn
-            cand = v if (rev or d > 0.0) else cand
-        for j in range(m):
-            st[_HEADER + ns] = tp[j]
-            ns += 1
-            while ns >= 4:
-                a = st[_HEADER + ns - 4]
-                b = st[_HEADER + ns - 3]
-                c = st[_HEADER + ns - 2]
-                d = st[_HEADER + ns - 1]
-                r = abs(b - c)
-                if r <= abs(a - b) and r <= abs(c - d):
-                    out[0, k] = r
-                    out[1, k] = 0.5 * (b + c)
-                    out[2, k] = 1.0
-                    k += 1
-                    st[_HEADER + ns - 3] = d
-                    ns -= 2
-                else:
-                    break
-        i = end
-    st[_NS] = ns
-    st[_CAND] = cand
-    st[_DIR] = dirn
-    return out[:, :k], i
-
-
-_feed_compiled = compile_loop(_feed_loop)
 
 
 def _run_ends(x: np.ndarray, st: np.ndarray) -> np.ndarray:
@@ -188,7 +115,8 @@ class StreamingRainflow:
     def samples(self) -> int:
         return self._samples
 
-    def _grow(self, need: int) -> None:
+    def _grow(self, need: int = 0) -> None:
+        """Room for ``need`` stack points, at least twice the present room."""
         bigger = np.zeros(_HEADER + max(need, 2 * (self._st.size - _HEADER)))
         bigger[: self._st.size] = self._st
         self._st = bigger
@@ -206,7 +134,7 @@ class StreamingRainflow:
         if used < x.size:  # compiled loop: stack storage full; grow and finish the block
             parts = [cycles]
             while used < x.size:
-                self._grow(2 * (self._st.size - _HEADER))
+                self._grow()
                 more, n = self._feed(self._st, x[used:])
                 parts.append(more)
                 used += n

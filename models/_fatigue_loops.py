@@ -1,0 +1,395 @@
+"""Compiled loops of the fatigue hot path: conductor stress, streaming rainflow, Miner damage.
+
+They live in one file because numba's on-disk cache only checks the source file of the
+compiled function: the building blocks a loop calls must sit in the same file, or editing
+one would leave the callers' cached machine code stale. The modules that own the physics
+document it (``models.helix``, ``models.rainflow_stream``, ``models.miner``); this file is
+their machinery, and every function here also runs as plain Python (numba is optional).
+
+Determinism. Committed damage must be the same to the last bit for any split of a series
+into blocks, so every value is computed from its own inputs by IEEE-754 operations alone,
+and sums run sequentially in closure order. ``log_det``/``exp_det`` are table-free,
+branch-free log and exp (within 1 ulp; reduction and minimax coefficients of Sun's fdlibm
+``e_log.c``/``e_exp.c``), so compiled loops vectorise them; numba compiles without
+fast-math, so a vector body and its scalar remainder round alike, and the numpy backend,
+running the same functions on arrays, gets the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models._jit import bits_float, compile_loop, float_bits, jitable, select
+
+# ----------------------------------------------------------------- log and exp
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2**20
+_LN2_LO = 1.90821492927058770002e-10
+_INV_LN2 = 1.44269504088896338700e+00
+_SHIFT = 6755399441055744.0  # 1.5 * 2**52: adding it rounds to an integer held in the low bits
+_SHIFT_BITS = 0x4338000000000000
+_SQRT_HALF_BITS = 0x3FE6A09E667F3BCD  # mantissas are reduced to [sqrt(1/2), sqrt(2))
+_TINY = 2.2250738585072014e-308  # smallest normal float64
+_LG = (6.666666666666735130e-01, 3.999999999940941908e-01, 2.857142874366239149e-01,
+       2.222219843214978396e-01, 1.818357216161805012e-01, 1.531383769920937332e-01,
+       1.479819860511658591e-01)
+_LG1, _LG2, _LG3, _LG4, _LG5, _LG6, _LG7 = _LG
+_P1, _P2, _P3, _P4, _P5 = (1.66666666666666019037e-01, -2.77777777770155933842e-03,
+                           6.61375632143793436117e-05, -1.65339022054652515390e-06,
+                           4.13813679705723846039e-08)
+
+
+@jitable
+def log_det(x):
+    """Natural log of x >= 0 (0 -> -inf, inf -> inf, negative or NaN -> NaN), < 1 ulp.
+
+    x = 2**e * (1 + f) with 1 + f in [sqrt(1/2), sqrt(2)); with s = f / (2 + f),
+    log(1 + f) = f - f**2/2 + s (f**2/2 + R(s**2)), R a minimax polynomial.
+    """
+    sub = x < _TINY  # subnormals: scale into the normal range first
+    xn = x * select(sub, 18014398509481984.0, 1.0)  # 2**54
+    bits = float_bits(xn)
+    e = (bits - _SQRT_HALF_BITS) >> 52
+    f = bits_float(bits - (e << 52)) - 1.0
+    dk = (bits_float(e + _SHIFT_BITS) - _SHIFT) - select(sub, 54.0, 0.0)
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    r = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7))) + w * (_LG2 + w * (_LG4 + w * _LG6))
+    hfsq = 0.5 * f * f
+    y = dk * _LN2_HI - ((hfsq - (s * (hfsq + r) + dk * _LN2_LO)) - f)
+    y = select(x < math.inf, y, x)
+    return select(x > 0.0, y, select(x == 0.0, -math.inf, math.nan))
+
+
+@jitable
+def exp_det(y):
+    """e**y for any float64 y (overflow -> inf, underflow -> 0 or subnormal), < 1 ulp.
+
+    y = k ln 2 + r, |r| <= ln(2)/2; e**r = 1 + r + r c / (2 - c) with
+    c = r - r**2 P(r**2); the power 2**k is applied as two factors so that subnormal
+    results are rounded once.
+    """
+    yc = select(y < 1100.0, y, 1100.0)
+    yc = select(yc > -1100.0, yc, -1100.0)
+    kd = yc * _INV_LN2 + _SHIFT
+    k = kd - _SHIFT
+    hi = yc - k * _LN2_HI
+    lo = k * _LN2_LO
+    r = hi - lo
+    r2 = r * r
+    c = r - r2 * (_P1 + r2 * (_P2 + r2 * (_P3 + r2 * (_P4 + r2 * _P5))))
+    p = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi)
+    ki = float_bits(kd) - _SHIFT_BITS
+    k1 = ki >> 1
+    v = p * bits_float((k1 + 1023) << 52) * bits_float((ki - k1 + 1023) << 52)
+    return select(np.isnan(y), y, v)
+
+
+# ------------------------------------------------------------ conductor stress
+@jitable
+def axial_stress(t, k, tan_a, cos_a, rg_signed, e_mod):
+    """Knapp axial stress E |cos a sqrt((1 + k T)^2 + (tan a + R G T)^2) - 1| (models.helix)."""
+    a = 1.0 + k * t
+    b = tan_a + rg_signed * t
+    return abs(cos_a * math.sqrt(a * a + b * b) - 1.0) * e_mod
+
+
+def axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
+    """``out[i] = axial_stress(t[i])``; returns the first non-finite index or -1.
+
+    The arithmetic loop has no branch so it vectorises; a NaN or inf tension shows up as
+    a non-finite stress, found by the second loop.
+    """
+    for i in range(t.shape[0]):
+        out[i] = axial_stress(t[i], k, tan_a, cos_a, rg_signed, e_mod)
+    for i in range(t.shape[0]):
+        if not math.isfinite(out[i]):
+            return i
+    return -1
+
+
+# ------------------------------------------------------------------ rainflow
+# Layout of the rainflow state vector: a header, then the stack of turning points.
+NS, CAND, DIR, HYST, STARTED, HEADER = 0, 1, 2, 3, 4, 5
+CHUNK = 2048  # samples per pass: a chunk's stresses, turning points and cycles stay in cache
+
+
+@jitable
+def _all_finite(x):
+    bad = False
+    for i in range(x.shape[0]):  # x - x is 0 for finite x, NaN otherwise; the OR vectorises
+        bad |= (x[i] - x[i]) != 0.0
+    return not bad
+
+
+@jitable
+def _begin(st, x, i, n, ns, cand, dirn, hyst):
+    """Take the first sample as a turning point, then wait until the signal leaves it by
+    more than the hysteresis (that fixes the direction). Returns (i, ns, cand, dirn)."""
+    if st[STARTED] == 0.0 and i < n:
+        st[HEADER] = x[i]
+        ns = 1
+        cand = x[i]
+        st[STARTED] = 1.0
+        i += 1
+    while i < n and dirn == 0.0:
+        if abs(x[i] - cand) > hyst:
+            dirn = 1.0 if x[i] > cand else -1.0
+            cand = x[i]
+        i += 1
+    return i, ns, cand, dirn
+
+
+@jitable
+def _turning_points(x, cand, dirn, hyst, tp):
+    """Confirmed turning points of the samples ``x`` into ``tp``, branch-free (noise makes
+    branches unpredictable). Returns (count, cand, dirn).
+
+    The candidate is extended when the signal moves on in its direction and confirmed
+    when it retreats by more than ``hyst``. The loop is bound by the latency of the values
+    it carries, so the direction is a 0/1 integer (and, or, xor take one cycle) and the
+    common hyst = 0 has its own, shorter chain (``_turning_points_h0``).
+    """
+    if hyst == 0.0:
+        return _turning_points_h0(x, cand, dirn, tp)
+    m = 0
+    up = 1 if dirn > 0.0 else 0
+    for j in range(x.shape[0]):
+        v = x[j]
+        d = v - cand  # (v - cand) * dirn, without the multiply (dirn is +-1)
+        rev = (up & (1 if d < -hyst else 0)) | ((1 - up) & (1 if d > hyst else 0))
+        ext = (up & (1 if d > 0.0 else 0)) | ((1 - up) & (1 if d < 0.0 else 0))
+        tp[m] = cand  # kept only when confirmed
+        m += rev
+        up ^= rev
+        cand = v if (rev | ext) != 0 else cand
+    return m, cand, 1.0 if up else -1.0
+
+
+@jitable
+def _turning_points_h0(x, cand, dirn, tp):
+    """``_turning_points`` for hyst = 0. Then cand always equals the previous sample in
+    value (it is the first of a run of equal ones, which keeps the sign of a zero), so the
+    comparisons use the previous sample, off the carried chain."""
+    m = 0
+    up = 1 if dirn > 0.0 else 0
+    prev = cand
+    for j in range(x.shape[0]):
+        v = x[j]
+        rev = (up & (1 if v < prev else 0)) | ((1 - up) & (1 if v > prev else 0))
+        tp[m] = cand
+        m += rev
+        up ^= rev
+        cand = cand if v == prev else v
+        prev = v
+    return m, cand, 1.0 if up else -1.0
+
+
+@jitable
+def _close_cycles(st, ns, tp, m, ranges, means, k):
+    """Push turning points tp[:m] on the stack in ``st``, closing four-point cycles into
+    ranges[k:], means[k:]. Returns (ns, k)."""
+    # the two top points live in registers (valid while ns >= 2); the point under test
+    # stays in one until it is pushed
+    top = st[HEADER + ns - 1]
+    below = st[HEADER + ns - 2]
+    for j in range(m):
+        d = tp[j]
+        while ns >= 3:
+            r = abs(below - top)
+            if (r <= abs(top - d)) & (r <= abs(st[HEADER + ns - 3] - below)):  # one branch, not two
+                ranges[k] = r
+                means[k] = 0.5 * (below + top)
+                k += 1
+                ns -= 2
+                top = st[HEADER + ns - 1]
+                below = st[HEADER + ns - 2]
+            else:
+                break
+        st[HEADER + ns] = d
+        below = top
+        top = d
+        ns += 1
+    return ns, k
+
+
+def feed_loop(st, x):
+    """Process samples ``x`` into state ``st``; return (cycles (3, k), samples consumed).
+
+    Returns consumed = -(i + 1) without touching ``st`` if x[i] is not finite, and
+    consumed < len(x) when the stack storage in ``st`` may overflow (the caller grows it
+    and calls again with the rest).
+    """
+    n = x.shape[0]
+    if not _all_finite(x):
+        for i in range(n):
+            if not math.isfinite(x[i]):
+                return np.empty((3, 0)), -(i + 1)
+    ns = int(st[NS])
+    # each closed cycle removes two stack points, so this bounds the cycles of this call;
+    # only the used prefix of each row is ever touched (fresh pages are costly)
+    out = np.empty((3, (ns + n) // 2 + 2))
+    k = 0
+    cand = st[CAND]
+    dirn = st[DIR]
+    hyst = st[HYST]
+    limit = st.shape[0] - HEADER
+    i, ns, cand, dirn = _begin(st, x, 0, n, ns, cand, dirn, hyst)
+    tp = np.empty(min(CHUNK, n))
+    while i < n and ns + CHUNK <= limit:
+        end = min(i + CHUNK, n)
+        m, cand, dirn = _turning_points(x[i:end], cand, dirn, hyst, tp)
+        ns, k = _close_cycles(st, ns, tp, m, out[0], out[1], k)
+        i = end
+    out[2, :k] = 1.0
+    st[NS] = ns
+    st[CAND] = cand
+    st[DIR] = dirn
+    return out[:, :k], i
+
+
+# --------------------------------------------------------------------- Miner
+# ``params`` = [range scale to MPa, cut-off MPa, n_seg, m_0.., ln coef_0.., bounds_0..]
+# (segment i: damage = count * exp(m_i ln S + ln coef_i); bounds ascending, MPa);
+# ``table`` row 0 holds the histogram edges, row 1 the counts (last = overflow);
+# ``inv_width`` > 0 marks uniform edges (direct bin index, then an exact check).
+
+
+@jitable
+def _cycle_damage(ranges, counts, params, ln_s, d):
+    """d[:n] = damage of each cycle; branch-free passes so that every one vectorises."""
+    n = ranges.shape[0]
+    scale = params[0]
+    cutoff = params[1]
+    nseg = int(params[2])
+    m_low = params[2 + nseg]
+    c_low = params[2 + 2 * nseg]
+    for i in range(n):
+        ln_s[i] = log_det(ranges[i] * scale)
+        d[i] = m_low * ln_s[i] + c_low
+    for j in range(nseg - 1):  # ascending knees: each one passed selects a steeper segment
+        bound = params[3 + 2 * nseg + j]
+        m_j = params[1 + nseg - j]
+        c_j = params[1 + 2 * nseg - j]
+        for i in range(n):
+            d[i] = select(ranges[i] * scale >= bound, m_j * ln_s[i] + c_j, d[i])
+    for i in range(n):
+        d[i] = select(ranges[i] * scale >= cutoff, counts[i] * exp_det(d[i]), 0.0)
+
+
+@jitable
+def _commit_damage(ranges, counts, d, table, inv_width, committed):
+    """Add d[:n] to ``committed`` one by one in order and bin the ranges; returns
+    (committed, cycles)."""
+    nb = table.shape[1]
+    top = table[0, nb - 1]
+    cycles = 0.0
+    for i in range(ranges.shape[0]):
+        committed += d[i]
+        cycles += counts[i]
+        r = ranges[i]
+        if r >= top:
+            table[1, nb - 1] += counts[i]
+        elif r >= table[0, 0]:
+            if inv_width > 0.0:  # uniform edges: direct index, then exact against the edges
+                lo = min(int((r - table[0, 0]) * inv_width), nb - 2)
+                while r < table[0, lo]:
+                    lo -= 1
+                while r >= table[0, lo + 1]:
+                    lo += 1
+            else:
+                lo = 0
+                hi = nb - 1
+                while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
+                    mid = (lo + hi) >> 1
+                    if r >= table[0, mid]:
+                        lo = mid
+                    else:
+                        hi = mid
+            table[1, lo] += counts[i]
+    return committed, cycles
+
+
+def commit_loop(ranges, counts, params, table, inv_width, committed):
+    """Add each cycle's damage in order and bin it. Returns (committed, added, cycles, bad).
+
+    ``bad`` is -1, or the index of the first invalid cycle; then nothing has changed.
+    """
+    n = ranges.shape[0]
+    bad = False
+    for i in range(n):  # r * 0 is 0 for finite r, NaN otherwise
+        bad |= not ((ranges[i] >= 0.0) & (ranges[i] * 0.0 == 0.0) & (counts[i] >= 0.0) & (counts[i] * 0.0 == 0.0))
+    if bad:
+        for i in range(n):
+            if not (ranges[i] >= 0.0 and math.isfinite(ranges[i]) and counts[i] >= 0.0 and math.isfinite(counts[i])):
+                return committed, 0.0, 0.0, i
+    start = committed
+    cycles = 0.0
+    c = min(CHUNK, n)
+    ln_s = np.empty(c)
+    d = np.empty(c)
+    for i in range(0, n, CHUNK):  # per chunk, so the damages stay in cache
+        end = min(i + CHUNK, n)
+        _cycle_damage(ranges[i:end], counts[i:end], params, ln_s, d)
+        committed, more = _commit_damage(ranges[i:end], counts[i:end], d, table, inv_width, committed)
+        cycles += more
+    return committed, committed - start, cycles, -1
+
+
+# --------------------------------------------------------------------- fused
+def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_width, committed):
+    """Tension -> axial stress -> rainflow -> Miner, chunk by chunk.
+
+    The same computations, in the same order, as ``axial_loop``, ``feed_loop`` and
+    ``commit_loop`` one after the other (hence the same bits), without the block-sized
+    intermediate arrays. Returns (committed, cycles, samples consumed); consumed <
+    len(t) when the stack storage may overflow (grow it and call again with the rest).
+    Each chunk's stresses are checked before the chunk is counted (one pass over the
+    tensions, not two): consumed = -(i + 1) if the stress of t[i] is not finite. Then
+    ``st[:HEADER + ns]`` and ``table[1]`` may hold the earlier chunks' changes, which the
+    caller undoes from a copy when ``t`` was longer than one chunk.
+    """
+    n = t.shape[0]
+    ns = int(st[NS])
+    cand = st[CAND]
+    dirn = st[DIR]
+    hyst = st[HYST]
+    limit = st.shape[0] - HEADER
+    w = min(CHUNK, n)
+    stress = np.empty(w)
+    tp = np.empty(w)
+    kmax = min(limit, ns + n) // 2 + 2  # cycles one chunk can close
+    ranges = np.empty(kmax)
+    means = np.empty(kmax)
+    ln_s = np.empty(kmax)
+    d = np.empty(kmax)
+    ones = np.ones(kmax)
+    cycles = 0.0
+    i = 0
+    while i < n and ns + CHUNK <= limit:
+        end = min(i + CHUNK, n)
+        for j in range(end - i):
+            stress[j] = axial_stress(t[i + j], k, tan_a, cos_a, rg_signed, e_mod)
+        if not _all_finite(stress[:end - i]):
+            for j in range(end - i):
+                if not math.isfinite(stress[j]):
+                    return committed, cycles, -(i + j + 1)
+        j, ns, cand, dirn = _begin(st, stress, 0, end - i, ns, cand, dirn, hyst)
+        m, cand, dirn = _turning_points(stress[j:end - i], cand, dirn, hyst, tp)
+        ns, nc = _close_cycles(st, ns, tp, m, ranges, means, 0)
+        _cycle_damage(ranges[:nc], ones[:nc], params, ln_s, d)
+        committed, more = _commit_damage(ranges[:nc], ones[:nc], d, table, inv_width, committed)
+        cycles += more
+        i = end
+    st[NS] = ns
+    st[CAND] = cand
+    st[DIR] = dirn
+    return committed, cycles, i
+
+
+axial_compiled = compile_loop(axial_loop)
+feed_compiled = compile_loop(feed_loop)
+commit_compiled = compile_loop(commit_loop)
+tension_compiled = compile_loop(tension_loop)
