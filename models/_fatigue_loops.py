@@ -326,16 +326,141 @@ def commit_loop(ranges, counts, params, table, inv_width, committed):
             if not (ranges[i] >= 0.0 and math.isfinite(ranges[i]) and counts[i] >= 0.0 and math.isfinite(counts[i])):
                 return committed, 0.0, 0.0, i
     start = committed
-    cycles = 0.0
     c = min(CHUNK, n)
-    ln_s = np.empty(c)
-    d = np.empty(c)
-    for i in range(0, n, CHUNK):  # per chunk, so the damages stay in cache
+    committed, cycles = _commit_chunks(ranges, counts, params, table, inv_width, committed,
+                                       np.empty(c), np.empty(c))
+    return committed, committed - start, cycles, -1
+
+
+@jitable
+def _commit_chunks(ranges, counts, params, table, inv_width, committed, ln_s, d):
+    """``_cycle_damage`` then ``_commit_damage`` per chunk of cycles, so the damages stay in
+    cache (``ln_s``, ``d``: scratch of min(CHUNK, n)). Returns (committed, cycles)."""
+    n = ranges.shape[0]
+    cycles = 0.0
+    for i in range(0, n, CHUNK):
         end = min(i + CHUNK, n)
         _cycle_damage(ranges[i:end], counts[i:end], params, ln_s, d)
         committed, more = _commit_damage(ranges[i:end], counts[i:end], d, table, inv_width, committed)
         cycles += more
-    return committed, committed - start, cycles, -1
+    return committed, cycles
+
+
+# ------------------------------------------------------------------ residue
+@jitable
+def _residue_cycles(st, pts, r, c):
+    """The counter's open residue (stack, then the running extreme once the direction is
+    known) counted as ASTM E1049 counts the end of a series, in its order (as
+    ``rainflow_stream._astm_cycles``): ranges into ``r``, counts (0.5 or 1.0) into ``c``;
+    ``pts`` is scratch. All three hold at least the residue's length. Returns the count."""
+    ns = int(st[NS])
+    n = ns + (1 if st[DIR] != 0.0 else 0)
+    top = 0
+    start = 0
+    k = 0
+    for p in range(n):
+        pts[top] = st[HEADER + p] if p < ns else st[CAND]
+        top += 1
+        while top - start >= 3:
+            x = abs(pts[top - 1] - pts[top - 2])
+            y = abs(pts[top - 2] - pts[top - 3])
+            if x < y:
+                break
+            r[k] = y
+            if top - start == 3:  # Y holds the starting point: a half cycle
+                c[k] = 0.5
+                start += 1
+            else:
+                c[k] = 1.0
+                pts[top - 3] = pts[top - 1]
+                top -= 2
+            k += 1
+    for i in range(start, top - 1):
+        r[k] = abs(pts[i] - pts[i + 1])
+        c[k] = 0.5
+        k += 1
+    return k
+
+
+@jitable
+def _residue_damage(st, params, pts, r, c, ln_s, d):
+    """Miner damage of the residue cycles (``_residue_cycles``), each as ``_cycle_damage``
+    computes it, summed in counting order; the arrays are scratch of the residue's length."""
+    k = _residue_cycles(st, pts, r, c)
+    _cycle_damage(r[:k], c[:k], params, ln_s, d)
+    total = 0.0
+    for i in range(k):
+        total += d[i]
+    return total
+
+
+def residue_loop(st, params):
+    """``_residue_damage`` of the counter state ``st`` (one compiled call)."""
+    n = int(st[NS]) + 1
+    return _residue_damage(st, params, np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+                           np.empty(n))
+
+
+# -------------------------------------------------------------------- ticks
+def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_c,
+               out_r, out_m, nc, t_committed, t_cycles, t_residue, residue):
+    """Whole alert ticks of stresses ``x``: tick k takes x[stops[k - 1]:stops[k]] (from 0
+    for the first); at its end its closed cycles are committed (after ``pre_r``/``pre_c``,
+    cycles pending from earlier blocks, in the first tick), and the committed damage, the
+    cycles committed and (if ``residue``) the residue damage are recorded in
+    ``t_committed[k]``, ``t_cycles[k]``, ``t_residue[k]``.
+
+    The same computations in the same order as ``feed_loop`` per tick, then
+    ``commit_loop`` of the pending and closed cycles, then ``residue_loop``: the same bits.
+    Starts at tick ``k``, writing closed cycles from ``out_r[nc]``/``out_m[nc]``; returns
+    (k, nc, committed), k < len(stops) when tick k may not fit the stack storage (grow it
+    and call again from there), or k = -1 if x holds a NaN or inf (nothing changed).
+    """
+    if not _all_finite(x):
+        return -1, nc, committed
+    n_ticks = stops.shape[0]
+    ns = int(st[NS])
+    cand = st[CAND]
+    dirn = st[DIR]
+    hyst = st[HYST]
+    limit = st.shape[0] - HEADER
+    tp = np.empty(CHUNK)
+    ln_s = np.empty(CHUNK)
+    d = np.empty(CHUNK)
+    ones = np.ones(out_r.shape[0])
+    scratch = np.empty((5, limit + 1)) if residue else np.empty((5, 0))
+    start = stops[k - 1] if k > 0 else 0
+    while k < n_ticks:
+        stop = stops[k]
+        if ns + (stop - start) > limit:
+            break
+        i, ns, cand, dirn = _begin(st, x, start, stop, ns, cand, dirn, hyst)
+        first = nc
+        while i < stop:
+            end = min(i + CHUNK, stop)
+            m, cand, dirn = _turning_points(x[i:end], cand, dirn, hyst, tp)
+            ns, nc = _close_cycles(st, ns, tp, m, out_r, out_m, nc)
+            i = end
+        cycles = 0.0
+        if k == 0 and pre_r.shape[0] > 0:
+            committed, cycles = _commit_chunks(pre_r, pre_c, params, table, inv_width, committed,
+                                               ln_s, d)
+        committed, more = _commit_chunks(out_r[first:nc], ones[first:nc], params, table,
+                                         inv_width, committed, ln_s, d)
+        t_committed[k] = committed
+        t_cycles[k] = cycles + more
+        st[NS] = ns
+        st[CAND] = cand
+        st[DIR] = dirn
+        if residue:
+            t_residue[k] = _residue_damage(st, params, scratch[0], scratch[1], scratch[2],
+                                           scratch[3], scratch[4])
+        start = stop
+        k += 1
+    st[NS] = ns
+    st[CAND] = cand
+    st[DIR] = dirn
+    return k, nc, committed
 
 
 # --------------------------------------------------------------------- fused
@@ -392,4 +517,6 @@ def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_wi
 axial_compiled = compile_loop(axial_loop)
 feed_compiled = compile_loop(feed_loop)
 commit_compiled = compile_loop(commit_loop)
+residue_compiled = compile_loop(residue_loop)
+ticks_compiled = compile_loop(ticks_loop)
 tension_compiled = compile_loop(tension_loop)

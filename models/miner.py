@@ -35,6 +35,7 @@ from typing import Literal
 import numpy as np
 
 from models._fatigue_loops import commit_compiled as _commit_compiled
+from models._fatigue_loops import residue_compiled as _residue_compiled
 from models._fatigue_loops import exp_det, log_det
 from models._jit import select
 from models.sn_curve import SNCurve
@@ -158,12 +159,7 @@ class MinerAccumulator:
         bad = np.flatnonzero(~((raw >= 0) & np.isfinite(raw) & (n >= 0) & np.isfinite(n)))
         if bad.size:
             raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
-        seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
-        lncoef = self._params[3 + self._seg_m.size: 3 + 2 * self._seg_m.size]
-        # the compiled loop's log and exp on arrays (the same bits); ln 0 = -inf gives
-        # exp(-inf) = 0 damage; both sides of the selects are evaluated
-        with np.errstate(over="ignore", invalid="ignore"):
-            d = select(s >= self._cutoff, n * exp_det(self._seg_m[seg] * log_det(s) + lncoef[seg]), 0.0)
+        d = self._cycle_damage_numpy(n, s)
         start = self._committed
         # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
         self._committed = float(np.cumsum(np.concatenate(([start], d)))[-1])
@@ -173,12 +169,36 @@ class MinerAccumulator:
         np.add.at(self._hist, idx[inside], n[inside])
         return self._committed - start
 
+    def _cycle_damage_numpy(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Damage of ``n`` cycles of curve ranges ``s`` (MPa) each, as the compiled loop."""
+        seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
+        lncoef = self._params[3 + self._seg_m.size: 3 + 2 * self._seg_m.size]
+        # the compiled loop's log and exp on arrays (the same bits); ln 0 = -inf gives
+        # exp(-inf) = 0 damage; both sides of the selects are evaluated
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            return select(s >= self._cutoff, n * exp_det(self._seg_m[seg] * log_det(s) + lncoef[seg]), 0.0)
+
     def set_provisional(self, ranges_Pa, counts, means_Pa=None) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""
         d = self.sn_curve.damage_per_cycle(np.asarray(ranges_Pa, dtype=np.float64),
                                            np.asarray(counts, dtype=np.float64), means_Pa)
         self._provisional = float(np.sum(d))
         return self._provisional
+
+    def residue_damage(self, rainflow) -> float:
+        """Damage of a ``StreamingRainflow``'s open residue counted as ASTM E1049 counts the
+        end of a series (``rainflow.residue_half_cycles()``), each cycle's damage as the
+        committed ones', summed in counting order; nothing is stored. Cheap enough for
+        every alert tick: one compiled pass over the residue without mean correction."""
+        if not self._needs_means and _residue_compiled is not None:
+            return _residue_compiled(rainflow._st, self._params)
+        ranges, means, counts = rainflow.residue_half_cycles()
+        if self._needs_means:
+            s = self.sn_curve.effective_range_MPa(ranges, means)
+        else:
+            s = ranges * self._scale
+        d = self._cycle_damage_numpy(counts, s)
+        return float(np.cumsum(d)[-1]) if d.shape[0] else 0.0
 
     def set_provisional_from(self, rainflow) -> float:
         """Provisional damage from a ``StreamingRainflow``'s residue; return it."""

@@ -21,7 +21,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from models import fatigue, helix
-from models._jit import compile_loop
+from models._fatigue_loops import ticks_compiled as _ticks_compiled
 from monitor.config import ComponentConfig, Config, FatigueConfig
 
 
@@ -73,79 +73,6 @@ def build_cable(config: Config) -> Any:
 _EMPTY = np.zeros(0)
 
 
-def _range_damage(r, scf, to_mpa, bounds, m, coef, cutoff):
-    """Damage of one cycle of range ``r`` (Pa), as ``SNCurve.damage_per_cycle`` computes it
-    without mean correction (the arguments after ``r`` are ``SNCurve._terms_args``)."""
-    s = r * scf
-    s = s * to_mpa
-    if s < cutoff:
-        return 0.0
-    seg = m.shape[0] - 1
-    for b in range(bounds.shape[0]):  # ascending knees
-        if bounds[b] <= s:
-            seg -= 1
-    return s ** m[seg] * coef[seg]
-
-
-_range_damage_compiled = compile_loop(_range_damage)
-
-
-def _residue_damage_loop(points, scf, to_mpa, bounds, m, coef, cutoff):
-    """Miner damage of the rainflow residue ``points`` counted as ASTM E1049's three-point
-    rule counts the end of a series (as ``StreamingRainflow.residue_half_cycles``): closed
-    ranges as full cycles, ranges holding the start point and the leftovers as half cycles;
-    summed in counting order."""
-    n = points.shape[0]
-    stack = np.empty(n)
-    top = 0
-    start = 0
-    total = 0.0
-    for p in range(n):
-        stack[top] = points[p]
-        top += 1
-        while top - start >= 3:
-            x = abs(stack[top - 1] - stack[top - 2])
-            y = abs(stack[top - 2] - stack[top - 3])
-            if x < y:
-                break
-            d = _range_damage_compiled(y, scf, to_mpa, bounds, m, coef, cutoff)
-            if top - start == 3:  # Y holds the starting point: a half cycle
-                total += 0.5 * d
-                start += 1
-            else:
-                total += d
-                stack[top - 3] = stack[top - 1]
-                top -= 2
-    for i in range(start, top - 1):
-        total += 0.5 * _range_damage_compiled(abs(stack[i] - stack[i + 1]), scf, to_mpa,
-                                              bounds, m, coef, cutoff)
-    return total
-
-
-_residue_damage_compiled = compile_loop(_residue_damage_loop)
-
-
-class ResidueDamage:
-    """Damage of the open rainflow residue counted as ASTM E1049 would, i.e.
-    ``sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())`` summed (to rounding),
-    cheap enough to evaluate at every alert tick: one compiled pass over the residue's few
-    points for curves without mean-stress correction, the reference path otherwise.
-    """
-
-    def __init__(self, sn_curve: Any) -> None:
-        self.sn_curve = sn_curve
-        self._args = None
-        if sn_curve.mean_correction == "none" and _residue_damage_compiled is not None:
-            self._args = sn_curve._terms_args[1]
-
-    def __call__(self, rainflow: fatigue.StreamingRainflow) -> float:
-        if self._args is None:
-            r, m, c = rainflow.residue_half_cycles()
-            return float(np.sum(self.sn_curve.damage_per_cycle(r, c, m)))
-        residue = rainflow.residue
-        return _residue_damage_compiled(residue, *self._args) if residue.shape[0] > 1 else 0.0
-
-
 @dataclasses.dataclass(frozen=True)
 class TickRun:
     """What :meth:`Component.run_ticks` did: the closed cycles (ranges, means, counts) in
@@ -164,6 +91,7 @@ class Component:
         self.name = cfg.name
         self.cfg = cfg
         self._cable = cable
+        self._fcfg = fcfg
         self.sn_curve = build_sn_curve(cfg)
         if state is None:
             self.rainflow = fatigue.StreamingRainflow(hysteresis=cfg.hysteresis_Pa)
@@ -179,7 +107,6 @@ class Component:
             self._pending = [np.array(v, dtype=np.float64) for v in state["pending"]]
             peak = state["max_stress_Pa"]
             self.max_stress_Pa = -math.inf if peak is None else float(peak)
-        self._residue_damage = ResidueDamage(self.sn_curve)
 
     def stress(self, tension_N: np.ndarray) -> np.ndarray:
         """Stress of the component under the load samples; records the peak."""
@@ -215,6 +142,12 @@ class Component:
         """Whole alert ticks: tick ``k`` takes ``stress_Pa[stops[k - 1]:stops[k]]`` (from 0
         for the first) and ends at ``ends_ns[k]``, where its cycles (and those pending from
         earlier blocks, first) are committed. ``figures`` asks for each tick's figures."""
+        if not stops:
+            return TickRun((_EMPTY,) * 3, [])
+        rf, miner = self.rainflow, self.miner
+        if (_ticks_compiled is not None and rf.backend == "numba" and miner.backend == "numba"
+                and not miner._needs_means):
+            return self._run_ticks_compiled(stress_Pa, stops, ends_ns, figures)
         parts, out, start = [], [], 0
         for stop, end in zip(stops, ends_ns):
             if stop > start:
@@ -228,6 +161,40 @@ class Component:
         cycles = tuple(np.concatenate(p) for p in zip(*parts)) if parts else (_EMPTY,) * 3
         return TickRun(cycles, out)
 
+    def _run_ticks_compiled(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],
+                            figures: bool) -> TickRun:
+        """``run_ticks`` as one compiled pass over the ticks (``ticks_loop``), working on the
+        counter's and the accumulator's own state arrays: the same bits as the loop."""
+        rf, miner = self.rainflow, self.miner
+        x = np.ascontiguousarray(stress_Pa[:stops[-1]], dtype=np.float64)
+        n_ticks = len(stops)
+        pre_r, _, pre_c = self._pending
+        size = (int(rf._st[0]) + x.shape[0]) // 2 + 2  # each closed cycle pops two points
+        out_r, out_m = np.empty(size), np.empty(size)
+        t_committed, t_cycles, t_residue = np.empty(n_ticks), np.empty(n_ticks), np.empty(n_ticks)
+        stops_a = np.asarray(stops, dtype=np.int64)
+        k, nc, committed = 0, 0, miner._committed
+        while True:
+            k, nc, committed = _ticks_compiled(
+                x, stops_a, k, rf._st, miner._params, miner._table, miner._inv_width, committed,
+                pre_r, pre_c, out_r, out_m, nc, t_committed, t_cycles, t_residue, figures)
+            if k < 0:
+                raise ValueError("stress contains NaN or inf; block not counted")
+            if k == n_ticks:
+                break
+            rf._grow()  # the next tick may not fit the stack storage
+        rf._samples += x.shape[0]
+        self._pending = [_EMPTY, _EMPTY, _EMPTY]
+        out = []
+        for i in range(n_ticks):  # date each tick's damage in order, as commit() does
+            miner._take_kernel_totals(float(t_committed[i]), float(t_cycles[i]), ends_ns[i] / 1e9)
+            if figures:
+                rate = miner.damage_rate_per_day
+                damage = float(t_committed[i]) + float(t_residue[i])
+                out.append((damage, float(t_committed[i]), rate,
+                            max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf))
+        return TickRun((out_r[:nc], out_m[:nc], np.ones(nc)), out)
+
     def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
         if ranges.shape[0] == 0:
             return 0.0
@@ -240,7 +207,7 @@ class Component:
         and not accumulated, so reading figures never changes the state.
         """
         committed = self.miner.damage_committed + self._damage(*self._pending)
-        damage = committed + self._residue_damage(self.rainflow)
+        damage = committed + self.miner.residue_damage(self.rainflow)
         rate = float(self.miner.damage_rate_per_day)
         return {
             "damage": damage,
@@ -255,12 +222,12 @@ class Component:
     def warm_up(self) -> None:
         """Run the compiled kernels once on throwaway objects (a process's first numba call
         costs a second or more), so a restarted daemon processes its first block promptly."""
-        stress = (helix.conductor_stress(np.array([1000.0, 2000.0, 1000.0]), self._cable,
-                                         lay=self.cfg.lay)
-                  if self.cfg.kind == "conductor" else np.array([1e6, 2e6, 1e6]))
-        fatigue.StreamingRainflow().feed(stress)
-        fatigue.MinerAccumulator(self.sn_curve).add_cycles(np.ones(1), np.ones(1), np.zeros(1),
-                                                           time_s=0.0)
+        spare = Component(self.cfg, self._cable, self._fcfg)
+        stress = spare.stress(np.array([1000.0, 2000.0, 1000.0, 3000.0, 500.0]))
+        spare.feed(stress[:2])
+        spare.commit(1)
+        spare.run_ticks(stress, [3, 5], [2, 3])
+        spare.figures()
 
     def state(self) -> dict[str, Any]:
         return {

@@ -203,3 +203,29 @@ def test_committed_sum_matches_qats_and_fatpack(backend):
     assert miner.damage_committed == pytest.approx(q, rel=1e-12)
     assert miner.damage_committed == pytest.approx(f, rel=1e-12)
     assert miner.total_cycles == np.sum(counts)
+
+
+@pytest.mark.parametrize("hysteresis", [0.0, 2e6])
+def test_residue_damage_is_the_astm_residue_at_every_block(hysteresis):
+    # the damage of the open residue, read at every alert tick, equals the ASTM half cycles
+    # of the residue through the S-N curve, and the compiled and numpy paths give one value
+    rng = np.random.default_rng(11)
+    sn = SNCurve.vaps_copper()
+    goodman = sn.with_factors(mean_correction="goodman", ultimate_Pa=250e6)
+    for _ in range(3):
+        x = np.cumsum(rng.normal(0, 4e6, 3000)) + 5e6 * np.sin(np.arange(3000) / 7)
+        rf = StreamingRainflow(hysteresis=hysteresis)
+        fast, slow = MinerAccumulator(sn), MinerAccumulator(sn, backend="numpy")
+        mean_corrected = MinerAccumulator(goodman)
+        cuts = np.sort(rng.choice(np.arange(1, 3000), 200, replace=False))
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, 3000]):
+            rf.feed(x[a:b])
+            r, m, c = rf.residue_half_cycles()
+            expected = float(np.sum(sn.damage_per_cycle(r, c, m)))
+            got = fast.residue_damage(rf)
+            assert got == pytest.approx(expected, rel=1e-12, abs=1e-300)
+            assert slow.residue_damage(rf) == got
+            assert mean_corrected.residue_damage(rf) == pytest.approx(
+                float(np.sum(goodman.damage_per_cycle(r, c, m))), rel=1e-12, abs=1e-300)
+        assert expected > 0
+    assert MinerAccumulator(sn).residue_damage(StreamingRainflow()) == 0.0

@@ -281,29 +281,6 @@ def test_models_estimator_adapter_is_split_invariant_and_restorable():
     np.testing.assert_allclose(np.concatenate([p[1] for p in parts]), ref_v, rtol=1e-9)
 
 
-@pytest.mark.parametrize("hysteresis", [0.0, 2e6])
-def test_residue_damage_equals_the_astm_residue_at_every_block(hysteresis):
-    from monitor.components import ResidueDamage
-
-    rng = np.random.default_rng(11)
-    sn = fatigue.SNCurve.vaps_copper()
-    for trial in range(4):
-        x = np.cumsum(rng.normal(0, 4e6, 4000)) + 5e6 * np.sin(np.arange(4000) / 7)
-        rf, cached = fatigue.StreamingRainflow(hysteresis=hysteresis), ResidueDamage(sn)
-        sn_g = sn.with_factors(mean_correction="goodman", ultimate_Pa=250e6)
-        goodman = ResidueDamage(sn_g)
-        cuts = np.sort(rng.choice(np.arange(1, 4000), 300, replace=False))
-        for a, b in zip(np.r_[0, cuts], np.r_[cuts, 4000]):
-            rf.feed(x[a:b])
-            r, m, c = rf.residue_half_cycles()
-            expected = float(np.sum(sn.damage_per_cycle(r, c, m)))
-            assert cached(rf) == pytest.approx(expected, rel=1e-12, abs=1e-300)
-            # the mean-corrected (reference) path agrees too
-            assert goodman(rf) == pytest.approx(float(np.sum(sn_g.damage_per_cycle(r, c, m))),
-                                                rel=1e-12, abs=1e-300)
-        assert expected > 0
-
-
 def test_estimator_for_a_line_given_as_segments():
     from monitor.load_source import build_estimator
 
