@@ -3,8 +3,9 @@
 Two runs against a real daemon process:
 
 1. Real time: 20 Hz tension, 10 Hz IMU and 1 Hz GNSS in 1-s blocks for ``--seconds``. Prints
-   the daemon's CPU use (% of one core, from /proc after a warm-up), its RSS, and the
-   sample-to-status latency: from the put of a block to the first status that counts it as
+   the daemon's CPU use (% of one core, from /proc after a warm-up), its RSS split into
+   anonymous and file-backed pages and by mapping (a shared library's touched pages count in
+   RSS: numba's LLVM is the biggest item), and the sample-to-status latency: from the put of a block to the first status that counts it as
    processed (p50/p99/max). The sensor-time lag of the status (ordering waits for the slowest
    stream) is printed separately.
 2. Accelerated: ``--days`` of the same streams in ``--block-s`` blocks as fast as the daemon
@@ -186,7 +187,12 @@ def realtime(client: Client, buoy: str, pid: int, seconds: int, warmup: int) -> 
     lat_ms = np.array(lat) * 1e3
     print(f"real time, {seconds} s after {warmup} s warm-up: 20 Hz tension + 10 Hz IMU + 1 Hz GNSS")
     print(f"  daemon CPU           {100 * (cpu1 - cpu0) / (t1 - t0):6.2f} % of one core")
-    print(f"  daemon RSS           {rss:6.1f} MB (peak {hwm:.1f} MB), by mapping:")
+    status = Path(f"/proc/{pid}/status").read_text()
+    kb = {ln.split(":")[0]: int(ln.split()[1]) for ln in status.splitlines()
+          if ln.startswith(("RssAnon", "RssFile"))}
+    print(f"  daemon RSS           {rss:6.1f} MB (peak {hwm:.1f} MB): {kb['RssAnon'] / 1024:.1f} MB "
+          f"anonymous, {kb['RssFile'] / 1024:.1f} MB file-backed (library pages, shared and "
+          f"evictable); by mapping:")
     for what, mb in rss_breakdown(pid):
         print(f"      {mb:6.1f} MB  {what}")
     print(f"  sample-to-status     p50 {np.percentile(lat_ms, 50):6.1f} ms  p99 "
