@@ -31,7 +31,7 @@ cfg.write_text(Path({repo!r}, "monitor", "vaps_seed004.toml").read_text()
 daemon = cmd_run.build_daemon(str(cfg))
 codec = zenoh_io.default_codec()
 t0 = 1_750_000_000 * 10**9
-for k in range(5):
+for k in range(25):  # 25 s of sensor time: alert rules run every 10 s
     for sensor, hz, fields in (("tension", 20, ("tension_N",)),
                                ("imu", 10, ("accel_x_mps2", "accel_y_mps2", "accel_z_mps2")),
                                ("gnss", 1, ("lat_deg", "lon_deg"))):
@@ -66,7 +66,7 @@ def test_buoymon_run_builds_and_processes_without_scipy(tmp_path):
     """With ``keep_scipy_out`` (as ``buoymon run`` does) a scipy import anywhere on the path
     fails the build or the first blocks; afterwards no scipy module is loaded at all."""
     out = _run(_DAEMON_PATH.format(repo=str(REPO), tmp=str(tmp_path), block_scipy=True))
-    assert out["counters"]["messages"] == 15
+    assert out["counters"]["messages"] == 75
     assert out["counters"]["undecodable"] == out["counters"]["refused"] == 0
     assert out["scipy"] == []
 
