@@ -3,8 +3,9 @@
 Two runs against a real daemon process:
 
 1. Real time: 20 Hz tension, 10 Hz IMU and 1 Hz GNSS in 1-s blocks for ``--seconds``. Prints
-   the daemon's CPU use (% of one core, from /proc after a warm-up), its RSS, and the
-   sample-to-status latency: from the put of a block to the first status that counts it as
+   the daemon's CPU use (% of one core, from /proc after a warm-up), its RSS split into
+   anonymous and file-backed pages and by mapping (a shared library's touched pages count in
+   RSS: numba's LLVM is the biggest item), and the sample-to-status latency: from the put of a block to the first status that counts it as
    processed (p50/p99/max). The sensor-time lag of the status (ordering waits for the slowest
    stream) is printed separately.
 2. Accelerated: ``--days`` of the same streams in ``--block-s`` blocks as fast as the daemon
@@ -80,6 +81,22 @@ def proc_stats(pid: int) -> tuple[float, float, float]:
     return cpu, kb["VmRSS"] / 1024, kb["VmHWM"] / 1024
 
 
+def rss_breakdown(pid: int, top: int = 8) -> list[tuple[str, float]]:
+    """Resident MB of a process by mapping: each shared library (file pages it touched count
+    in RSS too), [heap], and anonymous mappings (thread stacks, arenas, mmap'd buffers)."""
+    kb: dict[str, int] = {}
+    name = "?"
+    for line in Path(f"/proc/{pid}/smaps").read_text().splitlines():
+        head = line.split()
+        if not head[0].endswith(":"):  # a mapping's header: address perms offset dev inode [path]
+            name = head[5].rsplit("/", 1)[-1] if len(head) > 5 else "[anon]"
+        elif head[0] == "Rss:":
+            kb[name] = kb.get(name, 0) + int(head[1])
+    ranked = sorted(kb.items(), key=lambda kv: -kv[1])
+    rest = sum(v for _, v in ranked[top:])
+    return [(k, v / 1024) for k, v in ranked[:top]] + [("everything else", rest / 1024)]
+
+
 def start_daemon(tmp: Path, port: int, load_source: str) -> tuple[subprocess.Popen, str]:
     shipped = (REPO / "monitor" / "vaps_seed004.toml").read_text()
     cfg = tmp / "bench.toml"
@@ -97,11 +114,14 @@ def start_daemon(tmp: Path, port: int, load_source: str) -> tuple[subprocess.Pop
 class Client:
     def __init__(self, port: int, buoy: str) -> None:
         zc = ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",))
-        for _ in range(100):  # the daemon takes a moment to listen
+        deadline = time.monotonic() + 60  # the daemon takes a moment to start listening
+        while True:
             try:
                 self.session = zenoh_io.open_session(zc)
                 break
             except Exception:
+                if time.monotonic() > deadline:
+                    raise SystemExit("daemon did not listen within 60 s") from None
                 time.sleep(0.1)
         self.codec = zenoh_io.ProtobufCodec()
         self.q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
@@ -167,7 +187,14 @@ def realtime(client: Client, buoy: str, pid: int, seconds: int, warmup: int) -> 
     lat_ms = np.array(lat) * 1e3
     print(f"real time, {seconds} s after {warmup} s warm-up: 20 Hz tension + 10 Hz IMU + 1 Hz GNSS")
     print(f"  daemon CPU           {100 * (cpu1 - cpu0) / (t1 - t0):6.2f} % of one core")
-    print(f"  daemon RSS           {rss:6.1f} MB (peak {hwm:.1f} MB)")
+    status = Path(f"/proc/{pid}/status").read_text()
+    kb = {ln.split(":")[0]: int(ln.split()[1]) for ln in status.splitlines()
+          if ln.startswith(("RssAnon", "RssFile"))}
+    print(f"  daemon RSS           {rss:6.1f} MB (peak {hwm:.1f} MB): {kb['RssAnon'] / 1024:.1f} MB "
+          f"anonymous, {kb['RssFile'] / 1024:.1f} MB file-backed (library pages, shared and "
+          f"evictable); by mapping:")
+    for what, mb in rss_breakdown(pid):
+        print(f"      {mb:6.1f} MB  {what}")
     print(f"  sample-to-status     p50 {np.percentile(lat_ms, 50):6.1f} ms  p99 "
           f"{np.percentile(lat_ms, 99):6.1f} ms  max {lat_ms.max():6.1f} ms  (n={lat_ms.size})")
     if lag:

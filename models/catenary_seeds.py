@@ -11,8 +11,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate import cumulative_simpson
-from scipy.optimize import brentq
 
 from models.catenary_kernel import _phi_from_excess
 
@@ -146,6 +144,9 @@ def constant_stress_parameter(x, y):
         raise ValueError(f"need x > 0 and y > 0, got {x!r}, {y!r}")
     # y/x = ln sec(u)/u with u = x/c in (0, pi/2), increasing in u
     ratio = y / x
+    # imported here, not at module level: scipy costs the live daemon memory it never uses
+    from scipy.optimize import brentq  # noqa: PLC0415
+
     u = brentq(lambda u: -math.log(math.cos(u)) / u - ratio, 1e-12, 0.5 * math.pi - 1e-15,
                xtol=1e-300, rtol=1e-15, maxiter=500)
     return x / u
@@ -160,6 +161,8 @@ def gravity_cable_shape(s, weight, t_h):
     w = np.broadcast_to(np.asarray(weight, dtype=float), s.shape)
     if s.ndim != 1 or s.size < 2 or s[0] != 0.0 or np.any(np.diff(s) <= 0.0):
         raise ValueError("s must be an increasing 1-D grid starting at 0")
+    from scipy.integrate import cumulative_simpson  # noqa: PLC0415 (see constant_stress_parameter)
+
     v = cumulative_simpson(w, x=s, initial=0.0)
     t = np.hypot(t_h, v)
     x = cumulative_simpson(t_h / t, x=s, initial=0.0)

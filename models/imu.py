@@ -27,7 +27,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
+
+from models.butterworth import bilinear_zpk, butter_analog_zpk, zpk2sos
 
 
 def _check_rate(dt: float, f_cut: float) -> None:
@@ -52,6 +53,8 @@ def displacement_from_acceleration(
         raise ValueError("need at least 8 acceleration samples")
     if not np.all(np.isfinite(a)):
         raise ValueError("acceleration contains NaN or infinite values")
+    from scipy import signal  # noqa: PLC0415 (batch tool only: keeps scipy out of the daemon)
+
     a = signal.detrend(a, axis=-1, type="linear")
     n = a.shape[-1]
     f = np.fft.rfftfreq(n, dt)
@@ -94,10 +97,9 @@ class DisplacementIntegrator:
         _check_rate(self.dt, self.f_cut)
         if not isinstance(self.channels, int) or self.channels < 1:
             raise ValueError(f"channels must be a positive integer, got {self.channels!r}")
-        z, p, k = signal.butter(4, 2 * np.pi * self.f_cut, btype="high", analog=True, output="zpk")
+        z, p, k = butter_analog_zpk(4, 2 * np.pi * self.f_cut, "high")
         # HP4 / s^2: drop two of the four zeros at s = 0.
-        zd, pd, kd = signal.bilinear_zpk(z[2:], p, k, 1.0 / self.dt)
-        self._sos = signal.zpk2sos(zd, pd, kd)
+        self._sos = zpk2sos(*bilinear_zpk(z[2:], p, k, 1.0 / self.dt))
         self._zi = np.zeros((self.channels, self._sos.shape[0], 2))
         self.samples_seen = 0
 

@@ -24,7 +24,6 @@ from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 G_STANDARD = 9.80665
 
@@ -287,6 +286,9 @@ def sea_state_from_heave(
         raise ValueError("heave contains NaN or infinite values")
     if not 0.0 <= f_min < f_max:
         raise ValueError(f"need 0 <= f_min < f_max, got {f_min}, {f_max}")
+    # scipy.signal costs the live daemon ~60 MB of memory: imported only where it is used
+    from scipy import signal  # noqa: PLC0415
+
     nper = min(x.size, int(round(segment_s / dt)))
     f, s = signal.welch(x, fs=1.0 / dt, nperseg=nper, detrend="linear")
     band = (f >= f_min) & (f <= min(f_max, 0.5 / dt))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import sys
 import tomllib
 from typing import Any
 
@@ -110,7 +111,22 @@ class AlertDelivery:
             self.outbox.close()
 
 
+def keep_scipy_out() -> None:
+    """Make ``import scipy`` fail in this process: called first thing by ``buoymon run``.
+
+    Nothing on the daemon's path uses scipy (tests/test_daemon_imports.py holds it to that),
+    but numba imports it whenever it is installed: ``scipy`` for a version check and, when
+    its compiler context starts, all of ``scipy.linalg`` to offer BLAS to ``np.dot`` in
+    compiled code, which no kernel here calls: 14 MB of the daemon's resident memory
+    (bench/bench_daemon.py) for nothing. numba takes the ImportError as "no scipy"; the
+    cached kernels load the same machine code either way. A process that already has scipy
+    is left alone.
+    """
+    sys.modules.setdefault("scipy", None)  # None in sys.modules: import raises ImportError
+
+
 def run(args: argparse.Namespace) -> int:
+    keep_scipy_out()
     try:
         daemon = build_daemon(args.config)
     except (ValueError, OSError) as exc:

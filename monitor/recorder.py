@@ -15,9 +15,10 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
-from mcap.writer import CompressionType, Writer
+if TYPE_CHECKING:
+    from mcap.writer import Writer
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,10 @@ class McapRecorder:
         while os.path.exists(path):  # a restart within the same window: never overwrite
             n += 1
             path = os.path.join(self.directory, f"{self._prefix}-{stamp}-{n}.mcap")
+        # mcap (with zstd, lz4, importlib.metadata) is loaded by the first file only: the
+        # daemon imports this module whether or not it records
+        from mcap.writer import CompressionType, Writer  # noqa: PLC0415
+
         self._file = open(path, "wb")
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile="", library="buoymon")

@@ -25,12 +25,9 @@ import json
 import logging
 import os
 import queue
-import smtplib
 import threading
-import urllib.request
 from dataclasses import dataclass
-from email.message import EmailMessage
-from typing import Any, Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
 import zenoh
 
@@ -40,6 +37,9 @@ from monitor.alerts.outbox import Outbox
 from monitor.alerts.records import AlertRecord, webhook_payload
 from monitor.blocks import validate_buoy_id
 from monitor.events import StepResult
+
+if TYPE_CHECKING:
+    from email.message import EmailMessage
 
 log = logging.getLogger(__name__)
 
@@ -191,6 +191,9 @@ class WebhookSender:
         self.cfg = cfg
 
     def __call__(self, payload: bytes, dedup_key: str) -> None:
+        # imported by the senders only: with ssl they cost a daemon without them ~4.6 MB
+        import urllib.request  # noqa: PLC0415
+
         req = urllib.request.Request(
             self.cfg.url, data=payload, method="POST",
             headers={"Content-Type": "application/json", "Idempotency-Key": dedup_key,
@@ -214,6 +217,8 @@ class EmailSender:
     def message(self, payload: bytes, dedup_key: str) -> EmailMessage:
         rec = json.loads(payload)
         ann, labels = rec["annotations"], rec["labels"]
+        from email.message import EmailMessage  # noqa: PLC0415 (see WebhookSender.__call__)
+
         msg = EmailMessage()
         msg["From"] = self.cfg.sender
         msg["To"] = ", ".join(self.cfg.to)
@@ -228,6 +233,8 @@ class EmailSender:
         return msg
 
     def __call__(self, payload: bytes, dedup_key: str) -> None:
+        import smtplib  # noqa: PLC0415 (see WebhookSender.__call__)
+
         msg = self.message(payload, dedup_key)
         with smtplib.SMTP(self.cfg.host, self.cfg.port, timeout=self.cfg.timeout_s) as smtp:
             if self.cfg.starttls:
