@@ -428,7 +428,7 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     ln_s = np.empty(CHUNK)
     d = np.empty(CHUNK)
     ones = np.ones(out_r.shape[0])
-    scratch = np.empty((5, limit + 1)) if residue else np.empty((5, 0))
+    scratch = np.empty((5, 64))  # the residue's scratch, grown when the residue is longer
     start = stops[k - 1] if k > 0 else 0
     while k < n_ticks:
         stop = stops[k]
@@ -453,6 +453,8 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
         st[CAND] = cand
         st[DIR] = dirn
         if residue:
+            if ns + 1 > scratch.shape[1]:
+                scratch = np.empty((5, 2 * (ns + 1)))
             t_residue[k] = _residue_damage(st, params, scratch[0], scratch[1], scratch[2],
                                            scratch[3], scratch[4])
         start = stop

@@ -28,6 +28,7 @@ from monitor.blocks import SampleBlock, parse_sensor_topic
 from monitor.checkpoint import CheckpointStore, PeriodicCheckpointer
 from monitor.daemon_config import DaemonConfig
 from monitor.events import Sink, StepResult
+from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
 from monitor import zenoh_io
@@ -38,6 +39,7 @@ log = logging.getLogger("buoymon.daemon")
 _MIN_STATUS_GAP_S = 0.02
 _IDLE_WAIT_S = 0.2
 _MAX_TURN_S = 0.25  # longest stretch of queued work between periodic duties
+_RELEASE_EVERY_S = 600.0  # hand back the JIT compiler's pages (monitor.memory) this often
 
 
 class PipelineLike(Protocol):
@@ -139,6 +141,7 @@ class Daemon:
         self._status_pub: Any = None
         self._started_mono = time.monotonic()
         self._last_status_mono = 0.0
+        self._next_release_mono = 0.0
         self._dirty_status = False
         self._last_watchdog = 0.0
 
@@ -215,6 +218,9 @@ class Daemon:
             self._checkpointer.maybe_save()
             if self.recorder is not None:
                 self.recorder.maybe_flush()
+            if now >= self._next_release_mono:  # at once, then now and then: a steady daemon
+                release_compiler_pages()        # never runs the compiler (monitor.memory)
+                self._next_release_mono = now + _RELEASE_EVERY_S
             self._pet_watchdog(now)
 
     def _pet_watchdog(self, now: float) -> None:

@@ -75,7 +75,9 @@ class Sink(Protocol):
     def close(self) -> None: ...
 
 
-@dataclass(frozen=True, eq=False)
+# The per-tick observation classes below are built at every alert tick: plain dataclasses
+# with slots (a frozen one pays an object.__setattr__ per field). Consumers only read them.
+@dataclass(slots=True, eq=False)
 class ComponentObs:
     """One component's fatigue figures at the end of an alert-evaluation tick."""
 
@@ -86,7 +88,7 @@ class ComponentObs:
     max_stress_Pa: float  # maximum conductor stress within the tick (NaN if no samples)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(slots=True, eq=False)
 class StreamObs:
     """Health of one sensor stream at the end of a tick (counters are totals since start)."""
 
@@ -98,7 +100,7 @@ class StreamObs:
     received_in_tick: int
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(slots=True, eq=False)
 class Observation:
     """Input of one alert evaluation.
 
