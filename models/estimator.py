@@ -431,8 +431,8 @@ class MotionTensionEstimator:
         p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
         fresh = self._hist is None
         p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
-        x_off = np.hypot(c.span + x, y) - c.span
         if want is None:
+            x_off = np.hypot(c.span + x, y) - c.span
             t_qs, h, v, qflags = self.quasi_static(x_off, z)
             flags = np.array(qflags, dtype=np.uint8)
         else:
@@ -440,7 +440,8 @@ class MotionTensionEstimator:
             # on the positions)
             t_qs, h, v = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
             flags = np.zeros(n, np.uint8)
-            t_qs[want], h[want], v[want], flags[want] = self.quasi_static(x_off[want], z[want])
+            x_off = np.hypot(c.span + x[want], y[want]) - c.span
+            t_qs[want], h[want], v[want], flags[want] = self.quasi_static(x_off, z[want])
         total, axial, drag, angle = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
         self._jerk_y = _dynamic_core(
             p, c.span, c.height, c.dt,
