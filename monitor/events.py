@@ -120,7 +120,9 @@ class Observation:
     load_t_ns: np.ndarray
     tension_N: np.ndarray
     measured_tension_N: float  # mean of measured tension in the tick (NaN if none)
-    estimated_tension_N: float  # mean of the motion estimate in the tick (NaN if none)
+    # mean of the motion estimate in the tick: over every motion sample when a model_residual
+    # rule is configured, else over the samples that fed fatigue (NaN if none)
+    estimated_tension_N: float
     components: Mapping[str, ComponentObs]
     streams: Mapping[str, StreamObs]
     # (min, max) of tension_N when the producer has it already (NaN if no samples)

@@ -313,6 +313,11 @@ class Pipeline:
         # without rules there is nothing to evaluate: skip building the per-tick observations
         rule_keys = getattr(self.alerts, "rule_keys", None)
         self._has_rules = rule_keys is None or bool(rule_keys())
+        # the model-residual rule compares the tick means of the measured tension and of the
+        # motion estimate over every motion sample, not only where the estimate feeds fatigue
+        rule_kinds = getattr(self.alerts, "rule_kinds", None)
+        self._full_estimate = self.estimator is not None and (
+            rule_kinds is None or "model_residual" in rule_kinds())
         lim = config.validate["tension"].fields["tension_N"]
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
@@ -328,6 +333,10 @@ class Pipeline:
         self.open_tick = _NO_LOAD if "open_tick" not in st else (
             np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
             np.array(st["open_tick"][2], np.int8))
+        # motion estimates of the tick not yet evaluated (t_ns, tension_N), full-estimate mode
+        self.open_estimate = (np.array(st["open_estimate"][0], np.int64),
+                              np.array(st["open_estimate"][1], np.float64)
+                              ) if st.get("open_estimate") else _NO_LOAD[:2]
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
         self._warm_up()
 
@@ -395,8 +404,12 @@ class Pipeline:
             if info.acc_t.shape[0]:
                 fields = dict(zip(SENSOR_FIELDS[self.motion_sensor], info.acc_values))
                 # estimate only where it feeds fatigue, and the newest sample for the status
-                want = self.selector.needed(m_t, info.acc_t)
-                want[-1] = True
+                # (or everywhere for the model-residual rule)
+                if self._full_estimate:
+                    want = np.ones(info.acc_t.shape, bool)
+                else:
+                    want = self.selector.needed(m_t, info.acc_t)
+                    want[-1] = True
                 e_t, e_v = self.estimator.feed(info.acc_t, fields, want)
         t, v, src = self.selector.select(m_t, m_v, e_t, e_v)
         self.stats.add(v, src)
@@ -406,7 +419,7 @@ class Pipeline:
             self.last["estimated_N"] = float(e_v[-1])
         stresses = {name: c.stress(v) for name, c in self.components.items()}
         self.new_alerts = []
-        closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit)
+        closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
         if t.shape[0]:
             self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
         if upto is not None:
@@ -429,7 +442,8 @@ class Pipeline:
 
     def _feed_by_tick(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                       stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
-                      tick_limit: int | None) -> dict[str, list[np.ndarray]]:
+                      tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray]
+                      ) -> dict[str, list[np.ndarray]]:
         """Feed the rainflow tick by tick, committing damage and evaluating alerts at tick ends."""
         closed: dict[str, list[tuple[np.ndarray, ...]]] = {n: [] for n in self.components}
         if self.next_tick_ns is None and streams:
@@ -446,6 +460,8 @@ class Pipeline:
             for info in streams.values():
                 info.prepare(ends)
             load = _TickLoad(v, src, stresses, np.append(0, cuts[:-2]), cuts[:-1])
+            if self._full_estimate:
+                est_means = self._estimate_means(*estimate, ends)
         start, prev_end = 0, _NEVER
         cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
         n_ticks = ends.shape[0]
@@ -471,9 +487,16 @@ class Pipeline:
                                      np.zeros(1, np.int64), np.full(1, tv.shape[0]))
                     j = 0
                 self._evaluate(k, end, tt, tv, tick, j, streams,
-                               {n: f[k] for n, f in figures.items()})
+                               {n: f[k] for n, f in figures.items()},
+                               est_means[k] if self._full_estimate else tick.est[j])
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
+        if self._full_estimate:
+            e_t, e_v = estimate
+            rest = int(np.searchsorted(e_t, ends[-1], side="right")) if ends.shape[0] else 0
+            base = _NO_LOAD[:2] if ends.shape[0] else self.open_estimate
+            self.open_estimate = (np.concatenate([base[0], e_t[rest:]]),
+                                  np.concatenate([base[1], e_v[rest:]]))
         if ends.shape[0]:
             self.next_tick_ns = int(ends[-1]) + self.tick_ns
             self.tick_counts = {}
@@ -491,16 +514,30 @@ class Pipeline:
             counts[1] += rej
         return {n: [np.concatenate(parts) for parts in zip(*cycles)] for n, cycles in closed.items()}
 
+    def _estimate_means(self, e_t: np.ndarray, e_v: np.ndarray, ends: np.ndarray) -> list[float]:
+        """Mean motion estimate in each tick ending at ``ends`` (the first one with the
+        estimates an earlier slab left for it), by sequential sums: split invariant."""
+        cuts = np.searchsorted(e_t, ends, side="right").tolist()
+        means, start = [], 0
+        for k, stop in enumerate(cuts):
+            seg = e_v[start:stop]
+            if k == 0 and self.open_estimate[0].shape[0]:
+                seg = np.concatenate([self.open_estimate[1], seg])
+            means.append(_seq_mean(seg))
+            start = stop
+        return means
+
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, load: _TickLoad,
                   j: int, streams: Mapping[str, _StreamSlab],
-                  figures: Mapping[str, tuple[float, float, float, float]]) -> None:
+                  figures: Mapping[str, tuple[float, float, float, float]],
+                  estimated: float) -> None:
         """Evaluate the alert rules at the end of the slab's ``k``-th tick (``load``'s
         ``j``-th); ``figures`` are each component's (damage, damage_committed, rate, life)
-        at that tick's end."""
+        at that tick's end, ``estimated`` the tick's mean motion estimate."""
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
-            measured_tension_N=load.meas[j], estimated_tension_N=load.est[j],
+            measured_tension_N=load.meas[j], estimated_tension_N=estimated,
             components={n: ComponentObs(*f, load.smax[n][j]) for n, f in figures.items()},
             streams=_LazyStreams(self, end, streams, k),
             tension_range_N=(load.vmin[j], load.vmax[j]),
@@ -619,6 +656,7 @@ class Pipeline:
             "next_tick_ns": self.next_tick_ns,
             "tick_counts": {s: list(c) for s, c in self.tick_counts.items()},
             "open_tick": [a.tolist() for a in self.open_tick],
+            "open_estimate": [a.tolist() for a in self.open_estimate],
             "last": dict(self.last),
             "alert_history": list(self.alert_history),
         }

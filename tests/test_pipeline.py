@@ -330,3 +330,24 @@ def test_core_feeds_block_and_tick_hooks_the_same_live_and_replay(live):
     # T0 + 10 s ... T0 + 50 s; the trailing partial tick is not evaluated, so that a split
     # replay equals one pass
     assert sink.ticks == [T0 + k * 10 * S for k in range(6)]
+
+
+def test_model_residual_rule_sees_the_estimate_while_the_load_cell_is_healthy(monkeypatch):
+    # a load cell reading 2 kN high for 5 minutes: the model-residual rule compares the tick
+    # means of the measured tension and of the motion estimate over every motion sample
+    # (the estimate does not feed fatigue then), fires after its delay and clears
+    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None: FakeEstimator())
+    config = config_with(default_config(), alerts={"rule": [
+        {"kind": "model_residual", "threshold": 1000.0, "on_delay_s": 30.0}]})
+    data = sea(900)
+    x = (data["tension"][0] - T0) / S
+    bias = np.where((x >= 300) & (x < 600), 2000.0, 0.0)
+    swell = 5000.0 + 800.0 * np.sin(2 * np.pi * x / 5.25 + 0.3)  # what FakeEstimator sees
+    data["tension"] = (data["tension"][0], {"tension_N": swell + bias})
+    p, steps = run(config, blocks_interleaved(data, 1), live=True)
+    events = [(a["event"], (a["at_ns"] - T0) / S) for a in p.report()["alerts"]]
+    assert [e for e, _ in events] == ["fire", "clear"]
+    assert 330 <= events[0][1] <= 350 and 600 <= events[1][1] <= 620
+    assert p.report()["tension_N"]["samples_estimated"] == 0  # fatigue saw the load cell only
+    fired = p.report()["alerts"][0]
+    assert fired["value"] == pytest.approx(2000.0, abs=100.0)

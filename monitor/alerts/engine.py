@@ -173,6 +173,10 @@ class AlertEngine:
         """(rule name, component) of every rule instance, in evaluation order."""
         return [(r.name, r.target) for r in self._rules]
 
+    def rule_kinds(self) -> set[str]:
+        """The kinds of rule configured (the pipeline computes some inputs only for them)."""
+        return {r.kind for r in self._rules}
+
     @staticmethod
     def _operator(who: str, why: str, at_ns: int) -> None:
         for key, val in (("who", who), ("why", why)):
