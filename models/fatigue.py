@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.fatigue_stream import FatigueStream
+from models.fatigue_stream import FatigueStream, TickCommits, commit_ticks
 from models.miner import MinerAccumulator
 from models.rainflow_stream import StreamingRainflow
 from models.sn_curve import SNCurve
 
-__all__ = ["SNCurve", "StreamingRainflow", "MinerAccumulator", "FatigueStream", "damage"]
+__all__ = ["SNCurve", "StreamingRainflow", "MinerAccumulator", "FatigueStream", "TickCommits",
+           "commit_ticks", "damage"]
 
 
 def damage(stress_series_Pa, sn_curve: SNCurve, hysteresis: float = 0.0, include_residue: bool = True) -> float:

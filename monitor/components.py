@@ -21,7 +21,6 @@ from typing import Any, Mapping
 import numpy as np
 
 from models import fatigue, helix
-from models._fatigue_loops import ticks_compiled as _ticks_compiled
 from monitor.config import ComponentConfig, Config, FatigueConfig
 
 
@@ -141,13 +140,24 @@ class Component:
                   figures: bool = True) -> TickRun:
         """Whole alert ticks: tick ``k`` takes ``stress_Pa[stops[k - 1]:stops[k]]`` (from 0
         for the first) and ends at ``ends_ns[k]``, where its cycles (and those pending from
-        earlier blocks, first) are committed. ``figures`` asks for each tick's figures."""
+        earlier blocks, first) are committed. ``figures`` asks for each tick's figures.
+        One compiled pass (``models.fatigue.commit_ticks``) when available, else the same
+        feed/commit loop (the same bits)."""
         if not stops:
             return TickRun((_EMPTY,) * 3, [])
-        rf, miner = self.rainflow, self.miner
-        if (_ticks_compiled is not None and rf.backend == "numba" and miner.backend == "numba"
-                and not miner._needs_means):
-            return self._run_ticks_compiled(stress_Pa, stops, ends_ns, figures)
+        run = fatigue.commit_ticks(self.rainflow, self.miner, stress_Pa, stops,
+                                   [e / 1e9 for e in ends_ns], (self._pending[0], self._pending[2]),
+                                   residue=figures)
+        if run is not None:  # the compiled pass
+            self._pending = [_EMPTY, _EMPTY, _EMPTY]
+            out = []
+            if figures:
+                for committed, rate, res in zip(run.committed.tolist(), run.rate_per_day.tolist(),
+                                                run.residue.tolist()):
+                    damage = committed + res
+                    out.append((damage, committed, rate,
+                                max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf))
+            return TickRun((run.ranges, run.means, np.ones(run.ranges.shape[0])), out)
         parts, out, start = [], [], 0
         for stop, end in zip(stops, ends_ns):
             if stop > start:
@@ -160,40 +170,6 @@ class Component:
             start = stop
         cycles = tuple(np.concatenate(p) for p in zip(*parts)) if parts else (_EMPTY,) * 3
         return TickRun(cycles, out)
-
-    def _run_ticks_compiled(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],
-                            figures: bool) -> TickRun:
-        """``run_ticks`` as one compiled pass over the ticks (``ticks_loop``), working on the
-        counter's and the accumulator's own state arrays: the same bits as the loop."""
-        rf, miner = self.rainflow, self.miner
-        x = np.ascontiguousarray(stress_Pa[:stops[-1]], dtype=np.float64)
-        n_ticks = len(stops)
-        pre_r, _, pre_c = self._pending
-        size = (int(rf._st[0]) + x.shape[0]) // 2 + 2  # each closed cycle pops two points
-        out_r, out_m = np.empty(size), np.empty(size)
-        t_committed, t_cycles, t_residue = np.empty(n_ticks), np.empty(n_ticks), np.empty(n_ticks)
-        stops_a = np.asarray(stops, dtype=np.int64)
-        k, nc, committed = 0, 0, miner._committed
-        while True:
-            k, nc, committed = _ticks_compiled(
-                x, stops_a, k, rf._st, miner._params, miner._table, miner._inv_width, committed,
-                pre_r, pre_c, out_r, out_m, nc, t_committed, t_cycles, t_residue, figures)
-            if k < 0:
-                raise ValueError("stress contains NaN or inf; block not counted")
-            if k == n_ticks:
-                break
-            rf._grow()  # the next tick may not fit the stack storage
-        rf._samples += x.shape[0]
-        self._pending = [_EMPTY, _EMPTY, _EMPTY]
-        out = []
-        for i in range(n_ticks):  # date each tick's damage in order, as commit() does
-            miner._take_kernel_totals(float(t_committed[i]), float(t_cycles[i]), ends_ns[i] / 1e9)
-            if figures:
-                rate = miner.damage_rate_per_day
-                damage = float(t_committed[i]) + float(t_residue[i])
-                out.append((damage, float(t_committed[i]), rate,
-                            max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf))
-        return TickRun((out_r[:nc], out_m[:nc], np.ones(nc)), out)
 
     def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
         if ranges.shape[0] == 0:

@@ -444,7 +444,8 @@ class Pipeline:
                       stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
                       tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray]
                       ) -> dict[str, list[np.ndarray]]:
-        """Feed the rainflow tick by tick, committing damage and evaluating alerts at tick ends."""
+        """Rainflow and Miner damage over the slab's whole ticks (each committed at its end),
+        the alert rules at every tick end, and the samples after the last end kept pending."""
         closed: dict[str, list[tuple[np.ndarray, ...]]] = {n: [] for n in self.components}
         if self.next_tick_ns is None and streams:
             first = min(int(x.t[0]) for x in streams.values())
@@ -471,11 +472,8 @@ class Pipeline:
             run = comp.run_ticks(stresses[name], cuts_l[:n_ticks], ends_l, evaluate)
             figures[name] = run.figures
             closed[name].append(run.cycles)
-        for k in range(n_ticks + 1):
-            stop = cuts_l[k]
-            if k == n_ticks:
-                break
-            end = ends_l[k]
+        for k in range(n_ticks):
+            stop, end = cuts_l[k], ends_l[k]
             if stop > start:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
             if evaluate:
@@ -500,6 +498,7 @@ class Pipeline:
         if ends.shape[0]:
             self.next_tick_ns = int(ends[-1]) + self.tick_ns
             self.tick_counts = {}
+        stop = cuts_l[n_ticks]
         if stop > start:
             # the samples after the last tick end: their cycles wait for that tick's end
             for name, comp in self.components.items():

@@ -1,4 +1,5 @@
-"""monitor.components.Component.run_ticks: the compiled pass equals the feed/commit loop."""
+"""monitor.components.Component.run_ticks: the compiled pass (models.fatigue_stream.commit_ticks)
+equals the feed/commit loop."""
 
 import dataclasses
 import json
@@ -7,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-import monitor.components as components
+import models.fatigue_stream as fatigue_stream
 from monitor.components import Component, build_cable
 from monitor.config import default_config
 
@@ -21,7 +22,7 @@ def make(hysteresis_Pa: float = 0.0, state=None) -> Component:
 def drive(comp: Component, stress: np.ndarray, rng, reference: bool, monkeypatch):
     """Slabs of random size with whole ticks and a partial tail (pending cycles)."""
     if reference:
-        monkeypatch.setattr(components, "_ticks_compiled", None)
+        monkeypatch.setattr(fatigue_stream, "ticks_compiled", None)
     else:
         monkeypatch.undo()
     runs, tick_end, a = [], 10**9, 0
