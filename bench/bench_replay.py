@@ -12,9 +12,9 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
 
 Measured 2026-11-21 on the 2-core development machine (quiet), 30-day log of 1184 MB,
 51.84 M tension samples, CPU time: default configuration (6 alert rules, 10 s ticks)
-16.6 s = 3.12 M tension samples/s (156,000 x real time); without alert rules 4.12 M/s;
-peak RSS 180 MB (1 day) vs 185 MB (30 days), +2.6 %; naive baseline 0.664 M/s, so 4.7 x
-(6.2 x without rules) against the 20 x target. Where the time goes (py-spy, 30 days):
+16.4 s = 3.17 M tension samples/s (159,000 x real time); without alert rules 4.36 M/s;
+peak RSS 179 MB (1 day) vs 185 MB (30 days), +3.2 %; naive baseline 0.680 M/s, so 4.7 x
+(6.4 x without rules) against the 20 x target. Where the time goes (py-spy, 30 days):
 reading and decoding the log 37 % (protobuf decode 12 %, zstd 8.5 %), the motion estimator
 11 %, validation 6 %, the alert ticks 14 % (rules, observations), the compiled tick pass
 (rainflow, Miner, residue) 7 %, start-up (imports, the catenary table) 6 %.
