@@ -67,7 +67,7 @@ _DELAYS = {"on_delay_s": _p(0.0, 0.0, True, unit="s"), "off_delay_s": _p(0.0, 0.
 # (derated) endurance stress; slack_snap jump in N above floor_N; rejected_rate fraction of
 # received samples over window_s; model_residual |measured - estimated| in N (tick means; with
 # this rule the pipeline estimates every motion sample, not only where the estimate feeds
-# fatigue, which costs replay about a tenth more CPU).
+# fatigue, which costs replay a tenth to a fifth more CPU).
 KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, ParamSpec]]] = {
     "damage_fraction": ("component", {"threshold": _p(None, 0.0)}),
     "damage_rate": ("component", {"threshold": _p(None, 0.0, unit="1/d"), **_DELAYS}),
