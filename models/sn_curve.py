@@ -45,7 +45,6 @@ from typing import Literal
 
 import numpy as np
 
-from models._jit import compile_loop
 
 LowStress = Literal["miner", "cutoff", "haibach"]
 MeanCorrection = Literal["none", "goodman", "gerber", "walker", "swt"]
@@ -249,34 +248,6 @@ class SNCurve:
         """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa."""
         return self._damage_of(self.effective_range_MPa(range_Pa, mean_Pa), counts)
 
-    def damage_of_valid(self, range_Pa: np.ndarray, counts: np.ndarray,
-                        mean_Pa: np.ndarray) -> np.ndarray:
-        """``damage_per_cycle`` for float64 arrays the caller knows to be finite with
-        ranges >= 0 (e.g. rainflow of validated stresses): the same values without the
-        input checks, for hot loops over a handful of cycles."""
-        if self.mean_correction == "none":
-            # one compiled pass for everything but the power (numpy's power, whose last bits
-            # differ from libm's on SIMD builds, keeps the values identical)
-            scalar_m, args = self._terms_args
-            s, m_seg, coef_seg = _segment_terms(range_Pa, *args)
-            # a single slope stays a scalar exponent: numpy special-cases some (2, 0.5)
-            d = np.power(s, m_seg if scalar_m is None else scalar_m)
-            d *= coef_seg
-            d *= counts
-            return d
-        s = _mean_corrected(range_Pa * self.scf, mean_Pa * self.scf, self.mean_correction,
-                            self.ultimate_Pa, self.walker_gamma)
-        return self._damage_of(s * (self.derating / _MPA), counts)
-
-    @cached_property
-    def _terms_args(self) -> tuple[float | None, tuple]:
-        """(the slope if there is one segment, the arguments of ``_segment_terms`` after the
-        ranges); ranges below the cut-off (-inf: none) give no damage."""
-        m, coef, bounds = self._power_law
-        cutoff = float(self.endurance_MPa) if self.low_stress == "cutoff" else -np.inf
-        return (m[0] if m.size == 1 else None), (
-            self.scf, self.derating / _MPA, bounds, m, np.atleast_1d(coef), cutoff)
-
     def _damage_of(self, s: np.ndarray, counts) -> np.ndarray:
         """Damage of effective ranges ``s`` (MPa, see ``effective_range_MPa``) times counts."""
         m, coef, bounds = self._power_law
@@ -330,36 +301,6 @@ class SNCurve:
         return replace(self, **changes)
 
 
-def _segment_terms_loop(range_Pa, scf, to_mpa, bounds, m, coef, cutoff):
-    """Effective ranges ``s = range_Pa * scf * to_mpa`` (MPa, in that order as numpy does it)
-    with each one's segment slope and coefficient; ranges below ``cutoff`` get slope 0 and
-    coefficient 0, so ``s ** m * coef`` is exactly the 0.0 the cut-off gives."""
-    n = range_Pa.shape[0]
-    s, m_seg, coef_seg = np.empty(n), np.empty(n), np.empty(n)
-    last = m.shape[0] - 1
-    for i in range(n):
-        x = range_Pa[i] * scf
-        x = x * to_mpa
-        s[i] = x
-        seg = last
-        for b in range(bounds.shape[0]):  # ascending knees: searchsorted(side="right")
-            if bounds[b] <= x:
-                seg -= 1
-        if x < cutoff:
-            m_seg[i], coef_seg[i] = 0.0, 0.0
-        else:
-            m_seg[i], coef_seg[i] = m[seg], coef[seg]
-    return s, m_seg, coef_seg
-
-
-def _segment_terms_numpy(range_Pa, scf, to_mpa, bounds, m, coef, cutoff):
-    s = range_Pa * scf * to_mpa
-    seg = m.shape[0] - 1 - np.searchsorted(bounds, s, side="right")
-    cut = s < cutoff
-    return s, np.where(cut, 0.0, m[seg]), np.where(cut, 0.0, coef[seg])
-
-
-_segment_terms = compile_loop(_segment_terms_loop) or _segment_terms_numpy
 
 
 def _mean_corrected(s: np.ndarray, sm: np.ndarray, kind: str, su: float | None, gamma: float) -> np.ndarray:
