@@ -215,6 +215,29 @@ def _close_cycles(st, ns, tp, m, ranges, means, k):
     return ns, k
 
 
+@jitable
+def _count(st, x, i, stop, tp, ranges, means, k):
+    """Count samples x[i:stop] into the counter state ``st``, chunk by chunk while the stack
+    storage has room for the next chunk, closing cycles into ranges[k:], means[k:]; ``tp``
+    holds a chunk's turning points. Returns (where it stopped, k); < stop when the storage
+    may overflow."""
+    ns = int(st[NS])
+    cand = st[CAND]
+    dirn = st[DIR]
+    hyst = st[HYST]
+    limit = st.shape[0] - HEADER
+    i, ns, cand, dirn = _begin(st, x, i, stop, ns, cand, dirn, hyst)
+    while i < stop and ns + min(CHUNK, stop - i) <= limit:
+        end = min(i + CHUNK, stop)
+        m, cand, dirn = _turning_points(x[i:end], cand, dirn, hyst, tp)
+        ns, k = _close_cycles(st, ns, tp, m, ranges, means, k)
+        i = end
+    st[NS] = ns
+    st[CAND] = cand
+    st[DIR] = dirn
+    return i, k
+
+
 def feed_loop(st, x):
     """Process samples ``x`` into state ``st``; return (cycles (3, k), samples consumed).
 
@@ -227,26 +250,11 @@ def feed_loop(st, x):
         for i in range(n):
             if not math.isfinite(x[i]):
                 return np.empty((3, 0)), -(i + 1)
-    ns = int(st[NS])
     # each closed cycle removes two stack points, so this bounds the cycles of this call;
     # only the used prefix of each row is ever touched (fresh pages are costly)
-    out = np.empty((3, (ns + n) // 2 + 2))
-    k = 0
-    cand = st[CAND]
-    dirn = st[DIR]
-    hyst = st[HYST]
-    limit = st.shape[0] - HEADER
-    i, ns, cand, dirn = _begin(st, x, 0, n, ns, cand, dirn, hyst)
-    tp = np.empty(min(CHUNK, n))
-    while i < n and ns + CHUNK <= limit:
-        end = min(i + CHUNK, n)
-        m, cand, dirn = _turning_points(x[i:end], cand, dirn, hyst, tp)
-        ns, k = _close_cycles(st, ns, tp, m, out[0], out[1], k)
-        i = end
+    out = np.empty((3, (int(st[NS]) + n) // 2 + 2))
+    i, k = _count(st, x, 0, n, np.empty(min(CHUNK, n)), out[0], out[1], 0)
     out[2, :k] = 1.0
-    st[NS] = ns
-    st[CAND] = cand
-    st[DIR] = dirn
     return out[:, :k], i
 
 
@@ -419,10 +427,6 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     if not _all_finite(x):
         return -1, nc, committed
     n_ticks = stops.shape[0]
-    ns = int(st[NS])
-    cand = st[CAND]
-    dirn = st[DIR]
-    hyst = st[HYST]
     limit = st.shape[0] - HEADER
     tp = np.empty(CHUNK)
     ln_s = np.empty(CHUNK)
@@ -432,15 +436,10 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     start = stops[k - 1] if k > 0 else 0
     while k < n_ticks:
         stop = stops[k]
-        if ns + (stop - start) > limit:
+        if int(st[NS]) + (stop - start) > limit:  # the whole tick must fit the storage
             break
-        i, ns, cand, dirn = _begin(st, x, start, stop, ns, cand, dirn, hyst)
         first = nc
-        while i < stop:
-            end = min(i + CHUNK, stop)
-            m, cand, dirn = _turning_points(x[i:end], cand, dirn, hyst, tp)
-            ns, nc = _close_cycles(st, ns, tp, m, out_r, out_m, nc)
-            i = end
+        _, nc = _count(st, x, start, stop, tp, out_r, out_m, nc)
         cycles = 0.0
         if k == 0 and pre_r.shape[0] > 0:
             committed, cycles = _commit_chunks(pre_r, pre_c, params, table, inv_width, committed,
@@ -449,19 +448,14 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
                                          inv_width, committed, ln_s, d)
         t_committed[k] = committed
         t_cycles[k] = cycles + more
-        st[NS] = ns
-        st[CAND] = cand
-        st[DIR] = dirn
         if residue:
+            ns = int(st[NS])
             if ns + 1 > scratch.shape[1]:
                 scratch = np.empty((5, 2 * (ns + 1)))
             t_residue[k] = _residue_damage(st, params, scratch[0], scratch[1], scratch[2],
                                            scratch[3], scratch[4])
         start = stop
         k += 1
-    st[NS] = ns
-    st[CAND] = cand
-    st[DIR] = dirn
     return k, nc, committed
 
 
