@@ -253,12 +253,8 @@ class Daemon:
         return self.streams.setdefault(sensor, StreamHealth())
 
     def _on_data(self, key: str, payload: bytes, recv_ns: int) -> None:
-        self.counters["messages"] += 1
-        try:
-            block = self.codec.decode(key, payload, recv_ns)
-        except ValueError as exc:
-            self.counters["undecodable"] += 1
-            log.warning("undecodable message", extra={"fields": {"key": key, "error": str(exc)}})
+        block = zenoh_io.decode_counted(self.codec, key, payload, recv_ns, self.counters, log)
+        if block is None:
             return
         if block.buoy_id != self.buoy_id:
             self.counters["wrong_buoy"] += 1

@@ -190,12 +190,10 @@ class ShoreMonitor:
             t = self._tracker(buoy)
             if t is None:
                 return
-            t.counters["messages"] += 1
-            try:
-                block = self.codec.decode(key, payload, recv_ns)
-            except ValueError as exc:
-                t.counters["undecodable"] += 1
-                log.warning("undecodable message", extra={"fields": {"key": key, "error": str(exc)}})
+            from monitor.zenoh_io import decode_counted  # noqa: PLC0415 (zenoh: loaded by now)
+
+            block = decode_counted(self.codec, key, payload, recv_ns, t.counters, log)
+            if block is None:
                 return
             if t.pipeline is None:
                 t.pipeline = self.make_pipeline(config_for_buoy(self.config, buoy))

@@ -167,3 +167,16 @@ class ProtobufCodec:
 def default_codec() -> BlockCodec:
     """The codec used on the wire: the same bytes as the MCAP log messages."""
     return ProtobufCodec()
+
+
+def decode_counted(codec: BlockCodec, key: str, payload: bytes, recv_ns: int,
+                   counters: dict[str, int], log: Any) -> SampleBlock | None:
+    """Decode a received sensor message, counting it in ``counters["messages"]``; a payload
+    that does not decode is counted as ``"undecodable"``, logged, and gives None."""
+    counters["messages"] += 1
+    try:
+        return codec.decode(key, payload, recv_ns)
+    except ValueError as exc:
+        counters["undecodable"] += 1
+        log.warning("undecodable message", extra={"fields": {"key": key, "error": str(exc)}})
+        return None

@@ -305,6 +305,16 @@ def _read_i64(buf, p):
     return v
 
 
+@numba.njit(cache=True, inline="always")
+def _value_slot(fn_vals, fnum):
+    """Index of field number ``fnum`` among the value fields, or -1."""
+    j = -1
+    for q in range(fn_vals.shape[0]):
+        if fn_vals[q] == fnum:
+            j = q
+    return j
+
+
 @numba.njit(cache=True)
 def _skip(buf, p, end, wt):
     """Position after a field of wire type ``wt`` starting at ``p``; -1 if malformed."""
@@ -347,10 +357,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
                 break
             fnum = tag >> 3
             wt = tag & 7
-            j = -1
-            for q in range(nf):
-                if fn_vals[q] == fnum:
-                    j = q
+            j = _value_slot(fn_vals, fnum)
             if fnum == fn_t0 and wt == 1:
                 if p + 8 > end:
                     st = 1
@@ -432,10 +439,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
             tag, p = _read_varint(buf, p, end)
             fnum = tag >> 3
             wt = tag & 7
-            j = -1
-            for q in range(nf):
-                if fn_vals[q] == fnum:
-                    j = q
+            j = _value_slot(fn_vals, fnum)
             if fnum == fn_off and (wt == 2 or wt == 0):
                 e2 = p + 1  # one varint for the unpacked form
                 if wt == 2:
