@@ -8,6 +8,8 @@ rate_buckets=24, reference_cycles=1e7, backend="auto")``
   ``set_provisional(ranges_Pa, counts, means_Pa=None) -> float``
       replace the provisional damage (the rainflow residue's half cycles).
   ``set_provisional_from(rainflow) -> float``  the same from a ``StreamingRainflow``.
+  ``residue_damage(rainflow) -> float``  that figure without storing it (one compiled pass,
+                            cheap enough for every alert tick).
   ``damage_committed``, ``damage_provisional``, ``damage`` (= committed + provisional)
   ``damage_rate_per_day``   committed damage per day over the last ``rate_window_s``
   ``remaining_life_days``   (1 - damage) / rate (inf while the rate is zero)
@@ -202,8 +204,8 @@ class MinerAccumulator:
 
     def set_provisional_from(self, rainflow) -> float:
         """Provisional damage from a ``StreamingRainflow``'s residue; return it."""
-        ranges, means, counts = rainflow.residue_half_cycles()
-        return self.set_provisional(ranges, counts, means)
+        self._provisional = self.residue_damage(rainflow)
+        return self._provisional
 
     def _date(self, added: float, t: float) -> None:
         self._rate = None
