@@ -333,7 +333,7 @@ def _skip(buf, p, end, wt):
     return -1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread
 def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
     m = offs.shape[0]
     nf = fn_vals.shape[0]

@@ -4,6 +4,9 @@ The file is read front to back record by record (https://mcap.dev/spec); the foo
 summary are never needed, so a file that was cut short (crash, power loss) or has damaged
 chunks is read as far as it is intact. Each chunk is decompressed once, its records located by
 a numba scan and all of its sensor payloads decoded in bulk (:func:`replay.codec.decode_many`).
+With ``read_ahead`` (the default) a worker thread does all that for the next chunk
+(:class:`replay.chunks.ReadAhead`; none of it holds the GIL) while the caller processes the
+blocks of the current one; the results are the same either way.
 This delivers millions of messages per second where ``mcap``'s per-message reader manages a
 few hundred thousand.
 
@@ -47,11 +50,10 @@ from __future__ import annotations
 
 import logging
 import struct
-import zlib
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Iterable, Iterator, Mapping, Sequence
 
 import numba
 import numpy as np
@@ -59,6 +61,7 @@ import zstandard
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
 from replay import codec
+from replay.chunks import Inflated, ReadAhead, inflate
 
 log = logging.getLogger(__name__)
 from replay.writer import (
@@ -137,7 +140,7 @@ def expand_paths(paths: Iterable[str | PathLike], *, recursive: bool = False,
 # ------------------------------------------------------------------------------ record scan
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread
 def _scan_records(buf):
     """Locate records in a decompressed chunk (or any record sequence).
 
@@ -194,6 +197,33 @@ def _scan_records(buf):
             o += 1
         p = c + np.int64(ln)
     return ch[:m], log[:m], pub[:m], doff[:m], dlen[:m], oop[:o], ooff[:o], olen[:o], p, status
+
+
+@dataclass(slots=True)
+class _Digest:
+    """A run of records located by :func:`_scan_records`, its messages grouped by channel
+    (indices in record order) and the payloads of the channels already known decoded."""
+
+    buf: np.ndarray
+    scan: tuple
+    groups: dict[int, np.ndarray]
+    decoded: dict[int, tuple]
+
+
+def _digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str]) -> _Digest:
+    """Scan ``raw`` and decode the messages of the sensor channels in ``channels``. A pure
+    function of its inputs, so the read-ahead thread can run it (channel definitions never
+    change once read, so a copy of them taken earlier decodes the same)."""
+    buf = np.frombuffer(raw, np.uint8)
+    scan = _scan_records(buf)
+    ch, doff, dlen = scan[0], scan[3], scan[4]
+    groups = {c: np.flatnonzero(ch == c) for c in np.unique(ch).tolist()}
+    decoded = {}
+    for c, sel in groups.items():
+        target = channels.get(c)
+        if isinstance(target, tuple):
+            decoded[c] = codec.decode_many(buf, doff[sel], dlen[sel], target[1])
+    return _Digest(buf, scan, groups, decoded)
 
 
 _MAX_CUT_CHUNK = 64 << 20  # bytes read for a chunk whose length runs past the end of file
@@ -290,18 +320,21 @@ class LogReader:
         paths: files or directories (see :func:`expand_paths`), read in the given order.
         coalesce: concatenate messages per topic and release (see module doc) for speed.
         reorder_window_s: sensor-time horizon within which out-of-order messages are sorted.
+        read_ahead: inflate the next chunk in a worker thread while the caller processes the
+            blocks of the current one (same results; uses a second core).
 
     Iterate once; afterwards :attr:`stats` holds one :class:`FileStats` per file.
     """
 
     def __init__(self, paths: Sequence[str | PathLike] | str | PathLike, *, coalesce: bool = True,
-                 reorder_window_s: float = 60.0):
+                 reorder_window_s: float = 60.0, read_ahead: bool = True):
         if isinstance(paths, (str, PathLike)):
             paths = [paths]
         if not reorder_window_s >= 0:
             raise ValueError(f"reorder_window_s = {reorder_window_s}: must be >= 0")
         self.paths = expand_paths(paths)
         self.coalesce = coalesce
+        self.read_ahead = read_ahead
         self.window_ns = int(round(reorder_window_s * 1e9))
         self.stats: list[FileStats] = []
         self._streams: list[_Stream] = []
@@ -342,137 +375,121 @@ class LogReader:
                 st.error = "not an MCAP file (bad or missing magic bytes)"
                 return
             ctx = _FileContext(fidx)
-            pos = 8
-            loose: list[bytes] = []  # top-level (unchunked) message records, batched
-            awaiting: list | None = None  # lost chunk whose message count comes from its index
-            while True:
-                head = f.read(9)
-                if len(head) < 9:
-                    if head:
-                        st.lost.append(LostRange("file cut inside a record header", pos))
+            ahead = ReadAhead(f.fileno(), size, _digest) if self.read_ahead else None
+            try:
+                yield from self._read_records(f, size, ctx, st, ahead)
+            finally:
+                if ahead is not None:
+                    ahead.close()
+
+    def _read_records(self, f, size: int, ctx: "_FileContext", st: FileStats,
+                      ahead: ReadAhead | None) -> Iterator[None]:
+        """The records after the magic, in file order, with salvage (see the module doc)."""
+        pos = 8
+        loose: list[bytes] = []  # top-level (unchunked) message records, batched
+        awaiting: list | None = None  # lost chunk whose message count comes from its index
+        while True:
+            head = f.read(9)
+            if len(head) < 9:
+                if head:
+                    st.lost.append(LostRange("file cut inside a record header", pos))
+                break
+            op, ln = struct.unpack("<BQ", head)
+            cut = ln > size - pos - 9
+            if op == 0 or 0x10 <= op < 0x80 or (cut and op != OP_CHUNK):
+                # an impossible record header: skip to the next chunk if there is one
+                why = ("file cut inside a record" if cut and op
+                       else f"corrupt record (opcode {op})")
+                nxt = _find_chunk(f, pos + 1, size)
+                tail = "" if nxt is None else f"; skipped {nxt - pos} bytes to the next chunk"
+                # a cut index/summary record holds no messages; a corrupt header may hide some
+                known_empty = cut and 0 < op < 0x10 and op != OP_MESSAGE
+                st.lost.append(LostRange(f"{why} at byte {pos}{tail}", pos,
+                                         messages=0 if known_empty else None))
+                if nxt is None:
                     break
-                op, ln = struct.unpack("<BQ", head)
-                cut = ln > size - pos - 9
-                if op == 0 or 0x10 <= op < 0x80 or (cut and op != OP_CHUNK):
-                    # an impossible record header: skip to the next chunk if there is one
-                    why = ("file cut inside a record" if cut and op
-                           else f"corrupt record (opcode {op})")
+                f.seek(nxt)
+                pos = nxt
+                continue
+            if op == OP_MESSAGE and not cut:
+                loose.append(head + f.read(ln))
+                if len(loose) >= 4096:
+                    self._records(_digest(b"".join(loose), ctx.channels), ctx, st)
+                    loose.clear()
+                    yield
+                pos += 9 + ln
+                continue
+            if loose:
+                self._records(_digest(b"".join(loose), ctx.channels), ctx, st)
+                loose.clear()
+                yield
+            if awaiting is not None and op != OP_MESSAGE_INDEX:
+                awaiting = None
+            if op == OP_CHUNK:
+                got = ahead.take(pos) if ahead is not None else None
+                if got is None:
+                    content = f.read(min(ln, _MAX_CUT_CHUNK) if cut else ln)
+                    got = inflate(content, cut, self._dctx), None
+                else:
+                    f.seek(ln, 1)
+                awaiting = self._chunk(*got, pos, ctx, st)
+                if ahead is not None and not cut:
+                    # the next chunk is inflated and digested while the caller works
+                    ahead.schedule(pos + 9 + ln, dict(ctx.channels))
+                yield
+                if cut:  # a truncated file, or a corrupt length: look for a next chunk
                     nxt = _find_chunk(f, pos + 1, size)
-                    tail = "" if nxt is None else f"; skipped {nxt - pos} bytes to the next chunk"
-                    # a cut index/summary record holds no messages; a corrupt header may hide some
-                    known_empty = cut and 0 < op < 0x10 and op != OP_MESSAGE
-                    st.lost.append(LostRange(f"{why} at byte {pos}{tail}", pos,
-                                             messages=0 if known_empty else None))
                     if nxt is None:
                         break
                     f.seek(nxt)
                     pos = nxt
                     continue
-                if op == OP_MESSAGE and not cut:
-                    loose.append(head + f.read(ln))
-                    if len(loose) >= 4096:
-                        self._records(np.frombuffer(b"".join(loose), np.uint8), ctx, st)
-                        loose.clear()
-                        yield
-                    pos += 9 + ln
-                    continue
-                if loose:
-                    self._records(np.frombuffer(b"".join(loose), np.uint8), ctx, st)
-                    loose.clear()
-                    yield
-                if awaiting is not None and op != OP_MESSAGE_INDEX:
-                    awaiting = None
-                if op == OP_CHUNK:
-                    content = f.read(min(ln, _MAX_CUT_CHUNK) if cut else ln)
-                    awaiting = self._chunk(content, pos, cut, ctx, st)
-                    yield
-                    if cut:  # a truncated file, or a corrupt length: look for a next chunk
-                        nxt = _find_chunk(f, pos + 1, size)
-                        if nxt is None:
-                            break
-                        f.seek(nxt)
-                        pos = nxt
-                        continue
-                elif op in (OP_SCHEMA, OP_CHANNEL):
-                    ctx.definition(op, f.read(ln), self, st)
-                elif op == OP_MESSAGE_INDEX and awaiting is not None:
-                    content = f.read(ln)
-                    (nbytes,) = struct.unpack_from("<I", content, 2)
-                    lost = awaiting[0]
-                    awaiting[0] = LostRange(lost.reason, lost.offset, lost.start_ns, lost.end_ns,
-                                            (lost.messages or 0) + nbytes // 16)
-                    st.lost[awaiting[1]] = awaiting[0]
-                elif op in (OP_DATA_END, OP_FOOTER):
-                    st.complete = True
-                    break
-                else:
-                    f.seek(ln, 1)
-                pos += 9 + ln
-            if loose:
-                self._records(np.frombuffer(b"".join(loose), np.uint8), ctx, st)
-                yield
-            if st.messages == 0 and st.error is None:
-                st.error = "no sensor messages could be read"
-
-    def _chunk(self, content: bytes, pos: int, cut: bool, ctx: "_FileContext",
-               st: FileStats) -> list | None:
-        """Decode one chunk; return ``[LostRange, index in st.lost]`` if it was lost whole."""
-        st.chunks += 1
-        try:
-            t_lo, t_hi, usize, crc = struct.unpack_from("<QQQI", content, 0)
-            comp, p = _str_at(content, 28)
-            (clen,) = struct.unpack_from("<Q", content, p)
-        except (struct.error, UnicodeDecodeError):
-            st.lost.append(LostRange("file cut inside a chunk header", pos))
-            st.bad_chunks += 1
-            return None
-        data = memoryview(content)[p + 8:p + 8 + clen]
-
-        def lose(reason: str, messages: int | None = None) -> list:
-            st.bad_chunks += 1
-            st.lost.append(LostRange(reason, pos, t_lo, t_hi, messages))
-            return [st.lost[-1], len(st.lost) - 1]
-
-        try:
-            if comp == "zstd":
-                raw = (self._dctx.decompressobj().decompress(data) if cut
-                       else self._dctx.decompress(data, max_output_size=usize))
-            elif comp == "lz4":
-                import lz4.frame
-
-                raw = lz4.frame.decompress(bytes(data))
-            elif comp == "":
-                raw = bytes(data)
+            elif op in (OP_SCHEMA, OP_CHANNEL):
+                ctx.definition(op, f.read(ln), self, st)
+            elif op == OP_MESSAGE_INDEX and awaiting is not None:
+                content = f.read(ln)
+                (nbytes,) = struct.unpack_from("<I", content, 2)
+                lost = awaiting[0]
+                awaiting[0] = LostRange(lost.reason, lost.offset, lost.start_ns, lost.end_ns,
+                                        (lost.messages or 0) + nbytes // 16)
+                st.lost[awaiting[1]] = awaiting[0]
+            elif op in (OP_DATA_END, OP_FOOTER):
+                st.complete = True
+                break
             else:
-                return lose(f"chunk compression {comp!r} not supported")
-        except Exception as e:  # any decompressor error means a damaged chunk
-            if cut:
-                st.lost.append(LostRange("file cut inside a chunk (nothing decompressible)",
-                                         pos, t_lo, t_hi))
-                st.bad_chunks += 1
-                return None
-            return lose(f"chunk does not decompress: {e}")
-        if cut and len(raw) == usize and crc != 0 and zlib.crc32(raw) == crc:
-            cut = False  # the whole chunk is there and verified (its length field was wrong)
-        if cut:
-            n = self._records(np.frombuffer(raw, np.uint8), ctx, st)
+                f.seek(ln, 1)
+            pos += 9 + ln
+        if loose:
+            self._records(_digest(b"".join(loose), ctx.channels), ctx, st)
+            yield
+        if st.messages == 0 and st.error is None:
+            st.error = "no sensor messages could be read"
+
+    def _chunk(self, c: Inflated, digest: _Digest | None, pos: int, ctx: "_FileContext",
+               st: FileStats) -> list | None:
+        """Take one inflated chunk (``digest``: its records, when the read-ahead scanned them);
+        return ``[LostRange, index in st.lost]`` if it was lost whole and its Message Index
+        records may still give the count of its messages."""
+        st.chunks += 1
+        if c.raw is None:
+            st.bad_chunks += 1
+            st.lost.append(LostRange(c.error, pos, c.t_lo, c.t_hi))
+            return [st.lost[-1], len(st.lost) - 1] if c.indexed else None
+        n = self._records(digest if digest is not None else _digest(c.raw, ctx.channels),
+                          ctx, st)
+        if c.cut:
             st.bad_chunks += 1
             st.lost.append(LostRange(
                 f"file cut inside a chunk: {n} messages of it recovered", pos,
-                ctx.last_log if n else t_lo, t_hi))
-            return None
-        if len(raw) != usize:
-            return lose(f"chunk size {len(raw)} != {usize} declared")
-        if crc != 0 and zlib.crc32(raw) != crc:
-            return lose("bad chunk CRC")
-        self._records(np.frombuffer(raw, np.uint8), ctx, st)
+                ctx.last_log if n else c.t_lo, c.t_hi))
         return None
 
     # -------------------------------------------------------------- record level
 
-    def _records(self, buf: np.ndarray, ctx: "_FileContext", st: FileStats) -> int:
+    def _records(self, d: _Digest, ctx: "_FileContext", st: FileStats) -> int:
         """Handle a run of records; return the number of messages found in it."""
-        ch, log, pub, doff, dlen, oop, ooff, olen, _, _ = _scan_records(buf)
+        buf = d.buf
+        ch, log, pub, doff, dlen, oop, ooff, olen, _, _ = d.scan
         raw = None
         for op, a, ln in zip(oop.tolist(), ooff.tolist(), olen.tolist()):
             if op in (OP_SCHEMA, OP_CHANNEL):
@@ -484,15 +501,16 @@ class LogReader:
         seq = self._seq + np.arange(ch.shape[0], dtype=np.int64)
         self._seq += ch.shape[0]
         parts = []
-        for c in np.unique(ch).tolist():
-            sel = np.flatnonzero(ch == c)
+        for c, sel in d.groups.items():
             target = ctx.channels.get(c)
             if target is None or isinstance(target, str):
                 topic = target if isinstance(target, str) else f"<unknown channel {c}>"
                 st.skipped[topic] = st.skipped.get(topic, 0) + sel.shape[0]
                 continue
             sidx, numbers = target
-            status, n, t, vals = codec.decode_many(buf, doff[sel], dlen[sel], numbers)
+            decoded = d.decoded.get(c)  # else defined in this very run of records
+            status, n, t, vals = (decoded if decoded is not None
+                                  else codec.decode_many(buf, doff[sel], dlen[sel], numbers))
             good = status == codec.OK
             st.bad_payloads += int(sel.shape[0] - good.sum())
             sel, n = sel[good], n[good]

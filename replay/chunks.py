@@ -1,0 +1,135 @@
+"""MCAP chunk records: decompress and check them, optionally one chunk ahead in a worker thread.
+
+:func:`inflate` turns a chunk record's content into its records (or says why they are lost)
+without interpreting any of them. zstd, lz4 and the CRC release the GIL, so
+:class:`ReadAhead` inflating the next chunk in a worker thread while the caller processes the
+current one puts a second core to work: replaying the 30-day benchmark log, about 2.3 s of
+its ~15 s leave the main thread.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import zstandard
+
+from replay.writer import OP_CHUNK, OP_MESSAGE_INDEX
+
+
+@dataclass(slots=True)
+class Inflated:
+    """A chunk record's records, or why they are lost.
+
+    ``raw`` is None when nothing could be recovered; with ``cut`` it is the decompressible
+    prefix of a chunk the file ends inside. ``t_lo``/``t_hi`` are the chunk's log-time range
+    (None when its header is unreadable). ``error`` says why the chunk, or the rest of a cut
+    one, is lost; ``indexed`` marks a loss whose message count the chunk's Message Index
+    records (which follow it in the file) can give.
+    """
+
+    raw: bytes | None
+    t_lo: int | None = None
+    t_hi: int | None = None
+    cut: bool = False
+    error: str | None = None
+    indexed: bool = False
+
+
+def inflate(content: bytes, cut: bool, dctx: zstandard.ZstdDecompressor) -> Inflated:
+    """Decompress and check one chunk record's content (``cut``: the file ends inside it).
+
+    A cut chunk whose decompressed records are all there and pass the CRC (only its length
+    field was wrong) counts as whole. ``dctx`` must not be shared between threads.
+    """
+    try:
+        t_lo, t_hi, usize, crc = struct.unpack_from("<QQQI", content, 0)
+        (slen,) = struct.unpack_from("<I", content, 28)
+        comp = bytes(content[32:32 + slen]).decode()
+        (clen,) = struct.unpack_from("<Q", content, 32 + slen)
+    except (struct.error, UnicodeDecodeError):
+        return Inflated(None, error="file cut inside a chunk header")
+    data = memoryview(content)[40 + slen:40 + slen + clen]
+    try:
+        if comp == "zstd":
+            raw = (dctx.decompressobj().decompress(data) if cut
+                   else dctx.decompress(data, max_output_size=usize))
+        elif comp == "lz4":
+            import lz4.frame
+
+            raw = lz4.frame.decompress(bytes(data))
+        elif comp == "":
+            raw = bytes(data)
+        else:
+            return Inflated(None, t_lo, t_hi, error=f"chunk compression {comp!r} not supported",
+                            indexed=True)
+    except Exception as e:  # any decompressor error means a damaged chunk
+        if cut:
+            return Inflated(None, t_lo, t_hi, cut=True,
+                            error="file cut inside a chunk (nothing decompressible)")
+        return Inflated(None, t_lo, t_hi, error=f"chunk does not decompress: {e}", indexed=True)
+    if cut:
+        whole = len(raw) == usize and crc != 0 and zlib.crc32(raw) == crc
+        return Inflated(raw, t_lo, t_hi, cut=not whole)
+    if len(raw) != usize:
+        return Inflated(None, t_lo, t_hi, error=f"chunk size {len(raw)} != {usize} declared",
+                        indexed=True)
+    if crc != 0 and zlib.crc32(raw) != crc:
+        return Inflated(None, t_lo, t_hi, error="bad chunk CRC", indexed=True)
+    return Inflated(raw, t_lo, t_hi)
+
+
+class ReadAhead:
+    """Inflate, in one worker thread, the chunk that follows a file position.
+
+    :meth:`schedule` starts looking at a position (skipping Message Index records), inflates
+    the chunk found there if it lies wholly inside the file and, if its records are intact,
+    applies ``then(records, arg)`` to them in the worker too. :meth:`take` returns
+    ``(Inflated, then's result or None)`` if that chunk is the one at the position asked, else
+    None (the caller then reads the chunk itself). The worker reads with ``os.pread`` on
+    ``fd``, so it shares no file position with the caller. Close before closing the file.
+    """
+
+    def __init__(self, fd: int, size: int, then: Callable[[bytes, Any], Any]) -> None:
+        self._fd, self._size, self._then = fd, size, then
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="mcap-inflate")
+        self._dctx = zstandard.ZstdDecompressor()
+        self._future: Future | None = None
+
+    def schedule(self, pos: int, arg: Any = None) -> None:
+        self._future = self._pool.submit(self._next_chunk, pos, arg)
+
+    def take(self, pos: int) -> tuple[Inflated, Any] | None:
+        future, self._future = self._future, None
+        if future is None:
+            return None
+        try:
+            got = future.result()
+        except OSError:
+            return None
+        return got[1:] if got is not None and got[0] == pos else None
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._future = None
+
+    def _next_chunk(self, pos: int, arg: Any) -> tuple[int, Inflated, Any] | None:
+        while pos + 9 <= self._size:
+            op, ln = struct.unpack("<BQ", os.pread(self._fd, 9, pos))
+            if ln > self._size - pos - 9:
+                return None  # a cut or corrupt record: the caller's salvage handles it
+            if op == OP_MESSAGE_INDEX:
+                pos += 9 + ln
+                continue
+            if op != OP_CHUNK:
+                return None
+            content = os.pread(self._fd, ln, pos + 9)
+            if len(content) != ln:
+                return None
+            c = inflate(content, False, self._dctx)
+            return pos, c, (self._then(c.raw, arg) if c.raw is not None else None)
+        return None
