@@ -22,6 +22,7 @@ from typing import Any, Mapping, Protocol
 
 import numpy as np
 
+from monitor import model_cache
 from monitor.config import Config, LoadConfig, MooringConfig
 
 MEASURED, ESTIMATED = 1, 2
@@ -44,10 +45,14 @@ class MotionEstimator(Protocol):
 @functools.lru_cache(maxsize=8)
 def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
     """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
-    a second), so built once per mooring and step and shared by every estimator."""
+    a second), so built once per mooring and step, shared by every estimator and kept in the
+    on-disk model cache for the next process."""
+    return model_cache.cached("estimator", (mooring, dt), lambda: _build_model(mooring, dt))
+
+
+def _build_model(m: MooringConfig, dt: float) -> tuple[Any, Any]:
     from models import catenary, estimator
 
-    m = mooring
     if m.preset == "vaps_seed004":
         return estimator.seed004_estimator(dt=dt, span=m.span_m)
     line = catenary.Line(segments=tuple(
