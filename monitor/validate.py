@@ -45,13 +45,16 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t):  # pr
     n = t.shape[0]
     nf = values.shape[0]
     codes = np.zeros(n, dtype=np.int8)
+    counts = np.zeros(len(REASONS) + 1, np.int64)
     for i in range(n):
         ti = t[i]
         if has_last and ti == last_t:
             codes[i] = _DUP
+            counts[_DUP] += 1
             continue
         if (has_last and ti < last_t) or ti <= floor_t:
             codes[i] = _BACK
+            counts[_BACK] += 1
             continue
         code = 0
         for f in range(nf):
@@ -72,12 +75,13 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t):  # pr
                     code = _SPIKE
                     break
         codes[i] = code
+        counts[code] += 1
         if code == 0:
             last_t = ti
             has_last = True
             for f in range(nf):
                 last_v[f] = values[f, i]
-    return codes, last_t, has_last
+    return codes, counts, last_t, has_last
 
 
 class StreamValidator:
@@ -107,15 +111,15 @@ class StreamValidator:
         ``values`` has shape ``(n_fields, n)`` in the order of :data:`SENSOR_FIELDS`. Samples at
         or before ``floor_ns`` (already processed) are ``time_backwards``.
         """
-        codes, last_t, has_last = _validate(
+        codes, counts, last_t, has_last = _validate(
             t_ns, values, self._lo, self._hi, self._rate,
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),
         )
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
-        counts = np.bincount(codes, minlength=len(REASONS) + 1)
-        self.accepted += int(counts[0])
+        counts = counts.tolist()
+        self.accepted += counts[0]
         for i, reason in enumerate(REASONS, start=1):
-            self.rejected[reason] += int(counts[i])
+            self.rejected[reason] += counts[i]
         return codes
 
     def state(self) -> dict[str, Any]:
