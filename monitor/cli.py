@@ -47,11 +47,17 @@ def build_parser(argv: Sequence[str]) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser(argv).parse_args(argv)
-    from monitor.logs import setup_logging
+    try:
+        args = build_parser(argv).parse_args(argv)
+        from monitor.logs import setup_logging
 
-    setup_logging(args.log_level)
-    return int(args.func(args) or 0)
+        setup_logging(args.log_level)
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        # Ctrl-C: a message instead of a traceback, and the shell's status for SIGINT. Reports
+        # and state files are written (atomically) only at the end, so none is half-written.
+        print("buoymon: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

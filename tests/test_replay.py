@@ -153,3 +153,25 @@ def test_paced_replay_follows_sensor_time():
     paced = time.monotonic() - start
     # 3 s of data at 4 x real time: the last blocks start 2 s after the first, i.e. 0.5 s
     assert paced - fast >= 0.45
+
+
+def test_ctrl_c_ends_a_replay_with_status_130_and_leaves_the_state_file(tmp_path, capsys,
+                                                                         monkeypatch):
+    import replay.runner
+
+    write_log(tmp_path / "a.mcap", blocks_interleaved(sea(60), 1))
+    state = tmp_path / "state.json"
+    assert main(["replay", str(tmp_path / "a.mcap"), "--state", str(state)]) == 0
+    before = state.read_bytes()
+    capsys.readouterr()
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(replay.runner, "run_blocks", interrupted)
+    report = tmp_path / "r.json"
+    assert main(["replay", str(tmp_path / "a.mcap"), "--state", str(state),
+                 "--report", str(report)]) == 130
+    captured = capsys.readouterr()
+    assert "buoymon: interrupted" in captured.err and "Traceback" not in captured.err
+    assert not report.exists() and state.read_bytes() == before
