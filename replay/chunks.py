@@ -109,7 +109,7 @@ class ReadAhead:
             return None
         try:
             got = future.result()
-        except OSError:
+        except Exception:  # e.g. the file shrank under the worker: read it in line instead
             return None
         return got[1:] if got is not None and got[0] == pos else None
 

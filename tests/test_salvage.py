@@ -265,3 +265,17 @@ def test_read_ahead_inflates_the_chunk_after_the_message_indexes(log):
     assert inflated.error is None and not inflated.cut
     assert then == (second.uncompressed_size, "ctx")
     assert (inflated.t_lo, inflated.t_hi) == (second.message_start_time, second.message_end_time)
+
+
+def test_read_ahead_falls_back_when_its_worker_fails(log, tmp_path):
+    path, data, chunks = log
+    first, second = chunks[0], chunks[1]
+    with open(path, "rb") as f:
+        ahead = ReadAhead(f.fileno(), len(data) + 10_000, lambda raw, arg: 1 / 0)
+        try:
+            ahead.schedule(first.chunk_start_offset + first.chunk_length)
+            assert ahead.take(second.chunk_start_offset) is None
+            ahead.schedule(len(data) + 5)  # past the real end: pread returns too little
+            assert ahead.take(len(data) + 5) is None
+        finally:
+            ahead.close()
