@@ -33,10 +33,11 @@ class MotionEstimator(Protocol):
     """What the pipeline needs from a motion -> tension estimator (adapter over models.estimator)."""
 
     def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
-             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Accepted motion samples in time order -> ``(t_ns, tension_N)`` of the estimate;
-        only the samples in the boolean mask ``want`` (all if None) get a value, the others
-        are NaN."""
+             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accepted motion samples in time order -> ``(t_ns, tension_N, clamped)`` of the
+        estimate; only the samples in the boolean mask ``want`` (all if None) get a value, the
+        others are NaN. ``clamped`` marks estimates of motion outside the model's range, held
+        at the value at its edge."""
         ...
 
     def state(self) -> dict[str, Any]: ...
@@ -68,6 +69,10 @@ class _ModelsEstimator:
 
     The model works on a fixed time step (``[load] motion_rate_hz``); samples it flags as
     SETTLING (the IMU integrator warming up, a stream's first samples) give no estimate.
+    Samples it flags OUT_OF_RANGE (a position outside its tension table) keep the tension at
+    the table's edge, marked ``clamped``: in a storm these are the buoy's largest excursions,
+    the line near taut, and leaving them out would understate fatigue; the
+    :class:`LoadSelector` counts the ones that feed fatigue, so the report shows them.
     """
 
     def __init__(self, est_module: Any, model: Any, sensor: str) -> None:
@@ -83,7 +88,8 @@ class _ModelsEstimator:
             e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"],
                                   want=want)
         ok = (e.flags & np.uint8(self._flags.SETTLING)) == 0
-        return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok]
+        clamped = (e.flags & np.uint8(self._flags.OUT_OF_RANGE)) != 0
+        return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok], clamped[ok]
 
     def state(self) -> dict[str, Any]:
         return self.model.state.to_dict()
@@ -111,8 +117,11 @@ class LoadSelector:
         self.mode = cfg.source
         self.stale_ns = int(round(cfg.stale_after_s * 1e9))
         self.last_measured_ns: int | None = None
-        if state is not None and state["last_measured_ns"] is not None:
-            self.last_measured_ns = int(state["last_measured_ns"])
+        self.estimates_clamped = 0  # clamped estimates (see MotionEstimator.feed) used
+        if state is not None:
+            if state["last_measured_ns"] is not None:
+                self.last_measured_ns = int(state["last_measured_ns"])
+            self.estimates_clamped = int(state.get("estimates_clamped", 0))
 
     def needed(self, m_t: np.ndarray, e_t: np.ndarray) -> np.ndarray:
         """Boolean mask of the estimated samples at times ``e_t`` that :meth:`select` will
@@ -136,12 +145,15 @@ class LoadSelector:
             never[:] = False
         return never | (e_t - latest > self.stale_ns)
 
-    def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED."""
+    def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray,
+               e_clamped: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED.
+        The estimates used that ``e_clamped`` marks are counted in ``estimates_clamped``."""
+        use = self.needed(m_t, e_t)
+        if e_clamped is not None:
+            self.estimates_clamped += int(np.count_nonzero(use & e_clamped))
         if self.mode == "estimated":
             return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
-        use = self.needed(m_t, e_t)
         if m_t.shape[0]:
             self.last_measured_ns = int(m_t[-1])
         measured = (m_t, m_v, np.full(m_t.shape, MEASURED, np.int8))
@@ -154,4 +166,5 @@ class LoadSelector:
         return t[order], v[order], src[order]
 
     def state(self) -> dict[str, Any]:
-        return {"last_measured_ns": self.last_measured_ns}
+        return {"last_measured_ns": self.last_measured_ns,
+                "estimates_clamped": self.estimates_clamped}

@@ -398,7 +398,7 @@ class Pipeline:
         m_t, m_v = np.zeros(0, np.int64), np.zeros(0)
         if "tension" in streams:
             m_t, m_v = streams["tension"].acc_t, streams["tension"].acc_values[0]
-        e_t, e_v = np.zeros(0, np.int64), np.zeros(0)
+        e_t, e_v, e_clamped = np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
         if self.estimator is not None and self.motion_sensor in streams:
             info = streams[self.motion_sensor]
             if info.acc_t.shape[0]:
@@ -410,8 +410,8 @@ class Pipeline:
                 else:
                     want = self.selector.needed(m_t, info.acc_t)
                     want[-1] = True
-                e_t, e_v = self.estimator.feed(info.acc_t, fields, want)
-        t, v, src = self.selector.select(m_t, m_v, e_t, e_v)
+                e_t, e_v, e_clamped = self.estimator.feed(info.acc_t, fields, want)
+        t, v, src = self.selector.select(m_t, m_v, e_t, e_v, e_clamped)
         self.stats.add(v, src)
         if m_t.shape[0]:
             self.last["measured_N"] = float(m_v[-1])
@@ -631,7 +631,8 @@ class Pipeline:
             "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected)}
                         for s, val in self.validators.items()
                         if val.accepted or any(val.rejected.values())},
-            "tension_N": self.stats.summary(),
+            "tension_N": {**self.stats.summary(),
+                          "samples_estimate_clamped": self.selector.estimates_clamped},
             "load_source": self.last["source"],
             "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
                            for n, c in self.components.items()},

@@ -9,7 +9,9 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      {nan, out_of_range, spike, duplicate, time_backwards}
 ``tension_N``                        the fatigue load series: ``min``, ``mean``, ``max``, ``p99``
                                      (p99 on a fixed histogram, ~3 N bins), and how many samples
-                                     were ``samples_measured`` / ``samples_estimated``
+                                     were ``samples_measured`` / ``samples_estimated``, and
+                                     ``samples_estimate_clamped``: estimates of motion outside
+                                     the estimator's table, held at its edge
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
@@ -126,7 +128,9 @@ def summary_text(report: Mapping[str, Any]) -> str:
     t = report["tension_N"]
     lines.append(f"  tension  min {_num(t['min'], '.0f')} N, mean {_num(t['mean'], '.0f')} N, "
                  f"max {_num(t['max'], '.0f')} N, p99 {_num(t['p99'], '.0f')} N "
-                 f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated)")
+                 f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated"
+                 + (f", {t['samples_estimate_clamped']:,d} of them outside the estimator's range"
+                    if t.get("samples_estimate_clamped") else "") + ")")
     lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
                  f"{'max stress':>11s} {'life left':>11s}")
     for name, c in report["components"].items():

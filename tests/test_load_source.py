@@ -47,3 +47,64 @@ def test_needed_matches_the_rule_and_select_uses_exactly_those(seed):
         assert (src == ESTIMATED).sum() == use.sum() and (src == MEASURED).sum() == n_m
         assert np.all(np.diff(t) >= 0)
         t0 = int(max(m_t[-1] if n_m else 0, e_t[-1]))
+
+
+@pytest.mark.parametrize("source", ["auto", "estimated"])
+def test_clamped_estimates_that_feed_fatigue_are_counted(source):
+    """Estimates of motion outside the model's range (held at its edge) are used, and the
+    ones used are counted; the count is saved with the state."""
+    cfg = dataclasses.replace(default_config().load, source=source, stale_after_s=5.0)
+    sel = LoadSelector(cfg, {"last_measured_ns": None})  # a state from before the count
+    e_t = np.arange(1, 41, dtype=np.int64) * (S // 10)  # 4 s of estimates, no tension
+    e_v = np.full(e_t.shape, 800.0)
+    clamped = np.zeros(e_t.shape, bool)
+    clamped[[3, 4, 5, 30]] = True
+    t, v, src = sel.select(np.zeros(0, np.int64), np.zeros(0), e_t, e_v, clamped)
+    assert sel.estimates_clamped == 4
+    np.testing.assert_array_equal(t, e_t)
+    assert np.all(src == ESTIMATED)
+    again = LoadSelector(cfg, sel.state())
+    assert again.estimates_clamped == 4 and again.last_measured_ns == sel.last_measured_ns
+    if source == "auto":
+        # with a live load cell the estimates are not used: clamped ones are not counted
+        m_t = e_t[-1] + np.arange(1, 21, dtype=np.int64) * (S // 20)
+        e2 = m_t[::2] + 1
+        sel.select(m_t, np.full(m_t.shape, 900.0), e2, np.full(e2.shape, np.nan),
+                   np.ones(e2.shape, bool))
+        assert sel.estimates_clamped == 4
+
+
+def _motion_run(heave):
+    from monitor.blocks import SampleBlock
+    from monitor.config import config_with
+    from monitor.pipeline import Pipeline
+
+    c = default_config()
+    config = config_with(c, load={**c.raw["load"], "source": "estimated",
+                                  "motion_sensor": "motion"})
+    n = heave.shape[0]
+    t = 1_700_000_000 * S + np.arange(n, dtype=np.int64) * (S // 10)
+    k = np.arange(n)
+    surge, sway = 0.3 * np.sin(k / 40.0), 0.1 * np.cos(k / 55.0)
+    p = Pipeline(config, horizon_s=3600.0, gate_all=True)
+    for a in range(0, n, 100):
+        p.process(SampleBlock("vaps", "motion", t[a:a + 100], {
+            "heave_m": heave[a:a + 100], "surge_m": surge[a:a + 100], "sway_m": sway[a:a + 100]}))
+    p.flush()
+    return p.report()
+
+
+def test_motion_outside_the_estimators_table_is_counted_as_clamped():
+    """A slow heave excursion to 4 m passes validation (it is no spike) but lies outside the
+    estimator's tension table (+-2 m): its samples feed fatigue at the table's edge value and
+    the report counts them."""
+    n = 6000
+    k = np.arange(n)
+    calm = 0.5 * np.sin(2 * np.pi * k / 52.5)
+    excursion = calm + np.where((k > 3000) & (k < 3400), 4.0 * np.sin(np.pi * (k - 3000) / 400), 0)
+    a, b = _motion_run(calm), _motion_run(excursion)
+    outside = int(np.count_nonzero(excursion > 2.0))
+    assert a["tension_N"]["samples_estimate_clamped"] == 0
+    assert b["tension_N"]["samples_estimate_clamped"] == outside > 100
+    assert b["tension_N"]["samples_estimated"] == a["tension_N"]["samples_estimated"]
+    assert b["samples"]["motion"]["accepted"] == n and b["samples"]["motion"]["rejected"]["spike"] == 0

@@ -87,7 +87,7 @@ def test_the_cached_estimator_gives_the_same_bits_in_another_process(tmp_path):
         "k = np.arange(n)\n"
         "f = {'accel_x_mps2': 0.3 * np.sin(k / 9.0), 'accel_y_mps2': 0.1 * np.cos(k / 7.0),\n"
         "     'accel_z_mps2': 0.8 * np.sin(k / 5.0)}\n"
-        "t_ns, v = est.feed(k.astype(np.int64) * 100_000_000, f)\n"
+        "t_ns, v, _ = est.feed(k.astype(np.int64) * 100_000_000, f)\n"
         "print(dt, v.shape[0], v.tobytes().hex())\n"
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT), "BUOYMON_CACHE_DIR": str(tmp_path)}

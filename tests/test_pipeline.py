@@ -22,7 +22,8 @@ class FakeEstimator:
     def feed(self, t_ns, fields, want=None):
         v = 5000.0 + 400.0 * fields["accel_z_mps2"]
         # as the real estimator: unwanted samples are NaN (the pipeline must never use them)
-        return t_ns, v if want is None else np.where(want, v, np.nan)
+        return (t_ns, v if want is None else np.where(want, v, np.nan),
+                np.zeros(t_ns.shape, bool))
 
     def state(self):
         return {}
@@ -268,7 +269,8 @@ def test_models_estimator_adapter_is_split_invariant_and_restorable():
 
     config = default_config()
     t, imu = sea(300)["imu"]
-    ref_t, ref_v = build_estimator(config).feed(t, imu)
+    ref_t, ref_v, clamped = build_estimator(config).feed(t, imu)
+    assert clamped.shape == ref_t.shape and not clamped.any()  # a 1.5 m sea stays in range
     # the IMU integrator settles for a while; after that every sample has an estimate
     assert 0.4 * t.shape[0] < ref_t.shape[0] < t.shape[0] and np.all(ref_t == t[-ref_t.shape[0]:])
     assert np.all(np.isfinite(ref_v)) and np.all(ref_v >= 0)
@@ -279,6 +281,7 @@ def test_models_estimator_adapter_is_split_invariant_and_restorable():
         parts.append(est.feed(t[a:a + 7], {k: v[a:a + 7] for k, v in imu.items()}))
     np.testing.assert_array_equal(np.concatenate([p[0] for p in parts]), ref_t)
     np.testing.assert_allclose(np.concatenate([p[1] for p in parts]), ref_v, rtol=1e-9)
+    np.testing.assert_array_equal(np.concatenate([p[2] for p in parts]), clamped)
 
 
 def test_estimator_for_a_line_given_as_segments():
@@ -289,7 +292,7 @@ def test_estimator_for_a_line_given_as_segments():
              "diameter_m": 0.05}
     config = config_with(c, mooring={"segment": [chain], "depth_m": 23.0, "span_m": 50.0})
     t, imu = sea(300)["imu"]
-    est_t, est_v = build_estimator(config).feed(t, imu)
+    est_t, est_v, _ = build_estimator(config).feed(t, imu)
     assert est_t.shape[0] > 0.4 * t.shape[0]
     # a 60 m chain of 300 N/m hanging 23 m: the top tension is at least its suspended weight
     assert np.all(est_v > 300.0 * 23.0)
