@@ -613,6 +613,7 @@ class Pipeline:
             "load_source": self.last["source"],
             "measured_tension_N": self.last["measured_N"],
             "estimated_tension_N": self.last["estimated_N"],
+            "estimates_clamped": self.selector.estimates_clamped,
             "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
                            for n, c in self.components.items()},
             "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,

@@ -91,6 +91,7 @@ def _motion_run(heave):
         p.process(SampleBlock("vaps", "motion", t[a:a + 100], {
             "heave_m": heave[a:a + 100], "surge_m": surge[a:a + 100], "sway_m": sway[a:a + 100]}))
     p.flush()
+    assert p.status()["estimates_clamped"] == p.report()["tension_N"]["samples_estimate_clamped"]
     return p.report()
 
 
