@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 import subprocess
 import sys
@@ -105,6 +106,26 @@ def test_the_cached_estimator_gives_the_same_bits_in_another_process(tmp_path):
     loaded = run(cache=True)
     assert loaded[1] == fresh[1] > 100 and loaded[2] == fresh[2]
     assert loaded[0] < fresh[0]  # the catenary solves are skipped
+
+
+def test_a_change_to_the_builders_module_invalidates_its_entries(tmp_path, monkeypatch):
+    monkeypatch.setenv("BUOYMON_CACHE_DIR", str(tmp_path / "c"))
+    src = tmp_path / "builder_mod.py"
+    src.write_text("def build():\n    return 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import builder_mod
+
+    model_cache._code_version.cache_clear()
+    try:
+        assert model_cache.cached("demo", Inputs(1.0, "x"), builder_mod.build) == 1
+        assert model_cache.cached("demo", Inputs(1.0, "x"), builder_mod.build) == 1
+        src.write_text("def build():\n    return 22\n")  # same module, new source
+        importlib.reload(builder_mod)
+        model_cache._code_version.cache_clear()
+        assert model_cache.cached("demo", Inputs(1.0, "x"), builder_mod.build) == 22
+    finally:
+        model_cache._code_version.cache_clear()
+        sys.modules.pop("builder_mod", None)
 
 
 def test_a_change_to_the_models_source_invalidates_every_entry(tmp_path, monkeypatch):
