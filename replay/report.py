@@ -15,7 +15,7 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
-                                     ``remaining_life_days`` ("inf" = nothing accrues),
+                                     ``remaining_life_days`` (null = nothing accrues),
                                      ``kind``, ``lay``}
 ``alerts``                           alert transitions (monitor.alerts records as dicts)
 ``inputs``                           files read and the reader's statistics (lost data)

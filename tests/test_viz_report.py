@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import re
 import subprocess
 from pathlib import Path
@@ -209,3 +210,28 @@ def test_empty_and_non_finite_values_render(tmp_path):
     out = write_report(parse_report(r), tmp_path / "e2.html")
     assert sorted(out.png_paths) == ["alerts", "tension"]
     assert "Not shown: no fatigue components in the report" in out.html_path.read_text()
+
+
+def test_replay_html_with_a_component_that_accrues_nothing(tmp_path, capsys):
+    """The report writer leaves remaining_life_days null when nothing accrues (and tension
+    figures null without samples): replay --html renders it instead of failing."""
+    from monitor.blocks import SampleBlock
+    from replay.writer import LogWriter
+
+    log = tmp_path / "still.mcap"
+    t0 = 1_700_000_000 * 10**9
+    with LogWriter(log) as w:
+        for k in range(30):  # a constant tension: no stress cycle at all
+            t = t0 + k * 10**9 + np.arange(20, dtype=np.int64) * (10**9 // 20)
+            w.write_block(SampleBlock("vaps", "tension", t, {"tension_N": np.full(20, 900.0)}),
+                          recv_ns=t0 + (k + 1) * 10**9)
+    report, html = tmp_path / "r.json", tmp_path / "r.html"
+    assert buoymon(["replay", str(log), "--report", str(report), "--html", str(html),
+                    "--no-progress"]) == 0
+    data = json.loads(report.read_text())
+    assert data["components"]["conductor"]["remaining_life_days"] is None
+    parsed = parse_report(data)
+    assert parsed.components["conductor"].remaining_life_days == math.inf
+    assert "&infin;" in html.read_text() and "html report" in capsys.readouterr().out
+    data["tension_N"] = {k: None for k in ("min", "mean", "max", "p99")}
+    assert all(math.isnan(v) for v in parse_report(data).tension.values())

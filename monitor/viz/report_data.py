@@ -27,6 +27,11 @@ def _num(value: Any, where: str) -> float:
     return float(value)
 
 
+def _figure(value: Any, where: str) -> float:
+    """A figure the writer may leave ``null`` (no value: NaN), else as :func:`_num`."""
+    return math.nan if value is None else _num(value, where)
+
+
 def _array(value: Any, where: str, n: int | None = None) -> np.ndarray:
     if not isinstance(value, (list, tuple)):
         raise ValueError(f"report: {where}: expected a list of numbers, got {type(value).__name__}")
@@ -129,11 +134,13 @@ def _component(name: str, c: Any) -> Component:
     where = f"components.{name}"
     c = _mapping(c, where)
     try:
-        base = {k: _num(c[k], f"{where}.{k}") for k in (
+        base = {k: _figure(c[k], f"{where}.{k}") for k in (
             "damage", "damage_committed", "cycles", "max_stress_Pa", "damage_rate_per_day",
             "remaining_life_days")}
     except KeyError as exc:
         raise ValueError(f"report: {where}.{exc.args[0]} is missing") from exc
+    if c["remaining_life_days"] is None and base["damage_rate_per_day"] == 0.0:
+        base["remaining_life_days"] = math.inf  # the writer's null: nothing accrues
     opt: dict[str, Any] = {}
     if "damage_history" in c:
         opt["damage_history"] = _series(c["damage_history"], f"{where}.damage_history",
@@ -181,7 +188,7 @@ def parse_report(data: Any) -> Report:
                             {str(r): int(_num(n, f"samples.{ch}.rejected.{r}"))
                              for r, n in rejected.items()})
     t = _mapping(d["tension_N"], "tension_N")
-    tension = {k: _num(t.get(k), f"tension_N.{k}") for k in ("min", "mean", "max", "p99")}
+    tension = {k: _figure(t.get(k), f"tension_N.{k}") for k in ("min", "mean", "max", "p99")}
     comps = {str(n): _component(str(n), c)
              for n, c in _mapping(d["components"], "components").items()}
     if not isinstance(d["alerts"], list):
