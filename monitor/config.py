@@ -466,7 +466,7 @@ def _parse_alert_timing(raw: Any) -> AlertsTiming:
     interval = r.float("eval_interval_s", 10.0, gt=0)
     if interval * 1e9 != round(interval * 1e9):
         raise r.error("eval_interval_s", interval, "must be a whole number of nanoseconds")
-    return AlertsTiming(interval, r.float("resend_interval_s", 3600.0, gt=0))
+    return AlertsTiming(interval, r.float("resend_interval_s", 3600.0, ge=0))  # 0 = never
 
 
 def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:

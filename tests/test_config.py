@@ -139,3 +139,11 @@ def test_external_sections_are_checked_by_their_owner_or_reported_unchecked():
     assert set(results) == {"alerts", "zenoh"}
     for name, status in results.items():
         assert status == "ok" or status.startswith("not checked:"), (name, status)
+
+
+def test_resend_interval_zero_means_never():
+    """0 is the documented "never re-send" (monitor/alerts/config.py); negative is an error."""
+    c = default_config()
+    assert config_with(c, alerts={**c.raw["alerts"], "resend_interval_s": 0}).alerts.resend_interval_s == 0
+    with pytest.raises(ConfigError, match="alerts.resend_interval_s = -1.0: must be >= 0"):
+        config_with(c, alerts={**c.raw["alerts"], "resend_interval_s": -1})
