@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import logging
 import struct
+import zlib
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -375,12 +376,43 @@ class LogReader:
                 st.error = "not an MCAP file (bad or missing magic bytes)"
                 return
             ctx = _FileContext(fidx)
+            self._summary_definitions(f, size, ctx)
+            f.seek(8)
             ahead = ReadAhead(f.fileno(), size, _digest) if self.read_ahead else None
             try:
                 yield from self._read_records(f, size, ctx, st, ahead)
             finally:
                 if ahead is not None:
                     ahead.close()
+
+    def _summary_definitions(self, f, size: int, ctx: "_FileContext") -> None:
+        """Take the schemas and channels repeated in the summary section, when the file ends
+        in an intact footer. mcap's own writer (``buoymon record``) defines a channel inside
+        the first chunk that uses it: should that chunk be damaged, the channel's messages in
+        the other chunks are then still decoded. The definitions are the same as in the data
+        section (the first one read wins), so an intact file reads exactly as before."""
+        if size < 8 + 37:
+            return
+        f.seek(size - 37)
+        tail = f.read(37)  # footer record (opcode, length, 20 bytes), then the magic
+        if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
+            return
+        start, _, crc = struct.unpack_from("<QQI", tail, 9)
+        if not 8 <= start < size - 37:
+            return
+        f.seek(start)
+        buf = f.read(size - 37 - start)
+        if crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != crc:
+            return  # a damaged summary: read the data section alone
+        scratch = FileStats(path="")  # a damaged summary loses no data: not reported as loss
+        pos = 0
+        while pos + 9 <= len(buf):
+            op, ln = struct.unpack_from("<BQ", buf, pos)
+            if ln > len(buf) - pos - 9:
+                break
+            if op in (OP_SCHEMA, OP_CHANNEL):
+                ctx.definition(op, buf[pos + 9:pos + 9 + ln], self, scratch)
+            pos += 9 + ln
 
     def _read_records(self, f, size: int, ctx: "_FileContext", st: FileStats,
                       ahead: ReadAhead | None) -> Iterator[None]:
@@ -655,7 +687,7 @@ class _FileContext:
             cid, sid = struct.unpack_from("<HH", b, 0)
             topic, p = _str_at(b, 4)
             enc, _ = _str_at(b, p)
-        except struct.error:
+        except (struct.error, UnicodeDecodeError):
             st.lost.append(LostRange("malformed schema or channel record", -1))
             return
         if cid in self.channels:

@@ -279,3 +279,49 @@ def test_read_ahead_falls_back_when_its_worker_fails(log, tmp_path):
             assert ahead.take(len(data) + 5) is None
         finally:
             ahead.close()
+
+
+def _mcap_library_log(path, n=120):
+    """A log written as `buoymon record` writes (mcap's Writer: a channel is defined inside the
+    first chunk that uses it, and again in the summary)."""
+    from mcap.writer import CompressionType, Writer
+
+    from replay import codec
+
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD, chunk_size=2000)
+        w.start(profile="", library="test")
+        sid = w.register_schema(codec.schema_name("tension"), "protobuf",
+                                codec.file_descriptor_set("tension"))
+        cid = w.register_channel("buoy/b1/sensor/tension", "protobuf", sid)
+        for k in range(n):
+            t = T0 + k * S + np.arange(20, dtype=np.int64) * (S // 20)
+            block = SampleBlock("b1", "tension", t, {"tension_N": k * 20 + np.arange(20.0)})
+            w.add_message(cid, log_time=T0 + (k + 1) * S, publish_time=int(t[0]),
+                          data=codec.encode_block(block))
+        w.finish()
+    with open(path, "rb") as f:
+        return sorted(make_reader(f).get_summary().chunk_indexes,
+                      key=lambda c: c.chunk_start_offset)
+
+
+def test_channel_defined_only_in_a_damaged_chunk_comes_from_the_summary(tmp_path):
+    path = tmp_path / "recorded.mcap"
+    chunks = _mcap_library_log(path)
+    first = chunks[0]
+    bad = bytearray(path.read_bytes())
+    bad[first.chunk_start_offset + first.chunk_length - 5] ^= 0xFF  # in its compressed records
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(bad))
+    _, st, values = _read(damaged)
+    n_first = _messages_in(damaged, first)
+    assert 0 < n_first < N_SECONDS
+    assert np.array_equal(values, np.arange(n_first * 20, N_SECONDS * 20.0))
+    assert not st.skipped and [lost.messages for lost in st.lost] == [n_first]
+    # the summary itself damaged: it is ignored, the data section alone is read as before
+    bad[-40] ^= 0xFF
+    damaged.write_bytes(bytes(bad))
+    _, st, values = _read(damaged)
+    assert values.shape[0] == 0 and sum(st.skipped.values()) == N_SECONDS - n_first
+    _, st, values = _read(path)
+    assert np.array_equal(values, np.arange(N_SECONDS * 20.0)) and not st.lost
