@@ -34,9 +34,12 @@ def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None
 
 
 def client_side(zc: ZenohConfig) -> ZenohConfig:
-    """The recorder joins the daemon's network: it connects to the configured endpoints (the
-    daemon's listen endpoints when none are given to connect to) and listens on nothing."""
-    return replace(zc, listen=(), connect=zc.connect or zc.listen)
+    """The recorder joins the daemon's network as a client: it connects to the configured
+    endpoints (the daemon's listen endpoints when none are given to connect to) and listens on
+    nothing. A client because a Zenoh peer does not forward between other peers: as a peer
+    the recorder would miss what peer publishers (``buoymon simulate --publish``, sensor
+    drivers) send to the daemon."""
+    return replace(zc, mode="client", listen=(), connect=zc.connect or zc.listen)
 
 
 def recorder_token_key(buoy_id: str) -> str:

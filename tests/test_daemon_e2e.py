@@ -27,7 +27,7 @@ from monitor import zenoh_io  # noqa: E402
 from monitor.blocks import SampleBlock  # noqa: E402
 from monitor.cmd_record import recorder_token_key  # noqa: E402
 from monitor.daemon_config import ZenohConfig  # noqa: E402
-from monitor.publisher import publish_blocks  # noqa: E402
+from monitor.publisher import publish_blocks, publisher_config  # noqa: E402
 from monitor.checkpoint import CheckpointStore  # noqa: E402
 from monitor.config import load_config  # noqa: E402
 from monitor.pipeline import Pipeline  # noqa: E402
@@ -424,6 +424,8 @@ def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_p
         while not [r for r in session.liveliness().get(recorder_token_key(BUOY), timeout=1)]:
             assert time.monotonic() < deadline and rec.poll() is None, "recorder not up"
             time.sleep(0.1)
+    # published as `buoymon simulate --publish` does: a peer, like the recorder's daemon
+    with zenoh_io.open_session(publisher_config([f"tcp/127.0.0.1:{port}"])) as session:
         publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=None)
         wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
                          buoy=BUOY)
