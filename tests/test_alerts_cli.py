@@ -151,3 +151,30 @@ def test_daemon_absent_times_out(capsys):
     assert "no answer from buoy 'b1'" in capsys.readouterr().err
 
 
+
+
+def test_daemon_checkpoint_list_and_reset(tmp_path, capsys):
+    """--state also takes a stopped daemon's SQLite checkpoint (the pipeline state under
+    "pipeline"); a reset is saved as a new checkpoint the daemon resumes from."""
+    from monitor.checkpoint import CheckpointStore
+
+    path = tmp_path / "checkpoint.sqlite"
+    store = CheckpointStore(path)
+    store.save({"pipeline": {"x": 1, "alerts": firing_engine().state()}, "counters": {"n": 3}})
+    store.close()
+    assert main(["alerts", "list", "--state", str(path), "--json"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["alerts"]) == 4
+    assert main(["alerts", "reset", "damage_warning", "right", "--who", "bo",
+                 "--why", "cable replaced", "--state", str(path)]) == 0
+    store = CheckpointStore(path)
+    saved = store.load()
+    store.close()
+    assert saved.seq == 2 and saved.state["counters"] == {"n": 3}
+    assert saved.state["pipeline"]["x"] == 1
+    hist = saved.state["pipeline"]["alerts"]["history"]
+    assert (hist[-1]["type"], hist[-1]["who"]) == ("reset", "bo")
+    capsys.readouterr()
+    garbage = tmp_path / "garbage.bin"
+    garbage.write_bytes(b"\x81\x00\xff" * 10)
+    assert main(["alerts", "list", "--state", str(garbage)]) == 1
+    assert "neither a daemon checkpoint nor a JSON state file" in capsys.readouterr().err

@@ -5,9 +5,11 @@ Two targets:
 * a running daemon, over Zenoh (``--buoy ID [--connect ENDPOINT]``): ``list`` queries
   ``buoy/<id>/monitor/alerts``; ``ack``/``reset`` send the command as the payload of a query on
   ``buoy/<id>/monitor/alerts/operator`` and print the daemon's answer once it has applied it;
-* a saved state file (``--state PATH``, the pipeline's JSON state whose ``"alerts"`` key holds
-  the alert engine state) for when the daemon is stopped; ``ack``/``reset`` rewrite the file
-  atomically, and a reset is applied at the first tick after the daemon restarts.
+* a saved state for when the daemon is stopped (``--state PATH``): the daemon's checkpoint
+  (SQLite, ``[state] path``) or a replay's JSON state file (``buoymon replay --state``), whose
+  ``"alerts"`` key holds the alert engine state; ``ack``/``reset`` rewrite it atomically, and a
+  reset is applied at the first tick after the daemon restarts. (A running daemon would
+  overwrite its checkpoint: talk to it with ``--buoy`` instead.)
 
 Every ack and reset records who, when (wall-clock time of the command) and why in the engine's
 history.
@@ -37,7 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     def target(sp: argparse.ArgumentParser) -> None:
         g = sp.add_mutually_exclusive_group(required=True)
-        g.add_argument("--state", type=Path, help="pipeline state file (JSON) of a stopped daemon")
+        g.add_argument("--state", type=Path, help="checkpoint (SQLite) of a stopped daemon, or "
+                       "a replay's JSON state file")
         g.add_argument("--buoy", help="buoy id of a running daemon (reached over Zenoh)")
         sp.add_argument("--connect", action="append", metavar="ENDPOINT",
                         help=f"Zenoh endpoint of the daemon (default {DEFAULT_CONNECT}); "
@@ -108,19 +111,46 @@ def format_table(alerts: list[dict[str, Any]]) -> str:
 
 
 def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]:
+    with open(path, "rb") as f:
+        checkpoint = f.read(16) == b"SQLite format 3\x00"
+    if checkpoint:
+        from monitor.checkpoint import CheckpointStore
+
+        store = CheckpointStore(path)
+        try:
+            saved = store.load()
+            if saved is None or not isinstance(saved.state, dict) \
+                    or not isinstance(saved.state.get("pipeline"), dict):
+                raise ValueError(f"{path}: the daemon checkpoint holds no pipeline state yet")
+            outer = saved.state
+            result, changed = _apply(outer["pipeline"], path, command)
+            if changed:
+                store.save(outer)
+            return result
+        finally:
+            store.close()
     try:
         state = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not a JSON state file ({exc})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: neither a daemon checkpoint nor a JSON state file "
+                         f"({exc})") from None
+    result, changed = _apply(state, path, command)
+    if changed:
+        atomic_write_text(path, json.dumps(state, allow_nan=False))
+    return result
+
+
+def _apply(state: Any, path: Path, command: dict[str, Any] | None
+           ) -> tuple[dict[str, Any], bool]:
+    """List the alerts of a pipeline state, or apply ``command`` to it in place."""
     if not isinstance(state, dict) or "alerts" not in state:
-        raise ValueError(f"{path}: state file has no \"alerts\" entry")
+        raise ValueError(f"{path}: state has no \"alerts\" entry")
     engine = AlertEngine.from_state(state["alerts"])
     if command is None:
-        return {"buoy": engine.buoy_id, "alerts": [r.to_dict() for r in engine.active()]}
+        return {"buoy": engine.buoy_id, "alerts": [r.to_dict() for r in engine.active()]}, False
     result = engine.apply_command(command)
     state["alerts"] = engine.state()
-    atomic_write_text(path, json.dumps(state, allow_nan=False))
-    return result
+    return result, True
 
 
 def _on_daemon(buoy: str, connect: list[str], timeout: float,
