@@ -19,12 +19,24 @@ from monitor.viz.alert_view import alert_fields
 
 
 def _num(value: Any, where: str) -> float:
-    """A JSON number, or one of the strings "inf", "-inf", "nan"; ValueError otherwise."""
+    """A JSON number, one of the strings "inf", "-inf", "nan", or null (NaN: the replay writes
+    null for a figure it does not have, e.g. the remaining life when nothing accrues);
+    ValueError otherwise."""
+    if value is None:
+        return math.nan
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise ValueError(f"report: {where} = {value!r}: expected a number")
     if isinstance(value, str) and value.strip().lower() not in ("inf", "-inf", "+inf", "nan"):
         raise ValueError(f"report: {where} = {value!r}: expected a number")
     return float(value)
+
+
+def _count(value: Any, where: str) -> int:
+    """A finite JSON number as int (sample counts); ValueError otherwise."""
+    x = _num(value, where)
+    if not math.isfinite(x):
+        raise ValueError(f"report: {where} = {value!r}: expected a count")
+    return int(x)
 
 
 def _array(value: Any, where: str, n: int | None = None) -> np.ndarray:
@@ -177,8 +189,8 @@ def parse_report(data: Any) -> Report:
     for ch, s in _mapping(d["samples"], "samples").items():
         s = _mapping(s, f"samples.{ch}")
         rejected = _mapping(s.get("rejected", {}), f"samples.{ch}.rejected")
-        samples[str(ch)] = (int(_num(s.get("accepted"), f"samples.{ch}.accepted")),
-                            {str(r): int(_num(n, f"samples.{ch}.rejected.{r}"))
+        samples[str(ch)] = (_count(s.get("accepted"), f"samples.{ch}.accepted"),
+                            {str(r): _count(n, f"samples.{ch}.rejected.{r}")
                              for r, n in rejected.items()})
     t = _mapping(d["tension_N"], "tension_N")
     tension = {k: _num(t.get(k), f"tension_N.{k}") for k in ("min", "mean", "max", "p99")}
