@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from monitor.blocks import validate_buoy_id
+from monitor.cli_paths import check_output
 from replay.csv_import import DEFAULT_START, read_csv
 from replay.writer import LogWriter, Series
 
@@ -32,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         buoy_id = validate_buoy_id(args.buoy_id if args.buoy_id is not None else args.csv.stem)
         if not args.block_s > 0:
             raise ValueError(f"--block-s {args.block_s}: must be > 0")
+        check_output(args.output, [args.csv], "-o")
         data = read_csv(args.csv, start=args.start)
     except (ValueError, OSError) as e:
         hint = "" if args.buoy_id is not None else " (or pass --buoy-id)"

@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from monitor.cli_paths import check_output
 from monitor.config import ConfigError, default_config, load_config
 from monitor.events import Sink
 from replay import cmd_fleet
@@ -50,6 +51,7 @@ def write_html(path: str, report: dict) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from replay.report import summary_text, write_report
+    from replay.reader import expand_paths
     from replay.runner import replay_logs
 
     try:
@@ -59,6 +61,14 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.speed is not None and not args.speed > 0:
         print(f"replay: --speed {args.speed}: must be > 0", file=sys.stderr)
+        return 2
+    try:
+        inputs = expand_paths(args.logs)
+        for option in ("report", "html", "rrd"):
+            if getattr(args, option):
+                check_output(getattr(args, option), inputs, f"--{option}")
+    except ValueError as exc:
+        print(f"replay: {exc}", file=sys.stderr)
         return 2
     if cmd_fleet.wanted(args):
         return cmd_fleet.run(args, config)

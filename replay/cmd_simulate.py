@@ -14,6 +14,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from monitor.cli_paths import check_output
 from replay.simulate import LOAD_MODELS, SimConfig, simulate
 
 
@@ -83,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.output is None and args.publish is None:
             raise ValueError("-o/--output is required (or --publish)")
+        if args.output is not None:
+            check_output(args.output, [], "-o")
         if args.publish is not None:
             check_endpoint(args.publish, args.allow_remote)
         if args.speed is not None and not args.speed > 0:

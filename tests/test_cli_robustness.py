@@ -41,3 +41,43 @@ def test_replay_html_of_a_log_without_damage_rate(tmp_path, capsys):
     (tmp_path / "bad.json").write_text(json.dumps(report))
     assert main(["report", str(tmp_path / "bad.json")]) == 2
     assert "samples.tension.accepted = None" in capsys.readouterr().err
+
+
+def test_outputs_never_overwrite_an_input_file(tmp_path, capsys):
+    log = tiny_log(tmp_path / "a.mcap")
+    data = log.read_bytes()
+    for option in ("--report", "--html", "--rrd"):
+        assert main(["replay", str(log), option, str(log)]) == 2
+        assert f"{option} {log}: is the input file" in capsys.readouterr().err
+    # also when the log comes from a folder given on the command line
+    assert main(["replay", str(tmp_path), "--report", str(log)]) == 2
+    assert log.read_bytes() == data
+    report = tmp_path / "r.json"
+    assert main(["replay", str(log), "--report", str(report)]) == 0
+    text = report.read_text()
+    assert main(["report", str(report), "-o", str(report)]) == 2
+    assert "is the input file" in capsys.readouterr().err
+    assert report.read_text() == text
+    csv = tmp_path / "m.csv"
+    csv.write_text("time_s,tension_N\n0,100\n0.5,200\n")
+    assert main(["import", str(csv), "-o", str(csv)]) == 2
+    assert "-o" in capsys.readouterr().err
+    assert csv.read_text() == "time_s,tension_N\n0,100\n0.5,200\n"
+
+
+def test_an_output_that_is_a_folder_is_refused_before_any_work(tmp_path, capsys):
+    log = tiny_log(tmp_path / "a.mcap")
+    folder = tmp_path / "out"
+    folder.mkdir()
+    assert main(["replay", str(log), "--report", str(folder)]) == 2
+    assert f"--report {folder}: is a folder" in capsys.readouterr().err
+    assert main(["report", str(log), "-o", str(folder)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    csv = tmp_path / "m.csv"
+    csv.write_text("time_s,tension_N\n0,100\n")
+    assert main(["import", str(csv), "-o", str(folder)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    assert main(["simulate", "-o", str(folder), "--hours", "0.001", "--hs", "1", "--tp", "5",
+                 "--seed", "1"]) == 2
+    assert "is a folder" in capsys.readouterr().err
+
