@@ -81,3 +81,19 @@ def test_an_output_that_is_a_folder_is_refused_before_any_work(tmp_path, capsys)
                  "--seed", "1"]) == 2
     assert "is a folder" in capsys.readouterr().err
 
+
+def test_files_that_cannot_be_read_or_written_give_a_message(tmp_path, capsys):
+    missing = tmp_path / "no" / "such" / "x.mcap"
+    assert main(["simulate", "-o", str(missing), "--hours", "0.001", "--hs", "1", "--tp", "5",
+                 "--seed", "1"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("buoymon simulate: ") and str(missing) in err
+    csv = tmp_path / "m.csv"
+    csv.write_text("time_s,tension_N\n0,100\n")
+    assert main(["import", str(csv), "-o", str(missing)]) == 1
+    assert str(missing) in capsys.readouterr().err
+    assert main(["simulate", "-o", "/dev/full", "--hours", "0.001", "--hs", "1", "--tp", "5",
+                 "--seed", "1"]) == 1
+    assert "No space left on device" in capsys.readouterr().err
+    assert main(["check-config", str(tmp_path)]) in (1, 2)
+    assert str(tmp_path) in capsys.readouterr().err
