@@ -97,3 +97,39 @@ def test_files_that_cannot_be_read_or_written_give_a_message(tmp_path, capsys):
     assert "No space left on device" in capsys.readouterr().err
     assert main(["check-config", str(tmp_path)]) in (1, 2)
     assert str(tmp_path) in capsys.readouterr().err
+
+
+def test_state_file_continues_its_own_buoy_and_refuses_another(tmp_path, capsys):
+    # a log of a buoy that is not the config's: the state saved by part 1 continues in part 2
+    # (it used to be restored under the config's buoy id, so part 2 read nothing)
+    one = tiny_log(tmp_path / "one.mcap", buoy="b7", n=400)
+    assert main(["replay", str(one), "--report", str(tmp_path / "one.json")]) == 0
+    first = tiny_log(tmp_path / "p1.mcap", buoy="b7", n=200)
+    t = T0 + np.arange(200, 400, dtype=np.int64) * 50_000_000
+    v = 3000.0 + 500.0 * np.sin(np.arange(200, 400) * 0.7)
+    with LogWriter(tmp_path / "p2.mcap") as w:
+        w.write_series([Series("b7", "tension", t, v[None, :])], block_ns=10**9)
+    state = tmp_path / "state.json"
+    assert main(["replay", str(first), "--state", str(state)]) == 0
+    assert main(["replay", str(tmp_path / "p2.mcap"), "--state", str(state),
+                 "--report", str(tmp_path / "two.json")]) == 0
+    one_pass = json.loads((tmp_path / "one.json").read_text())
+    two_parts = json.loads((tmp_path / "two.json").read_text())
+    assert two_parts["samples"]["tension"]["accepted"] == 400
+    assert (two_parts["components"]["conductor"]["damage_committed"]
+            == one_pass["components"]["conductor"]["damage_committed"] > 0)
+    capsys.readouterr()
+    # a log of another buoy against that state: said so, and the state file is left as it was
+    saved = state.read_text()
+    other = tiny_log(tmp_path / "other.mcap", buoy="c9", t0_ns=T0 + 3600 * 10**9)
+    assert main(["replay", str(other), "--state", str(state)]) == 1
+    assert "the state is for buoy 'b7', the log for buoy 'c9'" in capsys.readouterr().err
+    assert state.read_text() == saved
+
+
+@pytest.mark.parametrize("text", ["[1, 2]", "42", '"state"', "null"])
+def test_state_file_that_is_json_but_not_a_state(tmp_path, capsys, text):
+    log = tiny_log(tmp_path / "a.mcap")
+    (tmp_path / "s.json").write_text(text)
+    assert main(["replay", str(log), "--state", str(tmp_path / "s.json")]) == 1
+    assert "expected a JSON object" in capsys.readouterr().err
