@@ -38,6 +38,7 @@ _ISO = re.compile(
     r"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d(?::\d\d)?)(?:\.(\d+))?(Z|z|[+-]\d\d:?\d\d)?$"
 )
 _NS = Decimal(10**9)
+LAST_NS = 2**63 - 1  # time stamps are int64 ns since the epoch: 2262-04-11T23:47:16Z at most
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,11 @@ def parse_iso_ns(text: str) -> int:
     except ValueError as e:
         raise ValueError(f"bad time {text!r}: {e}") from None
     secs = int(dt.timestamp())
-    return secs * 10**9 + (int(frac.ljust(9, "0")) if frac else 0)
+    t = secs * 10**9 + (int(frac.ljust(9, "0")) if frac else 0)
+    if t > LAST_NS:
+        raise ValueError(f"bad time {text!r}: after {_iso(LAST_NS)}, the last nanosecond time "
+                         "stamp")
+    return t
 
 
 def _columns(header: list[str]) -> tuple[int, bool, dict[str, list[int]]]:
@@ -198,15 +203,19 @@ def _bad_cells(row: list[str], width: int, value_cols: list[int], names: list[st
 def _time_ns(cell: str, relative: bool, start_ns: int) -> int:
     if not cell:
         raise ValueError("empty time cell")
-    if not relative:
-        return parse_iso_ns(cell)
-    try:
-        d = Decimal(cell)
-    except InvalidOperation:
-        raise ValueError(f"bad time_s {cell!r}: not a number") from None
-    if not d.is_finite():
-        raise ValueError(f"bad time_s {cell!r}: not finite")
-    t = start_ns + int((d * _NS).to_integral_value())
+    if relative:
+        try:
+            d = Decimal(cell)
+        except InvalidOperation:
+            raise ValueError(f"bad time_s {cell!r}: not a number") from None
+        if not d.is_finite():
+            raise ValueError(f"bad time_s {cell!r}: not finite")
+        t = start_ns + int((d * _NS).to_integral_value())
+        if t > LAST_NS:
+            raise ValueError(f"bad time_s {cell!r}: after {_iso(LAST_NS)}, the last nanosecond "
+                             "time stamp")
+    else:
+        t = parse_iso_ns(cell)
     if t <= 0:
-        raise ValueError(f"bad time_s {cell!r}: before the Unix epoch")
+        raise ValueError(f"bad time {cell!r}: not after the Unix epoch (1970-01-01T00:00:00Z)")
     return t

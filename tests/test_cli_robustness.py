@@ -133,3 +133,33 @@ def test_state_file_that_is_json_but_not_a_state(tmp_path, capsys, text):
     (tmp_path / "s.json").write_text(text)
     assert main(["replay", str(log), "--state", str(tmp_path / "s.json")]) == 1
     assert "expected a JSON object" in capsys.readouterr().err
+
+
+def test_times_beyond_nanosecond_time_stamps(tmp_path, capsys):
+    # int64 ns since the epoch end in 2262; before, such times overflowed with a traceback
+    csv = tmp_path / "far.csv"
+    csv.write_text("time,tension_N\n2024-01-01T00:00:00Z,1\n2300-01-01T00:00:00Z,2\n"
+                   "1969-12-31T23:59:59Z,3\n")
+    assert main(["import", str(csv), "-o", str(tmp_path / "far.mcap")]) == 0
+    err = capsys.readouterr().err
+    assert "line 3: bad time '2300-01-01T00:00:00Z': after 2262-04-11T23:47:16" in err
+    assert "line 4: bad time '1969-12-31T23:59:59Z': not after the Unix epoch" in err
+    csv.write_text("time_s,tension_N\n1e30,1\n0,2\n")
+    assert main(["import", str(csv), "-o", str(tmp_path / "far.mcap")]) == 0
+    assert "line 2: bad time_s '1e30': after 2262" in capsys.readouterr().err
+    assert main(["import", str(csv), "-o", str(tmp_path / "far.mcap"),
+                 "--start", "2300-01-01T00:00:00Z"]) == 2
+    assert "after 2262" in capsys.readouterr().err
+    for block_s in ("1e-12", "1e30"):
+        assert main(["import", str(csv), "-o", str(tmp_path / "far.mcap"),
+                     "--block-s", block_s]) == 2
+        assert f"--block-s {float(block_s)}: must be between" in capsys.readouterr().err
+    sim = ["simulate", "-o", str(tmp_path / "s.mcap"), "--hs", "1", "--tp", "5", "--seed", "1"]
+    assert main([*sim, "--hours", "1e9"]) == 2  # it used to write until the disk was full
+    assert "hours = 1000000000.0: from 2000-01-01T00:00:00Z the log would end after 2262" in \
+        capsys.readouterr().err
+    assert main([*sim, "--hours", "0.01", "--start", "9999-01-01T00:00:00Z"]) == 2
+    assert "after 2262" in capsys.readouterr().err
+    assert main([*sim, "--hours", "0.01", "--start", "1960-01-01T00:00:00Z"]) == 2
+    assert "start = '1960-01-01T00:00:00Z': must be after 1970" in capsys.readouterr().err
+    assert not (tmp_path / "s.mcap").exists()
