@@ -513,6 +513,8 @@ def load_config(path: str | Path) -> Config:
         raise ConfigError(f"config error: file {str(path)!r} not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config error: {path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"config error: {path}: not valid TOML (not UTF-8 text)") from None
     return parse_config(data, source=str(path))
 
 

@@ -105,6 +105,10 @@ def parse_iso_ns(text: str) -> int:
 def _columns(header: list[str]) -> tuple[int, bool, dict[str, list[int]]]:
     """Index of the time column, whether it is ``time_s``, and sensor -> value column indices."""
     names = [h.strip() for h in header]
+    other = [sep for sep in (";", "\t", "|") if len(names) == 1 and sep in names[0]]
+    if other:
+        raise ValueError(f"CSV header {names[0]!r}: one column; the file looks "
+                         f"{other[0]!r}-separated, the columns must be separated by commas")
     times = [i for i, n in enumerate(names) if n in ("time_s", "time")]
     if len(times) != 1:
         raise ValueError(f"CSV header {names}: needs exactly one time column, 'time_s' or 'time'")
@@ -136,7 +140,14 @@ def _columns(header: list[str]) -> tuple[int, bool, dict[str, list[int]]]:
 
 def read_csv(path: str | Path, start: str = DEFAULT_START) -> CsvData:
     """Parse a measurement CSV (see module doc). ValueError for an unusable header/start."""
-    start_ns = parse_iso_ns(start)
+    try:
+        return _read_csv(path, parse_iso_ns(start))
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.object[exc.start]:#04x}); expected "
+                         "a CSV file") from None
+
+
+def _read_csv(path: str | Path, start_ns: int) -> CsvData:
     data = CsvData()
     with open(path, newline="", encoding="utf-8-sig") as f:
         reader = csv.reader(f)

@@ -163,3 +163,23 @@ def test_times_beyond_nanosecond_time_stamps(tmp_path, capsys):
     assert main([*sim, "--hours", "0.01", "--start", "1960-01-01T00:00:00Z"]) == 2
     assert "start = '1960-01-01T00:00:00Z': must be after 1970" in capsys.readouterr().err
     assert not (tmp_path / "s.mcap").exists()
+
+
+def test_files_of_the_wrong_kind_are_named(tmp_path, capsys):
+    log = tiny_log(tmp_path / "a.mcap")  # binary, not UTF-8
+    assert main(["import", str(log), "-o", str(tmp_path / "b.mcap")]) == 2
+    assert f"{log}: not UTF-8 text (byte 0x89); expected a CSV file" in capsys.readouterr().err
+    assert main(["check-config", str(log)]) == 2
+    assert f"config error: {log}: not valid TOML (not UTF-8 text)" in capsys.readouterr().err
+    assert main(["replay", str(log), "--config", str(log)]) == 2
+    assert "not valid TOML" in capsys.readouterr().err
+    assert main(["report", str(log), "-o", str(tmp_path / "r.html")]) == 2
+    assert f"{log} is not a JSON report" in capsys.readouterr().err
+    assert main(["alerts", "list", "--state", str(log)]) == 1
+    assert f"{log}: not a JSON state file" in capsys.readouterr().err
+    assert main(["replay", str(log), "--state", str(log)]) == 1
+    assert "not valid JSON" in capsys.readouterr().err
+    semi = tmp_path / "semi.csv"
+    semi.write_text("time_s;tension_N\n0;100\n")
+    assert main(["import", str(semi), "-o", str(tmp_path / "b.mcap")]) == 2
+    assert "looks ';'-separated" in capsys.readouterr().err

@@ -110,7 +110,7 @@ def format_table(alerts: list[dict[str, Any]]) -> str:
 def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]:
     try:
         state = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not a JSON state file ({exc})") from None
     if not isinstance(state, dict) or "alerts" not in state:
         raise ValueError(f"{path}: state file has no \"alerts\" entry")

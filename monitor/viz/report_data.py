@@ -218,6 +218,8 @@ def load_report(path: str | Path) -> Report:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise ValueError(f"report: cannot read {path}: {exc.strerror}") from exc
+    except UnicodeDecodeError:
+        raise ValueError(f"report: {path} is not a JSON report (not UTF-8 text)") from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
