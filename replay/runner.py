@@ -51,6 +51,17 @@ def load_state(path: str | Path | None) -> dict[str, Any] | None:
     return state
 
 
+def _check_state_components(state: dict[str, Any], config: Config, path: str | Path) -> None:
+    """ValueError unless the state holds exactly the config's components: a component the
+    config lacks would have its damage dropped from the saved state, a new one would count
+    only the later parts."""
+    saved = sorted(state.get("components") or {})
+    wanted = sorted(c.name for c in config.components)
+    if saved != wanted:
+        raise ValueError(f"state file {path} holds components {saved}, the config {wanted}: "
+                         "continue with the configuration that wrote it")
+
+
 def save_state(path: str | Path, state: dict[str, Any]) -> None:
     atomic_write_text(path, json.dumps(state, allow_nan=True, separators=(",", ":")))
 
@@ -196,6 +207,8 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
 
     files = collect_logs(paths)
     state = load_state(state_path)
+    if state is not None:
+        _check_state_components(state, config, state_path)
     if show_progress is None:
         show_progress = sys.stderr.isatty()
     span = time_span(files) if show_progress else None

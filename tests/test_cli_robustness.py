@@ -183,3 +183,18 @@ def test_files_of_the_wrong_kind_are_named(tmp_path, capsys):
     semi.write_text("time_s;tension_N\n0;100\n")
     assert main(["import", str(semi), "-o", str(tmp_path / "b.mcap")]) == 2
     assert "looks ';'-separated" in capsys.readouterr().err
+
+
+def test_state_file_of_other_components_is_refused(tmp_path, capsys):
+    # continuing with a config whose components differ dropped the saved damage silently
+    log = tiny_log(tmp_path / "a.mcap", n=200)
+    state = tmp_path / "state.json"
+    assert main(["replay", str(log), "--state", str(state)]) == 0
+    saved = state.read_text()
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    renamed = tmp_path / "renamed.toml"
+    renamed.write_text(text.replace('name = "conductor"', 'name = "wire"', 1))
+    capsys.readouterr()
+    assert main(["replay", str(log), "--state", str(state), "--config", str(renamed)]) == 1
+    assert "holds components ['conductor'], the config ['wire']" in capsys.readouterr().err
+    assert state.read_text() == saved
