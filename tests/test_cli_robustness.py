@@ -198,3 +198,12 @@ def test_state_file_of_other_components_is_refused(tmp_path, capsys):
     assert main(["replay", str(log), "--state", str(state), "--config", str(renamed)]) == 1
     assert "holds components ['conductor'], the config ['wire']" in capsys.readouterr().err
     assert state.read_text() == saved
+
+
+def test_summary_names_an_unreadable_file(tmp_path, capsys):
+    tiny_log(tmp_path / "good.mcap")
+    (tmp_path / "junk.mcap").write_bytes(b"garbage\n")
+    assert main(["replay", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert (f"damaged input: unreadable {tmp_path / 'junk.mcap'} (not an MCAP file" in out)
+    assert "without footer" not in out and ": ;" not in out
