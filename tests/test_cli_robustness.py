@@ -207,3 +207,11 @@ def test_summary_names_an_unreadable_file(tmp_path, capsys):
     out = capsys.readouterr().out
     assert (f"damaged input: unreadable {tmp_path / 'junk.mcap'} (not an MCAP file" in out)
     assert "without footer" not in out and ": ;" not in out
+
+
+@pytest.mark.parametrize("timeout", ["-1", "0", "nan", "inf"])
+def test_alerts_timeout_must_be_positive(capsys, timeout):
+    # -1 waited no time and blamed the daemon; nan said 'negative timeout'
+    assert main(["alerts", "list", "--buoy", "nobuoy", "--timeout", timeout]) == 1
+    assert f"--timeout {float(timeout)}: must be a number of seconds > 0" in \
+        capsys.readouterr().err
