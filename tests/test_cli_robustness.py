@@ -215,3 +215,11 @@ def test_alerts_timeout_must_be_positive(capsys, timeout):
     assert main(["alerts", "list", "--buoy", "nobuoy", "--timeout", timeout]) == 1
     assert f"--timeout {float(timeout)}: must be a number of seconds > 0" in \
         capsys.readouterr().err
+
+
+def test_view_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
+    # the viewer used to start, show nothing and end with 'exited with status 0'
+    report = tmp_path / "r.json"
+    report.write_text("{}")
+    assert main(["view", str(report)]) == 2
+    assert f"not a Rerun recording (.rrd): {report}" in capsys.readouterr().err
