@@ -223,3 +223,25 @@ def test_view_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
     report.write_text("{}")
     assert main(["view", str(report)]) == 2
     assert f"not a Rerun recording (.rrd): {report}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("replay_horizon_s = 3600.0", "replay_horizon_s = 1e300",
+     "ordering.replay_horizon_s = 1e+300: must be <= 1e+09"),
+    ("eval_interval_s = 10.0", "eval_interval_s = 1e12",
+     "alerts.eval_interval_s = 1000000000000.0: must be <= 1e+09"),
+    ("on_delay_s = 60.0", "on_delay_s = 1e300", "on_delay_s = 1e+300: must be <= 1e+09"),
+    ("window_s = 600.0", "window_s = 1e300", "window_s = 1e+300: must be <= 1e+09"),
+])
+def test_config_durations_have_a_ceiling(tmp_path, capsys, old, new, message):
+    # durations become int64 nanoseconds: 1e300 s passed check-config and then the replay
+    # died with an OverflowError
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    assert old in text
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace(old, new, 1))
+    assert main(["check-config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+    log = tiny_log(tmp_path / "a.mcap")
+    assert main(["replay", str(log), "--config", str(cfg)]) in (1, 2)  # [alerts]: 1
+    assert message in capsys.readouterr().err
