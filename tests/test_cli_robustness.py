@@ -245,3 +245,13 @@ def test_config_durations_have_a_ceiling(tmp_path, capsys, old, new, message):
     log = tiny_log(tmp_path / "a.mcap")
     assert main(["replay", str(log), "--config", str(cfg)]) in (1, 2)  # [alerts]: 1
     assert message in capsys.readouterr().err
+
+
+def test_bad_sn_table_names_the_component(tmp_path, capsys):
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace('sn_curve = "vaps_copper"', 'sn_curve = { stress_range_Pa = '
+                                '[1e8, 2e8], cycles = [1e6, 1e7] }', 1))
+    assert main(["check-config", str(cfg)]) == 2
+    assert ("config error: component 'conductor': sn_curve table: tabulated cycles must "
+            "increase") in capsys.readouterr().err
