@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from monitor.cli_paths import check_output
@@ -67,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
         for option in ("report", "html", "rrd"):
             if getattr(args, option):
                 check_output(getattr(args, option), inputs, f"--{option}")
+        if args.report_dir and Path(args.report_dir).exists() and not Path(args.report_dir).is_dir():
+            raise ValueError(f"--report-dir {args.report_dir}: is a file, expected a folder")
     except ValueError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2

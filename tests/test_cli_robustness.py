@@ -255,3 +255,12 @@ def test_bad_sn_table_names_the_component(tmp_path, capsys):
     assert main(["check-config", str(cfg)]) == 2
     assert ("config error: component 'conductor': sn_curve table: tabulated cycles must "
             "increase") in capsys.readouterr().err
+
+
+def test_fleet_report_dir_that_is_a_file_is_refused_before_the_replay(tmp_path, capsys):
+    a, b = tiny_log(tmp_path / "a.mcap", buoy="a1"), tiny_log(tmp_path / "b.mcap", buoy="b1")
+    taken = tmp_path / "taken.json"
+    taken.write_text("{}")
+    assert main(["replay", str(a), str(b), "--report-dir", str(taken)]) == 2
+    assert f"--report-dir {taken}: is a file" in capsys.readouterr().err
+    assert taken.read_text() == "{}"
