@@ -107,6 +107,8 @@ class SimConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be an integer >= 0")
         validate_buoy_id(self.buoy_id)
+        if round(self.hours * 3600 * BASE_HZ) < 1:
+            raise ValueError(f"hours = {self.hours!r}: shorter than one sample at {BASE_HZ} Hz")
         start_ns = parse_iso_ns(self.start)
         if start_ns % SECOND:
             raise ValueError(f"start = {self.start!r}: must be a whole second")

@@ -264,3 +264,10 @@ def test_fleet_report_dir_that_is_a_file_is_refused_before_the_replay(tmp_path, 
     assert main(["replay", str(a), str(b), "--report-dir", str(taken)]) == 2
     assert f"--report-dir {taken}: is a file" in capsys.readouterr().err
     assert taken.read_text() == "{}"
+
+
+def test_simulate_shorter_than_one_sample(tmp_path, capsys):
+    # it divided by the zero samples it wrote
+    assert main(["simulate", "-o", str(tmp_path / "s.mcap"), "--hours", "1e-9", "--hs", "1",
+                 "--tp", "5", "--seed", "1"]) == 2
+    assert "hours = 1e-09: shorter than one sample at 20 Hz" in capsys.readouterr().err
