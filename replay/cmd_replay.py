@@ -13,6 +13,11 @@ from monitor.events import Sink
 from replay import cmd_fleet
 
 
+# slowest pace: a millionth of real time already stretches a 1 s block to 12 days; slower
+# ones overflow the sleep
+MIN_SPEED = 1e-6
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("replay", help="replay MCAP logs through the fatigue pipeline")
     p.add_argument("logs", nargs="+", help="MCAP files or directories of them (replayed in time order)")
@@ -60,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(exc, file=sys.stderr)
         return 2
-    if args.speed is not None and not args.speed > 0:
-        print(f"replay: --speed {args.speed}: must be > 0", file=sys.stderr)
+    if args.speed is not None and not args.speed >= MIN_SPEED:
+        print(f"replay: --speed {args.speed}: must be >= {MIN_SPEED:g}", file=sys.stderr)
         return 2
     try:
         inputs = expand_paths(args.logs)

@@ -271,3 +271,14 @@ def test_simulate_shorter_than_one_sample(tmp_path, capsys):
     assert main(["simulate", "-o", str(tmp_path / "s.mcap"), "--hours", "1e-9", "--hs", "1",
                  "--tp", "5", "--seed", "1"]) == 2
     assert "hours = 1e-09: shorter than one sample at 20 Hz" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("speed", ["1e-300", "0", "-1", "nan"])
+def test_pace_speed_has_a_floor(tmp_path, capsys, speed):
+    # 1e-300 overflowed time.sleep with a traceback
+    log = tiny_log(tmp_path / "a.mcap", n=100)
+    assert main(["replay", str(log), "--speed", speed]) == 2
+    assert f"--speed {float(speed)}: must be >= 1e-06" in capsys.readouterr().err
+    assert main(["simulate", "-o", str(tmp_path / "s.mcap"), "--hours", "0.01", "--hs", "1",
+                 "--tp", "5", "--seed", "1", "--publish", "--speed", speed]) == 2
+    assert f"--speed {float(speed)}: must be >= 1e-06" in capsys.readouterr().err
