@@ -52,7 +52,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         from monitor.logs import setup_logging
 
         setup_logging(args.log_level)
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        except OSError as exc:
+            # a file the command cannot read or write (missing folder, disk full, no access):
+            # the operating system's message names the file; a traceback would add nothing
+            print(f"buoymon {args.command}: {exc}", file=sys.stderr)
+            return 1
     except KeyboardInterrupt:
         # Ctrl-C: a message instead of a traceback, and the shell's status for SIGINT. Reports
         # and state files are written (atomically) only at the end, so none is half-written.

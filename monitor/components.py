@@ -44,7 +44,11 @@ def build_sn_curve(cfg: ComponentConfig) -> Any:
             raise ValueError(f"config error: component {cfg.name!r}: sn_curve = "
                              f"{sn.preset!r}: {exc}") from None
     else:
-        curve = fatigue.SNCurve.tabulated(np.array(sn.stress_range_Pa) / 1e6, sn.cycles)
+        try:
+            curve = fatigue.SNCurve.tabulated(np.array(sn.stress_range_Pa) / 1e6, sn.cycles)
+        except ValueError as exc:
+            raise ValueError(f"config error: component {cfg.name!r}: sn_curve table: {exc}"
+                             ) from None
     return curve.with_factors(derating=cfg.derating, scf=cfg.scf, dff=cfg.dff,
                               mean_correction=cfg.mean_stress, ultimate_Pa=cfg.ultimate_Pa)
 

@@ -27,6 +27,9 @@ from typing import Any, Mapping, Sequence
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 
 DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
+# longest time span a duration key may give: time is int64 ns, and a span in ns must fit with
+# room to add it to a time stamp (1e9 s is about 32 years)
+MAX_DURATION_S = 1e9
 
 # Top-level sections parsed by other modules: name -> "module:attribute.path", a callable
 # taking the section's raw table and raising ValueError on a bad value. A module that is not
@@ -409,7 +412,7 @@ def _parse_fatigue(r: SectionReader) -> FatigueConfig:
     edges = r.floats("histogram_edges_Pa", [i * 5.0e6 for i in range(41)], increasing=True,
                      min_len=2)
     out = FatigueConfig(
-        rate_window_s=r.float("rate_window_s", 3600.0, gt=0),
+        rate_window_s=r.float("rate_window_s", 3600.0, gt=0, le=MAX_DURATION_S),
         histogram_edges_Pa=edges,
         reference_cycles=r.float("reference_cycles", 1.0e7, gt=0),
     )
@@ -420,7 +423,7 @@ def _parse_fatigue(r: SectionReader) -> FatigueConfig:
 def _parse_load(r: SectionReader) -> LoadConfig:
     out = LoadConfig(
         source=r.str("source", "auto", choices=("auto", "measured", "estimated")),
-        stale_after_s=r.float("stale_after_s", 5.0, gt=0),
+        stale_after_s=r.float("stale_after_s", 5.0, gt=0, le=MAX_DURATION_S),
         motion_sensor=r.str("motion_sensor", "imu", choices=("imu", "motion")),
         motion_rate_hz=r.float("motion_rate_hz", 10.0, gt=0),
     )
@@ -445,7 +448,7 @@ def _parse_validate(r: SectionReader, load: LoadConfig) -> dict[str, SensorLimit
             f.done()
             fields[name] = limits
         stale_default = load.stale_after_s if sensor == "tension" else DEFAULT_STALE_S[sensor]
-        stale = s.float("stale_after_s", stale_default, gt=0)
+        stale = s.float("stale_after_s", stale_default, gt=0, le=MAX_DURATION_S)
         if sensor == "tension" and s.has("stale_after_s") and stale != load.stale_after_s:
             raise s.error("stale_after_s", stale, "tension staleness is set by load.stale_after_s")
         s.done()
@@ -454,8 +457,8 @@ def _parse_validate(r: SectionReader, load: LoadConfig) -> dict[str, SensorLimit
 
 
 def _parse_ordering(r: SectionReader) -> OrderingConfig:
-    out = OrderingConfig(r.float("horizon_s", 10.0, gt=0),
-                         r.float("replay_horizon_s", 3600.0, gt=0))
+    out = OrderingConfig(r.float("horizon_s", 10.0, gt=0, le=MAX_DURATION_S),
+                         r.float("replay_horizon_s", 3600.0, gt=0, le=MAX_DURATION_S))
     r.done()
     return out
 
@@ -463,10 +466,11 @@ def _parse_ordering(r: SectionReader) -> OrderingConfig:
 def _parse_alert_timing(raw: Any) -> AlertsTiming:
     # Only the timing keys are core; rules and delivery belong to monitor.alerts.
     r = SectionReader(raw, "alerts")
-    interval = r.float("eval_interval_s", 10.0, gt=0)
+    interval = r.float("eval_interval_s", 10.0, gt=0, le=MAX_DURATION_S)
     if interval * 1e9 != round(interval * 1e9):
         raise r.error("eval_interval_s", interval, "must be a whole number of nanoseconds")
-    return AlertsTiming(interval, r.float("resend_interval_s", 3600.0, ge=0))  # 0 = never
+    return AlertsTiming(interval, r.float("resend_interval_s", 3600.0, ge=0,  # 0 = never
+                                          le=MAX_DURATION_S))
 
 
 def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
@@ -513,6 +517,8 @@ def load_config(path: str | Path) -> Config:
         raise ConfigError(f"config error: file {str(path)!r} not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config error: {path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"config error: {path}: not valid TOML (not UTF-8 text)") from None
     return parse_config(data, source=str(path))
 
 

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from monitor.blocks import validate_buoy_id
+from monitor.cli_paths import check_output
 from replay.csv_import import DEFAULT_START, read_csv
 from replay.writer import LogWriter, Series
 
@@ -30,8 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         buoy_id = validate_buoy_id(args.buoy_id if args.buoy_id is not None else args.csv.stem)
-        if not args.block_s > 0:
-            raise ValueError(f"--block-s {args.block_s}: must be > 0")
+        if not 1e-9 <= args.block_s <= 1e9:
+            raise ValueError(f"--block-s {args.block_s}: must be between 1e-9 (1 ns) and 1e9")
+        check_output(args.output, [args.csv], "-o")
         data = read_csv(args.csv, start=args.start)
     except (ValueError, OSError) as e:
         hint = "" if args.buoy_id is not None else " (or pass --buoy-id)"

@@ -4,11 +4,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
+from monitor.cli_paths import check_output
 from monitor.config import ConfigError, default_config, load_config
 from monitor.events import Sink
 from replay import cmd_fleet
+
+
+# slowest pace: a millionth of real time already stretches a 1 s block to 12 days; slower
+# ones overflow the sleep
+MIN_SPEED = 1e-6
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -50,6 +57,7 @@ def write_html(path: str, report: dict) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from replay.report import summary_text, write_report
+    from replay.reader import expand_paths
     from replay.runner import replay_logs
 
     try:
@@ -57,8 +65,18 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(exc, file=sys.stderr)
         return 2
-    if args.speed is not None and not args.speed > 0:
-        print(f"replay: --speed {args.speed}: must be > 0", file=sys.stderr)
+    if args.speed is not None and not args.speed >= MIN_SPEED:
+        print(f"replay: --speed {args.speed}: must be >= {MIN_SPEED:g}", file=sys.stderr)
+        return 2
+    try:
+        inputs = expand_paths(args.logs)
+        for option in ("report", "html", "rrd"):
+            if getattr(args, option):
+                check_output(getattr(args, option), inputs, f"--{option}")
+        if args.report_dir and Path(args.report_dir).exists() and not Path(args.report_dir).is_dir():
+            raise ValueError(f"--report-dir {args.report_dir}: is a file, expected a folder")
+    except ValueError as exc:
+        print(f"replay: {exc}", file=sys.stderr)
         return 2
     if cmd_fleet.wanted(args):
         return cmd_fleet.run(args, config)

@@ -14,6 +14,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from monitor.cli_paths import check_output
+from replay.cmd_replay import MIN_SPEED
 from replay.simulate import LOAD_MODELS, SimConfig, simulate
 
 
@@ -83,10 +85,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.output is None and args.publish is None:
             raise ValueError("-o/--output is required (or --publish)")
+        if args.output is not None:
+            check_output(args.output, [], "-o")
         if args.publish is not None:
             check_endpoint(args.publish, args.allow_remote)
-        if args.speed is not None and not args.speed > 0:
-            raise ValueError(f"--speed {args.speed}: must be > 0")
+        if args.speed is not None and not args.speed >= MIN_SPEED:
+            raise ValueError(f"--speed {args.speed}: must be >= {MIN_SPEED:g}")
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
                         buoy_id=args.buoy_id, start=args.start, dropouts=args.dropouts,
                         spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span,

@@ -38,6 +38,7 @@ _ISO = re.compile(
     r"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d(?::\d\d)?)(?:\.(\d+))?(Z|z|[+-]\d\d:?\d\d)?$"
 )
 _NS = Decimal(10**9)
+LAST_NS = 2**63 - 1  # time stamps are int64 ns since the epoch: 2262-04-11T23:47:16Z at most
 
 
 @dataclass(frozen=True)
@@ -94,12 +95,20 @@ def parse_iso_ns(text: str) -> int:
     except ValueError as e:
         raise ValueError(f"bad time {text!r}: {e}") from None
     secs = int(dt.timestamp())
-    return secs * 10**9 + (int(frac.ljust(9, "0")) if frac else 0)
+    t = secs * 10**9 + (int(frac.ljust(9, "0")) if frac else 0)
+    if t > LAST_NS:
+        raise ValueError(f"bad time {text!r}: after {_iso(LAST_NS)}, the last nanosecond time "
+                         "stamp")
+    return t
 
 
 def _columns(header: list[str]) -> tuple[int, bool, dict[str, list[int]]]:
     """Index of the time column, whether it is ``time_s``, and sensor -> value column indices."""
     names = [h.strip() for h in header]
+    other = [sep for sep in (";", "\t", "|") if len(names) == 1 and sep in names[0]]
+    if other:
+        raise ValueError(f"CSV header {names[0]!r}: one column; the file looks "
+                         f"{other[0]!r}-separated, the columns must be separated by commas")
     times = [i for i, n in enumerate(names) if n in ("time_s", "time")]
     if len(times) != 1:
         raise ValueError(f"CSV header {names}: needs exactly one time column, 'time_s' or 'time'")
@@ -131,7 +140,14 @@ def _columns(header: list[str]) -> tuple[int, bool, dict[str, list[int]]]:
 
 def read_csv(path: str | Path, start: str = DEFAULT_START) -> CsvData:
     """Parse a measurement CSV (see module doc). ValueError for an unusable header/start."""
-    start_ns = parse_iso_ns(start)
+    try:
+        return _read_csv(path, parse_iso_ns(start))
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.object[exc.start]:#04x}); expected "
+                         "a CSV file") from None
+
+
+def _read_csv(path: str | Path, start_ns: int) -> CsvData:
     data = CsvData()
     with open(path, newline="", encoding="utf-8-sig") as f:
         reader = csv.reader(f)
@@ -198,15 +214,19 @@ def _bad_cells(row: list[str], width: int, value_cols: list[int], names: list[st
 def _time_ns(cell: str, relative: bool, start_ns: int) -> int:
     if not cell:
         raise ValueError("empty time cell")
-    if not relative:
-        return parse_iso_ns(cell)
-    try:
-        d = Decimal(cell)
-    except InvalidOperation:
-        raise ValueError(f"bad time_s {cell!r}: not a number") from None
-    if not d.is_finite():
-        raise ValueError(f"bad time_s {cell!r}: not finite")
-    t = start_ns + int((d * _NS).to_integral_value())
+    if relative:
+        try:
+            d = Decimal(cell)
+        except InvalidOperation:
+            raise ValueError(f"bad time_s {cell!r}: not a number") from None
+        if not d.is_finite():
+            raise ValueError(f"bad time_s {cell!r}: not finite")
+        t = start_ns + int((d * _NS).to_integral_value())
+        if t > LAST_NS:
+            raise ValueError(f"bad time_s {cell!r}: after {_iso(LAST_NS)}, the last nanosecond "
+                             "time stamp")
+    else:
+        t = parse_iso_ns(cell)
     if t <= 0:
-        raise ValueError(f"bad time_s {cell!r}: before the Unix epoch")
+        raise ValueError(f"bad time {cell!r}: not after the Unix epoch (1970-01-01T00:00:00Z)")
     return t

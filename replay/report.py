@@ -145,10 +145,13 @@ def summary_text(report: Mapping[str, Any]) -> str:
     read = report["inputs"]["read"]
     damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
                                        "bad_payloads", "late", "duplicates")}
-    damage = {k: v for k, v in damage.items() if v}
-    if damage or read.get("incomplete_files"):
-        lines.append("  damaged input: " + ", ".join(f"{k.replace('_', ' ')} {v}"
-                                                    for k, v in damage.items())
-                     + (f"; {len(read['incomplete_files'])} file(s) without footer"
-                        if read.get("incomplete_files") else ""))
+    parts = [f"{k.replace('_', ' ')} {v}" for k, v in damage.items() if v]
+    unreadable = read.get("unreadable_files") or []
+    cut = [f for f in read.get("incomplete_files") or [] if f not in unreadable]
+    if cut:
+        parts.append(f"{len(cut)} file(s) without footer")
+    errors = {f["path"]: f.get("error") for f in read.get("files", [])}
+    parts += [f"unreadable {f} ({errors.get(f) or 'no data'})" for f in unreadable]
+    if parts:
+        lines.append("  damaged input: " + "; ".join(parts))
     return "\n".join(lines)

@@ -42,9 +42,24 @@ def load_state(path: str | Path | None) -> dict[str, Any] | None:
     if path is None or not Path(path).exists():
         return None
     try:
-        return json.loads(Path(path).read_text())
-    except json.JSONDecodeError as exc:
+        state = json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"state file {path}: not valid JSON ({exc})") from None
+    if not isinstance(state, dict):
+        raise ValueError(f"state file {path}: expected a JSON object (a saved pipeline state), "
+                         f"got {type(state).__name__}")
+    return state
+
+
+def _check_state_components(state: dict[str, Any], config: Config, path: str | Path) -> None:
+    """ValueError unless the state holds exactly the config's components: a component the
+    config lacks would have its damage dropped from the saved state, a new one would count
+    only the later parts."""
+    saved = sorted(state.get("components") or {})
+    wanted = sorted(c.name for c in config.components)
+    if saved != wanted:
+        raise ValueError(f"state file {path} holds components {saved}, the config {wanted}: "
+                         "continue with the configuration that wrote it")
 
 
 def save_state(path: str | Path, state: dict[str, Any]) -> None:
@@ -116,16 +131,24 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None) -> tuple[Pipeline, ReplayResult]:
     """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
-    block, whose buoy id replaces the config's (with a warning) unless a state is continued;
-    blocks of other buoys are counted and skipped."""
+    block, whose buoy id replaces the config's (with a warning); a continued state keeps its
+    own buoy id, and a ValueError says so if the first block is of another buoy. Later blocks
+    of other buoys are counted and skipped."""
     pipeline: Pipeline | None = None
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     origin: list[float] = []
     start = time.perf_counter()
+    # a continued state keeps its buoy (it took the log's buoy id when it was first saved)
+    state_buoy = state.get("buoy_id") if state is not None else None
+    if isinstance(state_buoy, str) and state_buoy != config.buoy.id:
+        config = config_with(config, buoy={**config.section("buoy"), "id": state_buoy})
     for block in blocks:
         if pipeline is None:
-            if block.buoy_id != config.buoy.id and state is None:
+            if block.buoy_id != config.buoy.id and state is not None:
+                raise ValueError(f"the state is for buoy {config.buoy.id!r}, the log for "
+                                 f"buoy {block.buoy_id!r}")
+            if block.buoy_id != config.buoy.id:
                 log.warning("log is for buoy %r, config for %r: replaying as %r",
                             block.buoy_id, config.buoy.id, block.buoy_id)
                 config = config_with(config, buoy={**config.section("buoy"), "id": block.buoy_id})
@@ -184,6 +207,8 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
 
     files = collect_logs(paths)
     state = load_state(state_path)
+    if state is not None:
+        _check_state_components(state, config, state_path)
     if show_progress is None:
         show_progress = sys.stderr.isatty()
     span = time_span(files) if show_progress else None

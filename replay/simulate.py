@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from monitor.blocks import validate_buoy_id
-from replay.csv_import import parse_iso_ns
+from replay.csv_import import LAST_NS, parse_iso_ns
 from replay.writer import LogWriter, Series
 
 SECOND = 1_000_000_000
@@ -107,8 +107,16 @@ class SimConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be an integer >= 0")
         validate_buoy_id(self.buoy_id)
-        if parse_iso_ns(self.start) % SECOND:
+        if round(self.hours * 3600 * BASE_HZ) < 1:
+            raise ValueError(f"hours = {self.hours!r}: shorter than one sample at {BASE_HZ} Hz")
+        start_ns = parse_iso_ns(self.start)
+        if start_ns % SECOND:
             raise ValueError(f"start = {self.start!r}: must be a whole second")
+        if start_ns <= 0:
+            raise ValueError(f"start = {self.start!r}: must be after 1970-01-01T00:00:00Z")
+        if start_ns + self.hours * 3600 * SECOND > LAST_NS:
+            raise ValueError(f"hours = {self.hours!r}: from {self.start} the log would end "
+                             "after 2262-04-11, the last nanosecond time stamp")
 
 
 @dataclass

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from datetime import datetime, timezone
@@ -79,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         if args.state is not None:
             result = _on_state_file(args.state, _command(args))
         else:
+            if not 0 < args.timeout < math.inf:
+                raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
             result = _on_daemon(args.buoy, args.connect or [DEFAULT_CONNECT], args.timeout,
                                 _command(args))
     except (ValueError, OSError, TimeoutError) as exc:

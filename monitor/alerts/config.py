@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from monitor.alerts.records import SEVERITIES
+from monitor.config import MAX_DURATION_S
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
@@ -55,7 +56,9 @@ class ParamSpec:
     unit: str = ""
 
 
-def _p(default, low, low_inclusive=False, high=math.inf, unit=""):
+def _p(default, low, low_inclusive=False, high=None, unit=""):
+    if high is None:  # a duration becomes int64 ns, so it has a ceiling too
+        high = MAX_DURATION_S if unit == "s" else math.inf
     return ParamSpec(default, low, low_inclusive, high, unit)
 
 

@@ -25,8 +25,11 @@ def run(args: argparse.Namespace) -> int:
     from monitor.viz.html_report import write_report
     from monitor.viz.report_data import load_report
 
+    from monitor.cli_paths import check_output
+
     out = args.output or args.report.with_suffix(".html")
     try:
+        check_output(out, [args.report], "-o")
         rendered = write_report(load_report(args.report), out)
     except ValueError as exc:
         print(f"buoymon report: {exc}", file=sys.stderr)

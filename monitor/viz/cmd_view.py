@@ -21,6 +21,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _head(path: Path) -> bytes:
+    with open(path, "rb") as f:
+        return f.read(3)
+
+
 def run(args: argparse.Namespace) -> int:
     from monitor.viz.rerun_options import RerunOptions
     from monitor.viz.rerun_outputs import analytics_disabled_env, rerun_command, serve_web_viewer
@@ -28,6 +33,12 @@ def run(args: argparse.Namespace) -> int:
     missing = [str(p) for p in args.recordings if not p.is_file()]
     if missing:
         print(f"buoymon view: no such recording: {', '.join(missing)}", file=sys.stderr)
+        return 2
+    # a Rerun recording starts with "RRF" and a format digit; the viewer itself shows nothing
+    # for another file and exits without saying why
+    other = [str(p) for p in args.recordings if _head(p) != b"RRF"]
+    if other:
+        print(f"buoymon view: not a Rerun recording (.rrd): {', '.join(other)}", file=sys.stderr)
         return 2
     if args.native:
         # the desktop viewer also hosts a gRPC server, on all interfaces unless told otherwise

@@ -19,7 +19,11 @@ from monitor.viz.alert_view import alert_fields
 
 
 def _num(value: Any, where: str) -> float:
-    """A JSON number, or one of the strings "inf", "-inf", "nan"; ValueError otherwise."""
+    """A JSON number, one of the strings "inf", "-inf", "nan", or null (NaN: the replay writes
+    null for a figure it does not have, e.g. the remaining life when nothing accrues);
+    ValueError otherwise."""
+    if value is None:
+        return math.nan
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise ValueError(f"report: {where} = {value!r}: expected a number")
     if isinstance(value, str) and value.strip().lower() not in ("inf", "-inf", "+inf", "nan"):
@@ -27,9 +31,12 @@ def _num(value: Any, where: str) -> float:
     return float(value)
 
 
-def _figure(value: Any, where: str) -> float:
-    """A figure the writer may leave ``null`` (no value: NaN), else as :func:`_num`."""
-    return math.nan if value is None else _num(value, where)
+def _count(value: Any, where: str) -> int:
+    """A finite JSON number as int (sample counts); ValueError otherwise."""
+    x = _num(value, where)
+    if not math.isfinite(x):
+        raise ValueError(f"report: {where} = {value!r}: expected a count")
+    return int(x)
 
 
 def _array(value: Any, where: str, n: int | None = None) -> np.ndarray:
@@ -134,7 +141,7 @@ def _component(name: str, c: Any) -> Component:
     where = f"components.{name}"
     c = _mapping(c, where)
     try:
-        base = {k: _figure(c[k], f"{where}.{k}") for k in (
+        base = {k: _num(c[k], f"{where}.{k}") for k in (
             "damage", "damage_committed", "cycles", "max_stress_Pa", "damage_rate_per_day",
             "remaining_life_days")}
     except KeyError as exc:
@@ -184,11 +191,11 @@ def parse_report(data: Any) -> Report:
     for ch, s in _mapping(d["samples"], "samples").items():
         s = _mapping(s, f"samples.{ch}")
         rejected = _mapping(s.get("rejected", {}), f"samples.{ch}.rejected")
-        samples[str(ch)] = (int(_num(s.get("accepted"), f"samples.{ch}.accepted")),
-                            {str(r): int(_num(n, f"samples.{ch}.rejected.{r}"))
+        samples[str(ch)] = (_count(s.get("accepted"), f"samples.{ch}.accepted"),
+                            {str(r): _count(n, f"samples.{ch}.rejected.{r}")
                              for r, n in rejected.items()})
     t = _mapping(d["tension_N"], "tension_N")
-    tension = {k: _figure(t.get(k), f"tension_N.{k}") for k in ("min", "mean", "max", "p99")}
+    tension = {k: _num(t.get(k), f"tension_N.{k}") for k in ("min", "mean", "max", "p99")}
     comps = {str(n): _component(str(n), c)
              for n, c in _mapping(d["components"], "components").items()}
     if not isinstance(d["alerts"], list):
@@ -213,6 +220,8 @@ def load_report(path: str | Path) -> Report:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise ValueError(f"report: cannot read {path}: {exc.strerror}") from exc
+    except UnicodeDecodeError:
+        raise ValueError(f"report: {path} is not a JSON report (not UTF-8 text)") from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
