@@ -25,14 +25,14 @@ def tiny_log(path: Path, buoy: str = "qa", n: int = 40, t0_ns: int = T0) -> Path
 
 
 def test_replay_html_of_a_log_without_damage_rate(tmp_path, capsys):
-    # a 2 s log accrues no damage rate: its report holds null for remaining life, which the
-    # HTML renderer must take as "not available" instead of failing with a traceback
+    # a 2 s log accrues no damage rate: its report holds null for remaining life ("nothing
+    # accrues"), which the HTML renderer must show as infinite instead of failing
     log = tiny_log(tmp_path / "a.mcap")
     assert main(["replay", str(log), "--report", str(tmp_path / "r.json"),
                  "--html", str(tmp_path / "r.html")]) == 0
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["components"]["conductor"]["remaining_life_days"] is None
-    assert "n/a" in (tmp_path / "r.html").read_text()
+    assert "&infin;" in (tmp_path / "r.html").read_text()
     capsys.readouterr()
     # and `buoymon report` renders the same JSON again
     assert main(["report", str(tmp_path / "r.json"), "-o", str(tmp_path / "again.html")]) == 0
@@ -176,7 +176,7 @@ def test_files_of_the_wrong_kind_are_named(tmp_path, capsys):
     assert main(["report", str(log), "-o", str(tmp_path / "r.html")]) == 2
     assert f"{log} is not a JSON report" in capsys.readouterr().err
     assert main(["alerts", "list", "--state", str(log)]) == 1
-    assert f"{log}: not a JSON state file" in capsys.readouterr().err
+    assert f"{log}: neither a daemon checkpoint nor a JSON state file" in capsys.readouterr().err
     assert main(["replay", str(log), "--state", str(log)]) == 1
     assert "not valid JSON" in capsys.readouterr().err
     semi = tmp_path / "semi.csv"
