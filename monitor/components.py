@@ -21,7 +21,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from models import fatigue, helix
-from monitor.config import ComponentConfig, Config, FatigueConfig
+from monitor.config import ComponentConfig, Config, ConfigError, FatigueConfig
 
 
 def build_sn_curve(cfg: ComponentConfig) -> Any:
@@ -35,22 +35,25 @@ def build_sn_curve(cfg: ComponentConfig) -> Any:
         name, *args = sn.preset.split(":")
         factory = getattr(fatigue.SNCurve, name, None) if not name.startswith("_") else None
         if factory is None or name in ("tabulated", "basquin", "multi_slope", "from_dict"):
-            raise ValueError(f"config error: component {cfg.name!r}: sn_curve = {sn.preset!r}: "
-                             "not an SNCurve preset (vaps_copper, dnv_rp_c203:<detail>:<env>, "
-                             "dnv_chain_studless)")
+            raise ConfigError(f"config error: component {cfg.name!r}: sn_curve = {sn.preset!r}: "
+                              "not an SNCurve preset (vaps_copper, dnv_rp_c203:<detail>:<env>, "
+                              "dnv_chain_studless)")
         try:
             curve = factory(*args)
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"config error: component {cfg.name!r}: sn_curve = "
-                             f"{sn.preset!r}: {exc}") from None
+            raise ConfigError(f"config error: component {cfg.name!r}: sn_curve = "
+                              f"{sn.preset!r}: {exc}") from None
     else:
         try:
             curve = fatigue.SNCurve.tabulated(np.array(sn.stress_range_Pa) / 1e6, sn.cycles)
         except ValueError as exc:
-            raise ValueError(f"config error: component {cfg.name!r}: sn_curve table: {exc}"
-                             ) from None
-    return curve.with_factors(derating=cfg.derating, scf=cfg.scf, dff=cfg.dff,
-                              mean_correction=cfg.mean_stress, ultimate_Pa=cfg.ultimate_Pa)
+            raise ConfigError(f"config error: component {cfg.name!r}: sn_curve table: {exc}"
+                              ) from None
+    try:
+        return curve.with_factors(derating=cfg.derating, scf=cfg.scf, dff=cfg.dff,
+                                  mean_correction=cfg.mean_stress, ultimate_Pa=cfg.ultimate_Pa)
+    except ValueError as exc:
+        raise ConfigError(f"config error: component {cfg.name!r}: {exc}") from None
 
 
 def endurance_stress_Pa(cfg: ComponentConfig, curve: Any) -> float | None:
@@ -65,12 +68,12 @@ def endurance_stress_Pa(cfg: ComponentConfig, curve: Any) -> float | None:
 def build_cable(config: Config) -> Any:
     factory = getattr(helix.HelixCable, config.cable.preset, None)
     if factory is None:
-        raise ValueError(f"config error: cable.preset = {config.cable.preset!r}: "
-                         "not a models.helix.HelixCable preset")
+        raise ConfigError(f"config error: cable.preset = {config.cable.preset!r}: "
+                          "not a models.helix.HelixCable preset")
     try:
         return dataclasses.replace(factory(), **config.cable.overrides)
-    except TypeError as exc:
-        raise ValueError(f"config error: cable: {exc}") from None
+    except (TypeError, ValueError) as exc:  # an unknown field, or a value the model refuses
+        raise ConfigError(f"config error: cable: {exc}") from None
 
 
 _EMPTY = np.zeros(0)

@@ -29,7 +29,7 @@ import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.components import Component, build_cable, endurance_stress_Pa
-from monitor.config import Config
+from monitor.config import Config, ConfigError
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
@@ -59,7 +59,14 @@ def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, 
     components = {name: {"endurance_stress_Pa": e} for name, e in endurance_Pa.items()}
     if state:
         return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
-    return AlertEngine.from_config(config.section("alerts"), buoy_id, components)
+    try:
+        return AlertEngine.from_config(config.section("alerts"), buoy_id, components)
+    except ConfigError:
+        raise
+    except ValueError as exc:  # a rule naming a component or stream the config lacks
+        msg = str(exc)
+        raise ConfigError(msg if msg.startswith("config error") else f"config error: {msg}"
+                          ) from None
 
 
 def alert_to_dict(record: Any) -> dict[str, Any]:

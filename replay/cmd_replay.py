@@ -90,6 +90,9 @@ def run(args: argparse.Namespace) -> int:
         result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks, speed=speed,
                              show_progress=False if args.no_progress else None,
                              plot_fields=bool(args.html))
+    except ConfigError as exc:  # found when the pipeline is built (rules, cable, S-N curves)
+        print(exc, file=sys.stderr)
+        return 2
     except (FileNotFoundError, ValueError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 1

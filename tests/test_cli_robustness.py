@@ -282,3 +282,25 @@ def test_pace_speed_has_a_floor(tmp_path, capsys, speed):
     assert main(["simulate", "-o", str(tmp_path / "s.mcap"), "--hours", "0.01", "--hs", "1",
                  "--tp", "5", "--seed", "1", "--publish", "--speed", speed]) == 2
     assert f"--speed {float(speed)}: must be >= 1e-06" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, message", [
+    ('[[alerts.rule]]\nkind = "damage_rate"\nthreshold = 1.0\ncomponent = "mid"\n',
+     'config error: alerts.rule[6].component = "mid": unknown component'),
+    ('[cable]\npreset = "vaps_biw"\nno_such_field = 1.0\n', "config error: cable"),
+])
+def test_replay_exits_2_for_config_errors_found_when_the_pipeline_is_built(tmp_path, capsys,
+                                                                          extra, message):
+    from importlib import resources
+
+    text = (resources.files("monitor") / "vaps_seed004.toml").read_text()
+    if extra.startswith("[cable]"):
+        text = text.replace('[cable]\n', '[cable]\nno_such_field = 1.0\n', 1)
+    else:
+        text += "\n" + extra
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text)
+    log = tiny_log(tmp_path / "a.mcap")
+    capsys.readouterr()
+    assert main(["replay", str(log), "--config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
