@@ -392,28 +392,10 @@ class LogReader:
         the first chunk that uses it: should that chunk be damaged, the channel's messages in
         the other chunks are then still decoded. The definitions are the same as in the data
         section (the first one read wins), so an intact file reads exactly as before."""
-        if size < 8 + 37:
-            return
-        f.seek(size - 37)
-        tail = f.read(37)  # footer record (opcode, length, 20 bytes), then the magic
-        if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
-            return
-        start, _, crc = struct.unpack_from("<QQI", tail, 9)
-        if not 8 <= start < size - 37:
-            return
-        f.seek(start)
-        buf = f.read(size - 37 - start)
-        if crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != crc:
-            return  # a damaged summary: read the data section alone
         scratch = FileStats(path="")  # a damaged summary loses no data: not reported as loss
-        pos = 0
-        while pos + 9 <= len(buf):
-            op, ln = struct.unpack_from("<BQ", buf, pos)
-            if ln > len(buf) - pos - 9:
-                break
+        for op, content in _summary_records(f, size):
             if op in (OP_SCHEMA, OP_CHANNEL):
-                ctx.definition(op, buf[pos + 9:pos + 9 + ln], self, scratch)
-            pos += 9 + ln
+                ctx.definition(op, content, self, scratch)
 
     def _read_records(self, f, size: int, ctx: "_FileContext", st: FileStats,
                       ahead: ReadAhead | None) -> Iterator[None]:
@@ -707,6 +689,45 @@ class _FileContext:
         self.channels[cid] = (sidx, numbers)
 
 
+def _summary_records(f, size: int) -> Iterator[tuple[int, bytes]]:
+    """``(opcode, content)`` of the summary section's records, when the file ends in an
+    intact footer and its summary passes the footer's CRC; nothing otherwise."""
+    if size < 8 + 37:
+        return
+    f.seek(size - 37)
+    tail = f.read(37)  # footer record (opcode, length, 20 bytes), then the magic
+    if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
+        return
+    start, _, crc = struct.unpack_from("<QQI", tail, 9)
+    if not 8 <= start < size - 37:
+        return
+    f.seek(start)
+    buf = f.read(size - 37 - start)
+    if crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != crc:
+        return
+    pos = 0
+    while pos + 9 <= len(buf):
+        op, ln = struct.unpack_from("<BQ", buf, pos)
+        if ln > len(buf) - pos - 9:
+            return
+        yield op, buf[pos + 9:pos + 9 + ln]
+        pos += 9 + ln
+
+
+def _file_span(path: Path) -> tuple[int, int] | None:
+    """(first, last) message log time of one file from its summary Statistics record."""
+    try:
+        with open(path, "rb") as f:
+            size = f.seek(0, 2)
+            for op, content in _summary_records(f, size):
+                if op == OP_STATISTICS and len(content) >= 42:
+                    t0, t1 = struct.unpack_from("<QQ", content, 26)
+                    return (t0, t1) if t1 >= t0 > 0 else None
+    except OSError:
+        pass
+    return None
+
+
 def time_span(paths: Sequence[str | PathLike] | str | PathLike) -> tuple[int, int] | None:
     """(first, last) message log time over the files, from their summary Statistics records.
 
@@ -715,36 +736,37 @@ def time_span(paths: Sequence[str | PathLike] | str | PathLike) -> tuple[int, in
     """
     if isinstance(paths, (str, PathLike)):
         paths = [paths]
-    lo = hi = None
-    for path in expand_paths(paths):
-        try:
-            with open(path, "rb") as f:
-                f.seek(0, 2)
-                size = f.tell()
-                if size < 8 + 37 + 8:
-                    continue
-                f.seek(size - 8 - 29)
-                tail = f.read(29 + 8)
-                if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
-                    continue
-                summary_start, offsets_start = struct.unpack_from("<QQ", tail, 9)
-                if not 0 < summary_start < size:
-                    continue
-                f.seek(summary_start)
-                summary = f.read((offsets_start or size - 37 - 8) - summary_start)
-        except OSError:
-            continue
-        p = 0
-        while p + 9 <= len(summary):
-            op, ln = struct.unpack_from("<BQ", summary, p)
-            if op == OP_STATISTICS and p + 9 + 42 <= len(summary):
-                t0, t1 = struct.unpack_from("<QQ", summary, p + 9 + 26)
-                if t1 >= t0 > 0:
-                    lo = t0 if lo is None else min(lo, t0)
-                    hi = t1 if hi is None else max(hi, t1)
-                break
-            p += 9 + ln
-    return None if lo is None else (lo, hi)
+    spans = [sp for sp in map(_file_span, expand_paths(paths)) if sp is not None]
+    if not spans:
+        return None
+    return min(sp[0] for sp in spans), max(sp[1] for sp in spans)
+
+
+def file_start_ns(path: str | PathLike) -> int | None:
+    """The first message log time of a file: from its summary, else from the header of its
+    first chunk (a file cut short by a crash); None when neither can be read. Cheap."""
+    span = _file_span(Path(path))
+    if span is not None:
+        return span[0]
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != MAGIC:
+                return None
+            while True:
+                head = f.read(9)
+                if len(head) < 9:
+                    return None
+                op, ln = struct.unpack("<BQ", head)
+                if op in (OP_CHUNK, OP_MESSAGE):  # a chunk's start time; a message's own
+                    head = f.read(14)
+                    if len(head) < 14:
+                        return None
+                    return struct.unpack_from("<Q", head, 0 if op == OP_CHUNK else 6)[0]
+                if op == 0 or op >= 0x10:
+                    return None
+                f.seek(ln, 1)
+    except OSError:
+        return None
 
 
 def iter_blocks(paths: Sequence[str | PathLike] | str | PathLike, coalesce: bool = True,

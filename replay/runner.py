@@ -28,14 +28,22 @@ log = logging.getLogger(__name__)
 
 
 def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
-    """Expand directories to their ``*.mcap`` files (sorted). A missing path is logged and
-    skipped (the others are still replayed); FileNotFoundError if nothing is left."""
-    from replay.reader import expand_paths
+    """The ``*.mcap`` files under ``paths`` (folders searched with their sub-folders, as fleet
+    mode does; a file named twice is read once), in the order of their first message time,
+    so that no file's samples arrive after later ones (which validation would reject as
+    going back in time); files whose start cannot be read go last, in the order given. A
+    missing path is logged and skipped (the others are still replayed); FileNotFoundError
+    if nothing is left."""
+    from replay.reader import expand_paths, file_start_ns
 
-    out = expand_paths(paths, missing="skip")
+    seen: set[Path] = set()
+    out = [p for p in expand_paths(paths, recursive=True, missing="skip")
+           if not (p.resolve() in seen or seen.add(p.resolve()))]
     if not out:
         raise FileNotFoundError(f"no log files in {[str(p) for p in paths]}")
-    return out
+    starts = [file_start_ns(p) for p in out]
+    order = sorted(range(len(out)), key=lambda i: (starts[i] is None, starts[i] or 0, i))
+    return [out[i] for i in order]
 
 
 def load_state(path: str | Path | None) -> dict[str, Any] | None:

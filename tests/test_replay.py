@@ -175,3 +175,24 @@ def test_ctrl_c_ends_a_replay_with_status_130_and_leaves_the_state_file(tmp_path
     captured = capsys.readouterr()
     assert "buoymon: interrupted" in captured.err and "Traceback" not in captured.err
     assert not report.exists() and state.read_bytes() == before
+
+
+def test_logs_are_replayed_in_time_order_from_folders_and_sub_folders(tmp_path, capsys):
+    blocks = blocks_interleaved(sea(600), 1)
+    third = len(blocks) // 3
+    write_log(tmp_path / "one.mcap", blocks)
+    (tmp_path / "arch" / "2").mkdir(parents=True)
+    # names that sort against time, one file in a sub-folder, one cut short (no summary)
+    write_log(tmp_path / "arch" / "a.mcap", blocks[2 * third:])
+    write_log(tmp_path / "arch" / "2" / "z.mcap", blocks[:third])
+    write_log(tmp_path / "arch" / "b.mcap", blocks[third:2 * third])
+    data = (tmp_path / "arch" / "b.mcap").read_bytes()
+    (tmp_path / "arch" / "b.mcap").write_bytes(data[:data.rindex(b"\x0f\x00")])  # no DataEnd on
+    assert main(["replay", str(tmp_path / "one.mcap"), "--report", str(tmp_path / "one.json")]) == 0
+    assert main(["replay", str(tmp_path / "arch"), "--report", str(tmp_path / "arch.json")]) == 0
+    one = json.loads((tmp_path / "one.json").read_text())
+    arch = json.loads((tmp_path / "arch.json").read_text())
+    assert arch["samples"] == one["samples"]
+    assert arch["components"] == one["components"]
+    assert [Path(f).name for f in arch["inputs"]["files"]] == ["z.mcap", "b.mcap", "a.mcap"]
+    capsys.readouterr()
