@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
 from pathlib import Path
 
 from monitor.blocks import validate_buoy_id
@@ -25,6 +26,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"instant that time_s = 0 stands for (ISO 8601, default {DEFAULT_START}; "
                         "use 1970-01-01T00:00:00Z when time_s is Unix time)")
     p.add_argument("--block-s", type=float, default=1.0, help="block length in seconds (default 1)")
+    p.add_argument("--max-errors", type=int, default=100, metavar="N",
+                   help="bad rows listed one by one (default 100; 0 lists all); the rest are "
+                        "counted by reason")
     p.set_defaults(func=run)
 
 
@@ -39,8 +43,15 @@ def run(args: argparse.Namespace) -> int:
         hint = "" if args.buoy_id is not None else " (or pass --buoy-id)"
         print(f"buoymon import: {e}{hint if 'buoy id' in str(e) else ''}", file=sys.stderr)
         return 2
-    for bad in data.bad_rows:
+    shown = data.bad_rows if args.max_errors <= 0 else data.bad_rows[:args.max_errors]
+    for bad in shown:
         print(f"{args.csv}: {bad}", file=sys.stderr)
+    rest = data.bad_rows[len(shown):]
+    if rest:
+        reasons = Counter(b.reason.split(":")[0] for b in rest)
+        print(f"{args.csv}: ... and {len(rest)} more bad rows (" + ", ".join(
+            f"{n} {r}" for r, n in reasons.most_common()) + "); --max-errors 0 lists them all",
+            file=sys.stderr)
     if data.rows_accepted == 0:
         print(f"buoymon import: no valid rows in {args.csv}; nothing written\n{data.summary()}",
               file=sys.stderr)

@@ -24,7 +24,7 @@ import csv
 import re
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from decimal import Decimal, InvalidOperation
+from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +38,9 @@ _ISO = re.compile(
     r"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d(?::\d\d)?)(?:\.(\d+))?(Z|z|[+-]\d\d:?\d\d)?$"
 )
 _NS = Decimal(10**9)
+# a plain decimal number: Python's float() and Decimal() would also take "1_000" or "١٢"
+_NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$", re.ASCII)
+_NON_FINITE = re.compile(r"^[+-]?(?:nan|inf|infinity)$", re.IGNORECASE)
 LAST_NS = 2**63 - 1  # time stamps are int64 ns since the epoch: 2262-04-11T23:47:16Z at most
 
 
@@ -200,10 +203,9 @@ def _bad_cells(row: list[str], width: int, value_cols: list[int], names: list[st
         cell = row[i].strip()
         if not cell:
             return f"empty cell in column {names[i]}"
-        try:
-            v = float(cell)
-        except ValueError:
+        if not (_NUMBER.match(cell) or _NON_FINITE.match(cell)):
             return f"unparsable number in column {names[i]}: {cell!r}"
+        v = float(cell)
         if v != v:
             return f"NaN in column {names[i]}"
         if v in (float("inf"), float("-inf")):
@@ -215,10 +217,9 @@ def _time_ns(cell: str, relative: bool, start_ns: int) -> int:
     if not cell:
         raise ValueError("empty time cell")
     if relative:
-        try:
-            d = Decimal(cell)
-        except InvalidOperation:
-            raise ValueError(f"bad time_s {cell!r}: not a number") from None
+        if not (_NUMBER.match(cell) or _NON_FINITE.match(cell)):
+            raise ValueError(f"bad time_s {cell!r}: not a number")
+        d = Decimal(cell)
         if not d.is_finite():
             raise ValueError(f"bad time_s {cell!r}: not finite")
         t = start_ns + int((d * _NS).to_integral_value())

@@ -115,3 +115,29 @@ def test_cli_exit_codes(tmp_path, capsys):
     bad_name = _csv(tmp_path, "time_s,tension_N\n1,2\n", "bad id!.csv")
     assert main(["import", str(bad_name), "-o", str(out)]) == 2
     assert "--buoy-id" in capsys.readouterr().err
+
+
+def test_only_plain_decimal_numbers_are_read(tmp_path):
+    """Python would read "1_000" as 1000 and "٣" as 3: a CSV cell is a plain number or bad."""
+    p = _csv(tmp_path, "time_s,tension_N\n0,1_000\n1,\u0663\n2,1.5e3\n3,+.5\n4_0,7\n5,-2.\n6,0x10\n")
+    d = read_csv(p)
+    assert [(b.line, b.reason) for b in d.bad_rows] == [
+        (2, "unparsable number in column tension_N: '1_000'"),
+        (3, "unparsable number in column tension_N: '\u0663'"),
+        (6, "bad time_s '4_0': not a number"),
+        (8, "unparsable number in column tension_N: '0x10'")]
+    assert d.sensors["tension"][1].tolist() == [[1500.0, 0.5, -2.0]]
+
+
+def test_cli_lists_the_first_bad_rows_and_counts_the_rest(tmp_path, capsys):
+    rows = ["time_s,tension_N"] + [f"{k},{'x' if k % 2 else 1000 + k}" for k in range(300)]
+    rows += ["400,nan", "401,nan"]
+    p = _csv(tmp_path, "\n".join(rows) + "\n")
+    out = tmp_path / "o.mcap"
+    assert main(["import", str(p), "-o", str(out), "--buoy-id", "b1"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 101 and err[0].endswith("line 3: unparsable number in column tension_N: 'x'")
+    assert err[-1].endswith("... and 52 more bad rows (50 unparsable number in column "
+                            "tension_N, 2 NaN in column tension_N); --max-errors 0 lists them all")
+    assert main(["import", str(p), "-o", str(out), "--buoy-id", "b1", "--max-errors", "0"]) == 0
+    assert len(capsys.readouterr().err.splitlines()) == 152
