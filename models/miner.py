@@ -12,7 +12,8 @@ rate_buckets=24, reference_cycles=1e7, backend="auto")``
                             cheap enough for every alert tick).
   ``damage_committed``, ``damage_provisional``, ``damage`` (= committed + provisional)
   ``damage_rate_per_day``   committed damage per day over the last ``rate_window_s``
-  ``remaining_life_days``   (1 - damage) / rate (inf while the rate is zero)
+  ``remaining_life_days``   (1 - damage) / rate (inf while the rate is zero, 0 once the
+                            damage has reached 1)
   ``histogram``             (edges_Pa, counts, overflow_count): committed cycles per
                             nominal stress-range bin on fixed edges (never data dependent);
                             ranges below the first edge are not binned
@@ -264,10 +265,12 @@ class MinerAccumulator:
 
     @property
     def remaining_life_days(self) -> float:
+        if self.damage >= 1.0:
+            return 0.0  # used up, whatever the rate is now
         rate = self.damage_rate_per_day
         if rate <= 0.0:
             return math.inf
-        return max(0.0, 1.0 - self.damage) / rate
+        return (1.0 - self.damage) / rate
 
     @property
     def histogram(self) -> tuple[np.ndarray, np.ndarray, float]:

@@ -196,7 +196,9 @@ class Component:
             "damage": damage,
             "damage_committed": committed,
             "damage_rate_per_day": rate,
-            "remaining_life_days": max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf,
+            # life already used up stays 0 when the rate later drops to nothing
+            "remaining_life_days": (0.0 if damage >= 1.0 else (1.0 - damage) / rate if rate > 0
+                                    else math.inf),
             "cycles": float(self.miner.total_cycles) + (
                 float(self._pending[2].sum()) if self._pending[2].shape[0] else 0.0),
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,

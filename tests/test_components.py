@@ -85,3 +85,14 @@ def test_bad_stress_counts_nothing():
     with pytest.raises(ValueError, match="NaN or inf"):
         comp.run_ticks(np.array([1e6, np.nan, 2e6]), [3], [1])
     assert json.dumps(comp.state()) == before
+
+
+def test_remaining_life_is_zero_once_the_damage_passes_one():
+    comp = make()
+    swing = np.tile([0.0, 400e6], 2000)  # huge cycles: the copper conductors fail
+    comp.feed(swing)
+    fig = comp.figures()
+    assert fig["damage"] > 1.0 and fig["damage_rate_per_day"] == 0.0
+    assert fig["remaining_life_days"] == 0.0
+    fresh = make().figures()
+    assert fresh["damage"] == 0.0 and fresh["remaining_life_days"] == math.inf

@@ -116,6 +116,12 @@ def test_rate_and_remaining_life():
     assert miner.remaining_life_days == np.inf
     with pytest.raises(ValueError, match="non-decreasing"):
         miner.add_cycles(np.array([1e6]), np.array([1.0]), time_s=0.0)
+    # the life used up (damage past 1) stays used up when the rate falls back to zero
+    n = int(np.ceil((1.0 - miner.damage) / per_cycle)) + 10
+    miner.add_cycles(np.full(n, 50e6), np.ones(n), time_s=50 * 3600.0 + 1.5 * DAY)
+    assert miner.damage > 1.0 and miner.remaining_life_days == 0.0
+    miner.add_cycles(np.array([]), np.array([]), time_s=50 * 3600.0 + 3 * DAY)
+    assert miner.damage_rate_per_day == 0.0 and miner.remaining_life_days == 0.0
 
 
 def test_histogram_fixed_edges_and_equivalent_range():
