@@ -345,6 +345,7 @@ class Pipeline:
                               np.array(st["open_estimate"][1], np.float64)
                               ) if st.get("open_estimate") else _NO_LOAD[:2]
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
+        self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -553,7 +554,9 @@ class Pipeline:
         for rec in self.alerts.evaluate(obs):
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
-        del self.alert_history[:-ALERT_HISTORY_LIMIT]
+        if len(self.alert_history) > ALERT_HISTORY_LIMIT:
+            self.alerts_dropped += len(self.alert_history) - ALERT_HISTORY_LIMIT
+            del self.alert_history[:-ALERT_HISTORY_LIMIT]
 
     def _stream_obs(self, now: int) -> dict[str, StreamObs]:
         """Stream health of every stream at any time ``now`` (totals, no tick counts)."""
@@ -645,6 +648,7 @@ class Pipeline:
             "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
                            for n, c in self.components.items()},
             "alerts": list(self.alert_history),
+            "alerts_dropped": self.alerts_dropped,
         }
 
     def state(self) -> dict[str, Any]:
@@ -667,4 +671,5 @@ class Pipeline:
             "open_estimate": [a.tolist() for a in self.open_estimate],
             "last": dict(self.last),
             "alert_history": list(self.alert_history),
+            "alerts_dropped": self.alerts_dropped,
         }

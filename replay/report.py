@@ -17,7 +17,8 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
                                      ``remaining_life_days`` (null = nothing accrues),
                                      ``kind``, ``lay``}
-``alerts``                           alert transitions (monitor.alerts records as dicts)
+``alerts``                           alert transitions (monitor.alerts records as dicts), the
+                                     newest 10,000; ``alerts_dropped`` counts older ones
 ``inputs``                           files read and the reader's statistics (lost data)
 ``design_life_years``                the configured design life
 
@@ -91,6 +92,7 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
         "load_source_at_end": pipeline_report["load_source"],
         "components": comps,
         "alerts": pipeline_report["alerts"],
+        "alerts_dropped": pipeline_report["alerts_dropped"],
         "inputs": {"files": list(inputs), "read": dict(read_stats or {})},
         "config": config.source,
     })
@@ -141,7 +143,9 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
             f"{life if life == '-' else life + ' d':>11s}"
         )
-    lines.append(f"  alerts: {len(report['alerts'])} transition(s)")
+    dropped = report.get("alerts_dropped") or 0
+    lines.append(f"  alerts: {len(report['alerts'])} transition(s)"
+                 + (f" (and {dropped:,d} older ones not kept)" if dropped else ""))
     read = report["inputs"]["read"]
     damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
                                        "bad_payloads", "late", "duplicates")}

@@ -354,3 +354,16 @@ def test_model_residual_rule_sees_the_estimate_while_the_load_cell_is_healthy(mo
     assert p.report()["tension_N"]["samples_estimated"] == 0  # fatigue saw the load cell only
     fired = p.report()["alerts"][0]
     assert fired["value"] == pytest.approx(2000.0, abs=100.0)
+
+
+def test_alert_history_keeps_the_newest_and_counts_the_dropped(hooks, monkeypatch):
+    import monitor.pipeline as pipeline_mod
+
+    monkeypatch.setattr(pipeline_mod, "ALERT_HISTORY_LIMIT", 3)
+    p, _ = run(default_config(), blocks_interleaved(sea(2600), 10))
+    records = len(hooks[-1].seen) // 50  # the stand-in engine raises one every 50 ticks
+    rep = p.report()
+    assert records == 5 and len(rep["alerts"]) == 3 and rep["alerts_dropped"] == 2
+    assert [a["t_ns"] for a in rep["alerts"]] == [hooks[-1].seen[k * 50 - 1][0] for k in (3, 4, 5)]
+    again = Pipeline(default_config(), state=json.loads(json.dumps(p.state())))
+    assert again.report()["alerts_dropped"] == 2
