@@ -36,9 +36,12 @@ def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
     if nothing is left."""
     from replay.reader import expand_paths, file_start_ns
 
+    out: list[Path] = []
     seen: set[Path] = set()
-    out = [p for p in expand_paths(paths, recursive=True, missing="skip")
-           if not (p.resolve() in seen or seen.add(p.resolve()))]
+    for p in expand_paths(paths, recursive=True, missing="skip"):
+        if p.resolve() not in seen:  # a file named twice, or a file and its folder
+            seen.add(p.resolve())
+            out.append(p)
     if not out:
         raise FileNotFoundError(f"no log files in {[str(p) for p in paths]}")
     starts = [file_start_ns(p) for p in out]
