@@ -195,4 +195,9 @@ def test_logs_are_replayed_in_time_order_from_folders_and_sub_folders(tmp_path, 
     assert arch["samples"] == one["samples"]
     assert arch["components"] == one["components"]
     assert [Path(f).name for f in arch["inputs"]["files"]] == ["z.mcap", "b.mcap", "a.mcap"]
+    # a file named twice (itself and through its folder) is read once
+    assert main(["replay", str(tmp_path / "arch" / "a.mcap"), str(tmp_path / "arch"),
+                 "--report", str(tmp_path / "twice.json")]) == 0
+    twice = json.loads((tmp_path / "twice.json").read_text())
+    assert twice["samples"] == arch["samples"] and len(twice["inputs"]["files"]) == 3
     capsys.readouterr()
