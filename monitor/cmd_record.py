@@ -9,6 +9,7 @@ schema, so the files replay with ``buoymon replay``; JSON topics get a jsonschem
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import queue
 import signal
@@ -72,13 +73,24 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
     return recorder.messages
 
 
+def _document_time(payload: bytes, recv_ns: int) -> int:
+    """A status's or alert's sensor time (``now_ns`` / ``at_ns``), as the daemon's own
+    recording stamps them; the receive time for any other document."""
+    try:
+        doc = json.loads(payload)
+    except ValueError:
+        return recv_ns
+    t = doc.get("at_ns") or doc.get("now_ns") if isinstance(doc, dict) else None
+    return t if isinstance(t, int) and not isinstance(t, bool) and t > 0 else recv_ns
+
+
 def _write(recorder: McapRecorder, codec: zenoh_io.BlockCodec, key: str, payload: bytes,
            recv_ns: int) -> None:
     try:
         parse_sensor_topic(key)
     except ValueError:  # status, alerts, anything else: JSON documents
         if payload:  # an empty payload is a DELETE (a cleared alert): no document to keep
-            recorder.write(key, payload, JSON_OBJECT, recv_ns, recv_ns)
+            recorder.write(key, payload, JSON_OBJECT, recv_ns, _document_time(payload, recv_ns))
         return
     try:
         block = codec.decode(key, payload, recv_ns)

@@ -100,3 +100,32 @@ def test_file_of_a_killed_recorder_salvages_to_the_last_flush(tmp_path):
     assert len(got) >= 300
     assert [m[2][:7] for m in got[:300]] == [b"msg%04d" % i for i in range(300)]
     assert [m[1] for m in got[:300]] == [T0 + i for i in range(300)]
+
+
+def test_record_command_stamps_documents_with_their_sensor_time():
+    """`buoymon record` gives a status or alert document its sensor time as publish time, as
+    the daemon's own recording does; other documents get the receive time."""
+    from monitor import cmd_record, zenoh_io
+
+    class Capture:
+        def __init__(self):
+            self.calls = []
+
+        def write(self, key, payload, spec, log_time_ns, publish_time_ns):
+            self.calls.append((key, log_time_ns, publish_time_ns))
+
+    cap, recv = Capture(), 1_800_000_000 * 10**9
+    codec = zenoh_io.ProtobufCodec()
+    for key, payload in (("buoy/b1/monitor/status", b'{"now_ns": 1700000000000000000}'),
+                         ("buoy/b1/alerts/x", b'{"at_ns": 1700000000500000000, "state": "firing"}'),
+                         ("buoy/b1/monitor/other", b'{"n": 1}'),
+                         ("buoy/b1/monitor/status", b'{"now_ns": true}'),
+                         ("buoy/b1/monitor/broken", b"{not json"),
+                         ("buoy/b1/alerts/x", b"")):  # a DELETE: nothing to keep
+        cmd_record._write(cap, codec, key, payload, recv)
+    assert cap.calls == [
+        ("buoy/b1/monitor/status", recv, 1_700_000_000_000_000_000),
+        ("buoy/b1/alerts/x", recv, 1_700_000_000_500_000_000),
+        ("buoy/b1/monitor/other", recv, recv),
+        ("buoy/b1/monitor/status", recv, recv),
+        ("buoy/b1/monitor/broken", recv, recv)]
