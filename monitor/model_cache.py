@@ -55,9 +55,10 @@ def cached(kind: str, inputs: object, build: Callable[[], T]) -> T:
     """``build()``, or its result saved by an earlier call with the same ``kind`` and
     ``inputs`` (whose ``repr`` must determine the result: dataclasses of numbers and strings)."""
     folder = cache_dir()
-    if folder is None:
+    builder_file = getattr(sys.modules.get(build.__module__), "__file__", None)
+    if folder is None or builder_file is None:  # off, or a build whose source is unknown
         return build()
-    code = _code_version(sys.modules[build.__module__].__file__)
+    code = _code_version(builder_file)
     key = hashlib.sha256(f"{kind}|{inputs!r}|{code}".encode()).hexdigest()
     path = folder / f"{kind}-{key[:32]}.pickle"
     try:

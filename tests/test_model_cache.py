@@ -146,3 +146,13 @@ def test_a_change_to_the_models_source_invalidates_every_entry(tmp_path, monkeyp
     finally:
         model_cache._code_version.cache_clear()
     assert len(calls) == 2
+
+
+def test_a_build_without_a_source_file_is_not_cached(tmp_path, monkeypatch):
+    monkeypatch.setenv("BUOYMON_CACHE_DIR", str(tmp_path / "c"))
+    calls: list = []
+    build = _builder(calls, 5)
+    build.__module__ = "__no_such_module__"
+    assert model_cache.cached("demo", Inputs(1.0, "x"), build) == 5
+    assert model_cache.cached("demo", Inputs(1.0, "x"), build) == 5
+    assert len(calls) == 2 and not (tmp_path / "c").exists()
