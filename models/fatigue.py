@@ -2,7 +2,8 @@
 
 - ``SNCurve`` (``models.sn_curve``): S-N curves for stress RANGES in Pa.
 - ``StreamingRainflow`` (``models.rainflow_stream``): incremental four-point counting.
-- ``MinerAccumulator`` (``models.miner``): committed/provisional damage, rate, histogram.
+- ``MinerAccumulator`` (``models.miner``): committed/provisional damage, rate, histogram;
+  ``remaining_life_days(damage, rate)``.
 - ``FatigueStream`` (``models.fatigue_stream``): the three steps below fused in one
   compiled pass per chunk, ``feed_tension(tension_N, time_s) -> damage added``; the same
   bits as the separate calls, several times faster on large blocks.
@@ -25,12 +26,12 @@ from __future__ import annotations
 import numpy as np
 
 from models.fatigue_stream import FatigueStream, TickCommits, commit_ticks
-from models.miner import MinerAccumulator
+from models.miner import MinerAccumulator, remaining_life_days
 from models.rainflow_stream import StreamingRainflow
 from models.sn_curve import SNCurve
 
 __all__ = ["SNCurve", "StreamingRainflow", "MinerAccumulator", "FatigueStream", "TickCommits",
-           "commit_ticks", "damage"]
+           "commit_ticks", "damage", "remaining_life_days"]
 
 
 def damage(stress_series_Pa, sn_curve: SNCurve, hysteresis: float = 0.0, include_residue: bool = True) -> float:

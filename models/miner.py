@@ -47,6 +47,14 @@ _DAY_S = 86400.0
 _STATE_VERSION = 1
 
 
+def remaining_life_days(damage: float, rate_per_day: float) -> float:
+    """Days until the Miner sum ``damage`` reaches 1 at ``rate_per_day`` (1/day): 0 once it
+    has (also when the rate has since dropped to nothing), infinite while nothing accrues."""
+    if damage >= 1.0:
+        return 0.0
+    return (1.0 - damage) / rate_per_day if rate_per_day > 0.0 else math.inf
+
+
 class MinerAccumulator:
     """Committed + provisional Miner damage with rate, histogram and remaining life."""
 
@@ -265,12 +273,7 @@ class MinerAccumulator:
 
     @property
     def remaining_life_days(self) -> float:
-        if self.damage >= 1.0:
-            return 0.0  # used up, whatever the rate is now
-        rate = self.damage_rate_per_day
-        if rate <= 0.0:
-            return math.inf
-        return (1.0 - self.damage) / rate
+        return remaining_life_days(self.damage, self.damage_rate_per_day)
 
     @property
     def histogram(self) -> tuple[np.ndarray, np.ndarray, float]:

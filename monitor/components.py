@@ -162,8 +162,7 @@ class Component:
                 for committed, rate, res in zip(run.committed.tolist(), run.rate_per_day.tolist(),
                                                 run.residue.tolist()):
                     damage = committed + res
-                    out.append((damage, committed, rate,
-                                max(0.0, 1.0 - damage) / rate if rate > 0 else math.inf))
+                    out.append((damage, committed, rate, fatigue.remaining_life_days(damage, rate)))
             return TickRun((run.ranges, run.means, np.ones(run.ranges.shape[0])), out)
         parts, out, start = [], [], 0
         for stop, end in zip(stops, ends_ns):
@@ -196,9 +195,7 @@ class Component:
             "damage": damage,
             "damage_committed": committed,
             "damage_rate_per_day": rate,
-            # life already used up stays 0 when the rate later drops to nothing
-            "remaining_life_days": (0.0 if damage >= 1.0 else (1.0 - damage) / rate if rate > 0
-                                    else math.inf),
+            "remaining_life_days": fatigue.remaining_life_days(damage, rate),
             "cycles": float(self.miner.total_cycles) + (
                 float(self._pending[2].sum()) if self._pending[2].shape[0] else 0.0),
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,

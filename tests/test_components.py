@@ -96,3 +96,17 @@ def test_remaining_life_is_zero_once_the_damage_passes_one():
     assert fig["remaining_life_days"] == 0.0
     fresh = make().figures()
     assert fresh["damage"] == 0.0 and fresh["remaining_life_days"] == math.inf
+
+
+def test_tick_figures_give_zero_life_once_the_damage_passes_one(monkeypatch):
+    """The compiled tick pass and the reference loop agree past failure too."""
+    swing = np.tile([0.0, 400e6], 2000)
+    figures = []
+    for reference in (False, True):
+        if reference:
+            monkeypatch.setattr(fatigue_stream, "ticks_compiled", None)
+        comp = make()
+        run = comp.run_ticks(swing, [1000, 2000, 4000], [10**9, 2 * 10**9, 3 * 10**9])
+        figures.append(run.figures)
+    assert figures[0] == figures[1]
+    assert figures[0][-1][0] > 1.0 and figures[0][-1][3] == 0.0
