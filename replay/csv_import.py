@@ -203,7 +203,7 @@ def _bad_cells(row: list[str], width: int, value_cols: list[int], names: list[st
         cell = row[i].strip()
         if not cell:
             return f"empty cell in column {names[i]}"
-        if not (_NUMBER.match(cell) or _NON_FINITE.match(cell)):
+        if not _is_number(cell):
             return f"unparsable number in column {names[i]}: {cell!r}"
         v = float(cell)
         if v != v:
@@ -213,11 +213,18 @@ def _bad_cells(row: list[str], width: int, value_cols: list[int], names: list[st
     return None
 
 
+def _is_number(cell: str) -> bool:
+    """A plain decimal number, or a spelling of NaN/inf (rejected later, with its reason)."""
+    return bool(_NUMBER.match(cell) or _NON_FINITE.match(cell))
+
+
 def _time_ns(cell: str, relative: bool, start_ns: int) -> int:
     if not cell:
         raise ValueError("empty time cell")
-    if relative:
-        if not (_NUMBER.match(cell) or _NON_FINITE.match(cell)):
+    if not relative:
+        t = parse_iso_ns(cell)  # checks the int64 range itself
+    else:
+        if not _is_number(cell):
             raise ValueError(f"bad time_s {cell!r}: not a number")
         d = Decimal(cell)
         if not d.is_finite():
@@ -226,8 +233,6 @@ def _time_ns(cell: str, relative: bool, start_ns: int) -> int:
         if t > LAST_NS:
             raise ValueError(f"bad time_s {cell!r}: after {_iso(LAST_NS)}, the last nanosecond "
                              "time stamp")
-    else:
-        t = parse_iso_ns(cell)
     if t <= 0:
         raise ValueError(f"bad time {cell!r}: not after the Unix epoch (1970-01-01T00:00:00Z)")
     return t
