@@ -2,10 +2,11 @@
 
 The file is read front to back record by record (https://mcap.dev/spec); the footer and
 summary are not needed, so a file that was cut short (crash, power loss) or has damaged
-chunks is read as far as it is intact (an intact summary's copies of the channel definitions
-are taken too, so a damaged chunk that held a channel's definition costs only its own messages). Each chunk is decompressed once, its records located by
-a numba scan and all of its sensor payloads decoded in bulk (:func:`replay.codec.decode_many`).
-With ``read_ahead`` (the default) a worker thread does all that for the next chunk
+chunks is read as far as it is intact. (An intact summary's copies of the channel definitions
+are taken too, so a damaged chunk that held a channel's definition costs only its own
+messages.) Each chunk is decompressed once, its records located by a numba scan and all of
+its sensor payloads decoded in bulk (:func:`replay.codec.decode_many`). With ``read_ahead``
+(the default) a worker thread does all that for the next chunk
 (:class:`replay.chunks.ReadAhead`; none of it holds the GIL) while the caller processes the
 blocks of the current one; the results are the same either way.
 This delivers millions of messages per second where ``mcap``'s per-message reader manages a
