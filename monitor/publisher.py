@@ -3,15 +3,13 @@
 :func:`publish_blocks` publishes each block on ``buoy/<id>/sensor/<sensor>`` with the log
 format's payload encoding, paced by sensor time (``speed`` times real time, or as fast as
 possible), holding a liveliness token per sensor like a real sensor node. It is what
-``buoymon simulate --publish`` calls; ``python -m monitor.publisher LOG.mcap --connect EP``
-plays a recorded or simulated log without the rest of the CLI.
+what ``replay.publish`` (``buoymon simulate --publish``, ``python -m replay.publish``) calls
+to play a recorded or simulated log to a daemon.
 """
 
 from __future__ import annotations
 
-import argparse
 import logging
-import sys
 import threading
 import time
 from typing import Any, Callable, Iterable, Sequence
@@ -93,35 +91,3 @@ def play(blocks: Iterable[SampleBlock], zc: ZenohConfig, speed: float | None = N
     with zenoh_io.open_session(zc) as session:
         return publish_blocks(session, blocks, codec, speed, start_after_ns,
                               wait_for_subscriber_s)
-
-
-def publish_logs(paths: Sequence[str], zc: ZenohConfig, speed: float | None = None,
-                 start_after_ns: int | None = None, codec: zenoh_io.BlockCodec | None = None,
-                 wait_for_subscriber_s: float = 10.0) -> int:
-    """Play MCAP logs message by message (as recorded: not coalesced) over Zenoh."""
-    from replay.reader import iter_blocks  # noqa: PLC0415 (replay is only needed here)
-
-    return play(iter_blocks(list(paths), coalesce=False), zc, speed, start_after_ns, codec,
-                wait_for_subscriber_s)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m monitor.publisher",
-                                description="Play MCAP logs over Zenoh as a live buoy.")
-    p.add_argument("logs", nargs="+", help="MCAP log files")
-    p.add_argument("--connect", action="append", default=[],
-                   help="zenoh endpoint of the daemon, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    p.add_argument("--speed", type=float, default=None,
-                   help="times real time (default: as fast as possible)")
-    p.add_argument("--start-after-ns", type=int, default=None,
-                   help="skip blocks ending at or before this sensor time (ns)")
-    args = p.parse_args(argv)
-    if not args.connect:
-        p.error("--connect is required (the daemon's listen endpoint)")
-    n = publish_logs(args.logs, publisher_config(args.connect), args.speed, args.start_after_ns)
-    print(n, flush=True)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -145,10 +145,10 @@ class BlockCodec(Protocol):
 
 
 class ProtobufCodec:
-    """The log format's protobuf block encoding (``replay.codec``) as a :class:`BlockCodec`."""
+    """The log format's protobuf block encoding (``monitor.codec``) as a :class:`BlockCodec`."""
 
     def __init__(self) -> None:
-        from replay import codec  # noqa: PLC0415 (lazy: numba compile only when used)
+        from monitor import codec  # noqa: PLC0415 (lazy: numba compile only when used)
 
         self._codec = codec
 

@@ -1,7 +1,7 @@
 """``buoymon simulate -o LOG.mcap --hours H --hs M --tp S --seed N``: a synthetic buoy log.
 
 ``--publish [ENDPOINT] [--speed X]`` also plays the simulated buoy over Zenoh to a daemon
-(``monitor.publisher.publish_logs``: one message per 1 s block, liveliness tokens, paced by
+(``replay.publish.publish_logs``: one message per 1 s block, liveliness tokens, paced by
 sensor time), as a peer that only connects out. The endpoint must be on the loopback
 interface unless ``--allow-remote`` is given.
 """
@@ -107,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
             return 2
         print(summary.text(), flush=True)
         if args.publish is not None:
-            from monitor.publisher import publish_logs, publisher_config
+            from monitor.publisher import publisher_config
+            from replay.publish import publish_logs
 
             pace = "as fast as possible" if args.speed is None else f"at {args.speed:g}x real time"
             print(f"publishing to {args.publish} {pace} ...", flush=True)

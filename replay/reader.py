@@ -5,7 +5,7 @@ summary are not needed, so a file that was cut short (crash, power loss) or has 
 chunks is read as far as it is intact. (An intact summary's copies of the channel definitions
 are taken too, so a damaged chunk that held a channel's definition costs only its own
 messages.) Each chunk is decompressed once, its records located by a numba scan and all of
-its sensor payloads decoded in bulk (:func:`replay.codec.decode_many`). With ``read_ahead``
+its sensor payloads decoded in bulk (:func:`monitor.codec.decode_many`). With ``read_ahead``
 (the default) a worker thread does all that for the next chunk
 (:class:`replay.chunks.ReadAhead`; none of it holds the GIL) while the caller processes the
 blocks of the current one; the results are the same either way.
@@ -63,7 +63,7 @@ import numpy as np
 import zstandard
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
-from replay import codec
+from monitor import codec
 from replay.chunks import Inflated, ReadAhead, inflate
 
 log = logging.getLogger(__name__)
@@ -780,7 +780,7 @@ def reference_blocks(paths: Sequence[str | PathLike] | str | PathLike) -> list[S
     """Slow reference: ``mcap``'s own reader and the generic protobuf runtime, one block per
     message, sorted by (publish time, topic, read order) with exact duplicates dropped.
 
-    Independent of :mod:`replay.codec`'s decoder and of this module's record parsing; used by
+    Independent of :mod:`monitor.codec`'s decoder and of this module's record parsing; used by
     tests to check the fast path. Undamaged files only.
     """
     from google.protobuf import descriptor_pb2, descriptor_pool, message_factory

@@ -32,7 +32,7 @@ import numpy as np
 import zstandard
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, sensor_topic, validate_buoy_id
-from replay import codec
+from monitor import codec
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05

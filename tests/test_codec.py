@@ -9,7 +9,7 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
-from replay import codec
+from monitor import codec
 
 T0 = 1_700_000_000_123_456_789
 

@@ -108,7 +108,7 @@ def start_daemon(cfg: Path, tmp: Path) -> DaemonProcess:
 
 
 def publish(log: Path, port: int, speed: float | None = None, **popen) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "monitor.publisher", str(log),
+    cmd = [sys.executable, "-m", "replay.publish", str(log),
            "--connect", f"tcp/127.0.0.1:{port}"]
     if speed is not None:
         cmd += ["--speed", str(speed)]

@@ -220,7 +220,7 @@ def test_foreign_mcap_unchunked_and_lz4_files_are_read(tmp_path):
     """Files from mcap's own writer (top-level messages; lz4 chunks) decode the same."""
     from mcap.writer import CompressionType, Writer
 
-    from replay import codec
+    from monitor import codec
 
     blocks = [_blk("tension", _seconds("tension", k, 20), seed=k) for k in range(12)]
     variants = (("flat", {"use_chunking": False}), ("lz4", {"compression": CompressionType.LZ4}))

@@ -286,7 +286,7 @@ def _mcap_library_log(path, n=120):
     first chunk that uses it, and again in the summary)."""
     from mcap.writer import CompressionType, Writer
 
-    from replay import codec
+    from monitor import codec
 
     with open(path, "wb") as f:
         w = Writer(f, compression=CompressionType.ZSTD, chunk_size=2000)

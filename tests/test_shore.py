@@ -96,7 +96,7 @@ def test_three_buoys_publishing_at_once_over_loopback(tmp_path):
     try:
         assert shore.wait_ready(30)
         env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
-        pubs = [subprocess.Popen([sys.executable, "-m", "monitor.publisher", str(log),
+        pubs = [subprocess.Popen([sys.executable, "-m", "replay.publish", str(log),
                                   "--connect", f"tcp/127.0.0.1:{port}", "--speed", "15"],
                                  env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 for log in logs.values()]

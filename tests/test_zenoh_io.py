@@ -108,7 +108,7 @@ def test_protobuf_codec_is_the_log_format():
     import numpy as np
 
     from monitor.blocks import SampleBlock
-    from replay import codec
+    from monitor import codec
 
     block = SampleBlock("b1", "imu", np.array([10, 20, 35], np.int64),
                         {"accel_x_mps2": np.array([0.1, -0.2, 0.3]),

@@ -90,14 +90,14 @@ def file_descriptor_set(sensor: str) -> bytes:
 
 
 def proto_text() -> str:
-    """The schemas as ``.proto`` source, rendered from the descriptors (``replay/buoymon.proto``
+    """The schemas as ``.proto`` source, rendered from the descriptors (``monitor/buoymon.proto``
     is this text, kept for readers and for protoc users; a test checks they agree)."""
     names = {descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED64: "sfixed64",
              descriptor_pb2.FieldDescriptorProto.TYPE_UINT64: "uint64",
              descriptor_pb2.FieldDescriptorProto.TYPE_SINT64: "sint64",
              descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE: "double"}
     lines = ["// buoymon log format: one message per block of samples of one sensor.",
-             "// Generated from replay/codec.py (proto_text); see docs/LOG_FORMAT.md.",
+             "// Generated from monitor/codec.py (proto_text); see docs/LOG_FORMAT.md.",
              'syntax = "proto3";', "", f"package {PACKAGE};"]
     for sensor, fields in SENSOR_FIELDS.items():
         fds = descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set(sensor))

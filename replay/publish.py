@@ -1,0 +1,46 @@
+"""Play MCAP logs over Zenoh as a live buoy: ``python -m replay.publish LOG.mcap --connect EP``.
+
+What ``buoymon simulate --publish`` calls; the blocks go out through
+:func:`monitor.publisher.play`, message by message as recorded (not coalesced).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+from monitor import zenoh_io
+from monitor.daemon_config import ZenohConfig
+from monitor.publisher import play, publisher_config
+from replay.reader import iter_blocks
+
+
+def publish_logs(paths: Sequence[str], zc: ZenohConfig, speed: float | None = None,
+                 start_after_ns: int | None = None, codec: zenoh_io.BlockCodec | None = None,
+                 wait_for_subscriber_s: float = 10.0) -> int:
+    """Play MCAP logs message by message (as recorded: not coalesced) over Zenoh."""
+    return play(iter_blocks(list(paths), coalesce=False), zc, speed, start_after_ns, codec,
+                wait_for_subscriber_s)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m replay.publish",
+                                description="Play MCAP logs over Zenoh as a live buoy.")
+    p.add_argument("logs", nargs="+", help="MCAP log files")
+    p.add_argument("--connect", action="append", default=[],
+                   help="zenoh endpoint of the daemon, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="times real time (default: as fast as possible)")
+    p.add_argument("--start-after-ns", type=int, default=None,
+                   help="skip blocks ending at or before this sensor time (ns)")
+    args = p.parse_args(argv)
+    if not args.connect:
+        p.error("--connect is required (the daemon's listen endpoint)")
+    n = publish_logs(args.logs, publisher_config(args.connect), args.speed, args.start_after_ns)
+    print(n, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
