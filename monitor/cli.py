@@ -17,6 +17,8 @@ COMMANDS: dict[str, str] = {
     "import": "replay.cmd_import",
     "replay": "replay.cmd_replay",
     "demo": "replay.cmd_demo",
+    "design": "replay.cmd_design",
+    "forecast": "replay.cmd_forecast",
     "run": "monitor.cmd_run",
     "shore": "monitor.shore",
     "check-config": "monitor.cmd_check_config",

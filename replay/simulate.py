@@ -40,8 +40,10 @@ not change the sea or the noise.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
+from typing import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +204,21 @@ class _Sea:
         return out
 
 
+@functools.lru_cache(maxsize=4)
+def _tension_table(span_m: float, depth_m: float, cable_mass: float):
+    """The seed 004 mooring's tension table around a mean fairlead position, with its
+    limits: pure and about 0.1 s to solve, so solved once per position (a design check
+    simulates hundreds of sea states on the same mooring)."""
+    from models.catenary_table import TensionTable
+    from models.catenary_vaps import vaps_mooring
+
+    x_lim = (max(span_m - 6.0, 0.5), span_m + 2.5)
+    z_lim = (max(depth_m - 4.0, 0.0), depth_m + 4.0)
+    table = TensionTable(vaps_mooring(cable_mass=cable_mass), x_lim, z_lim, nx=48, nz=12,
+                         max_refinements=1)
+    return table, x_lim, z_lim
+
+
 class _Mooring:
     """Line tension from buoy motion through the physics models (stateful, streaming).
 
@@ -216,7 +233,6 @@ class _Mooring:
     MASS_PER_LENGTH = 1.10  # kg/m in air, the cable mass assumed by vaps_mooring()
 
     def __init__(self, cfg: SimConfig):
-        from models.catenary_table import TensionTable
         from models.catenary_vaps import vaps_mooring
         from models.estimator import EstimatorConfig, Flag, MotionTensionEstimator
 
@@ -227,9 +243,7 @@ class _Mooring:
         if math.hypot(self.span_m, depth) >= length:
             raise ValueError(f"mean_span_m = {self.span_m}: the {length:g} m line cannot reach "
                              f"a buoy that far in {depth:g} m of water")
-        x_lim = (max(self.span_m - 6.0, 0.5), self.span_m + 2.5)
-        z_lim = (max(depth - 4.0, 0.0), depth + 4.0)
-        table = TensionTable(line, x_lim, z_lim, nx=48, nz=12, max_refinements=1)
+        table, x_lim, z_lim = _tension_table(self.span_m, depth, self.MASS_PER_LENGTH)
         out_bit = np.uint8(Flag.OUT_OF_RANGE)
 
         def quasi_static(x_off: np.ndarray, z: np.ndarray):
@@ -300,27 +314,40 @@ def _gnss(cfg: SimConfig, surge: np.ndarray, sway: np.ndarray, span_m: float,
     return np.vstack([lat, lon])
 
 
+def _hours(cfg: SimConfig) -> Iterator[tuple[int, int, dict[str, np.ndarray], np.ndarray, "_Mooring"]]:
+    """Hour by hour: (hour, index of its first 20 Hz sample, motion, noise-free tension,
+    the mooring model)."""
+    total = int(round(cfg.hours * 3600 * BASE_HZ))
+    per_hour = 3600 * BASE_HZ
+    sea, mooring = _Sea(cfg), _Mooring(cfg)
+    for hour in range(math.ceil(total / per_hour)):
+        i0 = hour * per_hour
+        motion = sea.next(hour, min(per_hour, total - i0))
+        yield hour, i0, motion, mooring.tension(motion), mooring
+
+
+def clean_tension(cfg: SimConfig) -> np.ndarray:
+    """The noise-free line tension (N, 20 Hz) of ``cfg``'s sea and load model: the log's
+    tension stream before sensor noise and faults."""
+    return np.concatenate([tension for _, _, _, tension, _ in _hours(cfg)])
+
+
 def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
     """Write the simulated log to ``path``; return what was written."""
     from models.waves import sea_state_from_heave
 
     start_ns = parse_iso_ns(cfg.start)
     total = int(round(cfg.hours * 3600 * BASE_HZ))
-    per_hour = 3600 * BASE_HZ
-    sea, mooring = _Sea(cfg), _Mooring(cfg)
     summary = SimSummary(path=str(path), start_ns=start_ns, load_model=cfg.load_model)
     t_sum, t_min, t_max = 0.0, math.inf, -math.inf
     wave_n = int(round(cfg.waves_interval_s * BASE_HZ))
     heave_hist = np.empty(0)
     delay_ns = int(round(cfg.link_delay_s * SECOND))
     with LogWriter(path) as w:
-        for hour in range(math.ceil(total / per_hour)):
-            i0 = hour * per_hour
-            n = min(per_hour, total - i0)
+        for hour, i0, motion, tension, mooring in _hours(cfg):
+            n = tension.shape[0]
             idx = i0 + np.arange(n, dtype=np.int64)
             t = start_ns + idx * (SECOND // BASE_HZ)
-            motion = sea.next(hour, n)
-            tension = mooring.tension(motion)
             t_sum += float(tension.sum())
             t_min, t_max = min(t_min, float(tension.min())), max(t_max, float(tension.max()))
             series = []

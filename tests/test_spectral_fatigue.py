@@ -1,0 +1,80 @@
+"""Spectral fatigue (Dirlik, Tovo-Benasciutti) against the FLife package and hand results."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from models.sn_curve import SNCurve
+from models.spectral_fatigue import (cycle_rate_hz, damage_rate, damage_rate_from_psd,
+                                     range_density, spectral_moments, tovo_benasciutti_b)
+from models.waves import jonswap
+
+FLife = pytest.importorskip("FLife")
+
+F = np.linspace(0.01, 1.0, 2000)
+
+
+def _spectra():
+    """A wave-frequency stress spectrum, the same with a second, higher mode, and a narrow
+    one (Pa^2/Hz)."""
+    wave = 4e12 * jonswap(F, 1.5, 5.25)
+    bimodal = wave + 2e11 * np.exp(-((F - 0.6) / 0.05) ** 2)
+    narrow = 1e12 * np.exp(-((F - 0.2) / 0.01) ** 2)
+    return {"wave": wave, "bimodal": bimodal, "narrow": narrow}
+
+
+@pytest.mark.parametrize("name", ["wave", "bimodal", "narrow"])
+@pytest.mark.parametrize("k, log_a", [(3.0, 12.164), (4.0, 12.0), (5.0, 15.606)])
+def test_damage_rate_equals_flife_closed_forms(name, k, log_a):
+    psd = _spectra()[name]
+    curve = SNCurve.basquin(k, log_a)           # N = 10**log_a * S_MPa**-k, S a range
+    sd = FLife.SpectralData(input={"PSD": psd / 1e12, "f": F})  # MPa^2/Hz
+    c_amp = 10**log_a / 2**k                    # FLife's S-N curve is on amplitudes
+    for method, cls in (("dirlik", FLife.Dirlik), ("tovo_benasciutti", FLife.TovoBenasciutti)):
+        ours = damage_rate_from_psd(curve, F, psd, method)
+        theirs = 1.0 / cls(sd).get_life(c_amp, k)
+        assert ours == pytest.approx(theirs, rel=1e-6), method
+
+
+def test_narrow_band_limit_is_the_rayleigh_closed_form():
+    """A near pure tone (alpha_2 -> 1): both of TB's parts tend to the narrow-band result
+    nu0 (2 sqrt(2 m0))^k Gamma(1 + k/2) / C on ranges (Bendat), whatever b is."""
+    psd = _spectra()["narrow"]
+    mom = spectral_moments(F, psd)
+    assert mom.alpha2 > 0.997 and 0.0 <= tovo_benasciutti_b(mom) <= 1.0
+    k, log_a = 3.0, 12.0
+    by_hand = mom.nu0_hz * (2 * math.sqrt(2 * mom.m0) / 1e6) ** k * math.gamma(1 + k / 2) / 10**log_a
+    tb = damage_rate(SNCurve.basquin(k, log_a), mom, "tovo_benasciutti")
+    assert tb == pytest.approx(by_hand, rel=2e-3)
+
+
+@pytest.mark.parametrize("method", ["dirlik", "tovo_benasciutti"])
+def test_range_density_integrates_to_one(method):
+    mom = spectral_moments(F, _spectra()["bimodal"])
+    s = np.linspace(0, 40 * mom.sigma, 200_001)
+    assert np.trapezoid(range_density(s, mom, method), s) == pytest.approx(1.0, abs=1e-6)
+    assert cycle_rate_hz(mom, "dirlik") == pytest.approx(mom.nup_hz)
+
+
+def test_a_knee_curve_is_integrated_through_its_own_damage_per_cycle():
+    """The DNV two-slope curve: the spectral damage equals a brute-force sum over a fine
+    grid of ranges with the curve's damage_per_cycle (the same formula as rainflow)."""
+    curve = SNCurve.dnv_rp_c203("D", "air")
+    mom = spectral_moments(F, _spectra()["wave"])
+    s = np.linspace(1.0, 30 * mom.sigma, 2_000_001)
+    brute = mom.nup_hz * np.trapezoid(range_density(s, mom) * curve.damage_per_cycle(s), s)
+    assert damage_rate(curve, mom) == pytest.approx(brute, rel=1e-4)
+
+
+def test_bad_spectra_are_refused():
+    with pytest.raises(ValueError, match="no variance"):
+        spectral_moments(F, np.zeros_like(F))
+    with pytest.raises(ValueError, match="increasing"):
+        spectral_moments(F[::-1], np.ones_like(F))
+    with pytest.raises(ValueError, match="psd >= 0"):
+        spectral_moments(F, -np.ones_like(F))
+    with pytest.raises(ValueError, match="spectral method"):
+        damage_rate(SNCurve.basquin(3, 12), spectral_moments(F, _spectra()["wave"]), "rice")
