@@ -31,6 +31,7 @@ chromium:
 	  else echo "note: /usr/bin/chromium missing and cannot install it; its test will skip"; fi; }
 
 test: $(VENV)/.installed-test chromium
+	cd $(CURDIR) && $(VENV)/bin/lint-imports --no-cache
 	$(PY) -m pytest -q
 
 # every benchmark script prints its figures (the 30-day replay takes a few minutes)
