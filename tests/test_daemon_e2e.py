@@ -89,7 +89,8 @@ def write_config(tmp: Path, port: int, *, record: bool = False, checkpoint_s: fl
                  load_source: str = "auto", tension_alert: bool = False) -> Path:
     text = SHIPPED.read_text().replace('source = "auto"', f'source = "{load_source}"', 1)
     text += (f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\nstatus_interval_s = 0.5\n'
-             f'[state]\npath = "{tmp / "state.sqlite"}"\ncheckpoint_interval_s = {checkpoint_s}\n')
+             f'[state]\npath = "{tmp / "state.sqlite"}"\ncheckpoint_interval_s = {checkpoint_s}\n'
+             f'[metrics]\nport = {free_port()}\n')
     if record:
         text += f'[record]\ndir = "{tmp / "rec"}"\nflush_interval_s = 1.0\n'
     if tension_alert:  # fires above 4.5 kN (10 % of 45 kN): on the bigger wave groups
