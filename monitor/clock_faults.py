@@ -32,10 +32,12 @@ class StreamClock:
     skewed_blocks: int = 0
     time_restarts: int = 0
     behind_s: float = 0.0  # > 0 while the stream is behind its previous newest time
+    last_jump_s: float = 0.0  # how far back the last restart went
 
     def to_dict(self) -> dict[str, Any]:
         return {"clock_skew_s": self.skew_s, "clock_skewed_blocks": self.skewed_blocks,
-                "time_restarts": self.time_restarts, "time_behind_s": self.behind_s}
+                "time_restarts": self.time_restarts, "time_behind_s": self.behind_s,
+                "time_restart_jump_s": self.last_jump_s}
 
 
 class ClockFaults:
@@ -57,9 +59,11 @@ class ClockFaults:
                        f"{'ahead of' if s.skew_s > 0 else 'behind'} the logger clock "
                        f"(allowed {self.skew_max_s:g} s)")
         if s.newest_ns is not None and t_last_ns < s.newest_ns - self.restart_min_ns:
+            behind = (s.newest_ns - t_last_ns) / NS
             if s.behind_s == 0.0:  # a new restart, not the continuation of one
                 s.time_restarts += 1
-            s.behind_s = (s.newest_ns - t_last_ns) / NS
+                s.last_jump_s = behind
+            s.behind_s = behind
             out.append(f"stream {sensor}: time restarted {s.behind_s:.6g} s in the past "
                        "(its samples are rejected as time_backwards until it catches up)")
         else:

@@ -439,15 +439,17 @@ class Daemon:
 
     def publish_json(self, key: str, doc: Mapping[str, Any], sensor_time_ns: int) -> None:
         """Publish a JSON document (status, alerts) and record it like a received message,
-        stamped with ``sensor_time_ns`` as its publish time (0 before any sensor time): the
-        pipeline's sensor time never goes back, so neither does a recorded topic."""
+        stamped with ``sensor_time_ns`` as its publish time: the pipeline's sensor time never
+        goes back, so neither does a recorded topic. Before there is any sensor time (0: no
+        data yet, ever) documents are published but not recorded; the wall clock would put
+        them after the sensor-time ones that follow."""
         payload = zenoh_io.to_json_bytes(doc)
         if key == zenoh_io.status_key(self.buoy_id) and self._status_pub is not None:
             self._status_pub.put(payload)
         else:
             self.session.put(key, payload, encoding="application/json",
                              congestion_control=zenoh_io.zenoh.CongestionControl.BLOCK)
-        if self.recorder is not None:
+        if self.recorder is not None and sensor_time_ns > 0:
             self.recorder.write(key, payload, JSON_OBJECT, time.time_ns(), sensor_time_ns)
 
     def _publish_status(self) -> None:
@@ -485,7 +487,7 @@ class Daemon:
                 except Exception as exc:  # noqa: BLE001 (one sink must not stop the others)
                     log.error("live alert delivery failed", extra={"fields": {
                         "sink": type(sink).__name__, "error": repr(exc)}})
-        if self.recorder is not None:
+        if self.recorder is not None and sensor_time_ns > 0:  # as publish_json
             for rec in records:
                 self.recorder.write(rec.key, zenoh_io.to_json_bytes(rec.to_dict()), JSON_OBJECT,
                                     time.time_ns(), sensor_time_ns)

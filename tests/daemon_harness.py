@@ -62,6 +62,7 @@ class FakePipeline:
         state = state or {}
         self.delay_s = delay_s  # simulated processing time per block
         self.state_delay_s = state_delay_s  # simulated time to take a checkpoint
+        self.sinks: list[Any] = []  # alert sinks attached by the daemon (as the real pipeline)
         self.last_t = dict(state.get("last_t", {}))
         self.total = float(state.get("total", 0.0))
         self.accepted = dict(state.get("accepted", {}))
@@ -131,6 +132,26 @@ def expected_total(blocks: list[SampleBlock]) -> float:
     return p.total
 
 
+class _AlertKeys:
+    """Daemon extension: alerts on their Zenoh keys, as ``buoymon run`` attaches them."""
+
+    def __init__(self, session: Any, pipeline: Any) -> None:
+        from monitor.alerts.delivery import ZenohAlertSink
+
+        self.sink = ZenohAlertSink(session, BUOY)
+        pipeline.sinks.append(self.sink)
+
+    def poll(self) -> None:
+        """No operator commands without an alert engine."""
+
+    def close(self) -> None:
+        self.sink.close()
+
+
+def attach_alert_keys(session: Any, pipeline: Any) -> list[Any]:
+    return [_AlertKeys(session, pipeline)]
+
+
 def main(argv: list[str]) -> int:
     from monitor.cmd_run import load_daemon_config
     from monitor.daemon import Daemon
@@ -142,7 +163,7 @@ def main(argv: list[str]) -> int:
         state_delay = float(argv[3]) if len(argv) > 3 else 0.0
         daemon = Daemon(BUOY, load_daemon_config(argv[1]),
                         lambda state, sinks: FakePipeline(state, delay, state_delay),
-                        FakeCodec())
+                        FakeCodec(), attach=attach_alert_keys)
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: daemon.stop())
         daemon.run()

@@ -43,6 +43,8 @@ from monitor.alerts.records import AlertRecord
 
 # rules whose firing makes /healthz fail: the daemon cannot do its job
 HEALTH_RULES = ("data_age", "fatigue_blind", "checkpoint_failed")
+# counters that start from 0 in every daemon life (monitor.clock_faults): not saved
+_LIFE_COUNTERS = ("time_restart",)
 NS = 1_000_000_000
 
 
@@ -118,12 +120,18 @@ class LiveAlerts:
                     "clock_skew", name, "warning", abs(skew) > cfg.clock_skew_max_s, _num(skew),
                     cfg.clock_skew_max_s, "s",
                     f"stream {name}: sensor time {abs(skew):.6g} s {way} the logger clock"))
-            behind = s.get("time_behind_s")
-            if behind is not None:
+            if "time_restarts" in s:
+                # active while behind, and for hold_s after each restart (a re-sent stretch
+                # may catch up between two evaluations)
+                rose = self._increase("time_restart", name, "warning", int(s["time_restarts"]),
+                                      wall_ns, "")
+                behind = _num(s.get("time_behind_s"))
+                jump = behind if behind > 0 else _num(s.get("time_restart_jump_s"))
                 out.append(Condition(
-                    "time_restart", name, "warning", behind > 0, _num(behind), 0.0, "s",
-                    f"stream {name}: time restarted {behind:.6g} s in the past; its samples "
-                    "are rejected as time_backwards"))
+                    "time_restart", name, "warning", rose.active or behind > 0, jump, 0.0, "s",
+                    f"stream {name}: time restarted {jump:.6g} s in the past "
+                    f"({int(s['time_restarts'])} restarts); its older samples are rejected "
+                    "as time_backwards"))
             if "samples_missed" in s:
                 out.append(self._increase("samples_missed", name, "warning",
                                           int(s["samples_missed"]), wall_ns,
@@ -154,8 +162,10 @@ class LiveAlerts:
 
     def _increase(self, rule: str, comp: str, severity: str, value: int, wall_ns: int,
                   summary: str) -> Condition:
-        """Active for ``hold_s`` after the counter rose (the first value seen is the base)."""
-        entry = self._counters.setdefault((rule, comp), [value, 0])
+        """Active for ``hold_s`` after the counter rose (the first value seen is the base of
+        a cumulative counter; 0 that of a counter of this daemon life)."""
+        base = 0 if rule in _LIFE_COUNTERS else value
+        entry = self._counters.setdefault((rule, comp), [base, 0])
         if value > entry[0]:
             entry[1] = wall_ns
         entry[0] = value
@@ -205,7 +215,8 @@ class LiveAlerts:
 
     def state(self) -> dict[str, Any]:
         return {"firing": [r.to_dict() for r in self.active()],
-                "counters": [[r, c, *v] for (r, c), v in sorted(self._counters.items())]}
+                "counters": [[r, c, *v] for (r, c), v in sorted(self._counters.items())
+                             if r not in _LIFE_COUNTERS]}
 
 
 def _fields(rec: AlertRecord) -> dict[str, Any]:
