@@ -230,6 +230,15 @@ def test_a_publisher_restarting_with_older_times_is_alerted(tmp_path):
         tension = st["status"]["streams"]["tension"]
         assert tension["time_restarts"] == 1 and tension["rejected"]["duplicate"] == 200
         assert any(a["rule"] == "time_restart" for a in st["status"]["alerts"]["active"])
+        # `buoymon alerts list` finds the buoy and its endpoints in the configuration
+        out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "list", "--config",
+                              str(cfg), "--json"], env=ENV, capture_output=True, text=True,
+                             timeout=60)
+        assert out.returncode == 0, out.stderr
+        listed = json.loads(out.stdout)
+        assert listed["buoy"] == BUOY
+        assert [(a["rule"], a["labels"]["component"]) for a in listed["alerts"]
+                if a["rule"] == "time_restart"] == [("time_restart", "tension")]
     finally:
         c.close()
         assert d.terminate() == 0
