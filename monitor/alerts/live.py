@@ -41,6 +41,8 @@ from typing import Any, Iterable, Mapping
 
 from monitor.alerts.records import AlertRecord
 
+LIVE_RULES = ("data_age", "fatigue_blind", "clock_skew", "time_restart", "samples_missed",
+              "alert_delivery_refused", "alert_outbox_dropped", "checkpoint_failed")
 # rules whose firing makes /healthz fail: the daemon cannot do its job
 HEALTH_RULES = ("data_age", "fatigue_blind", "checkpoint_failed")
 # counters that start from 0 in every daemon life (monitor.clock_faults): not saved
