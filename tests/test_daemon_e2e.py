@@ -179,8 +179,11 @@ def test_live_over_zenoh_equals_replay_of_the_recording(tmp_path):
         pub = publish(log, port, speed=50.0)
         out, err = pub.communicate(timeout=120)
         assert pub.returncode == 0 and out.strip() == str(len(blocks)), err
-        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
-                         buoy=BUOY)
+        st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                              buoy=BUOY)["status"]
+        # the newest load sample that fed fatigue, and its wall-clock age (fatigue_blind)
+        assert blocks[-1].t_last_ns - 20 * 10**9 < st["load_t_ns"] <= blocks[-1].t_last_ns
+        assert 0 <= st["fatigue_feed_age_s"] < 60.0 and st["health"]["ok"]
         time.sleep(1.0)  # alerts go out before the reply that ended the wait: margin only
         sub.undeclare()
     assert d.terminate() == 0
