@@ -455,8 +455,7 @@ class Daemon:
     def _publish_status(self) -> None:
         doc = self.status()
         now = time.monotonic()
-        if self.config.health.live_rules and (
-                now - self._last_live_mono >= self.config.zenoh.status_interval_s):
+        if now - self._last_live_mono >= self.config.zenoh.status_interval_s:
             self._last_live_mono = now
             records = self.live.evaluate(doc, doc["wall_time_ns"])
             if records:

@@ -114,9 +114,12 @@ def test_a_restart_that_caught_up_between_evaluations_still_fires_for_hold_s():
     assert live.state()["counters"] == []
 
 
-def test_live_rules_off():
+def test_live_rules_off_raise_nothing_but_health_still_fails():
     live = LiveAlerts("b1", LiveConfig(enabled=False))
     assert live.evaluate(doc(age=99.0, accepted=1, feed=999.0), NS) == []
+    assert live.active() == []
+    assert [r.split(":")[0] for r in live.health()["reasons"]] == [
+        "data_age tension", "fatigue_blind fatigue"]
 
 
 def test_clock_skew_of_a_year_either_way_is_counted_with_its_size():

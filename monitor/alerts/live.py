@@ -176,9 +176,8 @@ class LiveAlerts:
 
     # --- evaluation ------------------------------------------------------------------------
     def evaluate(self, doc: Mapping[str, Any], wall_ns: int) -> list[AlertRecord]:
-        """Transitions since the last evaluation (fire and clear), as alert records."""
-        if not self.cfg.enabled:
-            return []
+        """Transitions since the last evaluation (fire and clear), as alert records; none
+        with the rules switched off (their state still drives :meth:`health`)."""
         out = []
         seen = set()
         for c in self.conditions(doc, wall_ns):
@@ -196,7 +195,7 @@ class LiveAlerts:
             was = self._firing.pop(key)
             out.append(AlertRecord(**{**_fields(was), "state": "resolved", "event": "clear",
                                       "ends_at_ns": wall_ns, "at_ns": wall_ns}))
-        return out
+        return out if self.cfg.enabled else []
 
     def _record(self, c: Condition, event: str, starts_ns: int, at_ns: int) -> AlertRecord:
         firing = event == "fire"
@@ -207,16 +206,17 @@ class LiveAlerts:
             value=c.value, threshold=c.threshold, unit=c.unit, summary=c.summary)
 
     def active(self) -> list[AlertRecord]:
-        return [self._firing[k] for k in sorted(self._firing)]
+        """Firing live alerts (none with the rules switched off)."""
+        return [self._firing[k] for k in sorted(self._firing)] if self.cfg.enabled else []
 
     def health(self) -> dict[str, Any]:
         """``/healthz``: failing while data is stale, fatigue is blind or checkpoints fail."""
-        reasons = [f"{r.rule} {r.component}: {r.summary}" for r in self.active()
-                   if r.rule in HEALTH_RULES]
+        reasons = [f"{r.rule} {r.component}: {r.summary}"
+                   for _, r in sorted(self._firing.items()) if r.rule in HEALTH_RULES]
         return {"ok": not reasons, "reasons": reasons}
 
     def state(self) -> dict[str, Any]:
-        return {"firing": [r.to_dict() for r in self.active()],
+        return {"firing": [self._firing[k].to_dict() for k in sorted(self._firing)],
                 "counters": [[r, c, *v] for (r, c), v in sorted(self._counters.items())
                              if r not in _LIFE_COUNTERS]}
 
