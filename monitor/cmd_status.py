@@ -16,7 +16,7 @@ import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, load_target
 
@@ -128,7 +128,7 @@ def _n(x: Any, fmt: str = "{:.4g}", unit: str = "") -> str:
     return "-" if x is None else fmt.format(x) + unit
 
 
-def _table(rows: list[tuple[str, ...]]) -> list[str]:
+def _table(rows: Sequence[Sequence[str]]) -> list[str]:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
 
@@ -150,7 +150,8 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
                + "".join(f"\n  {r}" for r in health.get("reasons", [])))
     out.append(f"sensor time {_t(doc.get('now_ns'))}; load source {doc.get('load_source')}; "
                f"fatigue fed {_n(doc.get('fatigue_feed_age_s'), '{:.1f}', ' s')} ago")
-    rows = [("STREAM", "AGE", "RATE", "ACCEPTED", "REJECTED", "MISSED", "CLOCK")]
+    rows: list[tuple[str, ...]] = [
+        ("STREAM", "AGE", "RATE", "ACCEPTED", "REJECTED", "MISSED", "CLOCK")]
     for name, s in sorted((doc.get("streams") or {}).items()):
         rej = s.get("rejected") or {}
         rejected = " ".join(f"{k}={v}" for k, v in sorted(rej.items()) if v) or "0"
@@ -166,7 +167,7 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
     out += ["streams:", *_table(rows)]
     rows = [("COMPONENT", "DAMAGE", "COMMITTED", "RATE/DAY", "REMAINING LIFE")]
     for name, c in sorted((doc.get("components") or {}).items()):
-        rows.append((name, _n(c.get("damage")), _n(c.get("damage_committed")),
+        rows.append((str(name), _n(c.get("damage")), _n(c.get("damage_committed")),
                      _n(c.get("damage_rate_per_day")),
                      _n(c.get("remaining_life_days"), "{:.4g}", " d")))
     out += ["components:", *_table(rows)]

@@ -118,6 +118,22 @@ class StreamHealth:
                 "rate_hz": recent / _RATE_WINDOW_S}
 
 
+@dataclass
+class CheckpointHealth:
+    """How checkpointing goes: the last good save (wall clock) and failures in this life."""
+
+    seq: int
+    saved_ns: int | None
+    failures: int = 0
+    failing: bool = False
+    last_error: str | None = None
+
+    def to_dict(self, wall_ns: int) -> dict[str, Any]:
+        age = None if self.saved_ns is None else (wall_ns - self.saved_ns) / 1e9
+        return {"seq": self.seq, "age_s": age, "failures": self.failures,
+                "failing": self.failing, "last_error": self.last_error}
+
+
 class _RateLimitedLog:
     """Logs a repeating warning at most every ``_LOG_EVERY_S`` per subject, with the count of
     the ones left out since, so a fault on every block neither floods nor goes quiet."""
@@ -173,8 +189,8 @@ class Daemon:
             hc.clock_skew_max_s, hc.hold_s), saved.get("daemon", {}).get("live"))
         self._faults = _RateLimitedLog()
         # checkpoint health: wall time of the last good save, failures in this life
-        self._ckpt = {"seq": self.restored_seq, "saved_ns": restored.saved_ns if restored else None,
-                      "failures": 0, "failing": False, "last_error": None}
+        self._ckpt = CheckpointHealth(self.restored_seq,
+                                      restored.saved_ns if restored is not None else None)
         self._last_doc: dict[str, Any] | None = None  # the last status built (read by /metrics)
         self._last_live_mono = 0.0
         self._load_t_ns: Any = None  # the pipeline's newest load time, and when it last moved
@@ -296,12 +312,14 @@ class Daemon:
             if not save():
                 return
         except (sqlite3.Error, OSError, ValueError) as exc:
-            ck.update(failures=ck["failures"] + 1, failing=True, last_error=repr(exc)[:300])
+            ck.failures += 1
+            ck.failing, ck.last_error = True, repr(exc)[:300]
             self._faults.warning("checkpoint", "checkpoint failed; damage since the last good "
                                  "one would be lost in a crash", error=repr(exc),
-                                 failures=ck["failures"])
+                                 failures=ck.failures)
             return
-        ck.update(seq=ck["seq"] + 1, saved_ns=time.time_ns(), failing=False)
+        ck.seq += 1
+        ck.saved_ns, ck.failing = time.time_ns(), False
 
     def _pet_watchdog(self, now: float) -> None:
         interval = self.notifier.watchdog_interval_s
@@ -399,7 +417,6 @@ class Daemon:
         load_t = doc.get("load_t_ns")
         if load_t is not None and load_t != self._load_t_ns:
             self._load_t_ns, self._load_mono = load_t, now
-        ck = self._ckpt
         doc.update({
             "buoy_id": self.buoy_id,
             "wall_time_ns": wall_ns,
@@ -408,17 +425,14 @@ class Daemon:
             "uptime_s": now - self._started_mono,
             "queue_depth": self._q.qsize(),  # received but not yet processed
             "fatigue_feed_age_s": now - self._load_mono,
-            "checkpoint": {
-                "seq": ck["seq"], "failures": ck["failures"], "failing": ck["failing"],
-                "last_error": ck["last_error"],
-                "age_s": None if ck["saved_ns"] is None else (wall_ns - ck["saved_ns"]) / 1e9},
+            "checkpoint": self._ckpt.to_dict(wall_ns),
         })
         for ext in self._extensions:
             fields = getattr(ext, "status_fields", None)
             if fields is not None:
                 doc.update(fields())
-        engine = getattr(self.pipeline, "alerts", None)
-        sensor_time = engine.active() if hasattr(engine, "active") else []
+        engine_active = getattr(getattr(self.pipeline, "alerts", None), "active", None)
+        sensor_time = engine_active() if engine_active is not None else []
         doc["alerts"] = {"active": [_alert_summary(r, "sensor_time") for r in sensor_time]
                          + [_alert_summary(r, "live") for r in self.live.active()]}
         doc["health"] = self.live.health()
