@@ -473,11 +473,12 @@ class Daemon:
             self._last_live_mono = now
             records = self.live.evaluate(doc, doc["wall_time_ns"])
             if records:
-                self._deliver_live(records, int(doc.get("now_ns") or 0))
                 doc["alerts"]["active"] = [a for a in doc["alerts"]["active"]
                                            if a["source"] != "live"] + [
                     _alert_summary(r, "live") for r in self.live.active()]
                 doc["health"] = self.live.health()
+                self._last_doc = doc  # /healthz agrees before anyone hears of the change
+                self._deliver_live(records, int(doc.get("now_ns") or 0))
         self._last_doc = doc
         self.publish_json(zenoh_io.status_key(self.buoy_id), doc, int(doc.get("now_ns") or 0))
         self.counters["status_published"] += 1
