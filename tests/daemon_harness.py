@@ -57,9 +57,15 @@ class FakePipeline:
     """Damage = sum of accepted tension samples / 1e9; samples at or before a stream's last
     time are rejected as duplicates, NaNs as nan: the contract the real pipeline keeps."""
 
-    def __init__(self, state: Any = None, delay_s: float = 0.0, state_delay_s: float = 0.0
-                 ) -> None:
+    def __init__(self, state: Any = None, delay_s: float = 0.0, state_delay_s: float = 0.0,
+                 alerts_raw: Any = None) -> None:
+        from monitor.alerts.engine import AlertEngine
+
         state = state or {}
+        self.buoy_id = BUOY
+        # an alert engine without sensor-time rules, so the daemon attaches alert delivery
+        # (Zenoh keys, outbox channels) exactly as `buoymon run` does
+        self.alerts = AlertEngine.from_config(alerts_raw or {}, BUOY, {})
         self.delay_s = delay_s  # simulated processing time per block
         self.state_delay_s = state_delay_s  # simulated time to take a checkpoint
         self.sinks: list[Any] = []  # alert sinks attached by the daemon (as the real pipeline)
@@ -132,26 +138,6 @@ def expected_total(blocks: list[SampleBlock]) -> float:
     return p.total
 
 
-class _AlertKeys:
-    """Daemon extension: alerts on their Zenoh keys, as ``buoymon run`` attaches them."""
-
-    def __init__(self, session: Any, pipeline: Any) -> None:
-        from monitor.alerts.delivery import ZenohAlertSink
-
-        self.sink = ZenohAlertSink(session, BUOY)
-        pipeline.sinks.append(self.sink)
-
-    def poll(self) -> None:
-        """No operator commands without an alert engine."""
-
-    def close(self) -> None:
-        self.sink.close()
-
-
-def attach_alert_keys(session: Any, pipeline: Any) -> list[Any]:
-    return [_AlertKeys(session, pipeline)]
-
-
 def main(argv: list[str]) -> int:
     from monitor.cmd_run import load_daemon_config
     from monitor.daemon import Daemon
@@ -159,11 +145,18 @@ def main(argv: list[str]) -> int:
 
     setup_logging("warning")
     if argv[0] == "run":
+        import tomllib
+
+        from monitor.cmd_run import AlertDelivery
+
         delay = float(argv[2]) if len(argv) > 2 else 0.0
         state_delay = float(argv[3]) if len(argv) > 3 else 0.0
+        with open(argv[1], "rb") as f:
+            alerts_raw = tomllib.load(f).get("alerts", {})
         daemon = Daemon(BUOY, load_daemon_config(argv[1]),
-                        lambda state, sinks: FakePipeline(state, delay, state_delay),
-                        FakeCodec(), attach=attach_alert_keys)
+                        lambda state, sinks: FakePipeline(state, delay, state_delay, alerts_raw),
+                        FakeCodec(),
+                        attach=lambda session, pipe: [AlertDelivery(session, pipe, alerts_raw)])
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: daemon.stop())
         daemon.run()
