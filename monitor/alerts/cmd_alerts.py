@@ -2,7 +2,8 @@
 
 Two targets:
 
-* a running daemon, over Zenoh (``--buoy ID [--connect ENDPOINT]``): ``list`` queries
+* a running daemon, over Zenoh (``--buoy ID [--connect ENDPOINT]``, or by default the buoy
+  and endpoints of ``--config``, itself by default ``/etc/buoymon/buoymon.toml``): ``list`` queries
   ``buoy/<id>/monitor/alerts``; ``ack``/``reset`` send the command as the payload of a query on
   ``buoy/<id>/monitor/alerts/operator`` and print the daemon's answer once it has applied it;
 * a saved state for when the daemon is stopped (``--state PATH``): the daemon's checkpoint
