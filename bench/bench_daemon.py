@@ -20,12 +20,12 @@ kept out and the compiler's pages were handed back, monitor/memory.py), 164.5 MB
 the kernels load at start; latency p50 2.9 ms, p99 22.7 ms; accelerated 30 days in 60 s
 blocks: 136.9 MB on day 1, 139.2 MB on day 30 (+1.7 %).
 
-Issue 14's additions (live wall-clock rules every status interval, clock checks per block, a
-/metrics scrape every 15 s and a /healthz probe every 10 s), measured 2026-11-24 on the same
-machine (target < 0.2 % of one core): live rules 39 us per status, clock checks 2 us per
-second of blocks, 1.3 ms of daemon CPU per scrape, 0.26 ms per probe: 0.015 % of one core.
-The real-time daemon CPU in that run was 0.59 % (0.51 % before, within this benchmark's
-run-to-run spread).
+Issue 14's additions (live wall-clock rules every status interval, clock checks per block,
+the status document's new fields, a /metrics scrape every 15 s and a /healthz probe every
+10 s), measured 2026-11-24 on the same machine (target < 0.2 % of one core): live rules 37 us
+per status interval, clock checks 2 us per second of blocks, status additions 22 us per
+status (4 a second), 1.1 ms of daemon CPU per scrape, 0.30 ms per probe: 0.023 % of one core.
+The real-time daemon CPU in that run was 0.53 % (0.51 % before).
 
 Usage: PYTHONPATH=. python bench/bench_daemon.py [--seconds 60] [--days 30] [--block-s 60]
 """
@@ -255,6 +255,7 @@ def new_rules_cost(client: Client, pid: int, metrics_port: int, scrape_every_s: 
         for s in RATES:
             clocks.observe(s, T0_NS + k * 10**9, T0_NS + k * 10**9)
     clock_s = (time.perf_counter() - t) / n  # one second of blocks
+    status_s = status_extra_cost(n)
     per_req = {}
     for path in ("/metrics", "/healthz"):
         cpu0, w0 = proc_stats(pid)[0], time.time()
@@ -264,16 +265,48 @@ def new_rules_cost(client: Client, pid: int, metrics_port: int, scrape_every_s: 
         for _ in range(n):
             _get(metrics_port, path)
         per_req[path] = max(0.0, (proc_stats(pid)[0] - cpu0) - idle * (time.time() - w0)) / n
-    total = (rules_s + clock_s + per_req["/metrics"] / scrape_every_s
+    statuses_per_s = 1 + len(RATES)  # the periodic one and one after each block
+    total = (rules_s + clock_s + statuses_per_s * status_s + per_req["/metrics"] / scrape_every_s
              + per_req["/healthz"] / health_every_s)
     print("issue 14 additions at the default rates (1 status/s, 3 blocks/s):")
     print(f"  live rules           {1e6 * rules_s:8.1f} us per status interval")
     print(f"  clock checks         {1e6 * clock_s:8.1f} us per second of blocks")
+    print(f"  status additions     {1e6 * status_s:8.1f} us per status ({statuses_per_s}/s): "
+          "Daemon.status() less the pipeline's status()")
     print(f"  /metrics scrape      {1e3 * per_req['/metrics']:8.2f} ms daemon CPU each "
           f"(one per {scrape_every_s:g} s)")
     print(f"  /healthz probe       {1e3 * per_req['/healthz']:8.2f} ms daemon CPU each "
           f"(one per {health_every_s:g} s)")
     print(f"  total                {100 * total:8.3f} % of one core (target < 0.2 %)")
+
+
+def status_extra_cost(n: int) -> float:
+    """Seconds per status spent on what Daemon.status() adds to the pipeline's status (the
+    daemon built in this process from the shipped configuration, fed 60 s of blocks)."""
+    from monitor.cmd_run import build_daemon  # noqa: PLC0415
+
+    with tempfile.TemporaryDirectory() as tmpd:
+        cfg = Path(tmpd) / "cfg.toml"
+        cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
+                       + f'\n[state]\npath = "{Path(tmpd) / "s.sqlite"}"\n'
+                       '[metrics]\nenabled = false\n')
+        daemon = build_daemon(str(cfg))
+        rng = np.random.default_rng(3)
+        for k in range(60):
+            for b in blocks_at("vaps", k, 1, rng):
+                daemon.pipeline.process(b)
+                daemon._stream(b.sensor).arrived(time.monotonic(), len(b))
+                daemon.clocks.observe(b.sensor, b.t_last_ns, b.t_last_ns)
+        t = time.perf_counter()
+        for _ in range(n):
+            daemon.pipeline.status()
+        base = time.perf_counter() - t
+        t = time.perf_counter()
+        for _ in range(n):
+            daemon.status()
+        full = time.perf_counter() - t
+        daemon.pipeline.close()
+    return max(0.0, full - base) / n
 
 
 def accelerated(client: Client, buoy: str, pid: int, days: float, block_s: int,
