@@ -8,7 +8,8 @@ daemon thread is busy (a checkpoint, a backlog). Process figures come from
 
 ``GET /metrics``: the Prometheus text exposition. ``GET /healthz``: ``200 ok`` or ``503`` with
 one reason per line while data is stale, fatigue is blind or checkpoints fail (the live rules
-in :data:`monitor.alerts.live.HEALTH_RULES`).
+in :data:`monitor.alerts.live.HEALTH_RULES`), or while the status is older than
+:data:`STALL_S` (the daemon's thread is stuck).
 
 Units are in the names (base units: seconds, newtons), counters end in ``_total``; Miner sums
 are ``_ratio`` (1 = end of fatigue life); the status's per-day damage rate and remaining life
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Callable, Iterator, Mapping
 
@@ -234,11 +236,18 @@ class MetricsServer:
         self.httpd.server_close()
 
 
-def healthz(doc: Mapping[str, Any] | None) -> tuple[int, str]:
-    """HTTP status and body of ``/healthz`` for a status document."""
+STALL_S = 10.0  # a status older than this means the daemon's loop is stuck
+
+
+def healthz(doc: Mapping[str, Any] | None, now_ns: int | None = None) -> tuple[int, str]:
+    """HTTP status and body of ``/healthz`` for a status document: its health verdict, and
+    whether the document itself is fresh (a stuck daemon thread publishes none)."""
     if doc is None:
         return 503, "starting: no status yet\n"
-    health = doc.get("health") or {"ok": True, "reasons": []}
-    if health.get("ok", True):
+    reasons = list((doc.get("health") or {}).get("reasons", []))
+    age_s = ((time.time_ns() if now_ns is None else now_ns) - int(doc.get("wall_time_ns", 0))) / 1e9
+    if age_s > STALL_S:
+        reasons.append(f"daemon loop stalled: the last status is {age_s:.0f} s old")
+    if not reasons:
         return 200, "ok\n"
-    return 503, "".join(f"{r}\n" for r in health.get("reasons", []))
+    return 503, "".join(f"{r}\n" for r in reasons)

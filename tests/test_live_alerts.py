@@ -114,6 +114,11 @@ def test_a_restart_that_caught_up_between_evaluations_still_fires_for_hold_s():
     assert live.state()["counters"] == []
 
 
+def test_a_damaged_saved_state_starts_fresh():
+    live = LiveAlerts("b1", LiveConfig(), {"firing": [{"rule": "x"}], "counters": [["a"]]})
+    assert live.active() == [] and live.state() == {"firing": [], "counters": []}
+
+
 def test_live_rules_off_raise_nothing_but_health_still_fails():
     live = LiveAlerts("b1", LiveConfig(enabled=False))
     assert live.evaluate(doc(age=99.0, accepted=1, feed=999.0), NS) == []

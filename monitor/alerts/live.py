@@ -35,6 +35,7 @@ counts.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from typing import Any, Iterable, Mapping
@@ -43,6 +44,7 @@ from monitor.alerts.records import AlertRecord
 
 LIVE_RULES = ("data_age", "fatigue_blind", "clock_skew", "time_restart", "samples_missed",
               "alert_delivery_refused", "alert_outbox_dropped", "checkpoint_failed")
+log = logging.getLogger(__name__)
 # rules whose firing makes /healthz fail: the daemon cannot do its job
 HEALTH_RULES = ("data_age", "fatigue_blind", "checkpoint_failed")
 # counters that start from 0 in every daemon life (monitor.clock_faults): not saved
@@ -91,14 +93,19 @@ class LiveAlerts:
                  ) -> None:
         self.buoy_id = buoy_id
         self.cfg = cfg
-        saved = saved or {}
         self._firing: dict[tuple[str, str], AlertRecord] = {}
-        for d in saved.get("firing", []):
-            rec = AlertRecord.from_dict(d)
-            self._firing[(rec.rule, rec.component)] = rec
         # counter-increase rules: (rule, component) -> [last value, wall ns of last increase]
-        self._counters: dict[tuple[str, str], list[int]] = {
-            (r, c): list(v) for r, c, *v in saved.get("counters", [])}
+        self._counters: dict[tuple[str, str], list[int]] = {}
+        try:
+            for d in (saved or {}).get("firing", []):
+                rec = AlertRecord.from_dict(d)
+                self._firing[(rec.rule, rec.component)] = rec
+            self._counters = {(r, c): [int(x) for x in v]
+                              for r, c, *v in (saved or {}).get("counters", [])}
+        except (ValueError, TypeError, AttributeError) as exc:
+            # a damaged part of the checkpoint costs the live rules' memory, not monitoring
+            log.error("live alert state not restored", extra={"fields": {"error": repr(exc)}})
+            self._firing, self._counters = {}, {}
 
     # --- conditions ------------------------------------------------------------------------
     def conditions(self, doc: Mapping[str, Any], wall_ns: int) -> list[Condition]:
