@@ -195,6 +195,8 @@ class Daemon:
         self._last_live_mono = 0.0
         self._load_t_ns: Any = None  # the pipeline's newest load time, and when it last moved
         self._load_mono = time.monotonic()
+        # stream -> (accepted, rejected, when accepted last moved)
+        self._accepted: dict[str, tuple[int, int, float]] = {}
         self.metrics = None
         if config.metrics.enabled:  # bound now: a port in use fails before anything starts
             from monitor.metrics import MetricsServer  # noqa: PLC0415 (only when enabled)
@@ -412,8 +414,17 @@ class Daemon:
         streams = {name: dict(s) for name, s in doc.get("streams", {}).items()}
         for name in sorted(set(streams) | set(self.streams)):
             health = self.streams.get(name, StreamHealth())
-            streams.setdefault(name, {}).update(health.to_dict(now, ages[name]))
-            streams[name].update(self.clocks.fields(name))
+            s = streams.setdefault(name, {})
+            s.update(health.to_dict(now, ages[name]))
+            s.update(self.clocks.fields(name))
+            # wall-clock age of the last accepted sample: blocks that keep arriving but are
+            # all rejected (a clock that went back) look alive by data age alone
+            accepted, rejected = s.get("accepted", 0), sum((s.get("rejected") or {}).values())
+            seen = self._accepted.get(name)
+            if seen is None or seen[0] != accepted:
+                seen = self._accepted[name] = (accepted, rejected, now)
+            s["accepted_age_s"] = now - seen[2]
+            s["rejected_since_accepted"] = rejected - seen[1]
         load_t = doc.get("load_t_ns")
         if load_t is not None and load_t != self._load_t_ns:
             self._load_t_ns, self._load_mono = load_t, now

@@ -373,3 +373,30 @@ def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config", str(cfg)],
                          env=ENV, capture_output=True, text=True, timeout=60)
     assert out.returncode == 1 and "no state file at" in out.stderr
+
+
+def test_a_sensor_that_went_back_in_time_while_the_daemon_was_down_is_alerted(tmp_path):
+    """Its blocks keep arriving but all are rejected: not stale by data age, yet alerted."""
+    port = free_port()
+    cfg = write_config(tmp_path / "cfg.toml", port, tmp_path / "state.sqlite",
+                       tension_age_s=1.0)
+    for life, (n, speed) in enumerate(((10, "0"), (4, "1"))):
+        d = DaemonProcess([sys.executable, HARNESS, "run", str(cfg)], tmp_path)
+        d.wait_for("READY=1")
+        c = Client(port)
+        try:
+            pub = subprocess.run([sys.executable, HARNESS, "publish", f"tcp/127.0.0.1:{port}",
+                                  str(n), speed], env=ENV, capture_output=True, text=True,
+                                 timeout=60)
+            assert pub.stdout.strip() == str(n), pub.stderr
+            if life == 1:  # the same (older) times again, one block a second
+                doc, _ = c.wait_alert("data_rejected", "put")
+                assert doc["labels"]["component"] == "tension"
+                assert "none was accepted" in doc["summary"] and "duplicate=" in doc["summary"]
+                st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 14)
+                tension = st["status"]["streams"]["tension"]
+                assert tension["accepted"] == 200 and tension["rejected"]["duplicate"] == 80
+                assert tension["time_restarts"] == 0  # a new daemon life: not a restart
+        finally:
+            c.close()
+            assert d.terminate() == 0

@@ -58,6 +58,24 @@ def test_a_stream_never_seen_alerts_only_when_required_counting_from_the_start()
         ("data_age", "tension", "fire")}
 
 
+def test_data_that_arrives_but_is_all_rejected_is_alerted():
+    live = LiveAlerts("b1", LiveConfig())
+    flowing = dict(age=0.5, accepted=100, rejected={"time_backwards": 40},
+                   rejected_since_accepted=40)
+    assert live.evaluate(doc(**flowing, accepted_age_s=4.0), NS) == []
+    # samples held back by the ordering layer (none rejected meanwhile) are not this rule's
+    held = dict(flowing, rejected_since_accepted=0)
+    assert live.evaluate(doc(**held, accepted_age_s=8.0), NS) == []
+    recs = live.evaluate(doc(**flowing, accepted_age_s=6.0), 2 * NS)
+    assert fired(recs) == {("data_rejected", "tension", "fire")}
+    assert recs[0].summary == ("stream tension: data arrives but none was accepted for 6 s "
+                               "(rejected so far: time_backwards=40)")
+    assert not live.health()["ok"]
+    # data that stopped altogether is data_age's, not this rule's
+    recs = live.evaluate(doc(age=9.0, accepted=100, accepted_age_s=9.0), 3 * NS)
+    assert fired(recs) == {("data_rejected", "tension", "clear"), ("data_age", "tension", "fire")}
+
+
 def test_fatigue_blind_and_checkpoint_failed_make_health_fail():
     live = LiveAlerts("b1", LiveConfig(fatigue_blind_timeout_s=60.0))
     recs = live.evaluate(doc(age=1.0, accepted=1, feed=61.0, ckpt_failing=True), NS)

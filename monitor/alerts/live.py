@@ -12,6 +12,10 @@ data_age (stream)        warning      no block arrived for longer than ``[health
                                       data_age_timeout_s`` (a stream seen before, or listed in
                                       ``required_streams``; age counted from the daemon's start
                                       when none arrived in this life)
+data_rejected (stream)   warning      blocks keep arriving but none of their samples was
+                                      accepted for longer than ``data_age_timeout_s`` (e.g. a
+                                      sensor restarted with an older clock while the daemon
+                                      was down: all ``time_backwards``)
 fatigue_blind (fatigue)  critical     neither measured tension nor a motion estimate fed the
                                       fatigue components for ``fatigue_blind_timeout_s``
 clock_skew (stream)      warning      the last block's sensor time is off the logger clock by
@@ -42,11 +46,11 @@ from typing import Any, Iterable, Mapping
 
 from monitor.alerts.records import AlertRecord
 
-LIVE_RULES = ("data_age", "fatigue_blind", "clock_skew", "time_restart", "samples_missed",
+LIVE_RULES = ("data_age", "data_rejected", "fatigue_blind", "clock_skew", "time_restart", "samples_missed",
               "alert_delivery_refused", "alert_outbox_dropped", "checkpoint_failed")
 log = logging.getLogger(__name__)
 # rules whose firing makes /healthz fail: the daemon cannot do its job
-HEALTH_RULES = ("data_age", "fatigue_blind", "checkpoint_failed")
+HEALTH_RULES = ("data_age", "data_rejected", "fatigue_blind", "checkpoint_failed")
 # counters that start from 0 in every daemon life (monitor.clock_faults): not saved
 _LIFE_COUNTERS = ("time_restart",)
 NS = 1_000_000_000
@@ -122,6 +126,18 @@ class LiveAlerts:
                     "data_age", name, "warning", _num(age) > timeout, _num(age), timeout, "s",
                     f"no data on stream {name} for {_num(age):.0f} s (timeout {timeout:g} s, "
                     "logger clock)"))
+            acc_age = s.get("accepted_age_s")
+            if acc_age is not None and math.isfinite(timeout) and s.get("data_age_s") is not None:
+                # flowing, and rejected (not merely held by the ordering layer)
+                flowing = (_num(s["data_age_s"]) <= timeout
+                           and (s.get("rejected_since_accepted") or 0) > 0)
+                rejected = " ".join(f"{k}={v}" for k, v in sorted((s.get("rejected") or {}).items())
+                                    if v)
+                out.append(Condition(
+                    "data_rejected", name, "warning", flowing and acc_age > timeout,
+                    _num(acc_age), timeout, "s",
+                    f"stream {name}: data arrives but none was accepted for {acc_age:.0f} s "
+                    f"(rejected so far: {rejected or 'none'})"))
             skew = s.get("clock_skew_s")
             if skew is not None:
                 way = "ahead of" if skew > 0 else "behind"
