@@ -412,7 +412,8 @@ class Daemon:
         doc = dict(self.pipeline.status())
         ages = self.config.health.data_age_timeout_s
         streams = {name: dict(s) for name, s in doc.get("streams", {}).items()}
-        for name in sorted(set(streams) | set(self.streams)):
+        required = self.config.health.required_streams
+        for name in sorted(set(streams) | set(self.streams) | set(required)):
             health = self.streams.get(name, StreamHealth())
             s = streams.setdefault(name, {})
             s.update(health.to_dict(now, ages[name]))

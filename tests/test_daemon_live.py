@@ -400,3 +400,25 @@ def test_a_sensor_that_went_back_in_time_while_the_daemon_was_down_is_alerted(tm
         finally:
             c.close()
             assert d.terminate() == 0
+
+
+def test_a_required_stream_that_never_appears_is_alerted(tmp_path):
+    port = free_port()
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f'[buoy]\nid = "{BUOY}"\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
+                   'status_interval_s = 0.5\n'
+                   f'[state]\npath = "{tmp_path / "state.sqlite"}"\n'
+                   '[health]\ndata_age_timeout_s = { gnss = 1.0 }\nrequired_streams = ["gnss"]\n'
+                   f'[metrics]\nport = {free_port()}\n')
+    d = DaemonProcess([sys.executable, HARNESS, "run", str(cfg)], tmp_path)
+    d.wait_for("READY=1")
+    c = Client(port)
+    try:
+        doc, _ = c.wait_alert("data_age", "put")
+        assert doc["labels"]["component"] == "gnss" and doc["value"] > 1.0
+        st = wait_until_state(port, lambda s: not s["status"]["health"]["ok"])["status"]
+        assert st["streams"]["gnss"]["data_age_s"] is None  # never arrived: shown, not invented
+        assert st["streams"]["gnss"]["data_stale"] is True
+    finally:
+        c.close()
+        assert d.terminate() == 0
