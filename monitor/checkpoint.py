@@ -163,7 +163,9 @@ class PeriodicCheckpointer:
         return True
 
     def save_now(self) -> int:
-        seq = self.store.save(self._get_state())
-        self._last = self._clock()
+        try:
+            seq = self.store.save(self._get_state())
+        finally:  # a failed save is retried after the interval, not on every call
+            self._last = self._clock()
         self.saves += 1
         return seq

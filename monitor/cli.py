@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "check-config": "monitor.cmd_check_config",
     "record": "monitor.cmd_record",
     "alerts": "monitor.alerts.cmd_alerts",
+    "status": "monitor.cmd_status",
     "report": "monitor.viz.cmd_report",
     "view": "monitor.viz.cmd_view",
 }

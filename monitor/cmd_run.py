@@ -105,6 +105,13 @@ class AlertDelivery:
     def poll(self) -> None:
         self.zenoh.apply_commands(self.engine)
 
+    def status_fields(self) -> dict[str, Any]:
+        """Outbox depth per channel for the status (monitor.daemon.Extension)."""
+        if self.outbox is None:
+            return {}
+        pending = self.outbox.outbox.pending_by_channel()
+        return {"delivery": {"channels": {ch: {"pending": n} for ch, n in pending.items()}}}
+
     def close(self) -> None:
         self.zenoh.close()
         if self.outbox is not None:

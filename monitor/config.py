@@ -40,6 +40,7 @@ SECTION_PARSERS: dict[str, str] = {
     "state": "monitor.daemon_config:StateConfig.from_dict",
     "record": "monitor.daemon_config:RecordConfig.from_dict",
     "health": "monitor.daemon_config:HealthConfig.from_dict",
+    "metrics": "monitor.daemon_config:MetricsConfig.from_dict",
     "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
 }
 

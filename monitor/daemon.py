@@ -19,13 +19,17 @@ from __future__ import annotations
 
 import logging
 import queue
+import sqlite3
 import threading
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Protocol, Sequence
 
+from monitor.alerts.live import LiveAlerts, LiveConfig
 from monitor.blocks import SampleBlock, parse_sensor_topic
 from monitor.checkpoint import CheckpointStore, PeriodicCheckpointer
+from monitor.clock_faults import ClockFaults
 from monitor.daemon_config import DaemonConfig
 from monitor.events import Sink, StepResult
 from monitor.memory import release_compiler_pages
@@ -40,6 +44,7 @@ _MIN_STATUS_GAP_S = 0.02
 _IDLE_WAIT_S = 0.2
 _MAX_TURN_S = 0.25  # longest stretch of queued work between periodic duties
 _RELEASE_EVERY_S = 600.0  # hand back the JIT compiler's pages (monitor.memory) this often
+_LOG_EVERY_S = 60.0  # a repeating fault (clock, checkpoint) is logged at most this often
 
 
 class PipelineLike(Protocol):
@@ -64,6 +69,9 @@ class Extension(Protocol):
 
     def close(self) -> None: ...
 
+    # optional: ``status_fields(self) -> Mapping[str, Any]``, merged into the top level of the
+    # status document (e.g. ``{"delivery": {...}}``)
+
 
 # attach(session, pipeline) -> extensions; may add sinks to ``pipeline.sinks``
 Attach = Callable[[Any, PipelineLike], Sequence[Extension]]
@@ -76,26 +84,72 @@ class _RecordAlertsSink:
         self.recorder = recorder
 
     def on_step(self, step: StepResult) -> None:
-        for rec in step.alerts:
-            now = time.time_ns()
+        for rec in step.alerts:  # publish time: the record's sensor time, as the status's
             self.recorder.write(rec.key, zenoh_io.to_json_bytes(rec.to_dict()), JSON_OBJECT,
-                                now, getattr(rec, "at_ns", 0) or now)
+                                time.time_ns(), rec.at_ns)
 
     def close(self) -> None:
         pass
 
 
+_RATE_WINDOW_S = 10.0  # the status's per-stream rate: samples received over this window
+
+
 @dataclass
 class StreamHealth:
-    """Wall-clock view of one sensor stream: data age and liveliness (not in the checkpoint)."""
+    """Wall-clock view of one sensor stream: data age, rate and liveliness (not in the
+    checkpoint)."""
 
     last_arrival_mono: float | None = None
     alive: bool | None = None  # None: no liveliness token seen either way
+    arrivals: "deque[tuple[float, int]]" = field(default_factory=deque)  # (mono, samples)
+
+    def arrived(self, now_mono: float, n_samples: int) -> None:
+        self.last_arrival_mono = now_mono
+        self.arrivals.append((now_mono, n_samples))
+        while self.arrivals[0][0] < now_mono - _RATE_WINDOW_S:
+            self.arrivals.popleft()
 
     def to_dict(self, now_mono: float, timeout_s: float) -> dict[str, Any]:
         age = None if self.last_arrival_mono is None else now_mono - self.last_arrival_mono
+        recent = sum(n for t, n in self.arrivals if t >= now_mono - _RATE_WINDOW_S)
         return {"data_age_s": age, "data_age_timeout_s": timeout_s,
-                "data_stale": age is None or age > timeout_s, "alive": self.alive}
+                "data_stale": age is None or age > timeout_s, "alive": self.alive,
+                "rate_hz": recent / _RATE_WINDOW_S}
+
+
+@dataclass
+class CheckpointHealth:
+    """How checkpointing goes: the last good save (wall clock) and failures in this life."""
+
+    seq: int
+    saved_ns: int | None
+    failures: int = 0
+    failing: bool = False
+    last_error: str | None = None
+
+    def to_dict(self, wall_ns: int) -> dict[str, Any]:
+        age = None if self.saved_ns is None else (wall_ns - self.saved_ns) / 1e9
+        return {"seq": self.seq, "age_s": age, "failures": self.failures,
+                "failing": self.failing, "last_error": self.last_error}
+
+
+class _RateLimitedLog:
+    """Logs a repeating warning at most every ``_LOG_EVERY_S`` per subject, with the count of
+    the ones left out since, so a fault on every block neither floods nor goes quiet."""
+
+    def __init__(self) -> None:
+        self._last: dict[str, float] = {}
+        self._held: dict[str, int] = {}
+
+    def warning(self, subject: str, message: str, **fields: Any) -> None:
+        now = time.monotonic()
+        if now - self._last.get(subject, -_LOG_EVERY_S) < _LOG_EVERY_S:
+            self._held[subject] = self._held.get(subject, 0) + 1
+            return
+        self._last[subject] = now
+        log.warning(message, extra={"fields": {**fields, "not_logged_since_last":
+                                               self._held.pop(subject, 0)}})
 
 
 class _Closing:
@@ -128,6 +182,27 @@ class Daemon:
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
         self.restored_seq = restored.seq if restored is not None else 0
+        hc = config.health
+        self.clocks = ClockFaults(hc.clock_skew_max_s, hc.time_restart_min_s)
+        self.live = LiveAlerts(buoy_id, LiveConfig(
+            hc.live_rules, hc.required_streams, hc.fatigue_blind_timeout_s,
+            hc.clock_skew_max_s, hc.hold_s), saved.get("daemon", {}).get("live"))
+        self._faults = _RateLimitedLog()
+        # checkpoint health: wall time of the last good save, failures in this life
+        self._ckpt = CheckpointHealth(self.restored_seq,
+                                      restored.saved_ns if restored is not None else None)
+        self._last_doc: dict[str, Any] | None = None  # the last status built (read by /metrics)
+        self._last_live_mono = 0.0
+        self._load_t_ns: Any = None  # the pipeline's newest load time, and when it last moved
+        self._load_mono = time.monotonic()
+        # stream -> (accepted, rejected, when accepted last moved)
+        self._accepted: dict[str, tuple[int, int, float]] = {}
+        self.metrics = None
+        if config.metrics.enabled:  # bound now: a port in use fails before anything starts
+            from monitor.metrics import MetricsServer  # noqa: PLC0415 (only when enabled)
+
+            self.metrics = MetricsServer(config.metrics.listen, config.metrics.port,
+                                         lambda: self._last_doc)
         self.recorder = (McapRecorder(config.record.dir, config.record.rotate_s,
                                       config.record.flush_interval_s)
                          if config.record.enabled else None)
@@ -161,6 +236,8 @@ class Daemon:
                 self.session, zenoh_io.sensor_key(self.buoy_id), self._q))
             declared.append(zenoh_io.declare_deferred_queryable(
                 self.session, zenoh_io.state_key(self.buoy_id), self._q))
+            declared.append(zenoh_io.declare_deferred_queryable(
+                self.session, zenoh_io.status_key(self.buoy_id), self._q))
             self._status_pub = zenoh_io.declare_json_publisher(
                 self.session, zenoh_io.status_key(self.buoy_id))
             declared.append(self._status_pub)
@@ -173,14 +250,18 @@ class Daemon:
                 self.session, zenoh_io.sensor_key(self.buoy_id), self._q)
             log.info("daemon ready", extra={"fields": {
                 "buoy_id": self.buoy_id, "listen": list(zc.listen), "connect": list(zc.connect),
-                "restored_checkpoint": self.restored_seq}})
+                "restored_checkpoint": self.restored_seq,
+                "metrics": None if self.metrics is None
+                else f"http://{self.config.metrics.listen}:{self.metrics.port}/metrics"}})
+            if self.metrics is not None:
+                self.metrics.start()
             self.notifier.ready(f"monitoring buoy {self.buoy_id}")
             self._serve()
             self.notifier.stopping()
             subscriber.undeclare()  # stop intake, then finish what already arrived
             self._drain()
             self._publish_status()
-            self._checkpointer.save_now()
+            self._checkpoint(self._checkpointer.save_now)
             log.info("daemon stopped", extra={"fields": {"counters": dict(self.counters)}})
         finally:
             for obj in reversed(declared):
@@ -190,6 +271,8 @@ class Daemon:
                     pass
             if self.recorder is not None:
                 self.recorder.close()
+            if self.metrics is not None:
+                self.metrics.close()
             self._store.close()
             self.session.close()
 
@@ -215,13 +298,30 @@ class Daemon:
                 self._publish_status()
             for ext in self._extensions:
                 ext.poll()
-            self._checkpointer.maybe_save()
+            self._checkpoint(self._checkpointer.maybe_save)
             if self.recorder is not None:
                 self.recorder.maybe_flush()
             if now >= self._next_release_mono:  # at once, then now and then: a steady daemon
                 release_compiler_pages()        # never runs the compiler (monitor.memory)
                 self._next_release_mono = now + _RELEASE_EVERY_S
             self._pet_watchdog(now)
+
+    def _checkpoint(self, save: Callable[[], Any]) -> None:
+        """Save via ``save``; a failure (disk full, database gone) is counted, logged, shown
+        in the status and alerted on (``checkpoint_failed``), and the daemon keeps serving."""
+        ck = self._ckpt
+        try:
+            if not save():
+                return
+        except (sqlite3.Error, OSError, ValueError) as exc:
+            ck.failures += 1
+            ck.failing, ck.last_error = True, repr(exc)[:300]
+            self._faults.warning("checkpoint", "checkpoint failed; damage since the last good "
+                                 "one would be lost in a crash", error=repr(exc),
+                                 failures=ck.failures)
+            return
+        ck.seq += 1
+        ck.saved_ns, ck.failing = time.time_ns(), False
 
     def _pet_watchdog(self, now: float) -> None:
         interval = self.notifier.watchdog_interval_s
@@ -262,7 +362,11 @@ class Daemon:
         if self.recorder is not None:
             self.recorder.write(key, payload, self.codec.channel_spec(block.sensor),
                                 recv_ns, block.t_first_ns)
-        self._stream(block.sensor).last_arrival_mono = time.monotonic()
+        self._stream(block.sensor).arrived(time.monotonic(), len(block))
+        if len(block):
+            for msg in self.clocks.observe(block.sensor, block.t_last_ns, recv_ns):
+                self._faults.warning(f"clock {block.sensor}", "sensor clock fault: " + msg,
+                                     sensor=block.sensor, **self.clocks.fields(block.sensor))
         try:
             self.pipeline.process(block)
         except ValueError as exc:  # a block the pipeline refuses: count it, keep serving
@@ -281,35 +385,69 @@ class Daemon:
 
     def _on_query(self, query: Any) -> None:
         self.counters["queries"] += 1
+        status = zenoh_io.status_key(self.buoy_id)
         with query:
-            query.reply(zenoh_io.state_key(self.buoy_id),
-                        zenoh_io.to_json_bytes(self.full_state()), encoding="application/json")
+            if str(query.key_expr) == status:  # `buoymon status`: the status document only
+                query.reply(status, zenoh_io.to_json_bytes(self._last_doc or self.status()),
+                            encoding="application/json")
+            else:
+                query.reply(zenoh_io.state_key(self.buoy_id),
+                            zenoh_io.to_json_bytes(self.full_state()),
+                            encoding="application/json")
 
     # ---- output ----------------------------------------------------------------------------
 
     def status(self) -> dict[str, Any]:
-        """The status document published on ``buoy/<id>/monitor/status``.
+        """The status document published on ``buoy/<id>/monitor/status`` (docs/DAEMON.md).
 
         The pipeline's figures (sensor time, load source, latest measured and estimated
         tension, per-component damage, damage rate and remaining life, per-stream accepted
         and rejected counts and sensor-time staleness) with, per stream, the daemon's
-        wall-clock data age and liveliness, and the daemon's own counters.
+        wall-clock data age, liveliness and clock faults; the daemon's counters, checkpoint
+        health and fatigue-feed age; the extensions' fields (``status_fields``); the active
+        alerts (sensor-time and live rules) and the health verdict of the live rules.
         """
         now = time.monotonic()
+        wall_ns = time.time_ns()
         doc = dict(self.pipeline.status())
         ages = self.config.health.data_age_timeout_s
         streams = {name: dict(s) for name, s in doc.get("streams", {}).items()}
-        for name in sorted(set(streams) | set(self.streams)):
+        required = self.config.health.required_streams
+        for name in sorted(set(streams) | set(self.streams) | set(required)):
             health = self.streams.get(name, StreamHealth())
-            streams.setdefault(name, {}).update(health.to_dict(now, ages[name]))
+            s = streams.setdefault(name, {})
+            s.update(health.to_dict(now, ages[name]))
+            s.update(self.clocks.fields(name))
+            # wall-clock age of the last accepted sample: blocks that keep arriving but are
+            # all rejected (a clock that went back) look alive by data age alone
+            accepted, rejected = s.get("accepted", 0), sum((s.get("rejected") or {}).values())
+            seen = self._accepted.get(name)
+            if seen is None or seen[0] != accepted:
+                seen = self._accepted[name] = (accepted, rejected, now)
+            s["accepted_age_s"] = now - seen[2]
+            s["rejected_since_accepted"] = rejected - seen[1]
+        load_t = doc.get("load_t_ns")
+        if load_t is not None and load_t != self._load_t_ns:
+            self._load_t_ns, self._load_mono = load_t, now
         doc.update({
             "buoy_id": self.buoy_id,
-            "wall_time_ns": time.time_ns(),
+            "wall_time_ns": wall_ns,
             "streams": streams,
             "counters": dict(self.counters),
             "uptime_s": now - self._started_mono,
             "queue_depth": self._q.qsize(),  # received but not yet processed
+            "fatigue_feed_age_s": now - self._load_mono,
+            "checkpoint": self._ckpt.to_dict(wall_ns),
         })
+        for ext in self._extensions:
+            fields = getattr(ext, "status_fields", None)
+            if fields is not None:
+                doc.update(fields())
+        engine_active = getattr(getattr(self.pipeline, "alerts", None), "active", None)
+        sensor_time = engine_active() if engine_active is not None else []
+        doc["alerts"] = {"active": [_alert_summary(r, "sensor_time") for r in sensor_time]
+                         + [_alert_summary(r, "live") for r in self.live.active()]}
+        doc["health"] = self.live.health()
         return doc
 
     def full_state(self) -> dict[str, Any]:
@@ -317,26 +455,73 @@ class Daemon:
         return {"status": self.status(), "state": self.checkpoint_state()}
 
     def checkpoint_state(self) -> dict[str, Any]:
+        """The pipeline's state, the daemon's counters and live-rule state, and the last
+        status (shown by ``buoymon status`` while the daemon is stopped)."""
         return {
             "pipeline": self.pipeline.state(),
-            "daemon": {"counters": dict(self.counters)},
+            "daemon": {"counters": dict(self.counters), "live": self.live.state(),
+                       "last_status": self._last_doc},
         }
 
     def publish_json(self, key: str, doc: Mapping[str, Any], sensor_time_ns: int) -> None:
-        """Publish a JSON document (status, alerts) and record it like a received message."""
+        """Publish a JSON document (status, alerts) and record it like a received message,
+        stamped with ``sensor_time_ns`` as its publish time: the pipeline's sensor time never
+        goes back, so neither does a recorded topic. Before there is any sensor time (0: no
+        data yet, ever) documents are published but not recorded; the wall clock would put
+        them after the sensor-time ones that follow."""
         payload = zenoh_io.to_json_bytes(doc)
-        now_ns = time.time_ns()
         if key == zenoh_io.status_key(self.buoy_id) and self._status_pub is not None:
             self._status_pub.put(payload)
         else:
             self.session.put(key, payload, encoding="application/json",
                              congestion_control=zenoh_io.zenoh.CongestionControl.BLOCK)
-        if self.recorder is not None:
-            self.recorder.write(key, payload, JSON_OBJECT, now_ns, sensor_time_ns or now_ns)
+        if self.recorder is not None and sensor_time_ns > 0:
+            self.recorder.write(key, payload, JSON_OBJECT, time.time_ns(), sensor_time_ns)
 
     def _publish_status(self) -> None:
         doc = self.status()
+        now = time.monotonic()
+        if now - self._last_live_mono >= self.config.zenoh.status_interval_s:
+            self._last_live_mono = now
+            records = self.live.evaluate(doc, doc["wall_time_ns"])
+            if records:
+                doc["alerts"]["active"] = [a for a in doc["alerts"]["active"]
+                                           if a["source"] != "live"] + [
+                    _alert_summary(r, "live") for r in self.live.active()]
+                doc["health"] = self.live.health()
+                self._last_doc = doc  # /healthz agrees before anyone hears of the change
+                self._deliver_live(records, int(doc.get("now_ns") or 0))
+        self._last_doc = doc
         self.publish_json(zenoh_io.status_key(self.buoy_id), doc, int(doc.get("now_ns") or 0))
         self.counters["status_published"] += 1
         self._last_status_mono = time.monotonic()
         self._dirty_status = False
+
+    def _deliver_live(self, records: list[Any], sensor_time_ns: int) -> None:
+        """Live-rule transitions take the pipeline's alert path: every alert sink of the
+        pipeline (Zenoh alert keys, outbox channels: anything with ``publish(records)``), and
+        the recording, stamped with the sensor time like every other message."""
+        for rec in records:
+            log.warning("live alert", extra={"fields": {
+                "rule": rec.rule, "component": rec.component, "event": rec.event,
+                "value": rec.value, "summary": rec.summary}})
+        for sink in getattr(self.pipeline, "sinks", ()):
+            publish = getattr(sink, "publish", None)
+            if publish is not None:
+                try:
+                    publish(records)
+                except Exception as exc:  # noqa: BLE001 (one sink must not stop the others)
+                    log.error("live alert delivery failed", extra={"fields": {
+                        "sink": type(sink).__name__, "error": repr(exc)}})
+        if self.recorder is not None and sensor_time_ns > 0:  # as publish_json
+            for rec in records:
+                self.recorder.write(rec.key, zenoh_io.to_json_bytes(rec.to_dict()), JSON_OBJECT,
+                                    time.time_ns(), sensor_time_ns)
+
+
+def _alert_summary(rec: Any, source: str) -> dict[str, Any]:
+    """One active alert as shown in the status (``source``: ``sensor_time`` or ``live``)."""
+    return {"rule": rec.rule, "component": rec.component, "severity": rec.severity,
+            "source": source, "since_ns": rec.starts_at_ns, "value": rec.value,
+            "threshold": rec.threshold, "unit": rec.unit, "summary": rec.summary,
+            "fingerprint": rec.fingerprint, "acked_by": rec.acked_by}

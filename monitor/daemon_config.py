@@ -34,6 +34,17 @@ Example::
 
     [health]
     data_age_timeout_s = { tension = 5.0, imu = 5.0, gnss = 10.0, waves = 3600.0 }
+    live_rules = true                  # wall-clock alert rules (monitor.alerts.live)
+    required_streams = []              # alert on these even if never seen
+    fatigue_blind_timeout_s = 60.0
+    clock_skew_max_s = 600.0
+    time_restart_min_s = 1.0
+    hold_s = 600.0
+
+    [metrics]
+    enabled = true
+    listen = "127.0.0.1"
+    port = 9464                        # 0: any free port (logged, and in the status)
 """
 
 from __future__ import annotations
@@ -209,33 +220,70 @@ _DEFAULT_AGE = {"tension": 5.0, "motion": 5.0, "imu": 5.0, "gnss": 10.0, "waves"
 
 @dataclass(frozen=True)
 class HealthConfig:
-    """Wall-clock data-age timeouts per sensor stream (seconds since the last block arrived)."""
+    """Wall-clock liveness: data-age timeouts per sensor stream (seconds since the last block
+    arrived) and the live (wall-clock) alert rules of :mod:`monitor.alerts.live`."""
 
     data_age_timeout_s: Mapping[str, float] = field(default_factory=lambda: dict(_DEFAULT_AGE))
+    live_rules: bool = True              # off switch for every wall-clock alert rule
+    required_streams: tuple[str, ...] = ()  # alert on these even if never seen (age from start)
+    fatigue_blind_timeout_s: float = 60.0   # no load sample fed fatigue for this long
+    clock_skew_max_s: float = 600.0         # |sensor time - logger clock| allowed per block
+    time_restart_min_s: float = 1.0         # a stream going back by more is a time restart
+    hold_s: float = 600.0                   # counter-increase alerts stay on this long
 
     @classmethod
     def from_dict(cls, d: Any, where: str = "health") -> "HealthConfig":
-        d = _check_keys(d, where, {"data_age_timeout_s"})
+        d = _check_keys(d, where, {"data_age_timeout_s", "live_rules", "required_streams",
+                                   "fatigue_blind_timeout_s", "clock_skew_max_s",
+                                   "time_restart_min_s", "hold_s"})
         given = d.get("data_age_timeout_s", {})
         sub = f"{where}.data_age_timeout_s"
         given = _check_keys(given, sub, set(SENSOR_FIELDS))
         ages = dict(_DEFAULT_AGE)
         ages.update({k: _positive(given, sub, k, 1.0) for k in given})
-        return cls(ages)
+        required = d.get("required_streams", [])
+        if not isinstance(required, list) or any(s not in SENSOR_FIELDS for s in required):
+            raise _err(where, "required_streams", required,
+                       f"must be a list of sensor streams from {sorted(SENSOR_FIELDS)}")
+        return cls(ages, _bool(d, where, "live_rules", True), tuple(required),
+                   *(_positive(d, where, k, getattr(cls, k)) for k in (
+                       "fatigue_blind_timeout_s", "clock_skew_max_s", "time_restart_min_s",
+                       "hold_s")))
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    """Prometheus exposition (``/metrics``) and ``/healthz`` over HTTP (loopback by default)."""
+
+    enabled: bool = True
+    listen: str = "127.0.0.1"
+    port: int = 9464
+
+    @classmethod
+    def from_dict(cls, d: Any, where: str = "metrics") -> "MetricsConfig":
+        d = _check_keys(d, where, {"enabled", "listen", "port"})
+        listen = d.get("listen", cls.listen)
+        if not isinstance(listen, str) or not listen:
+            raise _err(where, "listen", listen, "must be a non-empty host address string")
+        port = d.get("port", cls.port)
+        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port < 65536:
+            raise _err(where, "port", port, "must be an integer port 0..65535 (0: any free)")
+        return cls(_bool(d, where, "enabled", True), listen, port)
 
 
 @dataclass(frozen=True)
 class DaemonConfig:
-    """All four daemon sections together."""
+    """All daemon sections together."""
 
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     state: StateConfig = field(default_factory=StateConfig)
     record: RecordConfig = field(default_factory=RecordConfig)
     health: HealthConfig = field(default_factory=HealthConfig)
+    metrics: MetricsConfig = field(default_factory=MetricsConfig)
 
 
 SECTIONS = {"zenoh": ZenohConfig, "state": StateConfig, "record": RecordConfig,
-            "health": HealthConfig}
+            "health": HealthConfig, "metrics": MetricsConfig}
 
 
 def parse_daemon_sections(raw: Mapping[str, Any]) -> DaemonConfig:

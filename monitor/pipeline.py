@@ -621,6 +621,7 @@ class Pipeline:
             "buoy_id": self.buoy_id,
             "now_ns": now,
             "load_source": self.last["source"],
+            "load_t_ns": self.last["load_t_ns"],  # newest load sample that fed fatigue
             "measured_tension_N": self.last["measured_N"],
             "estimated_tension_N": self.last["estimated_N"],
             "estimates_clamped": self.selector.estimates_clamped,

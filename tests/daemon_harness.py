@@ -1,6 +1,6 @@
 """Test harness for the daemon's mechanics, independent of the physics pipeline.
 
-``python tests/daemon_harness.py run CFG.toml [DELAY_S]`` runs a :class:`monitor.daemon.Daemon` for buoy
+``python tests/daemon_harness.py run CFG.toml [DELAY_S [STATE_DELAY_S]]`` runs a :class:`monitor.daemon.Daemon` for buoy
 ``b1`` with :class:`FakePipeline` (a sum of tension with the pipeline's per-stream
 re-delivery check) and :class:`FakeCodec`. ``python tests/daemon_harness.py publish ENDPOINT
 N SPEED`` plays ``N`` one-second tension blocks through :func:`monitor.publisher.publish_blocks`.
@@ -57,9 +57,18 @@ class FakePipeline:
     """Damage = sum of accepted tension samples / 1e9; samples at or before a stream's last
     time are rejected as duplicates, NaNs as nan: the contract the real pipeline keeps."""
 
-    def __init__(self, state: Any = None, delay_s: float = 0.0) -> None:
+    def __init__(self, state: Any = None, delay_s: float = 0.0, state_delay_s: float = 0.0,
+                 alerts_raw: Any = None) -> None:
+        from monitor.alerts.engine import AlertEngine
+
         state = state or {}
+        self.buoy_id = BUOY
+        # an alert engine without sensor-time rules, so the daemon attaches alert delivery
+        # (Zenoh keys, outbox channels) exactly as `buoymon run` does
+        self.alerts = AlertEngine.from_config(alerts_raw or {}, BUOY, {})
         self.delay_s = delay_s  # simulated processing time per block
+        self.state_delay_s = state_delay_s  # simulated time to take a checkpoint
+        self.sinks: list[Any] = []  # alert sinks attached by the daemon (as the real pipeline)
         self.last_t = dict(state.get("last_t", {}))
         self.total = float(state.get("total", 0.0))
         self.accepted = dict(state.get("accepted", {}))
@@ -95,6 +104,7 @@ class FakePipeline:
         return {
             "buoy_id": BUOY, "now_ns": self.now_ns,
             "load_source": "measured" if self.total else "none",
+            "load_t_ns": self.last_t.get("tension"),
             "measured_tension_N": None, "estimated_tension_N": None,
             "components": {"conductor": {"damage": self.total, "damage_committed": self.total,
                                          "damage_rate_per_day": 0.0,
@@ -105,6 +115,7 @@ class FakePipeline:
         }
 
     def state(self) -> dict[str, Any]:
+        time.sleep(self.state_delay_s)
         return {"last_t": dict(self.last_t), "total": self.total,
                 "accepted": dict(self.accepted), "rejected": self.rejected}
 
@@ -134,9 +145,18 @@ def main(argv: list[str]) -> int:
 
     setup_logging("warning")
     if argv[0] == "run":
+        import tomllib
+
+        from monitor.cmd_run import AlertDelivery
+
         delay = float(argv[2]) if len(argv) > 2 else 0.0
+        state_delay = float(argv[3]) if len(argv) > 3 else 0.0
+        with open(argv[1], "rb") as f:
+            alerts_raw = tomllib.load(f).get("alerts", {})
         daemon = Daemon(BUOY, load_daemon_config(argv[1]),
-                        lambda state, sinks: FakePipeline(state, delay), FakeCodec())
+                        lambda state, sinks: FakePipeline(state, delay, state_delay, alerts_raw),
+                        FakeCodec(),
+                        attach=lambda session, pipe: [AlertDelivery(session, pipe, alerts_raw)])
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: daemon.stop())
         daemon.run()
@@ -177,6 +197,8 @@ def free_port() -> int:
 def write_config(path: Path, port: int, state: Path, extra: str = "", record: Path | None = None,
                  checkpoint_s: float = 0.5, tension_age_s: float = 1.0) -> Path:
     rec = f'[record]\ndir = "{record}"\nflush_interval_s = 0.5\n' if record else ""
+    if "[metrics]" not in extra:  # a port of its own: tests run beside other daemons
+        extra += f"[metrics]\nport = {free_port()}\n"
     path.write_text(
         f'[buoy]\nid = "{BUOY}"\n'
         f'[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\nstatus_interval_s = 0.5\n'

@@ -159,6 +159,22 @@ def test_outbox_survives_restart_and_never_resends_delivered(tmp_path):
     box.close()
 
 
+def test_pending_by_channel_counts_undelivered_messages_of_every_channel(tmp_path):
+    """The status's outbox depth (monitor.cmd_run.AlertDelivery.status_fields)."""
+    def down(payload, key):
+        raise ConnectionError("receiver down")
+
+    box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": down, "email": lambda p, k: None})
+    assert box.pending_by_channel() == {"webhook": 0, "email": 0}
+    for k in "abc":
+        box.enqueue("webhook", k, b"x")
+    box.enqueue("email", "a", b"x")
+    assert box.pending_by_channel() == {"webhook": 3, "email": 1}
+    box.run_once()  # e-mail delivered, the webhook's head failed
+    assert box.pending_by_channel() == {"webhook": 3, "email": 0}
+    box.close()
+
+
 def test_outbox_rejects_unknown_channel(tmp_path):
     box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": lambda p, k: None})
     with pytest.raises(ValueError, match="channel 'email': no sender"):

@@ -1,4 +1,4 @@
-"""[zenoh], [state], [record], [health]: defaults and one test per invalid-config case."""
+"""[zenoh], [state], [record], [health], [metrics]: defaults and one test per invalid-config case."""
 
 import pytest
 
@@ -23,6 +23,10 @@ def test_defaults_are_a_loopback_only_peer():
     assert cfg.state.checkpoint_interval_s == 10.0
     assert cfg.record.enabled is False and cfg.record.rotate_s == 3600.0
     assert cfg.health.data_age_timeout_s["tension"] == 5.0
+    # live (wall-clock) rules on, metrics on loopback
+    assert cfg.health.live_rules and cfg.health.fatigue_blind_timeout_s == 60.0
+    assert cfg.health.clock_skew_max_s == 600.0 and cfg.health.required_streams == ()
+    assert (cfg.metrics.enabled, cfg.metrics.listen, cfg.metrics.port) == (True, "127.0.0.1", 9464)
 
 
 def test_client_mode_tls_and_auth_reach_the_zenoh_config():
@@ -85,6 +89,17 @@ def test_sections_parse_given_values():
      "health.data_age_timeout_s.tension = 0: must be a finite number > 0"),
     ("health", {"data_age_timeout_s": {"sonar": 3}}, "health.data_age_timeout_s.sonar = 3: unknown key"),
     ("health", {"stale": 3}, "health.stale = 3: unknown key"),
+    ("health", {"live_rules": "on"}, "health.live_rules = 'on': must be true or false"),
+    ("health", {"required_streams": ["sonar"]}, "health.required_streams = ['sonar']: must be a list"),
+    ("health", {"fatigue_blind_timeout_s": 0}, "health.fatigue_blind_timeout_s = 0: must be"),
+    ("health", {"clock_skew_max_s": -1}, "health.clock_skew_max_s = -1: must be"),
+    ("health", {"time_restart_min_s": "1"}, "health.time_restart_min_s = '1': must be"),
+    ("health", {"hold_s": float("inf")}, "health.hold_s = inf: must be a finite number > 0"),
+    ("metrics", {"port": 70000}, "metrics.port = 70000: must be an integer port"),
+    ("metrics", {"port": "9464"}, "metrics.port = '9464': must be an integer port"),
+    ("metrics", {"listen": ""}, "metrics.listen = '': must be a non-empty host"),
+    ("metrics", {"enabled": 0}, "metrics.enabled = 0: must be true or false"),
+    ("metrics", {"path": "/m"}, "metrics.path = '/m': unknown key"),
 ])
 def test_invalid_config_names_key_and_value(section, d, message):
     with pytest.raises(ValueError) as exc:

@@ -27,7 +27,8 @@ from monitor.blocks import SampleBlock
 tmp = Path({tmp!r})
 cfg = tmp / "daemon.toml"
 cfg.write_text(Path({repo!r}, "monitor", "vaps_seed004.toml").read_text()
-               + '\n[state]\npath = "' + str(tmp / "state.sqlite") + '"\n')
+               + '\n[state]\npath = "' + str(tmp / "state.sqlite") + '"\n'
+               + '[metrics]\nport = 0\n')  # any free port: other daemons may run beside
 daemon = cmd_run.build_daemon(str(cfg))
 codec = zenoh_io.default_codec()
 t0 = 1_750_000_000 * 10**9

@@ -77,7 +77,8 @@ def test_rrd_holds_the_dashboard(replayed):
 
 def _daemon_config(tmp_path: Path, rerun: str) -> Path:
     src = Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml"
-    text = src.read_text() + f'\n[state]\npath = "{tmp_path / "state"}"\n' + rerun
+    text = (src.read_text() + f'\n[state]\npath = "{tmp_path / "state"}"\n'
+            + '[metrics]\nport = 0\n' + rerun)  # any free port: the test builds two daemons
     tmp_path.mkdir(parents=True, exist_ok=True)
     cfg = tmp_path / "cfg.toml"
     cfg.write_text(text)

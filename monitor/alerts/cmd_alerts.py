@@ -2,7 +2,8 @@
 
 Two targets:
 
-* a running daemon, over Zenoh (``--buoy ID [--connect ENDPOINT]``): ``list`` queries
+* a running daemon, over Zenoh (``--buoy ID [--connect ENDPOINT]``, or by default the buoy
+  and endpoints of ``--config``, itself by default ``/etc/buoymon/buoymon.toml``): ``list`` queries
   ``buoy/<id>/monitor/alerts``; ``ack``/``reset`` send the command as the payload of a query on
   ``buoy/<id>/monitor/alerts/operator`` and print the daemon's answer once it has applied it;
 * a saved state for when the daemon is stopped (``--state PATH``): the daemon's checkpoint
@@ -28,8 +29,7 @@ from typing import Any
 
 from monitor.alerts.engine import AlertEngine
 from monitor.atomic_file import atomic_write_text
-
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+from monitor.daemon_target import DEFAULT_CONFIG, DEFAULT_CONNECT, load_target
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -39,13 +39,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = p.add_subparsers(dest="alerts_command", metavar="ACTION", required=True)
 
     def target(sp: argparse.ArgumentParser) -> None:
-        g = sp.add_mutually_exclusive_group(required=True)
+        g = sp.add_mutually_exclusive_group()
         g.add_argument("--state", type=Path, help="checkpoint (SQLite) of a stopped daemon, or "
                        "a replay's JSON state file")
         g.add_argument("--buoy", help="buoy id of a running daemon (reached over Zenoh)")
+        g.add_argument("--config", metavar="CFG.toml",
+                       help="the running daemon's configuration: its [buoy] id and [zenoh] "
+                            f"endpoints (the default, {DEFAULT_CONFIG}, when neither --state "
+                            "nor --buoy is given)")
         sp.add_argument("--connect", action="append", metavar="ENDPOINT",
-                        help=f"Zenoh endpoint of the daemon (default {DEFAULT_CONNECT}); "
-                             "repeatable")
+                        help=f"Zenoh endpoint of the daemon (default {DEFAULT_CONNECT}, or the "
+                             "configuration's); repeatable")
         sp.add_argument("--timeout", type=float, default=10.0,
                         help="seconds to wait for the daemon (default 10)")
         sp.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -82,8 +86,11 @@ def run(args: argparse.Namespace) -> int:
         else:
             if not 0 < args.timeout < math.inf:
                 raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
-            result = _on_daemon(args.buoy, args.connect or [DEFAULT_CONNECT], args.timeout,
-                                _command(args))
+            buoy, connect = args.buoy, [DEFAULT_CONNECT]
+            if buoy is None:  # the buoy (and endpoints) of the daemon's configuration
+                target = load_target(args.config or DEFAULT_CONFIG)
+                buoy, connect = target.buoy_id, list(target.connect)
+            result = _on_daemon(buoy, args.connect or connect, args.timeout, _command(args))
     except (ValueError, OSError, TimeoutError) as exc:
         print(f"buoymon alerts: {exc}", file=sys.stderr)
         return 1

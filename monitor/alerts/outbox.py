@@ -182,6 +182,13 @@ class Outbox:
             return self._db.execute(
                 "SELECT COUNT(*) FROM outbox WHERE delivered_s IS NULL").fetchone()[0]
 
+    def pending_by_channel(self) -> dict[str, int]:
+        """Messages not yet delivered, per channel (every channel, 0 included)."""
+        with self._lock:
+            rows = self._db.execute("SELECT channel, COUNT(*) FROM outbox WHERE delivered_s IS "
+                                    "NULL GROUP BY channel").fetchall()
+        return {**dict.fromkeys(self.senders, 0), **dict(rows)}
+
     def messages(self) -> list[dict]:
         """All stored messages (delivered or not), oldest first, for inspection and tests."""
         with self._lock:

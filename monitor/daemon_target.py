@@ -1,0 +1,48 @@
+"""Where a command finds the daemon of a configuration: buoy id, endpoints, state file.
+
+Read straight from the TOML (``[buoy] id``, ``[zenoh]``, ``[state] path``) without building
+the pipeline, so ``buoymon status`` and ``buoymon alerts`` start fast.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+
+from monitor.blocks import validate_buoy_id
+from monitor.daemon_config import StateConfig, ZenohConfig
+
+DEFAULT_CONFIG = "/etc/buoymon/buoymon.toml"  # the path of monitor/systemd/buoymon.service
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+@dataclass(frozen=True)
+class DaemonTarget:
+    buoy_id: str
+    connect: tuple[str, ...]  # endpoints a client reaches the daemon on
+    state_path: str
+
+
+def _reachable(endpoint: str) -> str:
+    """A listen endpoint as a client connects to it: any-address binds become loopback."""
+    proto, _, addr = endpoint.partition("/")
+    for anywhere in ("0.0.0.0:", "[::]:"):
+        if addr.startswith(anywhere):
+            addr = "127.0.0.1:" + addr[len(anywhere):]
+    return f"{proto}/{addr}"
+
+
+def load_target(path: str) -> DaemonTarget:
+    """The daemon of configuration file ``path`` (ValueError naming key and value)."""
+    with open(path, "rb") as f:
+        try:
+            raw = tomllib.load(f)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"config error: {path}: {exc}") from None
+    buoy = raw.get("buoy", {}).get("id") if isinstance(raw.get("buoy"), dict) else None
+    if not isinstance(buoy, str):
+        raise ValueError(f"config error: {path}: buoy.id = {buoy!r}: must be a string")
+    zc = ZenohConfig.from_dict(raw.get("zenoh", {}))
+    connect = tuple(_reachable(e) for e in zc.listen) + zc.connect
+    return DaemonTarget(validate_buoy_id(buoy), connect or (DEFAULT_CONNECT,),
+                        StateConfig.from_dict(raw.get("state", {})).path)
