@@ -99,18 +99,20 @@ class AlertDelivery:
 
         self.engine = pipeline.alerts
         self.zenoh = ZenohAlertSink(session, pipeline.buoy_id, active=self.engine.active())
-        self.outbox = OutboxSink.from_config(AlertsConfig.from_dict(alerts_raw, "alerts"))
+        self.outbox = OutboxSink.from_config(AlertsConfig.from_dict(alerts_raw, "alerts"),
+                                             active=self.engine.active())
         pipeline.sinks.extend(s for s in (self.zenoh, self.outbox) if s is not None)
 
     def poll(self) -> None:
         self.zenoh.apply_commands(self.engine)
+        if self.outbox is not None:
+            self.outbox.refresh()
 
     def status_fields(self) -> dict[str, Any]:
-        """Outbox depth per channel for the status (monitor.daemon.Extension)."""
+        """Per delivery channel: pending, dead letters, counters (monitor.daemon.Extension)."""
         if self.outbox is None:
             return {}
-        pending = self.outbox.outbox.pending_by_channel()
-        return {"delivery": {"channels": {ch: {"pending": n} for ch, n in pending.items()}}}
+        return {"delivery": {"channels": self.outbox.outbox.stats()}}
 
     def close(self) -> None:
         self.zenoh.close()

@@ -134,15 +134,27 @@ def test_outbox_survives_restart_and_never_resends_delivered(tmp_path):
     def down(payload, key):
         raise ConnectionError("receiver down")
 
-    box = Outbox(path, {"webhook": down}, retry_base_s=5, retry_max_s=40, clock=lambda: clock[0])
+    class Jitter:  # the jitter's draw as a fraction of the capped backoff
+        fraction = 1.0
+
+        def uniform(self, a, b):
+            assert (a, b) == (0.5, 1.0)
+            return self.fraction
+
+    jitter = Jitter()
+    box = Outbox(path, {"webhook": down}, retry_base_s=5, retry_max_s=40,
+                 clock=lambda: clock[0], rng=jitter)
     assert box.enqueue("webhook", "a", b"A") and box.enqueue("webhook", "b", b"B")
     assert not box.enqueue("webhook", "a", b"A")
-    # backoff 5, 10, 20, 40, 40 s after successive failures (wall clock injected)
+    # backoff 5, 10, 20, 40, 40 s after successive failures (wall clock injected), each
+    # drawn between half and all of that: here all, then half
     dues = []
-    for _ in range(5):
+    for fraction in (1.0, 1.0, 1.0, 1.0, 0.5):
+        jitter.fraction = fraction
         dues.append(box.run_once() - clock[0])
         clock[0] += dues[-1]
-    assert dues == [5, 10, 20, 40, 40]
+    assert dues == [5, 10, 20, 40, 20]
+    assert box.stats()["webhook"]["failures_total"] == 5
     box.close()
 
     box = Outbox(path, {"webhook": lambda p, k: sent.append(p)}, clock=lambda: clock[0])
@@ -236,3 +248,82 @@ def test_email_through_outbox(tmp_path):
     assert "value: 2 1/d" in msg and "threshold: 1 1/d" in msg
     assert EmailSender(cfg.email).message(json.dumps(rec.to_dict()).encode(), "f:fire:1")[
         "Message-ID"] == "<f.fire.1@buoymon>"
+
+
+def test_refused_message_becomes_a_dead_letter_and_does_not_block(tmp_path):
+    """A 4xx from the receiver: the message is kept aside with the answer's body, counted,
+    and the next one goes out at once; an operator can retry or discard dead letters."""
+    refused = {"k0"}
+    got: list[str] = []
+
+    class Refusing(BaseHTTPRequestHandler):
+        def do_POST(self):
+            body = json.loads(self.rfile.read(int(self.headers["Content-Length"])))
+            if body["k"] in refused:
+                self.send_response(400)
+                self.end_headers()
+                self.wfile.write(b'{"message":"cannot unmarshal object"}')
+            else:
+                got.append(body["k"])
+                self.send_response(200)
+                self.end_headers()
+
+        def log_message(self, *args):
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Refusing)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{server.server_address[1]}/"
+    box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": WebhookSender(AlertsConfig.from_dict(
+        {"webhook": {"url": url}}).webhook)}, retry_base_s=30, retry_max_s=60)
+    try:
+        for i in range(3):
+            box.enqueue("webhook", f"k{i}", json.dumps({"k": f"k{i}"}).encode())
+        assert box.run_once() is None  # nothing left to retry: k0 is dead, k1 and k2 sent
+        assert got == ["k1", "k2"]
+        st = box.stats()["webhook"]
+        assert st["dead_letters"] == 1 and st["dead_total"] == 1 and st["pending"] == 0
+        assert st["delivered_total"] == 2 and st["failures_total"] == 0
+        dead = box.messages(dead_only=True)
+        assert [d["dedup_key"] for d in dead] == ["k0"]
+        assert "HTTP 400" in dead[0]["last_error"] and "cannot unmarshal" in dead[0]["last_error"]
+        refused.clear()
+        assert box.settle_dead(retry=True) == 1
+        assert box.run_once() is None and got == ["k1", "k2", "k0"]
+        assert box.stats()["webhook"]["dead_letters"] == 0
+    finally:
+        box.close()
+        server.shutdown()
+        server.server_close()
+
+
+def test_full_outbox_drops_the_oldest_and_counts_them(tmp_path):
+    box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": lambda p, k: None}, max_pending=3)
+    try:
+        for i in range(5):
+            box.enqueue("webhook", f"k{i}", b"x")
+        assert [m["dedup_key"] for m in box.messages()] == ["k2", "k3", "k4"]
+        assert box.stats()["webhook"]["dropped_total"] == 2
+    finally:
+        box.close()
+
+
+def test_an_outbox_of_an_older_version_is_upgraded(tmp_path):
+    import sqlite3
+    path = str(tmp_path / "old.sqlite")
+    db = sqlite3.connect(path)
+    db.executescript("""CREATE TABLE outbox (id INTEGER PRIMARY KEY AUTOINCREMENT,
+        channel TEXT NOT NULL, dedup_key TEXT NOT NULL, payload BLOB NOT NULL,
+        created_s REAL NOT NULL, attempts INTEGER NOT NULL DEFAULT 0,
+        next_attempt_s REAL NOT NULL, delivered_s REAL, last_error TEXT,
+        UNIQUE (channel, dedup_key));
+        INSERT INTO outbox (channel, dedup_key, payload, created_s, next_attempt_s)
+        VALUES ('webhook', 'old', x'41', 1.0, 1.0);""")
+    db.commit()
+    db.close()
+    sent = []
+    box = Outbox(path, {"webhook": lambda p, k: sent.append(p)})
+    try:
+        assert box.run_once() is None and sent == [b"A"]
+    finally:
+        box.close()

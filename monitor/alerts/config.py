@@ -38,6 +38,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth, check_url,
+                                         parse_auth)
 from monitor.alerts.records import SEVERITIES
 from monitor.config import MAX_DURATION_S
 
@@ -162,9 +164,13 @@ class RuleConfig:
 
 @dataclass(frozen=True)
 class WebhookConfig:
+    """``[alerts.webhook]``: a direct receiver (chat, ticketing) that takes the body
+    Alertmanager itself sends to its receivers (webhook v4); not for Alertmanager's API."""
+
     url: str
     timeout_s: float = 10.0
     receiver: str = "buoymon"
+    auth: HttpAuth = HttpAuth()
 
 
 @dataclass(frozen=True)
@@ -184,6 +190,7 @@ class OutboxConfig:
     path: str = "alerts_outbox.sqlite"
     retry_base_s: float = 5.0
     retry_max_s: float = 600.0
+    max_pending: int = 10000
 
 
 @dataclass(frozen=True)
@@ -194,6 +201,7 @@ class AlertsConfig:
     rules: tuple[RuleConfig, ...] = ()
     webhook: WebhookConfig | None = None
     email: EmailConfig | None = None
+    alertmanager: AlertmanagerConfig | None = None
     outbox: OutboxConfig = field(default_factory=OutboxConfig)
 
     @classmethod
@@ -203,7 +211,7 @@ class AlertsConfig:
         if not isinstance(d, Mapping):
             raise _err(where, d, "must be a table")
         _check_keys(where, d, {"eval_interval_s", "resend_interval_s", "history_limit", "rule",
-                               "webhook", "email", "outbox"})
+                               "webhook", "email", "alertmanager", "outbox"})
         eval_s = _number(f"{where}.eval_interval_s", d.get("eval_interval_s", 10.0), _p(0, 0.0))
         resend = _number(f"{where}.resend_interval_s", d.get("resend_interval_s", 3600.0),
                          _p(0, 0.0, True))
@@ -226,6 +234,8 @@ class AlertsConfig:
             eval_interval_s=eval_s, resend_interval_s=resend, history_limit=hist, rules=rules,
             webhook=_webhook(f"{where}.webhook", d["webhook"]) if "webhook" in d else None,
             email=_email(f"{where}.email", d["email"]) if "email" in d else None,
+            alertmanager=(_alertmanager(f"{where}.alertmanager", d["alertmanager"])
+                          if "alertmanager" in d else None),
             outbox=_outbox(f"{where}.outbox", d.get("outbox", {})),
         )
 
@@ -235,11 +245,19 @@ class AlertsConfig:
             "eval_interval_s": self.eval_interval_s, "resend_interval_s": self.resend_interval_s,
             "history_limit": self.history_limit, "rule": [r.to_dict() for r in self.rules],
             "outbox": {"path": self.outbox.path, "retry_base_s": self.outbox.retry_base_s,
-                       "retry_max_s": self.outbox.retry_max_s},
+                       "retry_max_s": self.outbox.retry_max_s,
+                       "max_pending": self.outbox.max_pending},
         }
         if self.webhook is not None:
             d["webhook"] = {"url": self.webhook.url, "timeout_s": self.webhook.timeout_s,
-                            "receiver": self.webhook.receiver}
+                            "receiver": self.webhook.receiver, **_auth_dict(self.webhook.auth)}
+        if self.alertmanager is not None:
+            a = self.alertmanager
+            d["alertmanager"] = {
+                "url": list(a.urls), "resend_interval_s": a.resend_interval_s,
+                "ends_at_intervals": a.ends_at_intervals, "timeout_s": a.timeout_s,
+                "job": a.job, "instance": a.instance, "runbook_url": a.runbook_url,
+                "generator_url": a.generator_url, **_auth_dict(a.auth)}
         if self.email is not None:
             e = self.email
             d["email"] = {"host": e.host, "port": e.port, "from": e.sender, "to": list(e.to),
@@ -281,15 +299,46 @@ def _rule(where: str, r: Any) -> RuleConfig:
     return RuleConfig(kind, name, component, severity, params, where)
 
 
+def _auth_dict(auth: HttpAuth) -> dict[str, str]:
+    return {k: getattr(auth, k) for k in AUTH_KEYS if getattr(auth, k)}
+
+
 def _webhook(where: str, d: Any) -> WebhookConfig:
     if not isinstance(d, Mapping):
         raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"url", "timeout_s", "receiver"})
-    url = _string(f"{where}.url", d.get("url"), lambda s: s.startswith(("http://", "https://")),
-                  "an http:// or https:// URL")
+    _check_keys(where, d, {"url", "timeout_s", "receiver", *AUTH_KEYS})
+    url = check_url(f"{where}.url", d.get("url"), _err)
     return WebhookConfig(
         url=url, timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
         receiver=_string(f"{where}.receiver", d.get("receiver", "buoymon")),
+        auth=parse_auth(where, d, _err),
+    )
+
+
+def _alertmanager(where: str, d: Any) -> AlertmanagerConfig:
+    if not isinstance(d, Mapping):
+        raise _err(where, d, "must be a table")
+    _check_keys(where, d, {"url", "resend_interval_s", "ends_at_intervals", "timeout_s", "job",
+                           "instance", "runbook_url", "generator_url", *AUTH_KEYS})
+    raw = d.get("url")
+    urls = [raw] if isinstance(raw, str) else raw
+    if not isinstance(urls, list) or not urls:
+        raise _err(f"{where}.url", raw, "must be a URL or a non-empty list of URLs")
+    urls = [check_url(f"{where}.url[{i}]", u, _err) for i, u in enumerate(urls)]
+    text = {k: d.get(k, "") for k in ("instance", "runbook_url", "generator_url")}
+    for k, v in text.items():
+        if not isinstance(v, str):
+            raise _err(f"{where}.{k}", v, "must be a string")
+    return AlertmanagerConfig(
+        urls=tuple(urls),
+        resend_interval_s=_number(f"{where}.resend_interval_s", d.get("resend_interval_s", 60.0),
+                                  _p(0, 0.0)),
+        ends_at_intervals=_number(f"{where}.ends_at_intervals", d.get("ends_at_intervals", 4.0),
+                                  _p(0, 2.0, True)),
+        timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
+        job=_string(f"{where}.job", d.get("job", "buoymon")),
+        instance=text["instance"], runbook_url=text["runbook_url"],
+        generator_url=text["generator_url"], auth=parse_auth(where, d, _err),
     )
 
 
@@ -324,10 +373,13 @@ def _email(where: str, d: Any) -> EmailConfig:
 def _outbox(where: str, d: Any) -> OutboxConfig:
     if not isinstance(d, Mapping):
         raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"path", "retry_base_s", "retry_max_s"})
+    _check_keys(where, d, {"path", "retry_base_s", "retry_max_s", "max_pending"})
     base = _number(f"{where}.retry_base_s", d.get("retry_base_s", 5.0), _p(0, 0.0))
     top = _number(f"{where}.retry_max_s", d.get("retry_max_s", 600.0), _p(0, 0.0))
     if top < base:
         raise _err(f"{where}.retry_max_s", d.get("retry_max_s"), f"must be >= retry_base_s ({base:g})")
+    cap = d.get("max_pending", 10000)
+    if isinstance(cap, bool) or not isinstance(cap, int) or cap < 1:
+        raise _err(f"{where}.max_pending", cap, "must be an integer >= 1")
     return OutboxConfig(path=_string(f"{where}.path", d.get("path", "alerts_outbox.sqlite")),
-                        retry_base_s=base, retry_max_s=top)
+                        retry_base_s=base, retry_max_s=top, max_pending=cap)

@@ -26,6 +26,7 @@ import logging
 import os
 import queue
 import threading
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping
 
@@ -33,7 +34,9 @@ import zenoh
 
 from monitor.alerts.config import AlertsConfig, EmailConfig, WebhookConfig
 from monitor.alerts.engine import AlertEngine
-from monitor.alerts.outbox import Outbox
+from monitor.alerts.alertmanager import (AlertmanagerConfig, post_json, records_payload,
+                                         senders as alertmanager_senders)
+from monitor.alerts.outbox import Outbox, PermanentDeliveryError
 from monitor.alerts.records import AlertRecord, webhook_payload
 from monitor.blocks import validate_buoy_id
 from monitor.events import StepResult
@@ -185,23 +188,15 @@ class ZenohAlertSink:
 
 
 class WebhookSender:
-    """POSTs an Alertmanager-compatible JSON body; raises unless the receiver answers 2xx."""
+    """POSTs the Alertmanager *receiver* body (webhook v4) to a direct receiver; a 4xx answer
+    is a permanent refusal, anything else not 2xx is retried (``post_json``)."""
 
     def __init__(self, cfg: WebhookConfig) -> None:
         self.cfg = cfg
 
     def __call__(self, payload: bytes, dedup_key: str) -> None:
-        # imported by the senders only: with ssl they cost a daemon without them ~4.6 MB
-        import urllib.request  # noqa: PLC0415
-
-        req = urllib.request.Request(
-            self.cfg.url, data=payload, method="POST",
-            headers={"Content-Type": "application/json", "Idempotency-Key": dedup_key,
-                     "User-Agent": "buoymon"},
-        )
-        with urllib.request.urlopen(req, timeout=self.cfg.timeout_s) as resp:
-            if not 200 <= resp.status < 300:
-                raise OSError(f"webhook {self.cfg.url} answered HTTP {resp.status}")
+        post_json(self.cfg.url, payload, self.cfg.timeout_s, self.cfg.auth,
+                  {"Idempotency-Key": dedup_key})
 
 
 class EmailSender:
@@ -236,48 +231,98 @@ class EmailSender:
         import smtplib  # noqa: PLC0415 (see WebhookSender.__call__)
 
         msg = self.message(payload, dedup_key)
-        with smtplib.SMTP(self.cfg.host, self.cfg.port, timeout=self.cfg.timeout_s) as smtp:
-            if self.cfg.starttls:
-                smtp.starttls()
-            if self.cfg.username:
-                smtp.login(self.cfg.username, os.environ.get(self.cfg.password_env, ""))
-            smtp.send_message(msg)
+        try:
+            with smtplib.SMTP(self.cfg.host, self.cfg.port, timeout=self.cfg.timeout_s) as smtp:
+                if self.cfg.starttls:
+                    smtp.starttls()
+                if self.cfg.username:
+                    smtp.login(self.cfg.username, os.environ.get(self.cfg.password_env, ""))
+                smtp.send_message(msg)
+        except smtplib.SMTPRecipientsRefused as exc:  # every recipient refused: permanent
+            raise PermanentDeliveryError(f"SMTP {self.cfg.host}: recipients refused: "
+                                         f"{exc.recipients}") from None
+        except smtplib.SMTPResponseException as exc:  # 5xx permanent, 4xx try again
+            text = f"SMTP {self.cfg.host} answered {exc.smtp_code} {exc.smtp_error!r}"
+            if exc.smtp_code >= 500:
+                raise PermanentDeliveryError(text) from None
+            raise OSError(text) from None
 
 
 class OutboxSink:
-    """Stores every alert record for webhook and/or e-mail delivery in a durable outbox.
+    """Stores every alert record for delivery (webhook, e-mail, Alertmanager) in a durable
+    outbox, and keeps Alertmanager's view of the active alerts fresh.
 
     One message per record and channel, deduplicated on ``<fingerprint>:<event>:<at_ns>`` so
-    re-processing ticks after a restart does not notify twice.
+    re-processing ticks after a restart does not notify twice. For Alertmanager channels,
+    :meth:`refresh` (called on the daemon's thread between blocks) re-sends every active
+    alert each ``resend_interval_s`` of wall-clock time, as Prometheus does: only while the
+    channel has nothing else pending, so an outage queues one refresh, not one per interval.
     """
 
-    def __init__(self, outbox: Outbox, receiver: str = "buoymon") -> None:
+    def __init__(self, outbox: Outbox, receiver: str = "buoymon",
+                 alertmanager: AlertmanagerConfig | None = None,
+                 active: Iterable[AlertRecord] = (),
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.outbox = outbox
         self.receiver = receiver
+        self.alertmanager = alertmanager
+        self.am_channels = [c for c in outbox.senders if c.startswith("alertmanager")]
+        self.active: dict[str, AlertRecord] = {r.fingerprint: r for r in active}
+        self.clock = clock
+        self._next_refresh = clock()  # at once: a restarted daemon re-asserts what is active
+        self._refreshes = 0
 
     @classmethod
-    def from_config(cls, cfg: AlertsConfig, path: str | None = None) -> "OutboxSink | None":
-        """The sink for ``[alerts.webhook]``/``[alerts.email]`` (None if neither is set), with
-        its sender thread started. ``path`` overrides ``[alerts.outbox] path``."""
+    def from_config(cls, cfg: AlertsConfig, path: str | None = None,
+                    active: Iterable[AlertRecord] = ()) -> "OutboxSink | None":
+        """The sink for ``[alerts.webhook]``, ``[alerts.email]`` and ``[alerts.alertmanager]``
+        (None if none is set), with its sender thread started. ``path`` overrides
+        ``[alerts.outbox] path``; ``active`` are the alerts active at start."""
         senders: dict[str, Callable[[bytes, str], None]] = {}
         if cfg.webhook is not None:
             senders["webhook"] = WebhookSender(cfg.webhook)
         if cfg.email is not None:
             senders["email"] = EmailSender(cfg.email)
+        if cfg.alertmanager is not None:
+            senders.update(alertmanager_senders(cfg.alertmanager))
         if not senders:
             return None
         outbox = Outbox(path or cfg.outbox.path, senders, cfg.outbox.retry_base_s,
-                        cfg.outbox.retry_max_s)
+                        cfg.outbox.retry_max_s, cfg.outbox.max_pending)
         outbox.start()
-        return cls(outbox, cfg.webhook.receiver if cfg.webhook else "buoymon")
+        return cls(outbox, cfg.webhook.receiver if cfg.webhook else "buoymon",
+                   cfg.alertmanager, active)
 
     def publish(self, records: Iterable[AlertRecord]) -> None:
         for rec in records:
+            if rec.state == "firing":
+                self.active[rec.fingerprint] = rec
+            else:
+                self.active.pop(rec.fingerprint, None)
             key = f"{rec.fingerprint}:{rec.event}:{rec.at_ns}"
             for channel in self.outbox.senders:
-                payload = (_json(webhook_payload([rec], self.receiver)) if channel == "webhook"
-                           else _json(rec.to_dict()))
+                if channel == "webhook":
+                    payload = _json(webhook_payload([rec], self.receiver))
+                elif channel in self.am_channels:
+                    payload = records_payload([rec])
+                else:
+                    payload = _json(rec.to_dict())
                 self.outbox.enqueue(channel, key, payload)
+
+    def refresh(self) -> None:
+        """Re-send the active alerts to Alertmanager when a re-send interval has passed."""
+        if self.alertmanager is None or self.clock() < self._next_refresh:
+            return
+        self._next_refresh = self.clock() + self.alertmanager.resend_interval_s
+        if not self.active:
+            return
+        pending = self.outbox.pending_by_channel()
+        self._refreshes += 1
+        payload = records_payload(self.active.values())
+        for channel in self.am_channels:
+            if pending.get(channel, 0) == 0:
+                self.outbox.enqueue(channel, f"refresh:{time.time_ns()}:{self._refreshes}",
+                                    payload)
 
     def on_step(self, step: StepResult) -> None:
         if step.alerts:
