@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
 
-.PHONY: demo test bench clean chromium
+.PHONY: demo test bench clean chromium alertmanager
 
 $(VENV)/.created:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH"; exit 1; }
@@ -30,7 +30,16 @@ chromium:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
 	  else echo "note: /usr/bin/chromium missing and cannot install it; its test will skip"; fi; }
 
-test: $(VENV)/.installed-test chromium
+# the alert delivery tests run a real Prometheus Alertmanager (Debian package); install it
+# when missing (never started as a service here: the tests run their own on 127.0.0.1)
+alertmanager:
+	@test -x /usr/bin/prometheus-alertmanager || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	      --no-install-recommends prometheus-alertmanager >/dev/null; \
+	  else echo "note: prometheus-alertmanager missing and cannot install it; its tests will skip"; fi; }
+
+test: $(VENV)/.installed-test chromium alertmanager
 	cd $(CURDIR) && $(VENV)/bin/lint-imports --no-cache
 	$(PY) -m pytest -q
 

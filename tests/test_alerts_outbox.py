@@ -197,14 +197,20 @@ def test_outbox_rejects_unknown_channel(tmp_path):
 class SmtpCapture:
     """Minimal SMTP server (enough of RFC 5321 for smtplib) that stores received messages."""
 
-    def __init__(self) -> None:
+    def __init__(self, refuse: set[str] = frozenset(), connections: int = 1) -> None:
         self.sock = socket.socket()
         self.sock.bind(("127.0.0.1", 0))
         self.sock.listen(1)
         self.port = self.sock.getsockname()[1]
         self.messages: list[str] = []
-        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.refuse = refuse  # recipients answered 550 (mailbox unavailable)
+        self.thread = threading.Thread(target=self._serve_many, args=(connections,),
+                                       daemon=True)
         self.thread.start()
+
+    def _serve_many(self, n: int) -> None:
+        for _ in range(n):
+            self._serve()
 
     def _serve(self) -> None:
         conn, _ = self.sock.accept()
@@ -217,6 +223,8 @@ class SmtpCapture:
                 cmd = line[:4].upper()
                 if cmd in ("EHLO", "HELO"):
                     say("250 test")
+                elif cmd == "RCPT" and any(r in line for r in self.refuse):
+                    say("550 mailbox unavailable")
                 elif cmd == "DATA":
                     say("354 go")
                     data = []
@@ -248,6 +256,29 @@ def test_email_through_outbox(tmp_path):
     assert "value: 2 1/d" in msg and "threshold: 1 1/d" in msg
     assert EmailSender(cfg.email).message(json.dumps(rec.to_dict()).encode(), "f:fire:1")[
         "Message-ID"] == "<f.fire.1@buoymon>"
+
+
+def test_email_refused_by_the_server_is_a_dead_letter_and_the_next_one_goes(tmp_path):
+    smtp = SmtpCapture(refuse={"gone@example.org"}, connections=2)
+    cfg = AlertsConfig.from_dict({"email": {"host": "127.0.0.1", "port": smtp.port,
+                                            "from": "buoymon@example.org",
+                                            "to": "gone@example.org"}})
+    box = Outbox(str(tmp_path / "o.sqlite"), {"email": EmailSender(cfg.email)})
+    good = EmailSender(AlertsConfig.from_dict({"email": {
+        "host": "127.0.0.1", "port": smtp.port, "from": "buoymon@example.org",
+        "to": "ops@example.org"}}).email)
+    try:
+        rec = damage_records()[0]
+        box.enqueue("email", "a", json.dumps(rec.to_dict()).encode())
+        box.enqueue("email", "b", json.dumps(rec.to_dict()).encode())
+        box.senders["email"] = lambda p, k: (EmailSender(cfg.email) if k == "a" else good)(p, k)
+        assert box.run_once() is None
+        st = box.stats()["email"]
+        assert st["dead_letters"] == 1 and st["delivered_total"] == 1
+        assert "recipients refused" in box.messages(dead_only=True)[0]["last_error"]
+        assert len(smtp.messages) == 1
+    finally:
+        box.close()
 
 
 def test_refused_message_becomes_a_dead_letter_and_does_not_block(tmp_path):

@@ -166,8 +166,13 @@ class AlertmanagerSender:
         self.endpoint = url.rstrip("/") + "/api/v2/alerts"
 
     def body(self, payload: bytes) -> bytes:
+        """The request body; PermanentDeliveryError for a payload that is not alert records
+        (it could never be sent)."""
         now = self.clock()
-        records = [AlertRecord.from_dict(d) for d in json.loads(payload)]
+        try:
+            records = [AlertRecord.from_dict(d) for d in json.loads(payload)]
+        except (ValueError, TypeError) as exc:
+            raise PermanentDeliveryError(f"not a list of alert records: {exc}") from None
         return json.dumps([postable(r, self.cfg, now) for r in records]).encode()
 
     def __call__(self, payload: bytes, dedup_key: str) -> None:

@@ -1,4 +1,4 @@
-"""``buoymon alerts list|ack|reset``: inspect and manage alerts.
+"""``buoymon alerts list|ack|reset|outbox``: inspect and manage alerts.
 
 Two targets:
 
@@ -14,6 +14,12 @@ Two targets:
 
 Every ack and reset records who, when (wall-clock time of the command) and why in the engine's
 history.
+
+``outbox`` works on the delivery outbox (``[alerts.outbox] path`` of ``--config``, or
+``--outbox PATH``), also while the daemon runs: per channel what is pending, delivered,
+retried, dropped, and the dead letters (messages a receiver refused, with its answer);
+``--retry-dead`` queues them again (after fixing the receiver), ``--discard-dead`` deletes
+them. While dead letters are held the daemon raises ``alert_delivery_refused``.
 """
 
 from __future__ import annotations
@@ -66,7 +72,68 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         sp.add_argument("--who", required=True, help="operator name")
         sp.add_argument("--why", required=True, help="reason, recorded in the alert history")
         target(sp)
+    ob = sub.add_parser("outbox", help="delivery outbox: pending, delivered, dead letters")
+    ob.add_argument("--outbox", type=Path, help="outbox database (default: [alerts.outbox] "
+                                                 "path of --config)")
+    ob.add_argument("--config", metavar="CFG.toml",
+                    help=f"configuration naming the outbox (default {DEFAULT_CONFIG})")
+    act = ob.add_mutually_exclusive_group()
+    act.add_argument("--retry-dead", action="store_true", help="queue the dead letters again")
+    act.add_argument("--discard-dead", action="store_true", help="delete the dead letters")
+    ob.add_argument("--json", action="store_true", help="print JSON instead of text")
+    ob.set_defaults(func=run_outbox)
     p.set_defaults(func=run)
+
+
+def run_outbox(args: argparse.Namespace) -> int:
+    """``buoymon alerts outbox``: see the module docstring."""
+    from monitor.alerts.outbox import Outbox  # noqa: PLC0415
+
+    try:
+        path = args.outbox if args.outbox is not None else _outbox_path(args.config)
+        if not Path(path).is_file():
+            raise ValueError(f"{path}: no outbox database there (alerts not yet delivered "
+                             "through webhook, e-mail or Alertmanager?)")
+        box = Outbox(str(path), {})
+    except (ValueError, OSError) as exc:
+        print(f"buoymon alerts outbox: {exc}", file=sys.stderr)
+        return 1
+    try:
+        settled = (box.settle_dead(retry=True) if args.retry_dead
+                   else box.settle_dead(retry=False) if args.discard_dead else None)
+        result = {"outbox": str(path), "channels": box.stats(),
+                  "dead_letters": box.messages(dead_only=True)}
+    finally:
+        box.close()
+    if settled is not None:
+        result["settled"] = settled
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    for ch, st in result["channels"].items():
+        print(f"{ch}: {st['pending']} pending, {st['delivered_total']} delivered, "
+              f"{st['failures_total']} failed attempts, {st['dropped_total']} dropped, "
+              f"{st['dead_letters']} dead letters")
+    for d in result["dead_letters"]:
+        when = datetime.fromtimestamp(d["dead_s"], tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S")
+        print(f"  dead {d['channel']} {d['dedup_key']} (refused {when} UTC): {d['last_error']}")
+    if settled is not None:
+        print(f"{settled} dead letter(s) {'queued again' if args.retry_dead else 'discarded'}")
+    return 0
+
+
+def _outbox_path(config: str | None) -> Path:
+    import tomllib  # noqa: PLC0415
+
+    from monitor.alerts.config import AlertsConfig  # noqa: PLC0415
+
+    path = Path(config or DEFAULT_CONFIG)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"config error: {path}: {exc}") from None
+    out = Path(AlertsConfig.from_dict(raw.get("alerts"), "alerts").outbox.path)
+    return out if out.is_absolute() else Path.cwd() / out
 
 
 def _command(args: argparse.Namespace) -> dict[str, Any] | None:

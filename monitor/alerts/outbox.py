@@ -265,7 +265,8 @@ class Outbox:
                 "GROUP BY channel").fetchall())
             counts = self._db.execute("SELECT channel, name, value FROM outbox_counters"
                                       ).fetchall()
-        channels = sorted(set(self.senders) | {r[0] for r in pend} | set(dead))
+        channels = sorted(set(self.senders) | {r[0] for r in pend} | set(dead)
+                          | {r[0] for r in counts})
         out = {ch: {"pending": 0, "dead_letters": dead.get(ch, 0), "oldest_pending_age_s": None,
                     **dict.fromkeys(COUNTERS, 0)} for ch in channels}
         for ch, n, oldest in pend:
