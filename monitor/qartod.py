@@ -1,0 +1,304 @@
+"""QARTOD quality-control flags for every stream, computed while streaming.
+
+The tests and flags of the IOOS QARTOD manuals (general, in-situ currents, waves), with the
+semantics of ``ioos_qc.qartod`` (the test oracle, tests/test_qartod.py)::
+
+    1 pass   2 not evaluated   3 suspect   4 fail   9 missing (the value is NaN / infinite)
+
+``gross_range``     outside the sensor span (or infinite) -> fail; outside the operator span
+                    -> suspect
+``spike``           ``|x[n-1] - (x[n-2] + x[n]) / 2|`` above a threshold (ioos_qc "average"
+                    method): a centred test, so the flag of a sample is known when the NEXT
+                    sample arrives; the first sample and the last one so far stay 2
+``rate_of_change``  ``|x[n] - x[n-1]| / dt`` above ``rate_suspect_per_s`` -> suspect, above
+                    ``max_rate_per_s`` -> fail
+``flat_line``       every value in the last ``flat_suspect_s`` (``flat_fail_s``) seconds within
+                    ``flat_tolerance`` of each other -> suspect (fail); the first window's
+                    samples pass
+``location``        (GNSS) distance from the previous fix above ``location_range_max_m`` ->
+                    suspect; only one of lat/lon missing, or |lat| > 90, |lon| > 180 -> fail
+
+A stream with several fields gets one flag per test and sample: the worst over its fields
+(missing > fail > suspect > pass > not evaluated). A test switched off for a field (threshold
+inf, tolerance 0) gives 2 for it.
+
+Differences from ``ioos_qc`` batch results, on purpose: time steps are exact (ioos_qc truncates
+them to whole seconds, so its rate is infinite for sub-second data), and the flat-line window is
+the samples within the last N seconds (ioos_qc counts ``N / median step`` samples, which needs
+the whole record; both agree for evenly sampled data). The flat-line memory holds at most
+:data:`FLAT_MEMORY` samples per stream, so a window longer than that many samples is cut to it.
+
+Streaming: :class:`StreamQC` carries every test's memory across blocks (and in its state), so
+any split of a stream into blocks gives the same flags as one pass. Only samples later than the
+last one seen enter the tests (re-delivered and out-of-order samples are the validator's
+``duplicate`` / ``time_backwards`` rejections and get no flags).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numba
+import numpy as np
+
+PASS, NOT_EVALUATED, SUSPECT, FAIL, MISSING = 1, 2, 3, 4, 9
+TESTS: tuple[str, ...] = ("gross_range", "spike", "rate_of_change", "flat_line", "location")
+GROSS, SPIKE, RATE, FLAT, LOCATION = range(len(TESTS))
+FLAT_MEMORY = 4096
+_EARTH_RADIUS_M = 6_371_008.8  # mean radius (IUGG): haversine distance between fixes
+
+
+@dataclass(frozen=True)
+class FieldQC:
+    """QARTOD thresholds of one field (see the module docstring; inf / 0 = test off)."""
+
+    fail_min: float
+    fail_max: float
+    suspect_min: float
+    suspect_max: float
+    spike_suspect: float = np.inf
+    spike_fail: float = np.inf
+    rate_suspect_per_s: float = np.inf
+    rate_fail_per_s: float = np.inf
+    flat_tolerance: float = 0.0
+    flat_suspect_s: float = np.inf
+    flat_fail_s: float = np.inf
+
+
+def _params(fields: tuple[FieldQC, ...]) -> np.ndarray:
+    return np.array([[f.fail_min, f.fail_max, f.suspect_min, f.suspect_max, f.spike_suspect,
+                      f.spike_fail, f.rate_suspect_per_s, f.rate_fail_per_s, f.flat_tolerance,
+                      f.flat_suspect_s, f.flat_fail_s] for f in fields], dtype=np.float64)
+
+
+_N_TESTS = 5
+
+
+@numba.njit(cache=True, nogil=True)
+def _rank(flag):  # pragma: no cover - compiled
+    # worst-of order: missing > fail > suspect > pass > not evaluated
+    if flag == 9:
+        return 5
+    if flag == 2:
+        return 0
+    return flag
+
+
+@numba.njit(cache=True, nogil=True)
+def _worst(a, b):  # pragma: no cover - compiled
+    return a if _rank(a) >= _rank(b) else b
+
+
+@numba.njit(cache=True, nogil=True)
+def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ring_head, ring_n, first_t):  # pragma: no cover - compiled
+    """Flags ``(len(TESTS), n)`` of the samples ``t, x`` (``x``: fields x samples) and the
+    spike flag of each sample's PREDECESSOR (0 = none). State arrays are updated in place;
+    returns (flags, spike_prev, prev_t, n_seen, ring_head, ring_n, first_t)."""
+    nf, n = x.shape
+    cap = ring_t.shape[0]
+    flags = np.full((_N_TESTS, n), 2, np.uint8)
+    spike_prev = np.zeros(n, np.uint8)
+    for i in range(n):
+        ti = t[i]
+        if n_seen == 0:
+            first_t = ti
+        dt = (ti - prev_t) * 1e-9
+        sp = 0
+        gr = 2
+        rt = 2
+        ft = 2
+        for f in range(nf):
+            v = x[f, i]
+            ok = np.isfinite(v)
+            # gross range (an infinite value is out of range, as in ioos_qc)
+            if np.isnan(v):
+                g = 9
+            elif v < p[f, 0] or v > p[f, 1]:
+                g = 4
+            elif v < p[f, 2] or v > p[f, 3]:
+                g = 3
+            else:
+                g = 1
+            gr = _worst(gr, g)
+            # spike of the previous sample (x[n-1]) now that x[n] is here
+            if n_seen >= 1 and (np.isfinite(p[f, 4]) or np.isfinite(p[f, 5])):
+                if not np.isfinite(prev[f]):
+                    s = 9
+                elif n_seen < 2 or not np.isfinite(prev2[f]) or not ok:
+                    s = 2
+                else:
+                    d = abs(prev[f] - (prev2[f] + v) / 2.0)
+                    s = 1
+                    if d > p[f, 4]:
+                        s = 3
+                    if d > p[f, 5]:
+                        s = 4
+                sp = s if sp == 0 else _worst(sp, s)
+            # rate of change
+            if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]):
+                if not ok:
+                    r = 9
+                elif n_seen == 0 or np.isnan(prev[f]):
+                    r = 1  # (after an infinite value the rate is infinite, as in ioos_qc)
+                else:
+                    roc = abs(v - prev[f]) / dt
+                    r = 1
+                    if roc > p[f, 6]:
+                        r = 3
+                    if roc > p[f, 7]:
+                        r = 4
+                rt = _worst(rt, r)
+            # flat line over the samples within the longer window (newest first)
+            tol = p[f, 8]
+            if tol > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
+                if not ok:
+                    fl = 9
+                else:
+                    lo = v
+                    hi = v
+                    s_ns = p[f, 9] * 1e9
+                    f_ns = p[f, 10] * 1e9
+                    flat_s = True
+                    flat_f = True
+                    k = 0
+                    while k < ring_n:
+                        j = (ring_head - 1 - k) % cap
+                        age = ti - ring_t[j]
+                        if age > s_ns and age > f_ns:
+                            break
+                        w = ring_x[f, j]
+                        if np.isfinite(w):
+                            lo = min(lo, w)
+                            hi = max(hi, w)
+                            if hi - lo >= tol:
+                                if age <= s_ns:
+                                    flat_s = False
+                                if age <= f_ns:
+                                    flat_f = False
+                                break
+                        k += 1
+                    span = (ti - first_t) + (ti - prev_t if n_seen else 0)
+                    fl = 1
+                    if flat_s and span > s_ns:
+                        fl = 3
+                    if flat_f and span > f_ns:
+                        fl = 4
+                ft = _worst(ft, fl)
+        if location_max_m > 0 and nf == 2:
+            lat = x[0, i]
+            lon = x[1, i]
+            a, b = np.isfinite(lat), np.isfinite(lon)
+            if a != b:
+                loc = 4
+            elif not a:
+                loc = 9
+            else:
+                loc = 1
+                # no distance from an impossible fix (undefined, as in ioos_qc)
+                if n_seen >= 1 and abs(prev[0]) <= 90 and abs(prev[1]) <= 180:
+                    p1, p2 = np.radians(prev[0]), np.radians(lat)
+                    h = (np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2)
+                         * np.sin(np.radians(lon - prev[1]) / 2) ** 2)
+                    if 2 * _EARTH_RADIUS_M * np.arcsin(np.sqrt(min(h, 1.0))) > location_max_m:
+                        loc = 3
+                if abs(lat) > 90 or abs(lon) > 180:
+                    loc = 4
+            flags[4, i] = loc
+        flags[0, i] = gr
+        flags[2, i] = rt
+        flags[3, i] = ft
+        if n_seen >= 1:
+            spike_prev[i] = sp if sp != 0 else 2
+        for f in range(nf):
+            prev2[f] = prev[f]
+            prev[f] = x[f, i]
+        ring_t[ring_head] = ti
+        for f in range(nf):
+            ring_x[f, ring_head] = x[f, i]
+        ring_head = (ring_head + 1) % cap
+        ring_n = min(ring_n + 1, cap)
+        prev_t = ti
+        n_seen += 1
+    return flags, spike_prev, prev_t, n_seen, ring_head, ring_n, first_t
+
+
+
+class StreamQC:
+    """The QARTOD tests of one stream, with counts per test and the memory across blocks."""
+
+    def __init__(self, fields: tuple[FieldQC, ...], location_range_max_m: float = 0.0,
+                 state: Mapping[str, Any] | None = None) -> None:
+        self.fields = fields
+        self._p = _params(fields)
+        self._loc = float(location_range_max_m)
+        # the flat-line test needs the samples of its longest window; others two samples
+        windows = [max(f.flat_suspect_s if np.isfinite(f.flat_suspect_s) else 0.0,
+                       f.flat_fail_s if np.isfinite(f.flat_fail_s) else 0.0)
+                   for f in fields if f.flat_tolerance > 0]
+        self._cap = FLAT_MEMORY if any(w > 0 for w in windows) else 1
+        nf = len(fields)
+        self.counts = {name: {"suspect": 0, "fail": 0, "missing": 0} for name in self.tests()}
+        self.prev_t, self.n_seen, self.first_t = 0, 0, 0
+        self.prev, self.prev2 = np.full(nf, np.nan), np.full(nf, np.nan)
+        self.ring_t = np.zeros(self._cap, np.int64)
+        self.ring_x = np.full((nf, self._cap), np.nan)
+        self.ring_head, self.ring_n = 0, 0
+        if state is not None:
+            self.prev_t, self.n_seen = int(state["prev_t"]), int(state["n_seen"])
+            self.first_t = int(state["first_t"])
+            self.prev = _floats(state["prev"])
+            self.prev2 = _floats(state["prev2"])
+            rt, rx = state["ring_t"], state["ring_x"]
+            m = min(len(rt), self._cap)
+            self.ring_t[:m] = np.array(rt[len(rt) - m:], np.int64)
+            self.ring_x[:, :m] = _floats(rx).reshape(nf, -1)[:, len(rt) - m:]
+            self.ring_head, self.ring_n = m % self._cap, m
+            for name, c in state["counts"].items():
+                self.counts[name].update(c)
+
+    def tests(self) -> tuple[str, ...]:
+        """The tests this stream runs (location only for a stream given a range)."""
+        return TESTS if self._loc > 0 else TESTS[:LOCATION]
+
+    def check(self, t_ns: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(flags, spike_prev)`` of samples in time order, each later than every earlier one:
+        ``flags[test, i]`` per :data:`TESTS`; ``spike_prev[i]`` the spike flag of the sample
+        before ``i`` (0 for the stream's first). Counts suspect / fail / missing per test."""
+        flags, spike_prev, prev_t, n_seen, head, ring_n, first_t = _qc(
+            t_ns, np.ascontiguousarray(values, dtype=np.float64), self._p, self._loc,
+            np.int64(self.prev_t), self.prev, self.prev2, np.int64(self.n_seen), self.ring_t, self.ring_x, np.int64(self.ring_head),
+            np.int64(self.ring_n), np.int64(self.first_t))
+        self.prev_t, self.n_seen, self.first_t = int(prev_t), int(n_seen), int(first_t)
+        self.ring_head, self.ring_n = int(head), int(ring_n)
+        if t_ns.shape[0]:
+            spike = flags[SPIKE]
+            spike[:] = NOT_EVALUATED  # a sample's own spike flag is not known yet
+            self._count(flags, spike_prev)
+        return flags, spike_prev
+
+    def _count(self, flags: np.ndarray, spike_prev: np.ndarray) -> None:
+        for k, name in enumerate(self.tests()):
+            row = spike_prev if k == SPIKE else flags[k]
+            c = self.counts[name]
+            hist = np.bincount(row, minlength=10)
+            c["suspect"] += int(hist[SUSPECT])
+            c["fail"] += int(hist[FAIL])
+            c["missing"] += int(hist[MISSING])
+
+    def state(self) -> dict[str, Any]:
+        order = (self.ring_head - self.ring_n + np.arange(self.ring_n)) % self._cap
+        return {"prev_t": self.prev_t, "n_seen": self.n_seen, "first_t": self.first_t,
+                "prev": _json_floats(self.prev), "prev2": _json_floats(self.prev2),
+                "ring_t": self.ring_t[order].tolist(),
+                "ring_x": _json_floats(self.ring_x[:, order].ravel()),
+                "counts": {k: dict(v) for k, v in self.counts.items()}}
+
+
+def _json_floats(a: np.ndarray) -> list[float | None]:
+    """Floats for a JSON state: NaN (a missing value) as null."""
+    return [None if not np.isfinite(v) else v for v in a.tolist()]
+
+
+def _floats(values: list[float | None]) -> np.ndarray:
+    return np.array([np.nan if v is None else v for v in values], np.float64)
