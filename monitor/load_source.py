@@ -95,8 +95,10 @@ class _ModelsEstimator:
         return self.model.state.to_dict()
 
 
-def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator:
-    """The motion estimator of ``config``'s mooring, continuing from ``state`` if given.
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None,
+                    sensor: str | None = None) -> MotionEstimator:
+    """The motion estimator of ``config``'s mooring for the motion stream ``sensor`` ("imu" or
+    "motion"; default ``[load] motion_sensor``, imu for "auto"), continuing from ``state``.
 
     The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
     uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
@@ -107,7 +109,9 @@ def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> M
     est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
     saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
     model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
-    return _ModelsEstimator(estimator, model, config.load.motion_sensor)
+    configured = config.load.motion_sensor
+    return _ModelsEstimator(estimator, model,
+                            sensor or ("imu" if configured == "auto" else configured))
 
 
 class LoadSelector:

@@ -35,6 +35,8 @@ from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_esti
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.validate import REASONS, StreamValidator
 
+MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
+
 STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
 _NEVER = np.iinfo(np.int64).min
@@ -300,14 +302,22 @@ class Pipeline:
         self._stale_ns = {s: config.validate[s].stale_after_s * 1e9 for s in SENSOR_ORDER}
         self._idle_obs: dict[str, tuple[tuple, StreamObs]] = {}
         self.selector = LoadSelector(config.load, st.get("load"))
-        self.motion_sensor = config.load.motion_sensor
-        self.estimator = (build_estimator(config, st.get("estimator"))
-                          if config.load.source != "measured" else None)
+        # [load] motion_sensor = "auto": the first motion stream (imu or motion) to arrive
+        # feeds the estimator from then on (None until one has)
+        self.motion_sensor: str | None = st.get("motion_sensor", (
+            None if config.load.motion_sensor == "auto" else config.load.motion_sensor))
+        self.estimator = None
+        if config.load.source != "measured" and self.motion_sensor is not None:
+            self.estimator = build_estimator(config, st.get("estimator"), self.motion_sensor)
         load_streams = []
         if config.load.source != "estimated":
             load_streams.append("tension")
         if self.estimator is not None:
             load_streams.append(self.motion_sensor)
+        elif config.load.source != "measured":
+            # "auto" before a motion stream has arrived: both gate (a stream arriving after a
+            # slab was released would be late), until _choose_motion keeps the one that came
+            load_streams.extend(MOTION_SENSORS)
         horizon = config.ordering.horizon_s if horizon_s is None else horizon_s
         self.reorder = ReorderBuffer(load_streams or ["tension"], int(round(horizon * 1e9)),
                                      gate_all, st.get("reorder"))
@@ -368,11 +378,45 @@ class Pipeline:
         if block.buoy_id != self.buoy_id:
             raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
                              f"{self.buoy_id!r}")
+        if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
+                and self.config.load.source != "measured" and len(block)):
+            self._choose_motion(block.sensor)
         self.reorder.push(block)
         for hook in self._block_hooks:
             hook(block)
         upto = self.reorder.watermark()
         return self._advance(block.sensor, upto, upto)
+
+    def _choose_motion(self, sensor: str) -> None:
+        """``motion_sensor = "auto"``: ``sensor`` feeds the estimator from now on and gates the
+        ordering as a load stream (split-invariant for a buoy with one motion stream; a buoy
+        sending both should name the one to use)."""
+        self.motion_sensor = sensor
+        self.estimator = build_estimator(self.config, None, sensor)
+        self.reorder.load_streams = tuple(s for s in self.reorder.load_streams
+                                          if s not in MOTION_SENSORS or s == sensor)
+        rule_kinds = getattr(self.alerts, "rule_kinds", None)
+        self._full_estimate = rule_kinds is None or "model_residual" in rule_kinds()
+
+    def load_problems(self) -> list[str]:
+        """Why the fatigue chain has (or had) no load, in words ([] when it has one)."""
+        cfg = self.config.load
+        seen = {s for s, v in self.validators.items() if v.accepted or any(v.rejected.values())}
+        out = []
+        if cfg.source != "estimated" and "tension" not in seen:
+            out.append("no tension samples (load cell absent)")
+        if cfg.source != "measured":
+            present = [s for s in MOTION_SENSORS if s in seen]
+            if cfg.motion_sensor != "auto" and cfg.motion_sensor not in seen:
+                out.append(f"[load] motion_sensor = {cfg.motion_sensor!r} but no "
+                           f"{cfg.motion_sensor} samples arrived"
+                           + (f" (the buoy sends {', '.join(present)}: set motion_sensor = "
+                              f"\"auto\")" if present else ""))
+            elif cfg.motion_sensor == "auto" and not present:
+                out.append("no motion samples (imu or motion) for the estimator")
+        if self.stats.n["measured"] + self.stats.n["estimated"] == 0 and seen:
+            out.append("no load could be formed: fatigue damage is not being computed")
+        return out
 
     def flush(self) -> StepResult:
         """End of input: process every buffered sample; evaluate ticks the data completes."""
@@ -624,10 +668,13 @@ class Pipeline:
             "measured_tension_N": self.last["measured_N"],
             "estimated_tension_N": self.last["estimated_N"],
             "estimates_clamped": self.selector.estimates_clamped,
+            "motion_sensor": self.motion_sensor,
+            "load_problems": self.load_problems(),
             "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
                            for n, c in self.components.items()},
             "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,
-                            "rejected": dict(o.rejected)}
+                            "rejected": dict(o.rejected),
+                            "qc": self.validators[s].qc_counts()}
                         for s, o in self._stream_obs(now).items()},
             "buffered_samples": self.reorder.buffered(),
             "next_tick_ns": self.next_tick_ns,
@@ -639,12 +686,15 @@ class Pipeline:
             "buoy_id": self.buoy_id,
             "time_start_ns": self.last["time_start_ns"],
             "time_end_ns": self.last["time_end_ns"],
-            "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected)}
+            "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected),
+                            "qc": val.qc_counts()}
                         for s, val in self.validators.items()
                         if val.accepted or any(val.rejected.values())},
             "tension_N": {**self.stats.summary(),
                           "samples_estimate_clamped": self.selector.estimates_clamped},
             "load_source": self.last["source"],
+            "motion_sensor": self.motion_sensor,
+            "load_problems": self.load_problems(),
             "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
                            for n, c in self.components.items()},
             "alerts": list(self.alert_history),
@@ -660,6 +710,7 @@ class Pipeline:
             "validators": {s: v.state() for s, v in self.validators.items()},
             "load": self.selector.state(),
             "estimator": self.estimator.state() if self.estimator is not None else None,
+            "motion_sensor": self.motion_sensor,
             "reorder": self.reorder.state(),
             "alerts": self.alerts.state(),
             "stats": self.stats.state(),

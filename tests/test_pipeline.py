@@ -63,7 +63,7 @@ def hooks(monkeypatch):
         return e
 
     monkeypatch.setattr(pipeline_mod, "build_alert_engine", engine)
-    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None: FakeEstimator())
+    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None, sensor=None: FakeEstimator())
     return engines
 
 
@@ -339,7 +339,7 @@ def test_model_residual_rule_sees_the_estimate_while_the_load_cell_is_healthy(mo
     # a load cell reading 2 kN high for 5 minutes: the model-residual rule compares the tick
     # means of the measured tension and of the motion estimate over every motion sample
     # (the estimate does not feed fatigue then), fires after its delay and clears
-    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None: FakeEstimator())
+    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None, sensor=None: FakeEstimator())
     config = config_with(default_config(), alerts={"rule": [
         {"kind": "model_residual", "threshold": 1000.0, "on_delay_s": 30.0}]})
     data = sea(900)
