@@ -122,10 +122,15 @@ class LoadSelector:
         self.stale_ns = int(round(cfg.stale_after_s * 1e9))
         self.last_measured_ns: int | None = None
         self.estimates_clamped = 0  # clamped estimates (see MotionEstimator.feed) used
+        self.breaking_N = cfg.breaking_load_N
+        # load samples used above the breaking load, by source: the line would have parted
+        # (measured) or the estimate left the range where it means anything (estimated)
+        self.above_break = {"measured": 0, "estimated": 0}
         if state is not None:
             if state["last_measured_ns"] is not None:
                 self.last_measured_ns = int(state["last_measured_ns"])
             self.estimates_clamped = int(state.get("estimates_clamped", 0))
+            self.above_break.update(state.get("above_break", {}))
 
     def needed(self, m_t: np.ndarray, e_t: np.ndarray) -> np.ndarray:
         """Boolean mask of the estimated samples at times ``e_t`` that :meth:`select` will
@@ -156,6 +161,9 @@ class LoadSelector:
         use = self.needed(m_t, e_t)
         if e_clamped is not None:
             self.estimates_clamped += int(np.count_nonzero(use & e_clamped))
+        if self.mode != "estimated":
+            self.above_break["measured"] += int(np.count_nonzero(m_v > self.breaking_N))
+        self.above_break["estimated"] += int(np.count_nonzero(use & (e_v > self.breaking_N)))
         if self.mode == "estimated":
             return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
         if m_t.shape[0]:
@@ -171,4 +179,5 @@ class LoadSelector:
 
     def state(self) -> dict[str, Any]:
         return {"last_measured_ns": self.last_measured_ns,
-                "estimates_clamped": self.estimates_clamped}
+                "estimates_clamped": self.estimates_clamped,
+                "above_break": dict(self.above_break)}

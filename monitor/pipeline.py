@@ -30,6 +30,7 @@ import numpy as np
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.components import Component, build_cable, endurance_stress_Pa
 from monitor.config import Config, ConfigError
+from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
@@ -354,6 +355,8 @@ class Pipeline:
         self.open_estimate = (np.array(st["open_estimate"][0], np.int64),
                               np.array(st["open_estimate"][1], np.float64)
                               ) if st.get("open_estimate") else _NO_LOAD[:2]
+        self.damage_split = DamageSplit({n: max(c.sn_curve.m) for n, c in self.components.items()},
+                                        st.get("damage_split"))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
         self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
         self._warm_up()
@@ -403,8 +406,10 @@ class Pipeline:
         cfg = self.config.load
         seen = {s for s, v in self.validators.items() if v.accepted or any(v.rejected.values())}
         out = []
-        if cfg.source != "estimated" and "tension" not in seen:
-            out.append("no tension samples (load cell absent)")
+        if cfg.source == "measured" and "tension" not in seen:
+            out.append("[load] source = 'measured' but no tension samples arrived")
+        elif cfg.source == "auto" and "tension" not in seen and seen:
+            out.append("no tension samples (no load cell): the load is the motion estimate")
         if cfg.source != "measured":
             present = [s for s in MOTION_SENSORS if s in seen]
             if cfg.motion_sensor != "auto" and cfg.motion_sensor not in seen:
@@ -536,9 +541,12 @@ class Pipeline:
                     tick = _TickLoad(tv, ts, {n: c.stress(tv) for n, c in self.components.items()},
                                      np.zeros(1, np.int64), np.full(1, tv.shape[0]))
                     j = 0
+                est_mean = est_means[k] if self._full_estimate else tick.est[j]
                 self._evaluate(k, end, tt, tv, tick, j, streams,
-                               {n: f[k] for n, f in figures.items()},
-                               est_means[k] if self._full_estimate else tick.est[j])
+                               {n: f[k] for n, f in figures.items()}, est_mean)
+                self.damage_split.tick({n: f[k][1] for n, f in figures.items()},
+                                       int(np.count_nonzero(ts == MEASURED)), ts.shape[0],
+                                       tick.meas[j], est_mean)
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
         if self._full_estimate:
@@ -668,9 +676,11 @@ class Pipeline:
             "measured_tension_N": self.last["measured_N"],
             "estimated_tension_N": self.last["estimated_N"],
             "estimates_clamped": self.selector.estimates_clamped,
+            "samples_above_break": dict(self.selector.above_break),
             "motion_sensor": self.motion_sensor,
             "load_problems": self.load_problems(),
-            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+            "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
+                               "damage_by_source": self.damage_split.figures(n)}
                            for n, c in self.components.items()},
             "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,
                             "rejected": dict(o.rejected),
@@ -691,11 +701,14 @@ class Pipeline:
                         for s, val in self.validators.items()
                         if val.accepted or any(val.rejected.values())},
             "tension_N": {**self.stats.summary(),
-                          "samples_estimate_clamped": self.selector.estimates_clamped},
+                          "samples_estimate_clamped": self.selector.estimates_clamped,
+                          "samples_above_break": sum(self.selector.above_break.values()),
+                          "samples_estimate_above_break": self.selector.above_break["estimated"]},
             "load_source": self.last["source"],
             "motion_sensor": self.motion_sensor,
             "load_problems": self.load_problems(),
-            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+            "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
+                               "damage_by_source": self.damage_split.figures(n)}
                            for n, c in self.components.items()},
             "alerts": list(self.alert_history),
             "alerts_dropped": self.alerts_dropped,
@@ -711,6 +724,7 @@ class Pipeline:
             "load": self.selector.state(),
             "estimator": self.estimator.state() if self.estimator is not None else None,
             "motion_sensor": self.motion_sensor,
+            "damage_split": self.damage_split.state(),
             "reorder": self.reorder.state(),
             "alerts": self.alerts.state(),
             "stats": self.stats.state(),

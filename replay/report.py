@@ -16,6 +16,7 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      ``samples_estimate_clamped``: estimates of motion outside
                                      the estimator's table, held at its edge
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
+                                     ``damage_by_source`` (monitor.damage_split),
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
                                      ``remaining_life_days`` (null = nothing accrues),
@@ -82,6 +83,8 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
             "kind": c.kind,
             "lay": c.lay,
         }
+        if "damage_by_source" in figures:
+            comps[name]["damage_by_source"] = figures["damage_by_source"]
     return _strict({
         "report_version": REPORT_VERSION,
         "buoy_id": pipeline_report["buoy_id"],
@@ -155,6 +158,20 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
             f"{life if life == '-' else life + ' d':>11s}"
         )
+    for name, c in report["components"].items():
+        split = c.get("damage_by_source")
+        if split and split["estimated"]:
+            lines.append(
+                f"  {name}: committed damage {split['measured']:.3e} from measured load, "
+                f"{split['estimated']:.3e} from the motion estimate (band "
+                f"{split['estimated_low']:.3e} .. {split['estimated_high']:.3e}, tension error "
+                f"+-{split['estimate_relative_error']:.0%} {split['estimate_error_from']})")
+    t_flags = [f"{t[k]:,d} {what}" for k, what in (
+        ("samples_above_break", "above the breaking load"),
+        ("samples_estimate_above_break", "of them estimates above the breaking load"))
+        if t.get(k)]
+    if t_flags:
+        lines.append("  tension: " + ", ".join(t_flags) + " (see the alerts)")
     dropped = report.get("alerts_dropped") or 0
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)"
                  + (f" (and {dropped:,d} older ones not kept)" if dropped else ""))
