@@ -286,6 +286,9 @@ class SensorLimits:
     fields: Mapping[str, FieldLimits]
     stale_after_s: float
     location_range_max_m: float = 0.0  # gnss: QARTOD location test, 0 = off
+    # motion: the watch circle (span_m, stretched line length m, depth m): a position the
+    # line cannot reach is a location fail (None = off)
+    watch_circle: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -537,8 +540,12 @@ def _parse_validate(r: SectionReader, load: LoadConfig,
             # consecutive fixes further apart than the watch circle's diameter (line straight)
             # plus two 50 m GNSS errors are suspect
             location = s.float("location_range_max_m", 2 * mooring.length_m + 100.0, ge=0)
+        watch = None
+        if sensor == "motion" and s.bool("watch_circle", True):
+            # 2 % stretch: about a steel-cored cable's elongation near its breaking load
+            watch = (mooring.span_m, 1.02 * mooring.length_m, mooring.depth_m)
         s.done()
-        out[sensor] = SensorLimits(fields, stale, location)
+        out[sensor] = SensorLimits(fields, stale, location, watch)
     return out
 
 

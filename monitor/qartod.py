@@ -255,7 +255,7 @@ class StreamQC:
             self.ring_x[:, :m] = _floats(rx).reshape(nf, -1)[:, len(rt) - m:]
             self.ring_head, self.ring_n = m % self._cap, m
             for name, c in state["counts"].items():
-                self.counts[name].update(c)
+                self.counts.setdefault(name, {"suspect": 0, "fail": 0, "missing": 0}).update(c)
 
     def tests(self) -> tuple[str, ...]:
         """The tests this stream runs (location only for a stream given a range)."""
@@ -276,6 +276,12 @@ class StreamQC:
             spike[:] = NOT_EVALUATED  # a sample's own spike flag is not known yet
             self._count(flags, spike_prev)
         return flags, spike_prev
+
+    def count(self, test: str, suspect: int, fail: int) -> None:
+        """Add flags of a test computed outside the kernel (the motion watch circle)."""
+        c = self.counts.setdefault(test, {"suspect": 0, "fail": 0, "missing": 0})
+        c["suspect"] += suspect
+        c["fail"] += fail
 
     def _count(self, flags: np.ndarray, spike_prev: np.ndarray) -> None:
         for k, name in enumerate(self.tests()):

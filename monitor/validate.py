@@ -12,6 +12,11 @@ Rules, applied to each sample in time order, first match wins:
                     sample: ``|v - v_last| > max_rate_per_s * (t - t_last)``;
 ``flat_line``       the QARTOD flat-line test fails (monitor.qartod): a stuck sensor.
 
+A displacement (``motion``) sample whose position the line cannot reach is ``out_of_range``
+and a QARTOD ``location`` fail: its horizontal distance from the anchor,
+``hypot(span + surge, sway)``, beyond ``sqrt(L^2 - (depth + heave)^2)`` with the line
+stretched 2 % (``[validate.motion] watch_circle = false`` turns this off).
+
 Every sample later than the stream's last one also gets the QARTOD flags of
 :mod:`monitor.qartod` (counted per test as ``qc``): a gross-range fail is ``out_of_range``
 (the same sensor span), a rate-of-change fail is (nearly always) ``spike``, a flat-line fail is
@@ -49,7 +54,7 @@ _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT = 1, 2, 3, 4, 5, 6
 
 @numba.njit(cache=True, nogil=True)
 def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
-              flat_fail):  # pragma: no cover
+              qc_code):  # pragma: no cover
     # Sequential by nature: each verdict depends on the last ACCEPTED sample before it.
     n = t.shape[0]
     nf = values.shape[0]
@@ -83,8 +88,8 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
                 if abs(values[f, i] - last_v[f]) > rate[f] * dt:
                     code = _SPIKE
                     break
-        if code == 0 and flat_fail[i]:
-            code = _FLAT
+        if code == 0 and qc_code[i]:
+            code = qc_code[i]
         codes[i] = code
         counts[code] += 1
         if code == 0:
@@ -104,6 +109,7 @@ class StreamValidator:
         self._lo = np.array([limits.fields[f].min for f in self.fields])
         self._hi = np.array([limits.fields[f].max for f in self.fields])
         self._rate = np.array([limits.fields[f].max_rate_per_s for f in self.fields])
+        self._watch = limits.watch_circle if sensor == "motion" else None
         self.last_t_ns = 0
         self.has_last = False
         self.last_values = np.zeros(len(self.fields))
@@ -136,6 +142,7 @@ class StreamValidator:
             # an infinite value is missing here, as it is once saved (strict JSON state) and
             # as the nan rule rejects it: flags must not change with a restart
             qc_values = np.where(np.isfinite(values), values, np.nan)
+        new = np.zeros(t_ns.shape, np.bool_)
         if t_ns.shape[0]:
             before = np.maximum.accumulate(np.concatenate(([max(seen, floor_ns)], t_ns[:-1])))
             new = t_ns > before
@@ -145,10 +152,15 @@ class StreamValidator:
             elif new.any():
                 flags, _ = self.qc.check(t_ns[new], qc_values[:, new])
                 flat_fail[new] = flags[FLAT] == FAIL
+        qc_code = np.where(flat_fail, np.int8(_FLAT), np.int8(0))
+        if self._watch is not None and t_ns.shape[0]:
+            outside = self._outside_watch_circle(qc_values)
+            qc_code[outside] = _RANGE
+            self.qc.count("location", 0, int(np.count_nonzero(outside & new)))
         codes, counts, last_t, has_last = _validate(
             t_ns, values, self._lo, self._hi, self._rate,
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),
-            flat_fail,
+            qc_code,
         )
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
         counts = counts.tolist()
@@ -156,6 +168,14 @@ class StreamValidator:
         for i, reason in enumerate(REASONS, start=1):
             self.rejected[reason] += counts[i]
         return codes
+
+    def _outside_watch_circle(self, values: np.ndarray) -> np.ndarray:
+        """Displacement samples (heave, surge, sway rows) the line cannot reach (see above)."""
+        span, line, depth = self._watch
+        heave, surge, sway = values
+        with np.errstate(invalid="ignore"):
+            reach = np.sqrt(np.maximum(line ** 2 - np.maximum(depth + heave, 0.0) ** 2, 0.0))
+            return np.hypot(span + surge, sway) > reach
 
     def state(self) -> dict[str, Any]:
         return {

@@ -106,3 +106,19 @@ def test_qartod_flags_are_counted_and_a_flat_line_fail_rejected():
     assert val.qc_counts()["gross_range"] == {"suspect": 3, "fail": 0}
     # 42 -> 6000 N in 0.1 s: 59,580 N/s, over max_rate_per_s (rejected as spike as well)
     assert got[31] == "spike" and val.qc_counts()["rate_of_change"]["fail"] >= 1
+
+
+def test_a_displacement_the_line_cannot_reach_is_a_location_fail():
+    from monitor.config import default_config
+
+    val = StreamValidator("motion", default_config().validate["motion"])
+    # the seed 004 line: 40 m (40.8 m stretched 2 %) in 23 m, nominal span 29 m: the reach is
+    # sqrt(40.8^2 - 23^2) = 33.70 m at heave 0, sqrt(40.8^2 - 21^2) = 34.98 m at heave -2 m
+    heave = np.array([0.0, 0.0, -2.0, -2.0, 0.0, 0.0])
+    surge = np.array([4.6, 4.8, 5.9, 6.1, -20.0, 0.0])
+    sway = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 15.0])  # hypot(29, 15) = 32.65 m: reachable
+    t = np.arange(6, dtype=np.int64) * 10 * S
+    codes = val.check(t, np.stack([heave, surge, sway]), NEVER)
+    assert [REASONS[c - 1] if c else "ok" for c in codes] == [
+        "ok", "out_of_range", "ok", "out_of_range", "ok", "ok"]
+    assert val.qc_counts()["location"] == {"suspect": 0, "fail": 2}
