@@ -485,7 +485,8 @@ class Pipeline:
         if now is not None:
             self.last["now_ns"] = max(self.last["now_ns"], now)
         self.last["source"] = self._source_at(self.last["now_ns"])
-        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected)
+        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected,
+                          {s: self.validators[s].qc_counts() for s in streams})
         for sink in self.sinks:
             sink.on_step(step)
         return step
@@ -644,7 +645,8 @@ class Pipeline:
 
     def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
               stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],
-              n_acc: int, rejected: Mapping[str, int]) -> StepResult:
+              n_acc: int, rejected: Mapping[str, int],
+              qc: Mapping[str, Mapping[str, Mapping[str, int]]]) -> StepResult:
         comps = {}
         for name, comp in self.components.items():
             f = comp.figures()
@@ -662,7 +664,7 @@ class Pipeline:
             measured_tension_N=nan if self.last["measured_N"] is None else self.last["measured_N"],
             estimated_tension_N=nan if self.last["estimated_N"] is None else self.last["estimated_N"],
             components=comps, accepted=n_acc, rejected=dict(rejected),
-            alerts=list(self.new_alerts),
+            alerts=list(self.new_alerts), qc=qc,
         )
 
     # ------------------------------------------------------------------ outputs
