@@ -4,7 +4,8 @@ Attribution (per alert tick, so it is the same for any split of the data into bl
 damage a component commits in a tick is shared between ``measured`` and ``estimated`` in
 proportion to the tick's load samples from each source. A cycle closes in the tick of its
 last turning point, so a cycle spanning a source change is attributed to the tick where it
-closes (an approximation, exact when the source does not change).
+closes (an approximation, exact when the source does not change). Damage committed after the
+last evaluated tick is ``unattributed`` until that tick ends (or if no alert rule runs).
 
 Band on the estimated part: damage scales as stress^m (Basquin) and stress is proportional to
 tension, so a relative tension error ``u`` of the motion estimator gives the damage factor
@@ -62,11 +63,15 @@ class DamageSplit:
             return math.sqrt(self.cal_sum_sq / self.cal_n), "residual"
         return ASSUMED_ERROR, "assumed"
 
-    def figures(self, name: str) -> dict[str, Any]:
+    def figures(self, name: str, committed: float) -> dict[str, Any]:
+        """The split of component ``name`` whose committed damage is now ``committed``;
+        ``unattributed`` is what was committed after the last evaluated tick (its source
+        mix is known when that tick ends)."""
         p = self.parts[name]
         u, how = self.relative_error()
         m = self.slopes[name]
         return {"measured": p["measured"], "estimated": p["estimated"],
+                "unattributed": max(committed - p["measured"] - p["estimated"], 0.0),
                 "estimated_low": p["estimated"] * max(1.0 - u, 0.0) ** m,
                 "estimated_high": p["estimated"] * (1.0 + u) ** m,
                 "estimate_relative_error": u, "estimate_error_from": how,

@@ -409,7 +409,8 @@ class Pipeline:
         if cfg.source == "measured" and "tension" not in seen:
             out.append("[load] source = 'measured' but no tension samples arrived")
         elif cfg.source == "auto" and "tension" not in seen and seen:
-            out.append("no tension samples (no load cell): the load is the motion estimate")
+            out.append("no tension samples (no load cell)" + (
+                ": the load is the motion estimate" if self.stats.n["estimated"] else ""))
         if cfg.source != "measured":
             present = [s for s in MOTION_SENSORS if s in seen]
             if cfg.motion_sensor != "auto" and cfg.motion_sensor not in seen:
@@ -682,7 +683,8 @@ class Pipeline:
             "motion_sensor": self.motion_sensor,
             "load_problems": self.load_problems(),
             "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
-                               "damage_by_source": self.damage_split.figures(n)}
+                               "damage_by_source": self.damage_split.figures(
+                                   n, c.figures()["damage_committed"])}
                            for n, c in self.components.items()},
             "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,
                             "rejected": dict(o.rejected),
@@ -710,7 +712,8 @@ class Pipeline:
             "motion_sensor": self.motion_sensor,
             "load_problems": self.load_problems(),
             "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
-                               "damage_by_source": self.damage_split.figures(n)}
+                               "damage_by_source": self.damage_split.figures(
+                                   n, c.figures()["damage_committed"])}
                            for n, c in self.components.items()},
             "alerts": list(self.alert_history),
             "alerts_dropped": self.alerts_dropped,

@@ -367,3 +367,45 @@ def test_alert_history_keeps_the_newest_and_counts_the_dropped(hooks, monkeypatc
     assert [a["t_ns"] for a in rep["alerts"]] == [hooks[-1].seen[k * 50 - 1][0] for k in (3, 4, 5)]
     again = Pipeline(default_config(), state=json.loads(json.dumps(p.state())))
     assert again.report()["alerts_dropped"] == 2
+
+
+def _motion_only(data):
+    """The sea's IMU blocks re-labelled as a displacement stream (values are small)."""
+    t, imu = data["imu"]
+    return [SampleBlock("vaps", "motion", t[k:k + 10], {
+        "heave_m": imu["accel_z_mps2"][k:k + 10] * 0.1, "surge_m": imu["accel_x_mps2"][k:k + 10] * 0.1,
+        "sway_m": imu["accel_y_mps2"][k:k + 10] * 0.1}) for k in range(0, t.shape[0], 10)]
+
+
+def test_status_and_report_say_in_words_when_no_load_can_be_formed():
+    blocks = _motion_only(sea(60))
+    imu = config_with(default_config(), load={"source": "auto", "motion_sensor": "imu"})
+    p, _ = run(imu, blocks)
+    problems = p.status()["load_problems"]
+    assert problems == [
+        "no tension samples (no load cell)",
+        "[load] motion_sensor = 'imu' but no imu samples arrived (the buoy sends motion: set "
+        "motion_sensor = \"auto\")",
+        "no load could be formed: fatigue damage is not being computed"]
+    assert p.report()["load_problems"] == problems and p.report()["motion_sensor"] == "imu"
+    # auto takes the displacement stream: a load is formed, only the missing cell is said
+    p, _ = run(default_config(), blocks)
+    assert p.motion_sensor == "motion" and p.report()["tension_N"]["samples_estimated"] > 0
+    assert p.status()["load_problems"] == [
+        "no tension samples (no load cell): the load is the motion estimate"]
+
+
+def test_status_carries_qc_counts_and_the_damage_split_by_source():
+    p, _ = run(default_config(), blocks_interleaved(sea(600, gap=(200, 300)), 7))
+    st = p.status()
+    assert set(st["streams"]["tension"]["qc"]) == {"gross_range", "spike", "rate_of_change",
+                                                   "flat_line"}
+    assert set(st["streams"]["gnss"]["qc"]["location"]) == {"suspect", "fail"}
+    split = st["components"]["conductor"]["damage_by_source"]
+    # the 100 s cell gap is fed by the estimate: both sources carry damage, and they add up
+    # to the committed damage
+    assert split["measured"] > 0 and split["estimated"] > 0
+    assert split["measured"] + split["estimated"] + split["unattributed"] == pytest.approx(
+        st["components"]["conductor"]["damage_committed"], rel=1e-9)
+    assert split["estimate_error_from"] in ("residual", "assumed")
+    assert split["estimated_low"] < split["estimated"] < split["estimated_high"]
