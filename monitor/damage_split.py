@@ -9,7 +9,9 @@ last evaluated tick is ``unattributed`` until that tick ends (or if no alert rul
 
 Band on the estimated part: damage scales as stress^m (Basquin) and stress is proportional to
 tension, so a relative tension error ``u`` of the motion estimator gives the damage factor
-range ``[(1 - u)^m, (1 + u)^m]``, with ``m`` the steepest slope of the component's S-N curve.
+range ``[(1 - u)^m, (1 + u)^m]``, with ``m`` the slope of the S-N curve's first (highest
+stress) segment, where the storm cycles that dominate the damage lie; on a multi-slope curve
+(vaps_copper: 4.5 .. 63) the band of damage from low-stress cycles is wider than this.
 ``u`` is calibrated on the residual where both sources are there: the RMS of
 ``(estimated - measured) / measured`` over the ticks whose mean measured tension is at least
 :data:`MIN_CAL_N` (the model-residual computation of the pipeline gives the tick means) once

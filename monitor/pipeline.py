@@ -355,7 +355,7 @@ class Pipeline:
         self.open_estimate = (np.array(st["open_estimate"][0], np.int64),
                               np.array(st["open_estimate"][1], np.float64)
                               ) if st.get("open_estimate") else _NO_LOAD[:2]
-        self.damage_split = DamageSplit({n: max(c.sn_curve.m) for n, c in self.components.items()},
+        self.damage_split = DamageSplit({n: c.sn_curve.m[0] for n, c in self.components.items()},
                                         st.get("damage_split"))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
         self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
