@@ -52,7 +52,8 @@ class StepResult:
         accepted / rejected: samples of this block accepted, and rejected by reason.
         alerts: alert transitions raised by this step (see :mod:`monitor.alerts`).
         qc: QARTOD flag totals of the streams this step processed,
-            ``{sensor: {test: {"suspect": n, "fail": n}}}`` (see :mod:`monitor.qartod`).
+            ``{sensor: {test: {"suspect": n, "fail": n}}}`` (see :mod:`monitor.qartod`); filled
+            only when a sink has ``wants_qc = True``.
     """
 
     buoy_id: str

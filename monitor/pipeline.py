@@ -290,6 +290,8 @@ class Pipeline:
         # blocks (e.g. GNSS positions for the Rerun map) and each alert tick's observation
         self._block_hooks = [s.on_block for s in self.sinks if hasattr(s, "on_block")]
         self._tick_hooks = [s.on_observation for s in self.sinks if hasattr(s, "on_observation")]
+        # StepResult.qc is built only for sinks that read it (a dict per step otherwise)
+        self._qc_sinks = any(getattr(s, "wants_qc", False) for s in self.sinks)
         self.tick_ns = int(round(config.alerts.eval_interval_s * 1e9))
         cable = build_cable(config)
         self.components = {
@@ -487,7 +489,8 @@ class Pipeline:
             self.last["now_ns"] = max(self.last["now_ns"], now)
         self.last["source"] = self._source_at(self.last["now_ns"])
         step = self._step(sensor, t, v, stresses, closed, n_acc, rejected,
-                          {s: self.validators[s].qc_counts() for s in streams})
+                          {s: self.validators[s].qc_counts() for s in streams}
+                          if self._qc_sinks else {})
         for sink in self.sinks:
             sink.on_step(step)
         return step

@@ -94,11 +94,13 @@ def _worst(a, b):  # pragma: no cover - compiled
 def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ring_head, ring_n, first_t):  # pragma: no cover - compiled
     """Flags ``(len(TESTS), n)`` of the samples ``t, x`` (``x``: fields x samples) and the
     spike flag of each sample's PREDECESSOR (0 = none). State arrays are updated in place;
-    returns (flags, spike_prev, prev_t, n_seen, ring_head, ring_n, first_t)."""
+    returns (flags, spike_prev, counts, prev_t, n_seen, ring_head, ring_n, first_t)."""
     nf, n = x.shape
     cap = ring_t.shape[0]
     flags = np.full((_N_TESTS, n), 2, np.uint8)
     spike_prev = np.zeros(n, np.uint8)
+    # per test: suspect, fail, missing (the spike test's of the predecessors)
+    counts = np.zeros((_N_TESTS, 3), np.int64)
     for i in range(n):
         ti = t[i]
         if n_seen == 0:
@@ -210,6 +212,14 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
         flags[3, i] = ft
         if n_seen >= 1:
             spike_prev[i] = sp if sp != 0 else 2
+        for k in range(_N_TESTS):
+            fk = spike_prev[i] if k == 1 else flags[k, i]
+            if fk == 3:
+                counts[k, 0] += 1
+            elif fk == 4:
+                counts[k, 1] += 1
+            elif fk == 9:
+                counts[k, 2] += 1
         for f in range(nf):
             prev2[f] = prev[f]
             prev[f] = x[f, i]
@@ -220,7 +230,7 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
         ring_n = min(ring_n + 1, cap)
         prev_t = ti
         n_seen += 1
-    return flags, spike_prev, prev_t, n_seen, ring_head, ring_n, first_t
+    return flags, spike_prev, counts, prev_t, n_seen, ring_head, ring_n, first_t
 
 
 
@@ -265,16 +275,21 @@ class StreamQC:
         """``(flags, spike_prev)`` of samples in time order, each later than every earlier one:
         ``flags[test, i]`` per :data:`TESTS`; ``spike_prev[i]`` the spike flag of the sample
         before ``i`` (0 for the stream's first). Counts suspect / fail / missing per test."""
-        flags, spike_prev, prev_t, n_seen, head, ring_n, first_t = _qc(
+        flags, spike_prev, counts, prev_t, n_seen, head, ring_n, first_t = _qc(
             t_ns, np.ascontiguousarray(values, dtype=np.float64), self._p, self._loc,
             np.int64(self.prev_t), self.prev, self.prev2, np.int64(self.n_seen), self.ring_t, self.ring_x, np.int64(self.ring_head),
             np.int64(self.ring_n), np.int64(self.first_t))
         self.prev_t, self.n_seen, self.first_t = int(prev_t), int(n_seen), int(first_t)
         self.ring_head, self.ring_n = int(head), int(ring_n)
         if t_ns.shape[0]:
-            spike = flags[SPIKE]
-            spike[:] = NOT_EVALUATED  # a sample's own spike flag is not known yet
-            self._count(flags, spike_prev)
+            flags[SPIKE] = NOT_EVALUATED  # a sample's own spike flag is not known yet
+            for k, name in enumerate(self.tests()):
+                suspect, fail, missing = counts[k].tolist()
+                if suspect or fail or missing:
+                    c = self.counts[name]
+                    c["suspect"] += suspect
+                    c["fail"] += fail
+                    c["missing"] += missing
         return flags, spike_prev
 
     def count(self, test: str, suspect: int, fail: int) -> None:
@@ -282,15 +297,6 @@ class StreamQC:
         c = self.counts.setdefault(test, {"suspect": 0, "fail": 0, "missing": 0})
         c["suspect"] += suspect
         c["fail"] += fail
-
-    def _count(self, flags: np.ndarray, spike_prev: np.ndarray) -> None:
-        for k, name in enumerate(self.tests()):
-            row = spike_prev if k == SPIKE else flags[k]
-            c = self.counts[name]
-            hist = np.bincount(row, minlength=10)
-            c["suspect"] += int(hist[SUSPECT])
-            c["fail"] += int(hist[FAIL])
-            c["missing"] += int(hist[MISSING])
 
     def state(self) -> dict[str, Any]:
         order = (self.ring_head - self.ring_n + np.arange(self.ring_n)) % self._cap

@@ -409,3 +409,25 @@ def test_status_carries_qc_counts_and_the_damage_split_by_source():
         st["components"]["conductor"]["damage_committed"], rel=1e-9)
     assert split["estimate_error_from"] in ("residual", "assumed")
     assert split["estimated_low"] < split["estimated"] < split["estimated_high"]
+
+
+def test_a_sink_that_wants_qc_gets_the_flag_totals_in_each_step():
+    class QcSink:
+        wants_qc = True
+
+        def __init__(self):
+            self.qc = {}
+
+        def on_step(self, step):
+            self.qc.update(step.qc)
+
+        def close(self):
+            pass
+
+    sink = QcSink()
+    p = Pipeline(default_config(), [sink])
+    for b in blocks_interleaved(sea(60), 5):
+        p.process(b)
+    p.flush()
+    assert sink.qc["tension"] == p.status()["streams"]["tension"]["qc"]
+    assert set(sink.qc) == {"tension", "imu", "gnss"}

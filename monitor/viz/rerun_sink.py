@@ -261,6 +261,8 @@ class RerunSink:
 
     # ---- Sink interface -------------------------------------------------------------------
 
+    wants_qc = True  # the pipeline fills StepResult.qc for this sink
+
     @_locked
     def on_step(self, step: StepResult) -> None:
         """Buffer one step's output; flush when the thresholds are reached."""
