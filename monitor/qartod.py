@@ -73,30 +73,38 @@ def _params(fields: tuple[FieldQC, ...]) -> np.ndarray:
 
 
 _N_TESTS = 5
+# counts column of a flag: suspect 0, fail 1, missing 2
+_SLOT = np.array([0, 0, 0, 0, 1, 0, 0, 0, 0, 2], np.int64)
 
 
-@numba.njit(cache=True, nogil=True)
-def _rank(flag):  # pragma: no cover - compiled
-    # worst-of order: missing > fail > suspect > pass > not evaluated
-    if flag == 9:
-        return 5
-    if flag == 2:
-        return 0
-    return flag
+# worst-of order: missing > fail > suspect > pass > not evaluated (index: flag)
+_RANK = np.array([0, 1, 0, 3, 4, 0, 0, 0, 0, 5], np.int64)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
 def _worst(a, b):  # pragma: no cover - compiled
-    return a if _rank(a) >= _rank(b) else b
+    return a if _RANK[a] >= _RANK[b] else b
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ring_head, ring_n, first_t):  # pragma: no cover - compiled
     """Flags ``(len(TESTS), n)`` of the samples ``t, x`` (``x``: fields x samples) and the
     spike flag of each sample's PREDECESSOR (0 = none). State arrays are updated in place;
     returns (flags, spike_prev, counts, prev_t, n_seen, ring_head, ring_n, first_t)."""
     nf, n = x.shape
     cap = ring_t.shape[0]
+    # which tests run on which field, decided once
+    do_spike = np.zeros(nf, np.bool_)
+    do_rate = np.zeros(nf, np.bool_)
+    do_flat = np.zeros(nf, np.bool_)
+    s_ns = np.zeros(nf)
+    f_ns = np.zeros(nf)
+    for f in range(nf):
+        do_spike[f] = np.isfinite(p[f, 4]) or np.isfinite(p[f, 5])
+        do_rate[f] = np.isfinite(p[f, 6]) or np.isfinite(p[f, 7])
+        do_flat[f] = p[f, 8] > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10]))
+        s_ns[f] = p[f, 9] * 1e9
+        f_ns[f] = p[f, 10] * 1e9
     flags = np.full((_N_TESTS, n), 2, np.uint8)
     spike_prev = np.zeros(n, np.uint8)
     # per test: suspect, fail, missing (the spike test's of the predecessors)
@@ -124,7 +132,7 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
                 g = 1
             gr = _worst(gr, g)
             # spike of the previous sample (x[n-1]) now that x[n] is here
-            if n_seen >= 1 and (np.isfinite(p[f, 4]) or np.isfinite(p[f, 5])):
+            if n_seen >= 1 and do_spike[f]:
                 if not np.isfinite(prev[f]):
                     s = 9
                 elif n_seen < 2 or not np.isfinite(prev2[f]) or not ok:
@@ -138,7 +146,7 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
                         s = 4
                 sp = s if sp == 0 else _worst(sp, s)
             # rate of change
-            if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]):
+            if do_rate[f]:
                 if not ok:
                     r = 9
                 elif n_seen == 0 or np.isnan(prev[f]):
@@ -153,38 +161,40 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
                 rt = _worst(rt, r)
             # flat line over the samples within the longer window (newest first)
             tol = p[f, 8]
-            if tol > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
+            if do_flat[f]:
                 if not ok:
                     fl = 9
                 else:
                     lo = v
                     hi = v
-                    s_ns = p[f, 9] * 1e9
-                    f_ns = p[f, 10] * 1e9
+                    sw = s_ns[f]
+                    fw = f_ns[f]
                     flat_s = True
                     flat_f = True
                     k = 0
                     while k < ring_n:
-                        j = (ring_head - 1 - k) % cap
+                        j = ring_head - 1 - k
+                        if j < 0:
+                            j += cap
                         age = ti - ring_t[j]
-                        if age > s_ns and age > f_ns:
+                        if age > sw and age > fw:
                             break
                         w = ring_x[f, j]
                         if np.isfinite(w):
                             lo = min(lo, w)
                             hi = max(hi, w)
                             if hi - lo >= tol:
-                                if age <= s_ns:
+                                if age <= sw:
                                     flat_s = False
-                                if age <= f_ns:
+                                if age <= fw:
                                     flat_f = False
                                 break
                         k += 1
                     span = (ti - first_t) + (ti - prev_t if n_seen else 0)
                     fl = 1
-                    if flat_s and span > s_ns:
+                    if flat_s and span > sw:
                         fl = 3
-                    if flat_f and span > f_ns:
+                    if flat_f and span > fw:
                         fl = 4
                 ft = _worst(ft, fl)
         if location_max_m > 0 and nf == 2:
@@ -212,26 +222,154 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
         flags[3, i] = ft
         if n_seen >= 1:
             spike_prev[i] = sp if sp != 0 else 2
-        for k in range(_N_TESTS):
-            fk = spike_prev[i] if k == 1 else flags[k, i]
-            if fk == 3:
-                counts[k, 0] += 1
-            elif fk == 4:
-                counts[k, 1] += 1
-            elif fk == 9:
-                counts[k, 2] += 1
+        # tally only what is flagged (the usual pass / not-evaluated costs one compare each)
+        if gr > 2:
+            counts[0, _SLOT[gr]] += 1
+        if spike_prev[i] > 2:
+            counts[1, _SLOT[spike_prev[i]]] += 1
+        if rt > 2:
+            counts[2, _SLOT[rt]] += 1
+        if ft > 2:
+            counts[3, _SLOT[ft]] += 1
+        if flags[4, i] > 2:
+            counts[4, _SLOT[flags[4, i]]] += 1
         for f in range(nf):
             prev2[f] = prev[f]
             prev[f] = x[f, i]
         ring_t[ring_head] = ti
         for f in range(nf):
             ring_x[f, ring_head] = x[f, i]
-        ring_head = (ring_head + 1) % cap
-        ring_n = min(ring_n + 1, cap)
+        ring_head += 1  # (no modulo: an integer division per sample is most of the cost)
+        if ring_head == cap:
+            ring_head = 0
+        if ring_n < cap:
+            ring_n += 1
         prev_t = ti
         n_seen += 1
     return flags, spike_prev, counts, prev_t, n_seen, ring_head, ring_n, first_t
 
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t):
+    # pragma: no cover - compiled
+    """The usual block, test by test in branch-free loops the compiler vectorises: every value
+    finite, two finite samples before it, no location test. Returns
+    ``(ok, flags, spike_prev, counts, ring_head, ring_n)``; ``ok`` False (nothing changed)
+    means: use :func:`_qc`. Same flags as :func:`_qc` for such a block."""
+    nf, n = x.shape
+    cap = ring_t.shape[0]
+    flags = np.full((_N_TESTS, n), 2, np.uint8)
+    spike_prev = np.zeros(n, np.uint8)
+    counts = np.zeros((_N_TESTS, 3), np.int64)
+    dt = np.empty(n)
+    dt[0] = (t[0] - prev_t) * 1e-9
+    for i in range(1, n):
+        dt[i] = (t[i] - t[i - 1]) * 1e-9
+    z = np.empty(n + 2)
+    for f in range(nf):
+        if not (np.isfinite(prev[f]) and np.isfinite(prev2[f])):
+            return False, flags, spike_prev, counts, ring_head, ring_n
+        for i in range(n):
+            if not np.isfinite(x[f, i]):
+                return False, flags, spike_prev, counts, ring_head, ring_n
+    gr = np.ones(n, np.uint8)
+    rt = np.full(n, 2, np.uint8)
+    sp = np.full(n, 2, np.uint8)
+    ft = np.full(n, 2, np.uint8)
+    for f in range(nf):
+        xf = x[f]
+        for i in range(n):
+            v = xf[i]
+            g = np.uint8(4) if (v < p[f, 0] or v > p[f, 1]) else (
+                np.uint8(3) if (v < p[f, 2] or v > p[f, 3]) else np.uint8(1))
+            gr[i] = max(gr[i], g)
+        if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]):
+            last = prev[f]
+            for i in range(n):
+                roc = abs(xf[i] - last) / dt[i]
+                r = np.uint8(4) if roc > p[f, 7] else (np.uint8(3) if roc > p[f, 6] else np.uint8(1))
+                rt[i] = r if rt[i] == 2 else max(rt[i], r)
+                last = xf[i]
+        if np.isfinite(p[f, 4]) or np.isfinite(p[f, 5]):
+            z[0] = prev2[f]
+            z[1] = prev[f]
+            z[2:] = xf
+            for i in range(n):
+                d = abs(z[i + 1] - (z[i] + z[i + 2]) / 2.0)
+                s = np.uint8(4) if d > p[f, 5] else (np.uint8(3) if d > p[f, 4] else np.uint8(1))
+                sp[i] = s if sp[i] == 2 else max(sp[i], s)
+        tol = p[f, 8]
+        if tol > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
+            sw = p[f, 9] * 1e9
+            fw = p[f, 10] * 1e9
+            for i in range(n):
+                # the flat-line scan of _qc (newest first, stop at the first value out of
+                # tolerance), over this block's earlier samples, then the memory
+                ti = t[i]
+                v = xf[i]
+                lo = v
+                hi = v
+                flat_s = True
+                flat_f = True
+                k = i - 1
+                m = 0
+                while True:
+                    if k >= 0:
+                        tj = t[k]
+                        w = xf[k]
+                    elif m < ring_n:
+                        j = ring_head - 1 - m
+                        if j < 0:
+                            j += cap
+                        tj = ring_t[j]
+                        w = ring_x[f, j]
+                        m += 1
+                    else:
+                        break
+                    k -= 1
+                    age = ti - tj
+                    if age > sw and age > fw:
+                        break
+                    if np.isfinite(w):
+                        lo = min(lo, w)
+                        hi = max(hi, w)
+                        if hi - lo >= tol:
+                            if age <= sw:
+                                flat_s = False
+                            if age <= fw:
+                                flat_f = False
+                            break
+                span = (ti - first_t) + (ti - (t[i - 1] if i else prev_t))
+                fl = np.uint8(1)
+                if flat_s and span > sw:
+                    fl = np.uint8(3)
+                if flat_f and span > fw:
+                    fl = np.uint8(4)
+                ft[i] = fl if ft[i] == 2 else max(ft[i], fl)
+    flags[0] = gr
+    flags[2] = rt
+    flags[3] = ft
+    spike_prev[:] = sp
+    for i in range(n):
+        counts[0, 0] += gr[i] == 3
+        counts[0, 1] += gr[i] == 4
+        counts[1, 0] += sp[i] == 3
+        counts[1, 1] += sp[i] == 4
+        counts[2, 0] += rt[i] == 3
+        counts[2, 1] += rt[i] == 4
+        counts[3, 0] += ft[i] == 3
+        counts[3, 1] += ft[i] == 4
+    for i in range(max(0, n - cap), n):
+        ring_t[ring_head] = t[i]
+        for f in range(nf):
+            ring_x[f, ring_head] = x[f, i]
+        ring_head += 1
+        if ring_head == cap:
+            ring_head = 0
+        if ring_n < cap:
+            ring_n += 1
+    return True, flags, spike_prev, counts, ring_head, ring_n
 
 
 class StreamQC:
@@ -275,12 +413,26 @@ class StreamQC:
         """``(flags, spike_prev)`` of samples in time order, each later than every earlier one:
         ``flags[test, i]`` per :data:`TESTS`; ``spike_prev[i]`` the spike flag of the sample
         before ``i`` (0 for the stream's first). Counts suspect / fail / missing per test."""
-        flags, spike_prev, counts, prev_t, n_seen, head, ring_n, first_t = _qc(
-            t_ns, np.ascontiguousarray(values, dtype=np.float64), self._p, self._loc,
-            np.int64(self.prev_t), self.prev, self.prev2, np.int64(self.n_seen), self.ring_t, self.ring_x, np.int64(self.ring_head),
-            np.int64(self.ring_n), np.int64(self.first_t))
-        self.prev_t, self.n_seen, self.first_t = int(prev_t), int(n_seen), int(first_t)
-        self.ring_head, self.ring_n = int(head), int(ring_n)
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        ok = False
+        if self.n_seen >= 2 and self._loc == 0 and t_ns.shape[0]:
+            ok, flags, spike_prev, counts, head, ring_n = _qc_fast(
+                t_ns, values, self._p, np.int64(self.prev_t), self.prev, self.prev2,
+                self.ring_t, self.ring_x, np.int64(self.ring_head), np.int64(self.ring_n),
+                np.int64(self.first_t))
+            if ok:
+                n = t_ns.shape[0]
+                self.prev2 = values[:, -2].copy() if n >= 2 else self.prev.copy()
+                self.prev = values[:, -1].copy()
+                self.prev_t, self.n_seen = int(t_ns[-1]), self.n_seen + n
+                self.ring_head, self.ring_n = int(head), int(ring_n)
+        if not ok:
+            flags, spike_prev, counts, prev_t, n_seen, head, ring_n, first_t = _qc(
+                t_ns, values, self._p, self._loc, np.int64(self.prev_t), self.prev,
+                self.prev2, np.int64(self.n_seen), self.ring_t, self.ring_x,
+                np.int64(self.ring_head), np.int64(self.ring_n), np.int64(self.first_t))
+            self.prev_t, self.n_seen, self.first_t = int(prev_t), int(n_seen), int(first_t)
+            self.ring_head, self.ring_n = int(head), int(ring_n)
         if t_ns.shape[0]:
             flags[SPIKE] = NOT_EVALUATED  # a sample's own spike flag is not known yet
             for k, name in enumerate(self.tests()):
