@@ -34,6 +34,7 @@ from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
+from monitor.qartod import StreamQC
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
@@ -369,6 +370,11 @@ class Pipeline:
         then processed at once. Touches no state."""
         tension = self.validators["tension"]
         tension.check(np.zeros(0, np.int64), np.zeros((1, 0)), _NEVER)
+        # both QARTOD kernels (the general one for a stream's first samples, then the fast
+        # one), on a throwaway copy of the tests
+        qc = StreamQC(tension.qc.fields)
+        for part in (np.arange(3, dtype=np.int64), np.arange(3, 6, dtype=np.int64)):
+            qc.check(part, np.zeros((1, 3)))
         for comp in self.components.values():
             comp.warm_up()
 

@@ -134,29 +134,33 @@ class StreamValidator:
         ``values`` has shape ``(n_fields, n)`` in the order of :data:`SENSOR_FIELDS`. Samples at
         or before ``floor_ns`` (already processed) are ``time_backwards``.
         """
+        n = t_ns.shape[0]
+        if values.shape != (len(self.fields), n):
+            raise ValueError(f"{self.sensor}: values of shape {values.shape} for {n} times "
+                             f"and {len(self.fields)} fields")
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
-        flat_fail = np.zeros(t_ns.shape, np.bool_)
+        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT or _RANGE
         qc_values = values
-        if t_ns.shape[0] and not np.isfinite(values).all():
+        if n and not np.isfinite(values).all():
             # an infinite value is missing here, as it is once saved (strict JSON state) and
             # as the nan rule rejects it: flags must not change with a restart
             qc_values = np.where(np.isfinite(values), values, np.nan)
-        new = np.zeros(t_ns.shape, np.bool_)
-        if t_ns.shape[0]:
+        if n and int(t_ns[0]) > max(seen, floor_ns) and (n == 1 or bool(np.all(t_ns[1:] > t_ns[:-1]))):
+            new = None  # the usual case: every sample is new
+            flags, _ = self.qc.check(t_ns, qc_values)
+            qc_code[flags[FLAT] == FAIL] = _FLAT
+        elif n:
             before = np.maximum.accumulate(np.concatenate(([max(seen, floor_ns)], t_ns[:-1])))
             new = t_ns > before
-            if new.all():
-                flags, _ = self.qc.check(t_ns, qc_values)
-                flat_fail = flags[FLAT] == FAIL
-            elif new.any():
+            if new.any():
                 flags, _ = self.qc.check(t_ns[new], qc_values[:, new])
-                flat_fail[new] = flags[FLAT] == FAIL
-        qc_code = np.where(flat_fail, np.int8(_FLAT), np.int8(0))
-        if self._watch is not None and t_ns.shape[0]:
+                qc_code[np.flatnonzero(new)[flags[FLAT] == FAIL]] = _FLAT
+        if self._watch is not None and n:
             outside = self._outside_watch_circle(qc_values)
             qc_code[outside] = _RANGE
-            self.qc.count("location", 0, int(np.count_nonzero(outside & new)))
+            self.qc.count("location", 0, int(np.count_nonzero(
+                outside if new is None else outside & new)))
         codes, counts, last_t, has_last = _validate(
             t_ns, values, self._lo, self._hi, self._rate,
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),

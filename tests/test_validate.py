@@ -95,7 +95,7 @@ def test_qartod_flags_are_counted_and_a_flat_line_fail_rejected():
     val = StreamValidator("tension", limits)
     # 0..0.9 s moving; 1.0..3.0 s stuck at 42 N; then above the operator span, then negative
     t = np.arange(40) * 0.1
-    v = np.r_[np.arange(10) * 10.0, np.full(21, 42.0), 6000.0, 6001.0, -5.0, np.arange(5) * 7.0]
+    v = np.r_[np.arange(10) * 10.0, np.full(21, 42.0), 6000.0, 6001.0, -5.0, np.arange(6) * 7.0]
     codes = val.check((t * S).astype(np.int64), v[None, :], NEVER)
     got = [REASONS[c - 1] if c else "ok" for c in codes]
     # the flat window (values within 0.5 N) starts at 0.9 s (42 N after 90 N is no flat run):
