@@ -28,6 +28,10 @@ the samples within the last N seconds (ioos_qc counts ``N / median step`` sample
 the whole record; both agree for evenly sampled data). The flat-line memory holds at most
 :data:`FLAT_MEMORY` samples per stream, so a window longer than that many samples is cut to it.
 
+Speed: a block of finite values after a stream's first two samples (the usual block) goes
+through ``_qc_fast``, test by test in loops the compiler vectorises; any other block through
+the general ``_qc``; both give the same flags (the split test compares them).
+
 Streaming: :class:`StreamQC` carries every test's memory across blocks (and in its state), so
 any split of a stream into blocks gives the same flags as one pass. Only samples later than the
 last one seen enter the tests (re-delivered and out-of-order samples are the validator's
