@@ -46,16 +46,15 @@ class DamageSplit:
              measured_mean: float, estimated_mean: float) -> None:
         """One evaluated tick: each component's committed damage at its end, its sample
         counts by source, and the tick means of the measured tension and the estimate."""
-        frac = n_measured / n_total if n_total else 0.0
         for name, value in committed.items():
             p = self.parts[name]
             delta = value - p["committed"]
             p["committed"] = value
             if delta > 0:
+                frac = n_measured / n_total if n_total else 0.0
                 p["measured"] += delta * frac
                 p["estimated"] += delta * (1.0 - frac)
-        if (math.isfinite(measured_mean) and math.isfinite(estimated_mean)
-                and measured_mean >= MIN_CAL_N):
+        if measured_mean >= MIN_CAL_N and estimated_mean == estimated_mean:  # (not NaN)
             self.cal_n += 1
             self.cal_sum_sq += ((estimated_mean - measured_mean) / measured_mean) ** 2
 

@@ -99,6 +99,7 @@ class _TickLoad:
         self.vmax, self.vmin = [math.nan] * k, [math.nan] * k
         self.meas, self.est = [math.nan] * k, [math.nan] * k
         self.smax = {name: [math.nan] * k for name in stresses}
+        self.n, self.n_meas = n.tolist(), [0] * k  # samples, and of them measured, per tick
         if full.shape[0] == 0:
             return
         # the non-empty ticks are back to back: reduce over their span in one call each
@@ -118,6 +119,7 @@ class _TickLoad:
         n_meas = np.add.reduceat(measured.astype(np.int64), at).tolist()
         for j, i in enumerate(idx):
             count = int(n[i])
+            self.n_meas[i] = n_meas[j]
             if n_meas[j] == count:  # the usual cases: one source
                 self.meas[i] = sums[j] / count
             elif n_meas[j] == 0:
@@ -556,8 +558,7 @@ class Pipeline:
                 self._evaluate(k, end, tt, tv, tick, j, streams,
                                {n: f[k] for n, f in figures.items()}, est_mean)
                 self.damage_split.tick({n: f[k][1] for n, f in figures.items()},
-                                       int(np.count_nonzero(ts == MEASURED)), ts.shape[0],
-                                       tick.meas[j], est_mean)
+                                       tick.n_meas[j], tick.n[j], tick.meas[j], est_mean)
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
         if self._full_estimate:
