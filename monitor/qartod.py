@@ -40,6 +40,7 @@ last one seen enter the tests (re-delivered and out-of-order samples are the val
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -281,6 +282,7 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
     rt = np.full(n, 2, np.uint8)
     sp = np.full(n, 2, np.uint8)
     ft = np.full(n, 2, np.uint8)
+    quick = np.empty(n, np.bool_)
     for f in range(nf):
         xf = x[f]
         for i in range(n):
@@ -307,7 +309,18 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
         if tol > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
             sw = p[f, 9] * 1e9
             fw = p[f, 10] * 1e9
+            near = min(sw, fw) * 1e-9
+            # a sample whose predecessor lies within both windows and differs by tol or more
+            # is not flat: decided here in a loop the compiler vectorises
+            last = prev[f]
             for i in range(n):
+                quick[i] = abs(xf[i] - last) >= tol and dt[i] <= near
+                last = xf[i]
+            for i in range(n):
+                if quick[i]:
+                    if ft[i] == 2:
+                        ft[i] = 1
+                    continue
                 # the flat-line scan of _qc (newest first, stop at the first value out of
                 # tolerance), over this block's earlier samples, then the memory
                 ti = t[i]
@@ -463,10 +476,11 @@ class StreamQC:
                 "counts": {k: dict(v) for k, v in self.counts.items()}}
 
 
-def _json_floats(a: np.ndarray) -> list[float | None]:
-    """Floats for a JSON state: NaN (a missing value) as null."""
-    return [None if not np.isfinite(v) else v for v in a.tolist()]
+def _json_floats(a: np.ndarray) -> list[float | str | None]:
+    """Floats for a strict-JSON state: NaN (a missing value) as null, infinities as "inf" /
+    "-inf" (the rate after an infinite value is infinite, after a NaN it is not)."""
+    return [v if math.isfinite(v) else (None if math.isnan(v) else str(v)) for v in a.tolist()]
 
 
-def _floats(values: list[float | None]) -> np.ndarray:
-    return np.array([np.nan if v is None else v for v in values], np.float64)
+def _floats(values: list[float | str | None]) -> np.ndarray:
+    return np.array([np.nan if v is None else float(v) for v in values], np.float64)
