@@ -272,6 +272,7 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
     for i in range(1, n):
         dt[i] = (t[i] - t[i - 1]) * 1e-9
     z = np.empty(n + 2)
+    rate = np.empty(n)
     for f in range(nf):
         if not (np.isfinite(prev[f]) and np.isfinite(prev2[f])):
             return False, flags, spike_prev, counts, ring_head, ring_n
@@ -285,25 +286,31 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
     quick = np.empty(n, np.bool_)
     for f in range(nf):
         xf = x[f]
+        # thresholds in locals: the loops below then vectorise
+        fmin, fmax, smin, smax = p[f, 0], p[f, 1], p[f, 2], p[f, 3]
         for i in range(n):
             v = xf[i]
-            g = np.uint8(4) if (v < p[f, 0] or v > p[f, 1]) else (
-                np.uint8(3) if (v < p[f, 2] or v > p[f, 3]) else np.uint8(1))
+            g = np.uint8(4) if (v < fmin or v > fmax) else (
+                np.uint8(3) if (v < smin or v > smax) else np.uint8(1))
             gr[i] = max(gr[i], g)
         if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]):
-            last = prev[f]
+            rs, rf = p[f, 6], p[f, 7]
+            r0 = abs(xf[0] - prev[f]) / dt[0]
+            rate[0] = r0
+            for i in range(1, n):
+                rate[i] = abs(xf[i] - xf[i - 1]) / dt[i]
             for i in range(n):
-                roc = abs(xf[i] - last) / dt[i]
-                r = np.uint8(4) if roc > p[f, 7] else (np.uint8(3) if roc > p[f, 6] else np.uint8(1))
+                roc = rate[i]
+                r = np.uint8(4) if roc > rf else (np.uint8(3) if roc > rs else np.uint8(1))
                 rt[i] = r if rt[i] == 2 else max(rt[i], r)
-                last = xf[i]
         if np.isfinite(p[f, 4]) or np.isfinite(p[f, 5]):
+            ss, sf = p[f, 4], p[f, 5]
             z[0] = prev2[f]
             z[1] = prev[f]
             z[2:] = xf
             for i in range(n):
                 d = abs(z[i + 1] - (z[i] + z[i + 2]) / 2.0)
-                s = np.uint8(4) if d > p[f, 5] else (np.uint8(3) if d > p[f, 4] else np.uint8(1))
+                s = np.uint8(4) if d > sf else (np.uint8(3) if d > ss else np.uint8(1))
                 sp[i] = s if sp[i] == 2 else max(sp[i], s)
         tol = p[f, 8]
         if tol > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
