@@ -23,7 +23,9 @@ drag model is taken to be good to +-30 % in tension.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
+
+import numpy as np
 
 ASSUMED_ERROR = 0.30
 MIN_CAL_TICKS = 30
@@ -42,21 +44,29 @@ class DamageSplit:
         self.cal_n = int(st.get("cal_n", 0))
         self.cal_sum_sq = float(st.get("cal_sum_sq", 0.0))
 
-    def tick(self, committed: Mapping[str, float], n_measured: int, n_total: int,
-             measured_mean: float, estimated_mean: float) -> None:
-        """One evaluated tick: each component's committed damage at its end, its sample
-        counts by source, and the tick means of the measured tension and the estimate."""
-        for name, value in committed.items():
+    def ticks(self, committed: Mapping[str, Sequence[float]],
+              rows: Sequence[tuple[int, int, float, float]]) -> None:
+        """Evaluated ticks in time order: each component's committed damage at each tick's
+        end, and per tick ``(measured samples, samples, mean measured tension, mean
+        estimate)`` (the means NaN when absent)."""
+        n_meas, n, meas, est = (np.array(c, dtype=np.float64) for c in zip(*rows))
+        frac = np.divide(n_meas, n, out=np.zeros_like(n), where=n > 0)
+        for name, values in committed.items():
             p = self.parts[name]
-            delta = value - p["committed"]
-            p["committed"] = value
-            if delta > 0:
-                frac = n_measured / n_total if n_total else 0.0
-                p["measured"] += delta * frac
-                p["estimated"] += delta * (1.0 - frac)
-        if measured_mean >= MIN_CAL_N and estimated_mean == estimated_mean:  # (not NaN)
-            self.cal_n += 1
-            self.cal_sum_sq += ((estimated_mean - measured_mean) / measured_mean) ** 2
+            v = np.array(values, dtype=np.float64)
+            delta = np.diff(v, prepend=p["committed"])
+            delta[delta < 0] = 0.0  # (a reset)
+            p["committed"] = float(v[-1])
+            # sequential sums: the same figures for any split of the ticks into slabs
+            for d, f in zip((delta * frac).tolist(), (delta * (1.0 - frac)).tolist()):
+                p["measured"] += d
+                p["estimated"] += f
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cal = (meas >= MIN_CAL_N) & ~np.isnan(est)
+            rel = (est[cal] - meas[cal]) / meas[cal]
+        self.cal_n += int(rel.shape[0])
+        for r in (rel * rel).tolist():
+            self.cal_sum_sq += r
 
     def relative_error(self) -> tuple[float, str]:
         """``(u, "residual" | "assumed")``: see the module docstring."""

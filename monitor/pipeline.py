@@ -542,6 +542,7 @@ class Pipeline:
             run = comp.run_ticks(stresses[name], cuts_l[:n_ticks], ends_l, evaluate)
             figures[name] = run.figures
             closed[name].append(run.cycles)
+        split_rows: list[tuple[int, int, float, float]] = []  # per evaluated tick
         for k in range(n_ticks):
             stop, end = cuts_l[k], ends_l[k]
             if stop > start:
@@ -557,10 +558,12 @@ class Pipeline:
                 est_mean = est_means[k] if self._full_estimate else tick.est[j]
                 self._evaluate(k, end, tt, tv, tick, j, streams,
                                {n: f[k] for n, f in figures.items()}, est_mean)
-                self.damage_split.tick({n: f[k][1] for n, f in figures.items()},
-                                       tick.n_meas[j], tick.n[j], tick.meas[j], est_mean)
+                split_rows.append((tick.n_meas[j], tick.n[j], tick.meas[j], est_mean))
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
+        if split_rows:
+            self.damage_split.ticks({n: [f[k][1] for k in range(n_ticks)]
+                                     for n, f in figures.items()}, split_rows)
         if self._full_estimate:
             e_t, e_v = estimate
             rest = int(np.searchsorted(e_t, ends[-1], side="right")) if ends.shape[0] else 0
