@@ -23,6 +23,13 @@ goes (py-spy, 2 cores): the pipeline's alert ticks ~25 % (rules, observations, t
 tick pass), the motion estimator ~20 %, validation ~8 %, what is left of reading (ordering
 and release of blocks) ~10 %, start-up ~5 %.
 
+Measured 2026-11-24 on the same machine (shared with other jobs), `--days 2 --baseline-days
+0.1`, warm compile cache, before / after QARTOD QC by default (issue 17: monitor.qartod on every
+stream, the over-break rule, the damage split): default config on one core 1.04 s / 1.18 s
+(+13 %), without alert rules 0.97 s / 0.96 s, 2 cores 0.96 s / 1.22 s wall; peak RSS 191 /
+194 MB. In-process best of 3 on one core (default config): 0.72-0.79 s / 0.82-0.86 s. The QC
+kernels take ~0.06 s of the 2-day replay (3.5 M tension + 1.7 M three-field IMU samples).
+
 Usage: python bench/bench_replay.py [--days 30] [--baseline-days 1] [--dir DIR [--reuse]] [--keep]
 """
 

@@ -16,6 +16,7 @@ alert rules) are kept as raw tables (:meth:`Config.section`) for their owners to
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import math
 import tomllib
@@ -253,21 +254,42 @@ class FatigueConfig:
 class LoadConfig:
     source: str  # "auto" | "measured" | "estimated"
     stale_after_s: float
-    motion_sensor: str  # stream that feeds the motion estimator: "imu" or "motion"
+    # stream that feeds the motion estimator: "imu", "motion", or "auto" (the first of the two
+    # that delivers an accepted sample, see monitor.load_source)
+    motion_sensor: str
     motion_rate_hz: float  # its nominal sample rate (the estimator works on a fixed step)
+    breaking_load_N: float = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
+    slack_limit_N: float = 0.0  # below this the line is slack: QC suspect
 
 
 @dataclass(frozen=True)
 class FieldLimits:
+    """One field's validation limits: ``min``/``max`` are the sensor span (outside = QARTOD
+    gross-range fail, rejected), ``max_rate_per_s`` the fastest physical change (faster =
+    rate-of-change fail, rejected as ``spike``); the rest are the QARTOD suspect thresholds
+    and the flat-line test (monitor.qartod; inf / 0 = test off)."""
+
     min: float
     max: float
     max_rate_per_s: float  # inf = no rate-of-change check
+    suspect_min: float = -math.inf
+    suspect_max: float = math.inf
+    spike_suspect: float = math.inf
+    spike_fail: float = math.inf
+    rate_suspect_per_s: float = math.inf
+    flat_tolerance: float = 0.0
+    flat_suspect_s: float = math.inf
+    flat_fail_s: float = math.inf
 
 
 @dataclass(frozen=True)
 class SensorLimits:
     fields: Mapping[str, FieldLimits]
     stale_after_s: float
+    location_range_max_m: float = 0.0  # gnss: QARTOD location test, 0 = off
+    # motion: the watch circle (span_m, stretched line length m, depth m): a position the
+    # line cannot reach is a location fail (None = off)
+    watch_circle: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -425,35 +447,106 @@ def _parse_load(r: SectionReader) -> LoadConfig:
     out = LoadConfig(
         source=r.str("source", "auto", choices=("auto", "measured", "estimated")),
         stale_after_s=r.float("stale_after_s", 5.0, gt=0, le=MAX_DURATION_S),
-        motion_sensor=r.str("motion_sensor", "imu", choices=("imu", "motion")),
+        motion_sensor=r.str("motion_sensor", "auto", choices=("auto", "imu", "motion")),
         motion_rate_hz=r.float("motion_rate_hz", 10.0, gt=0),
+        breaking_load_N=r.float("breaking_load_N", 45_000.0, gt=0),
+        slack_limit_N=r.float("slack_limit_N", 0.0),
     )
+    if not out.slack_limit_N < out.breaking_load_N:
+        raise r.error("slack_limit_N", out.slack_limit_N,
+                      f"must be < breaking_load_N ({out.breaking_load_N:g})")
     r.done()
     return out
 
 
-def _parse_validate(r: SectionReader, load: LoadConfig) -> dict[str, SensorLimits]:
+_G = 9.81
+
+
+def qc_defaults(mooring: MooringConfig, load: LoadConfig) -> dict[str, dict[str, dict[str, float]]]:
+    """Default QARTOD thresholds per sensor field, derived from the mooring and the line so the
+    shipped configuration catches instrument glitches with no tuning (docs/QC.md gives the
+    reasoning). Keys as in ``[validate.<sensor>.<field>]``."""
+    d, length, b = mooring.depth_m, mooring.length_m, load.breaking_load_N
+    watch = math.sqrt(max(length ** 2 - d ** 2, 0.0))  # watch-circle radius, line straight
+    fastest = math.sqrt(_G * d)  # phase speed of the longest wave the depth allows
+    flat = {"flat_suspect_s": 60.0, "flat_fail_s": 600.0}
+    out: dict[str, dict[str, dict[str, float]]] = {
+        "tension": {"tension_N": {
+            "suspect_min": load.slack_limit_N, "suspect_max": b,
+            "max_rate_per_s": b, "rate_suspect_per_s": 0.5 * b,
+            "spike_suspect": 0.1 * b, "spike_fail": 0.25 * b, "flat_tolerance": 0.1, **flat}},
+        "motion": {},
+        "imu": {},
+        "gnss": {},
+        "waves": {"hs_m": {"suspect_max": 0.78 * d}, "tp_s": {"suspect_min": 1.0,
+                                                             "suspect_max": 25.0}},
+    }
+    for name in SENSOR_FIELDS["motion"]:
+        span = d if name == "heave_m" else length
+        suspect = 0.39 * d if name == "heave_m" else watch
+        out["motion"][name] = {"min": -span, "max": span, "suspect_min": -suspect,
+                               "suspect_max": suspect, "max_rate_per_s": fastest,
+                               "rate_suspect_per_s": 2.0, "spike_suspect": 1.0,
+                               "spike_fail": 3.0, "flat_tolerance": 1e-3, **flat}
+    for name in SENSOR_FIELDS["imu"]:
+        out["imu"][name] = {"suspect_min": -3 * _G, "suspect_max": 3 * _G,
+                            "spike_suspect": 2 * _G, "spike_fail": 5 * _G,
+                            "flat_tolerance": 1e-4, **flat}
+    return out
+
+
+_QC_KEYS = ("suspect_min", "suspect_max", "spike_suspect", "spike_fail", "rate_suspect_per_s",
+            "flat_tolerance", "flat_suspect_s", "flat_fail_s")
+
+
+def _parse_field(f: SectionReader, lo: float, hi: float, rate: float,
+                 qc: Mapping[str, float]) -> FieldLimits:
+    lo, hi = f.float("min", qc.get("min", lo)), f.float("max", qc.get("max", hi))
+    values = {k: f.float(k, qc.get(k, getattr(FieldLimits, k)), allow_inf=True,
+                         **({"ge": 0} if k.startswith(("spike", "rate", "flat")) else {}))
+              for k in _QC_KEYS}
+    limits = FieldLimits(lo, hi, f.float("max_rate_per_s", qc.get("max_rate_per_s", rate),
+                                         gt=0, allow_inf=True), **values)
+    if not limits.max > limits.min:
+        raise f.error("max", limits.max, f"must be > min ({limits.min:g})")
+    # the operator (suspect) span lies inside the sensor (fail) span, as QARTOD has it
+    limits = dataclasses.replace(limits, suspect_min=max(limits.suspect_min, limits.min),
+                                 suspect_max=min(limits.suspect_max, limits.max))
+    if not limits.suspect_max >= limits.suspect_min:
+        raise f.error("suspect_max", limits.suspect_max,
+                      f"must be >= suspect_min ({limits.suspect_min:g})")
+    f.done()
+    return limits
+
+
+def _parse_validate(r: SectionReader, load: LoadConfig,
+                    mooring: MooringConfig) -> dict[str, SensorLimits]:
     out: dict[str, SensorLimits] = {}
     for key in r.table:
         if key not in SENSOR_FIELDS:
             raise r.error(key, r.table[key], f"unknown sensor; expected one of {sorted(SENSOR_FIELDS)}")
+    derived = qc_defaults(mooring, load)
     for sensor, defaults in DEFAULT_LIMITS.items():
         s = SectionReader(r.raw(sensor, {}), f"validate.{sensor}")
         fields = {}
         for name, (lo, hi, rate) in defaults.items():
             f = SectionReader(s.raw(name, {}), f"validate.{sensor}.{name}")
-            limits = FieldLimits(f.float("min", lo), f.float("max", hi),
-                                 f.float("max_rate_per_s", rate, gt=0, allow_inf=True))
-            if not limits.max > limits.min:
-                raise f.error("max", limits.max, f"must be > min ({limits.min:g})")
-            f.done()
-            fields[name] = limits
+            fields[name] = _parse_field(f, lo, hi, rate, derived[sensor].get(name, {}))
         stale_default = load.stale_after_s if sensor == "tension" else DEFAULT_STALE_S[sensor]
         stale = s.float("stale_after_s", stale_default, gt=0, le=MAX_DURATION_S)
         if sensor == "tension" and s.has("stale_after_s") and stale != load.stale_after_s:
             raise s.error("stale_after_s", stale, "tension staleness is set by load.stale_after_s")
+        location = 0.0
+        if sensor == "gnss":
+            # consecutive fixes further apart than the watch circle's diameter (line straight)
+            # plus two 50 m GNSS errors are suspect
+            location = s.float("location_range_max_m", 2 * mooring.length_m + 100.0, ge=0)
+        watch = None
+        if sensor == "motion" and s.bool("watch_circle", True):
+            # 2 % stretch: about a steel-cored cable's elongation near its breaking load
+            watch = (mooring.span_m, 1.02 * mooring.length_m, mooring.depth_m)
         s.done()
-        out[sensor] = SensorLimits(fields, stale)
+        out[sensor] = SensorLimits(fields, stale, location, watch)
     return out
 
 
@@ -492,15 +585,17 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
     for i, name in enumerate(names):
         if names.index(name) != i:
             raise ConfigError(f"config error: component[{i}].name = {name!r}: duplicate name")
+    mooring = _parse_mooring(SectionReader(top.raw("mooring", {"preset": "vaps_seed004"}),
+                                           "mooring"))
     return Config(
         buoy=_parse_buoy(SectionReader(top.raw("buoy", {}), "buoy")),
-        mooring=_parse_mooring(SectionReader(top.raw("mooring", {"preset": "vaps_seed004"}),
-                                             "mooring")),
+        mooring=mooring,
         cable=_parse_cable(SectionReader(top.raw("cable", {}), "cable")),
         components=components,
         fatigue=_parse_fatigue(SectionReader(top.raw("fatigue", {}), "fatigue")),
         load=load,
-        validate=_parse_validate(SectionReader(top.raw("validate", {}), "validate"), load),
+        validate=_parse_validate(SectionReader(top.raw("validate", {}), "validate"), load,
+                                 mooring),
         ordering=_parse_ordering(SectionReader(top.raw("ordering", {}), "ordering")),
         alerts=_parse_alert_timing(top.raw("alerts", {})),
         raw=data,

@@ -95,8 +95,10 @@ class _ModelsEstimator:
         return self.model.state.to_dict()
 
 
-def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> MotionEstimator:
-    """The motion estimator of ``config``'s mooring, continuing from ``state`` if given.
+def build_estimator(config: Config, state: Mapping[str, Any] | None = None,
+                    sensor: str | None = None) -> MotionEstimator:
+    """The motion estimator of ``config``'s mooring for the motion stream ``sensor`` ("imu" or
+    "motion"; default ``[load] motion_sensor``, imu for "auto"), continuing from ``state``.
 
     The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
     uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
@@ -107,7 +109,9 @@ def build_estimator(config: Config, state: Mapping[str, Any] | None = None) -> M
     est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
     saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
     model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
-    return _ModelsEstimator(estimator, model, config.load.motion_sensor)
+    configured = config.load.motion_sensor
+    return _ModelsEstimator(estimator, model,
+                            sensor or ("imu" if configured == "auto" else configured))
 
 
 class LoadSelector:
@@ -118,10 +122,15 @@ class LoadSelector:
         self.stale_ns = int(round(cfg.stale_after_s * 1e9))
         self.last_measured_ns: int | None = None
         self.estimates_clamped = 0  # clamped estimates (see MotionEstimator.feed) used
+        self.breaking_N = cfg.breaking_load_N
+        # load samples used above the breaking load, by source: the line would have parted
+        # (measured) or the estimate left the range where it means anything (estimated)
+        self.above_break = {"measured": 0, "estimated": 0}
         if state is not None:
             if state["last_measured_ns"] is not None:
                 self.last_measured_ns = int(state["last_measured_ns"])
             self.estimates_clamped = int(state.get("estimates_clamped", 0))
+            self.above_break.update(state.get("above_break", {}))
 
     def needed(self, m_t: np.ndarray, e_t: np.ndarray) -> np.ndarray:
         """Boolean mask of the estimated samples at times ``e_t`` that :meth:`select` will
@@ -152,6 +161,9 @@ class LoadSelector:
         use = self.needed(m_t, e_t)
         if e_clamped is not None:
             self.estimates_clamped += int(np.count_nonzero(use & e_clamped))
+        if self.mode != "estimated":
+            self.above_break["measured"] += int(np.count_nonzero(m_v > self.breaking_N))
+        self.above_break["estimated"] += int(np.count_nonzero(use & (e_v > self.breaking_N)))
         if self.mode == "estimated":
             return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
         if m_t.shape[0]:
@@ -167,4 +179,5 @@ class LoadSelector:
 
     def state(self) -> dict[str, Any]:
         return {"last_measured_ns": self.last_measured_ns,
-                "estimates_clamped": self.estimates_clamped}
+                "estimates_clamped": self.estimates_clamped,
+                "above_break": dict(self.above_break)}

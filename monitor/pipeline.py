@@ -30,10 +30,14 @@ import numpy as np
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.components import Component, build_cable, endurance_stress_Pa
 from monitor.config import Config, ConfigError
+from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
+from monitor.qartod import StreamQC
 from monitor.validate import REASONS, StreamValidator
+
+MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
 
 STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
@@ -95,6 +99,7 @@ class _TickLoad:
         self.vmax, self.vmin = [math.nan] * k, [math.nan] * k
         self.meas, self.est = [math.nan] * k, [math.nan] * k
         self.smax = {name: [math.nan] * k for name in stresses}
+        self.n, self.n_meas = n.tolist(), [0] * k  # samples, and of them measured, per tick
         if full.shape[0] == 0:
             return
         # the non-empty ticks are back to back: reduce over their span in one call each
@@ -114,6 +119,7 @@ class _TickLoad:
         n_meas = np.add.reduceat(measured.astype(np.int64), at).tolist()
         for j, i in enumerate(idx):
             count = int(n[i])
+            self.n_meas[i] = n_meas[j]
             if n_meas[j] == count:  # the usual cases: one source
                 self.meas[i] = sums[j] / count
             elif n_meas[j] == 0:
@@ -287,6 +293,8 @@ class Pipeline:
         # blocks (e.g. GNSS positions for the Rerun map) and each alert tick's observation
         self._block_hooks = [s.on_block for s in self.sinks if hasattr(s, "on_block")]
         self._tick_hooks = [s.on_observation for s in self.sinks if hasattr(s, "on_observation")]
+        # StepResult.qc is built only for sinks that read it (a dict per step otherwise)
+        self._qc_sinks = any(getattr(s, "wants_qc", False) for s in self.sinks)
         self.tick_ns = int(round(config.alerts.eval_interval_s * 1e9))
         cable = build_cable(config)
         self.components = {
@@ -300,14 +308,22 @@ class Pipeline:
         self._stale_ns = {s: config.validate[s].stale_after_s * 1e9 for s in SENSOR_ORDER}
         self._idle_obs: dict[str, tuple[tuple, StreamObs]] = {}
         self.selector = LoadSelector(config.load, st.get("load"))
-        self.motion_sensor = config.load.motion_sensor
-        self.estimator = (build_estimator(config, st.get("estimator"))
-                          if config.load.source != "measured" else None)
+        # [load] motion_sensor = "auto": the first motion stream (imu or motion) to arrive
+        # feeds the estimator from then on (None until one has)
+        self.motion_sensor: str | None = st.get("motion_sensor", (
+            None if config.load.motion_sensor == "auto" else config.load.motion_sensor))
+        self.estimator = None
+        if config.load.source != "measured" and self.motion_sensor is not None:
+            self.estimator = build_estimator(config, st.get("estimator"), self.motion_sensor)
         load_streams = []
         if config.load.source != "estimated":
             load_streams.append("tension")
         if self.estimator is not None:
             load_streams.append(self.motion_sensor)
+        elif config.load.source != "measured":
+            # "auto" before a motion stream has arrived: both gate (a stream arriving after a
+            # slab was released would be late), until _choose_motion keeps the one that came
+            load_streams.extend(MOTION_SENSORS)
         horizon = config.ordering.horizon_s if horizon_s is None else horizon_s
         self.reorder = ReorderBuffer(load_streams or ["tension"], int(round(horizon * 1e9)),
                                      gate_all, st.get("reorder"))
@@ -344,6 +360,8 @@ class Pipeline:
         self.open_estimate = (np.array(st["open_estimate"][0], np.int64),
                               np.array(st["open_estimate"][1], np.float64)
                               ) if st.get("open_estimate") else _NO_LOAD[:2]
+        self.damage_split = DamageSplit({n: c.sn_curve.m[0] for n, c in self.components.items()},
+                                        st.get("damage_split"))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
         self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
         self._warm_up()
@@ -354,6 +372,11 @@ class Pipeline:
         then processed at once. Touches no state."""
         tension = self.validators["tension"]
         tension.check(np.zeros(0, np.int64), np.zeros((1, 0)), _NEVER)
+        # both QARTOD kernels (the general one for a stream's first samples, then the fast
+        # one), on a throwaway copy of the tests
+        qc = StreamQC(tension.qc.fields)
+        for part in (np.arange(3, dtype=np.int64), np.arange(3, 6, dtype=np.int64)):
+            qc.check(part, np.zeros((1, 3)))
         for comp in self.components.values():
             comp.warm_up()
 
@@ -368,11 +391,48 @@ class Pipeline:
         if block.buoy_id != self.buoy_id:
             raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
                              f"{self.buoy_id!r}")
+        if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
+                and self.config.load.source != "measured" and len(block)):
+            self._choose_motion(block.sensor)
         self.reorder.push(block)
         for hook in self._block_hooks:
             hook(block)
         upto = self.reorder.watermark()
         return self._advance(block.sensor, upto, upto)
+
+    def _choose_motion(self, sensor: str) -> None:
+        """``motion_sensor = "auto"``: ``sensor`` feeds the estimator from now on and gates the
+        ordering as a load stream (split-invariant for a buoy with one motion stream; a buoy
+        sending both should name the one to use)."""
+        self.motion_sensor = sensor
+        self.estimator = build_estimator(self.config, None, sensor)
+        self.reorder.load_streams = tuple(s for s in self.reorder.load_streams
+                                          if s not in MOTION_SENSORS or s == sensor)
+        rule_kinds = getattr(self.alerts, "rule_kinds", None)
+        self._full_estimate = rule_kinds is None or "model_residual" in rule_kinds()
+
+    def load_problems(self) -> list[str]:
+        """Why the fatigue chain has (or had) no load, in words ([] when it has one)."""
+        cfg = self.config.load
+        seen = {s for s, v in self.validators.items() if v.accepted or any(v.rejected.values())}
+        out = []
+        if cfg.source == "measured" and "tension" not in seen:
+            out.append("[load] source = 'measured' but no tension samples arrived")
+        elif cfg.source == "auto" and "tension" not in seen and seen:
+            out.append("no tension samples (no load cell)" + (
+                ": the load is the motion estimate" if self.stats.n["estimated"] else ""))
+        if cfg.source != "measured":
+            present = [s for s in MOTION_SENSORS if s in seen]
+            if cfg.motion_sensor != "auto" and cfg.motion_sensor not in seen:
+                out.append(f"[load] motion_sensor = {cfg.motion_sensor!r} but no "
+                           f"{cfg.motion_sensor} samples arrived"
+                           + (f" (the buoy sends {', '.join(present)}: set motion_sensor = "
+                              f"\"auto\")" if present else ""))
+            elif cfg.motion_sensor == "auto" and not present:
+                out.append("no motion samples (imu or motion) for the estimator")
+        if self.stats.n["measured"] + self.stats.n["estimated"] == 0 and seen:
+            out.append("no load could be formed: fatigue damage is not being computed")
+        return out
 
     def flush(self) -> StepResult:
         """End of input: process every buffered sample; evaluate ticks the data completes."""
@@ -436,7 +496,9 @@ class Pipeline:
         if now is not None:
             self.last["now_ns"] = max(self.last["now_ns"], now)
         self.last["source"] = self._source_at(self.last["now_ns"])
-        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected)
+        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected,
+                          {s: self.validators[s].qc_counts() for s in streams}
+                          if self._qc_sinks else {})
         for sink in self.sinks:
             sink.on_step(step)
         return step
@@ -480,6 +542,7 @@ class Pipeline:
             run = comp.run_ticks(stresses[name], cuts_l[:n_ticks], ends_l, evaluate)
             figures[name] = run.figures
             closed[name].append(run.cycles)
+        split_rows: list[tuple[int, int, float, float]] = []  # per evaluated tick
         for k in range(n_ticks):
             stop, end = cuts_l[k], ends_l[k]
             if stop > start:
@@ -492,11 +555,15 @@ class Pipeline:
                     tick = _TickLoad(tv, ts, {n: c.stress(tv) for n, c in self.components.items()},
                                      np.zeros(1, np.int64), np.full(1, tv.shape[0]))
                     j = 0
+                est_mean = est_means[k] if self._full_estimate else tick.est[j]
                 self._evaluate(k, end, tt, tv, tick, j, streams,
-                               {n: f[k] for n, f in figures.items()},
-                               est_means[k] if self._full_estimate else tick.est[j])
+                               {n: f[k] for n, f in figures.items()}, est_mean)
+                split_rows.append((tick.n_meas[j], tick.n[j], tick.meas[j], est_mean))
             self.open_tick = _NO_LOAD
             start, prev_end = stop, end
+        if split_rows:
+            self.damage_split.ticks({n: [f[k][1] for k in range(n_ticks)]
+                                     for n, f in figures.items()}, split_rows)
         if self._full_estimate:
             e_t, e_v = estimate
             rest = int(np.searchsorted(e_t, ends[-1], side="right")) if ends.shape[0] else 0
@@ -592,7 +659,8 @@ class Pipeline:
 
     def _step(self, sensor: str, t: np.ndarray, v: np.ndarray,
               stresses: Mapping[str, np.ndarray], closed: Mapping[str, list[np.ndarray]],
-              n_acc: int, rejected: Mapping[str, int]) -> StepResult:
+              n_acc: int, rejected: Mapping[str, int],
+              qc: Mapping[str, Mapping[str, Mapping[str, int]]]) -> StepResult:
         comps = {}
         for name, comp in self.components.items():
             f = comp.figures()
@@ -610,7 +678,7 @@ class Pipeline:
             measured_tension_N=nan if self.last["measured_N"] is None else self.last["measured_N"],
             estimated_tension_N=nan if self.last["estimated_N"] is None else self.last["estimated_N"],
             components=comps, accepted=n_acc, rejected=dict(rejected),
-            alerts=list(self.new_alerts),
+            alerts=list(self.new_alerts), qc=qc,
         )
 
     # ------------------------------------------------------------------ outputs
@@ -625,10 +693,16 @@ class Pipeline:
             "measured_tension_N": self.last["measured_N"],
             "estimated_tension_N": self.last["estimated_N"],
             "estimates_clamped": self.selector.estimates_clamped,
-            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+            "samples_above_break": dict(self.selector.above_break),
+            "motion_sensor": self.motion_sensor,
+            "load_problems": self.load_problems(),
+            "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
+                               "damage_by_source": self.damage_split.figures(
+                                   n, c.figures()["damage_committed"])}
                            for n, c in self.components.items()},
             "streams": {s: {"last_t_ns": o.last_t_ns, "stale": o.stale, "accepted": o.accepted,
-                            "rejected": dict(o.rejected)}
+                            "rejected": dict(o.rejected),
+                            "qc": self.validators[s].qc_counts()}
                         for s, o in self._stream_obs(now).items()},
             "buffered_samples": self.reorder.buffered(),
             "next_tick_ns": self.next_tick_ns,
@@ -640,13 +714,20 @@ class Pipeline:
             "buoy_id": self.buoy_id,
             "time_start_ns": self.last["time_start_ns"],
             "time_end_ns": self.last["time_end_ns"],
-            "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected)}
+            "samples": {s: {"accepted": val.accepted, "rejected": dict(val.rejected),
+                            "qc": val.qc_counts()}
                         for s, val in self.validators.items()
                         if val.accepted or any(val.rejected.values())},
             "tension_N": {**self.stats.summary(),
-                          "samples_estimate_clamped": self.selector.estimates_clamped},
+                          "samples_estimate_clamped": self.selector.estimates_clamped,
+                          "samples_above_break": sum(self.selector.above_break.values()),
+                          "samples_estimate_above_break": self.selector.above_break["estimated"]},
             "load_source": self.last["source"],
-            "components": {n: {k: _finite_or_none(x) for k, x in c.figures().items()}
+            "motion_sensor": self.motion_sensor,
+            "load_problems": self.load_problems(),
+            "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
+                               "damage_by_source": self.damage_split.figures(
+                                   n, c.figures()["damage_committed"])}
                            for n, c in self.components.items()},
             "alerts": list(self.alert_history),
             "alerts_dropped": self.alerts_dropped,
@@ -661,6 +742,8 @@ class Pipeline:
             "validators": {s: v.state() for s, v in self.validators.items()},
             "load": self.selector.state(),
             "estimator": self.estimator.state() if self.estimator is not None else None,
+            "motion_sensor": self.motion_sensor,
+            "damage_split": self.damage_split.state(),
             "reorder": self.reorder.state(),
             "alerts": self.alerts.state(),
             "stats": self.stats.state(),

@@ -9,7 +9,18 @@ Rules, applied to each sample in time order, first match wins:
 ``nan``             any field is NaN or infinite;
 ``out_of_range``    any field is outside ``[min, max]`` of ``[validate.<sensor>.<field>]``;
 ``spike``           any field changed faster than ``max_rate_per_s`` since the last accepted
-                    sample: ``|v - v_last| > max_rate_per_s * (t - t_last)``.
+                    sample: ``|v - v_last| > max_rate_per_s * (t - t_last)``;
+``flat_line``       the QARTOD flat-line test fails (monitor.qartod): a stuck sensor.
+
+A displacement (``motion``) sample whose position the line cannot reach is ``out_of_range``
+and a QARTOD ``location`` fail: its horizontal distance from the anchor,
+``hypot(span + surge, sway)``, beyond ``sqrt(L^2 - (depth + heave)^2)`` with the line
+stretched 2 % (``[validate.motion] watch_circle = false`` turns this off).
+
+Every sample later than the stream's last one also gets the QARTOD flags of
+:mod:`monitor.qartod` (counted per test as ``qc``): a gross-range fail is ``out_of_range``
+(the same sensor span), a rate-of-change fail is (nearly always) ``spike``, a flat-line fail is
+``flat_line``; suspect flags are counted and the sample is used.
 
 Comparing with the last accepted sample (not the previous sample) makes the checks
 split-invariant: the validator's whole memory is ``(t_last, v_last)``, carried across blocks and
@@ -33,14 +44,17 @@ import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
+from monitor.qartod import FAIL, FLAT, FieldQC, StreamQC
 
 ACCEPTED = 0
-REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards")
-_NAN, _RANGE, _SPIKE, _DUP, _BACK = 1, 2, 3, 4, 5
+REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
+                            "flat_line")
+_NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT = 1, 2, 3, 4, 5, 6
 
 
 @numba.njit(cache=True, nogil=True)
-def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t):  # pragma: no cover
+def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
+              qc_code):  # pragma: no cover
     # Sequential by nature: each verdict depends on the last ACCEPTED sample before it.
     n = t.shape[0]
     nf = values.shape[0]
@@ -74,6 +88,8 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t):  # pr
                 if abs(values[f, i] - last_v[f]) > rate[f] * dt:
                     code = _SPIKE
                     break
+        if code == 0 and qc_code[i]:
+            code = qc_code[i]
         codes[i] = code
         counts[code] += 1
         if code == 0:
@@ -93,17 +109,24 @@ class StreamValidator:
         self._lo = np.array([limits.fields[f].min for f in self.fields])
         self._hi = np.array([limits.fields[f].max for f in self.fields])
         self._rate = np.array([limits.fields[f].max_rate_per_s for f in self.fields])
+        self._watch = limits.watch_circle if sensor == "motion" else None
         self.last_t_ns = 0
         self.has_last = False
         self.last_values = np.zeros(len(self.fields))
         self.accepted = 0
         self.rejected = {r: 0 for r in REASONS}
+        self.qc = StreamQC(
+            tuple(FieldQC(x.min, x.max, x.suspect_min, x.suspect_max, x.spike_suspect,
+                          x.spike_fail, x.rate_suspect_per_s, x.max_rate_per_s,
+                          x.flat_tolerance, x.flat_suspect_s, x.flat_fail_s)
+                  for x in (limits.fields[f] for f in self.fields)),
+            limits.location_range_max_m, None if state is None else state.get("qc"))
         if state is not None:
             self.has_last = bool(state["has_last"])
             self.last_t_ns = int(state["last_t_ns"])
             self.last_values = np.array(state["last_values"], dtype=np.float64)
             self.accepted = int(state["accepted"])
-            self.rejected.update({r: int(state["rejected"][r]) for r in REASONS})
+            self.rejected.update({r: int(state["rejected"].get(r, 0)) for r in REASONS})
 
     def check(self, t_ns: np.ndarray, values: np.ndarray, floor_ns: int) -> np.ndarray:
         """Verdict per sample: 0 = accepted, else ``REASONS[code - 1]``.
@@ -111,9 +134,37 @@ class StreamValidator:
         ``values`` has shape ``(n_fields, n)`` in the order of :data:`SENSOR_FIELDS`. Samples at
         or before ``floor_ns`` (already processed) are ``time_backwards``.
         """
+        n = t_ns.shape[0]
+        if values.shape != (len(self.fields), n):
+            raise ValueError(f"{self.sensor}: values of shape {values.shape} for {n} times "
+                             f"and {len(self.fields)} fields")
+        # the QARTOD tests see each sample later than the stream's last one, once
+        seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
+        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT or _RANGE
+        qc_values = values
+        if n and not np.isfinite(values).all():
+            # an infinite value is missing here, as it is once saved (strict JSON state) and
+            # as the nan rule rejects it: flags must not change with a restart
+            qc_values = np.where(np.isfinite(values), values, np.nan)
+        if n and int(t_ns[0]) > max(seen, floor_ns) and (n == 1 or bool(np.all(t_ns[1:] > t_ns[:-1]))):
+            new = None  # the usual case: every sample is new
+            flags, _ = self.qc.check(t_ns, qc_values)
+            qc_code[flags[FLAT] == FAIL] = _FLAT
+        elif n:
+            before = np.maximum.accumulate(np.concatenate(([max(seen, floor_ns)], t_ns[:-1])))
+            new = t_ns > before
+            if new.any():
+                flags, _ = self.qc.check(t_ns[new], qc_values[:, new])
+                qc_code[np.flatnonzero(new)[flags[FLAT] == FAIL]] = _FLAT
+        if self._watch is not None and n:
+            outside = self._outside_watch_circle(qc_values)
+            qc_code[outside] = _RANGE
+            self.qc.count("location", 0, int(np.count_nonzero(
+                outside if new is None else outside & new)))
         codes, counts, last_t, has_last = _validate(
             t_ns, values, self._lo, self._hi, self._rate,
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),
+            qc_code,
         )
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
         counts = counts.tolist()
@@ -122,6 +173,14 @@ class StreamValidator:
             self.rejected[reason] += counts[i]
         return codes
 
+    def _outside_watch_circle(self, values: np.ndarray) -> np.ndarray:
+        """Displacement samples (heave, surge, sway rows) the line cannot reach (see above)."""
+        span, line, depth = self._watch
+        heave, surge, sway = values
+        with np.errstate(invalid="ignore"):
+            reach = np.sqrt(np.maximum(line ** 2 - np.maximum(depth + heave, 0.0) ** 2, 0.0))
+            return np.hypot(span + surge, sway) > reach
+
     def state(self) -> dict[str, Any]:
         return {
             "has_last": self.has_last,
@@ -129,4 +188,9 @@ class StreamValidator:
             "last_values": [float(v) for v in self.last_values],
             "accepted": self.accepted,
             "rejected": dict(self.rejected),
+            "qc": self.qc.state(),
         }
+
+    def qc_counts(self) -> dict[str, dict[str, int]]:
+        """QARTOD flags so far per test: ``{test: {"suspect": n, "fail": n}}``."""
+        return {k: {"suspect": c["suspect"], "fail": c["fail"]} for k, c in self.qc.counts.items()}

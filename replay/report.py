@@ -6,13 +6,17 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
 ``time_start`` / ``time_end``        first / last accepted sample, ISO 8601 UTC (null if none),
                                      also as ``time_start_ns`` / ``time_end_ns``
 ``samples``                          per channel (sensor): ``accepted``, ``rejected`` =
-                                     {nan, out_of_range, spike, duplicate, time_backwards}
+                                     {nan, out_of_range, spike, duplicate, time_backwards,
+                                     flat_line}, ``qc`` = QARTOD flags {test: {suspect, fail}}
+``motion_sensor`` / ``load_problems`` the motion stream feeding the estimator (null if none);
+                                     why no load could be formed, in words ([] if none)
 ``tension_N``                        the fatigue load series: ``min``, ``mean``, ``max``, ``p99``
                                      (p99 on a fixed histogram, ~3 N bins), and how many samples
                                      were ``samples_measured`` / ``samples_estimated``, and
                                      ``samples_estimate_clamped``: estimates of motion outside
                                      the estimator's table, held at its edge
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
+                                     ``damage_by_source`` (monitor.damage_split),
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
                                      ``remaining_life_days`` (null = nothing accrues),
@@ -79,6 +83,8 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
             "kind": c.kind,
             "lay": c.lay,
         }
+        if "damage_by_source" in figures:
+            comps[name]["damage_by_source"] = figures["damage_by_source"]
     return _strict({
         "report_version": REPORT_VERSION,
         "buoy_id": pipeline_report["buoy_id"],
@@ -90,6 +96,8 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
         "samples": pipeline_report["samples"],
         "tension_N": pipeline_report["tension_N"],
         "load_source_at_end": pipeline_report["load_source"],
+        "motion_sensor": pipeline_report.get("motion_sensor"),
+        "load_problems": list(pipeline_report.get("load_problems", [])),
         "components": comps,
         "alerts": pipeline_report["alerts"],
         "alerts_dropped": pipeline_report["alerts_dropped"],
@@ -127,12 +135,19 @@ def summary_text(report: Mapping[str, Any]) -> str:
         rej = {k: v for k, v in s["rejected"].items() if v}
         rej_text = ", ".join(f"{k} {v}" for k, v in rej.items()) or "none"
         lines.append(f"  {sensor:8s} {s['accepted']:>12,d} samples accepted; rejected: {rej_text}")
+        qc = s.get("qc") or {}
+        for flag in ("fail", "suspect"):
+            flagged = ", ".join(f"{k} {c[flag]:,d}" for k, c in qc.items() if c.get(flag))
+            if flagged:
+                lines.append(f"  {'':8s} QC {flag}: {flagged}")
     t = report["tension_N"]
     lines.append(f"  tension  min {_num(t['min'], '.0f')} N, mean {_num(t['mean'], '.0f')} N, "
                  f"max {_num(t['max'], '.0f')} N, p99 {_num(t['p99'], '.0f')} N "
                  f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated"
                  + (f", {t['samples_estimate_clamped']:,d} of them outside the estimator's range"
                     if t.get("samples_estimate_clamped") else "") + ")")
+    for problem in report.get("load_problems") or []:
+        lines.append(f"  LOAD: {problem}")
     lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
                  f"{'max stress':>11s} {'life left':>11s}")
     for name, c in report["components"].items():
@@ -143,6 +158,20 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
             f"{life if life == '-' else life + ' d':>11s}"
         )
+    for name, c in report["components"].items():
+        split = c.get("damage_by_source")
+        if split and split["estimated"]:
+            lines.append(
+                f"  {name}: committed damage {split['measured']:.3e} from measured load, "
+                f"{split['estimated']:.3e} from the motion estimate (band "
+                f"{split['estimated_low']:.3e} .. {split['estimated_high']:.3e}, tension error "
+                f"+-{split['estimate_relative_error']:.0%} {split['estimate_error_from']})")
+    t_flags = [f"{t[k]:,d} {what}" for k, what in (
+        ("samples_above_break", "above the breaking load"),
+        ("samples_estimate_above_break", "of them estimates above the breaking load"))
+        if t.get(k)]
+    if t_flags:
+        lines.append("  tension: " + ", ".join(t_flags) + " (see the alerts)")
     dropped = report.get("alerts_dropped") or 0
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)"
                  + (f" (and {dropped:,d} older ones not kept)" if dropped else ""))

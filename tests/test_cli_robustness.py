@@ -286,7 +286,7 @@ def test_pace_speed_has_a_floor(tmp_path, capsys, speed):
 
 @pytest.mark.parametrize("extra, message", [
     ('[[alerts.rule]]\nkind = "damage_rate"\nthreshold = 1.0\ncomponent = "mid"\n',
-     'config error: alerts.rule[6].component = "mid": unknown component'),
+     'config error: alerts.rule[7].component = "mid": unknown component'),
     ('[cable]\npreset = "vaps_biw"\nno_such_field = 1.0\n', "config error: cable"),
 ])
 def test_replay_exits_2_for_config_errors_found_when_the_pipeline_is_built(tmp_path, capsys,

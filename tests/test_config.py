@@ -1,6 +1,8 @@
 """Configuration: the shipped seed 004 default, and one test per invalid-config case."""
 
 import copy
+import math
+import re
 import tomllib
 from importlib import resources
 
@@ -26,7 +28,18 @@ def test_default_is_the_seed_004_mooring():
     assert (comp.kind, comp.lay, comp.sn_curve.preset) == ("conductor", "left", "vaps_copper")
     assert c.load.source == "auto" and c.load.stale_after_s == 5.0
     assert c.alerts.eval_interval_s == 10.0
-    assert c.validate["tension"].fields["tension_N"].max_rate_per_s == 5.0e5
+    # QC defaults derived from the line (monitor.config.qc_defaults): the 45 kN break load
+    tension = c.validate["tension"].fields["tension_N"]
+    assert tension.max_rate_per_s == 45_000.0 and (tension.suspect_min, tension.suspect_max) == (
+        0.0, 45_000.0)
+    assert c.load.motion_sensor == "auto" and c.load.breaking_load_N == 45_000.0
+    # motion: +-23 m heave, +-40 m (line length) horizontal, sqrt(g d) = 15.02 m/s
+    surge = c.validate["motion"].fields["surge_m"]
+    assert (surge.min, surge.max) == (-40.0, 40.0)
+    assert surge.max_rate_per_s == pytest.approx(math.sqrt(9.81 * 23.0))
+    assert surge.suspect_max == pytest.approx(math.sqrt(40.0 ** 2 - 23.0 ** 2))  # watch circle
+    assert c.validate["motion"].fields["heave_m"].max == 23.0
+    assert c.validate["gnss"].location_range_max_m == 180.0
     assert c.validate["tension"].stale_after_s == c.load.stale_after_s
     assert c.validate["gnss"].stale_after_s == 60.0
 
@@ -147,3 +160,20 @@ def test_resend_interval_zero_means_never():
     assert config_with(c, alerts={**c.raw["alerts"], "resend_interval_s": 0}).alerts.resend_interval_s == 0
     with pytest.raises(ConfigError, match="alerts.resend_interval_s = -1.0: must be >= 0"):
         config_with(c, alerts={**c.raw["alerts"], "resend_interval_s": -1})
+
+
+@pytest.mark.parametrize("section, message", [
+    ({"validate": {"tension": {"tension_N": {"flat_tolerance": -1.0}}}},
+     "validate.tension.tension_N.flat_tolerance = -1.0: must be >= 0"),
+    ({"validate": {"motion": {"heave_m": {"suspect_min": 2.0, "suspect_max": 1.0}}}},
+     "validate.motion.heave_m.suspect_max = 1.0: must be >= suspect_min"),
+    ({"validate": {"gnss": {"location_range_max_m": "far"}}},
+     "validate.gnss.location_range_max_m = 'far': must be a number"),
+    ({"load": {"motion_sensor": "gps"}}, "load.motion_sensor = 'gps': must be one of"),
+    ({"load": {"slack_limit_N": 50_000.0}}, "load.slack_limit_N = 50000.0: must be < breaking"),
+])
+def test_qc_keys_are_validated_with_key_and_value(section, message):
+    from monitor.config import config_with
+
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        config_with(default_config(), **section)

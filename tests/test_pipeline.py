@@ -63,7 +63,7 @@ def hooks(monkeypatch):
         return e
 
     monkeypatch.setattr(pipeline_mod, "build_alert_engine", engine)
-    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None: FakeEstimator())
+    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None, sensor=None: FakeEstimator())
     return engines
 
 
@@ -339,7 +339,7 @@ def test_model_residual_rule_sees_the_estimate_while_the_load_cell_is_healthy(mo
     # a load cell reading 2 kN high for 5 minutes: the model-residual rule compares the tick
     # means of the measured tension and of the motion estimate over every motion sample
     # (the estimate does not feed fatigue then), fires after its delay and clears
-    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None: FakeEstimator())
+    monkeypatch.setattr(pipeline_mod, "build_estimator", lambda config, state=None, sensor=None: FakeEstimator())
     config = config_with(default_config(), alerts={"rule": [
         {"kind": "model_residual", "threshold": 1000.0, "on_delay_s": 30.0}]})
     data = sea(900)
@@ -367,3 +367,67 @@ def test_alert_history_keeps_the_newest_and_counts_the_dropped(hooks, monkeypatc
     assert [a["t_ns"] for a in rep["alerts"]] == [hooks[-1].seen[k * 50 - 1][0] for k in (3, 4, 5)]
     again = Pipeline(default_config(), state=json.loads(json.dumps(p.state())))
     assert again.report()["alerts_dropped"] == 2
+
+
+def _motion_only(data):
+    """The sea's IMU blocks re-labelled as a displacement stream (values are small)."""
+    t, imu = data["imu"]
+    return [SampleBlock("vaps", "motion", t[k:k + 10], {
+        "heave_m": imu["accel_z_mps2"][k:k + 10] * 0.1, "surge_m": imu["accel_x_mps2"][k:k + 10] * 0.1,
+        "sway_m": imu["accel_y_mps2"][k:k + 10] * 0.1}) for k in range(0, t.shape[0], 10)]
+
+
+def test_status_and_report_say_in_words_when_no_load_can_be_formed():
+    blocks = _motion_only(sea(60))
+    imu = config_with(default_config(), load={"source": "auto", "motion_sensor": "imu"})
+    p, _ = run(imu, blocks)
+    problems = p.status()["load_problems"]
+    assert problems == [
+        "no tension samples (no load cell)",
+        "[load] motion_sensor = 'imu' but no imu samples arrived (the buoy sends motion: set "
+        "motion_sensor = \"auto\")",
+        "no load could be formed: fatigue damage is not being computed"]
+    assert p.report()["load_problems"] == problems and p.report()["motion_sensor"] == "imu"
+    # auto takes the displacement stream: a load is formed, only the missing cell is said
+    p, _ = run(default_config(), blocks)
+    assert p.motion_sensor == "motion" and p.report()["tension_N"]["samples_estimated"] > 0
+    assert p.status()["load_problems"] == [
+        "no tension samples (no load cell): the load is the motion estimate"]
+
+
+def test_status_carries_qc_counts_and_the_damage_split_by_source():
+    p, _ = run(default_config(), blocks_interleaved(sea(600, gap=(200, 300)), 7))
+    st = p.status()
+    assert set(st["streams"]["tension"]["qc"]) == {"gross_range", "spike", "rate_of_change",
+                                                   "flat_line"}
+    assert set(st["streams"]["gnss"]["qc"]["location"]) == {"suspect", "fail"}
+    split = st["components"]["conductor"]["damage_by_source"]
+    # the 100 s cell gap is fed by the estimate: both sources carry damage, and they add up
+    # to the committed damage
+    assert split["measured"] > 0 and split["estimated"] > 0
+    assert split["measured"] + split["estimated"] + split["unattributed"] == pytest.approx(
+        st["components"]["conductor"]["damage_committed"], rel=1e-9)
+    assert split["estimate_error_from"] in ("residual", "assumed")
+    assert split["estimated_low"] < split["estimated"] < split["estimated_high"]
+
+
+def test_a_sink_that_wants_qc_gets_the_flag_totals_in_each_step():
+    class QcSink:
+        wants_qc = True
+
+        def __init__(self):
+            self.qc = {}
+
+        def on_step(self, step):
+            self.qc.update(step.qc)
+
+        def close(self):
+            pass
+
+    sink = QcSink()
+    p = Pipeline(default_config(), [sink])
+    for b in blocks_interleaved(sea(60), 5):
+        p.process(b)
+    p.flush()
+    assert sink.qc["tension"] == p.status()["streams"]["tension"]["qc"]
+    assert set(sink.qc) == {"tension", "imu", "gnss"}

@@ -118,7 +118,7 @@ def test_spotter_motion_glitches_are_counted_as_clamped_estimates(tmp_path, caps
     # the shipped configuration, the load estimated from the Spotter's 2.5 Hz displacements
     text = (Path(__file__).resolve().parents[1] / "monitor/vaps_seed004.toml").read_text()
     for old, new in (('source = "auto"', 'source = "estimated"'),
-                     ('motion_sensor = "imu"', 'motion_sensor = "motion"'),
+                     ('motion_sensor = "auto"', 'motion_sensor = "motion"'),
                      ("motion_rate_hz = 10.0", "motion_rate_hz = 2.5")):
         assert old in text
         text = text.replace(old, new)
@@ -134,13 +134,16 @@ def test_spotter_motion_glitches_are_counted_as_clamped_estimates(tmp_path, caps
                                      for a, (x, y, z) in zip(s.tolist(), xyz.tolist())],
                                     "--config", str(config))
         capsys.readouterr()
-        assert reports[name]["samples"]["motion"]["accepted"] == s.shape[0]
+        motion = reports[name]["samples"]["motion"]
+        rejected = sum(motion["rejected"].values())  # QARTOD fails (issue 17): glitch jumps
+        assert motion["accepted"] + rejected == s.shape[0]
+        assert rejected == 0 if name == "clean" else rejected < 200
         # the glitches: positions outside the estimator's table (seed004_estimator: offsets
         # -3 .. +3.5 m from the 29 m span, heave +-2 m); the first two samples only settle
         offset = np.hypot(29.0 + xyz[2:, 0], xyz[2:, 1]) - 29.0
         outside = np.count_nonzero((offset < -3.0) | (offset > 3.5) | (np.abs(xyz[2:, 2]) > 2.0))
         clamped = reports[name]["tension_N"]["samples_estimate_clamped"]
-        assert clamped == outside
+        assert outside - rejected <= clamped <= outside
         assert outside == 0 if name == "clean" else outside > 100
     calm = reports["clean"]["tension_N"]
     assert 150.0 < calm["mean"] < 300.0 and calm["max"] < 2_000.0  # the ~220 N static tension

@@ -29,7 +29,7 @@ def test_each_reason_is_detected_and_counted():
                    "ok", "ok"]
     assert val.accepted == 4
     assert val.rejected == {"nan": 1, "out_of_range": 1, "spike": 1, "duplicate": 1,
-                            "time_backwards": 1}
+                            "time_backwards": 1, "flat_line": 0}
     assert val.last_t_ns == int(0.6 * S) and val.last_values[0] == 1120
 
 
@@ -86,3 +86,39 @@ def test_multi_field_sample_is_rejected_if_any_field_is_bad():
     values = np.array([[0.0, 1.0, 2.0], [0.0, math.inf, 2.0], [0.0, 1.0, 11.0]])
     codes = val.check(t, values, NEVER)
     assert [REASONS[c - 1] if c else "ok" for c in codes] == ["ok", "nan", "out_of_range"]
+
+
+def test_qartod_flags_are_counted_and_a_flat_line_fail_rejected():
+    limits = SensorLimits({"tension_N": FieldLimits(
+        -100.0, 10_000.0, 1_000.0, suspect_min=0.0, suspect_max=5_000.0, flat_tolerance=0.5,
+        flat_suspect_s=1.0, flat_fail_s=2.0)}, stale_after_s=5.0)
+    val = StreamValidator("tension", limits)
+    # 0..0.9 s moving; 1.0..3.0 s stuck at 42 N; then above the operator span, then negative
+    t = np.arange(40) * 0.1
+    v = np.r_[np.arange(10) * 10.0, np.full(21, 42.0), 6000.0, 6001.0, -5.0, np.arange(6) * 7.0]
+    codes = val.check((t * S).astype(np.int64), v[None, :], NEVER)
+    got = [REASONS[c - 1] if c else "ok" for c in codes]
+    # the flat window (values within 0.5 N) starts at 0.9 s (42 N after 90 N is no flat run):
+    # stuck from 1.0 s; suspect once more than 1 s of it lies behind a sample, fail after 2 s
+    assert got[:31] == ["ok"] * 30 + ["flat_line"]
+    assert val.rejected["flat_line"] == 1
+    assert val.qc_counts()["flat_line"] == {"suspect": 10, "fail": 1}
+    assert val.qc_counts()["gross_range"] == {"suspect": 3, "fail": 0}
+    # 42 -> 6000 N in 0.1 s: 59,580 N/s, over max_rate_per_s (rejected as spike as well)
+    assert got[31] == "spike" and val.qc_counts()["rate_of_change"]["fail"] >= 1
+
+
+def test_a_displacement_the_line_cannot_reach_is_a_location_fail():
+    from monitor.config import default_config
+
+    val = StreamValidator("motion", default_config().validate["motion"])
+    # the seed 004 line: 40 m (40.8 m stretched 2 %) in 23 m, nominal span 29 m: the reach is
+    # sqrt(40.8^2 - 23^2) = 33.70 m at heave 0, sqrt(40.8^2 - 21^2) = 34.98 m at heave -2 m
+    heave = np.array([0.0, 0.0, -2.0, -2.0, 0.0, 0.0])
+    surge = np.array([4.6, 4.8, 5.9, 6.1, -20.0, 0.0])
+    sway = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 15.0])  # hypot(29, 15) = 32.65 m: reachable
+    t = np.arange(6, dtype=np.int64) * 10 * S
+    codes = val.check(t, np.stack([heave, surge, sway]), NEVER)
+    assert [REASONS[c - 1] if c else "ok" for c in codes] == [
+        "ok", "out_of_range", "ok", "out_of_range", "ok", "ok"]
+    assert val.qc_counts()["location"] == {"suspect": 0, "fail": 2}

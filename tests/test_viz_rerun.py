@@ -282,3 +282,16 @@ def test_memory_stays_bounded_in_a_long_live_run(tmp_path):
 def test_entity_parts_are_sanitised():
     assert entity_part("left lay/conductor") == "left_lay_conductor"
     assert entity_part("") == "_" and entity_part("c-1.a_b") == "c-1.a_b"
+
+
+def test_qartod_flag_totals_are_logged_per_stream_and_test(tmp_path):
+    import dataclasses
+
+    steps = [dataclasses.replace(s, qc={"tension": {"spike": {"suspect": k, "fail": 2 * k}}})
+             for k, s in enumerate(make_steps(N_STEPS))]
+    data, _ = record(tmp_path, RerunOptions(slow_interval_s=5.0), steps)
+    picked = [0] + [k for k in range(1, N_STEPS)
+                    if steps[k].now_ns // 5_000_000_000 > steps[k - 1].now_ns // 5_000_000_000]
+    np.testing.assert_array_equal(scalars(data["health/tension/qc/spike/suspect"]), picked)
+    np.testing.assert_array_equal(scalars(data["health/tension/qc/spike/fail"]),
+                                  [2 * k for k in picked])

@@ -296,8 +296,10 @@ class TensionHigh(Rule):
         return self.on_level
 
     def summary(self) -> str:
-        return (f"cable tension above {self.threshold:.0%} of the breaking strength "
-                f"({self.cfg.params['breaking_strength_N'] / 1e3:g} kN)")
+        mbl = self.cfg.params['breaking_strength_N'] / 1e3
+        if self.threshold >= 1.0:  # the line would have parted, or the load is not real
+            return f"line load above breaking strength ({mbl:g} kN)"
+        return f"cable tension above {self.threshold:.0%} of the breaking strength ({mbl:g} kN)"
 
 
 class ConductorStress(Rule):

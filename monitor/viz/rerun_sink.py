@@ -30,6 +30,8 @@ entity                              archetype                   content
 ``health/<sensor>/accepted``        Scalars                     accepted samples (total)
 ``health/<sensor>/rejected``        Scalars                     rejected samples (total)
 ``health/<sensor>/state``           StateChange                 ok / stale (from alert ticks)
+``health/<sensor>/qc/<test>/<flag>`` Scalars                    QARTOD suspect / fail flags of
+                                                                the test (total)
 ``position/buoy``                   Points2D                    buoy east/north of anchor (m)
 ``position/anchor``, ``position/watch_circle``  Points2D / LineStrips2D (static)
 ``mooring/line``                    LineStrips3D                cable shape (m, z up)
@@ -241,6 +243,7 @@ class RerunSink:
         self._hist: dict[str, CycleHistogram] = {}
         self._styled: set[str] = set()
         self._health: dict[str, list[int]] = {}  # sensor -> [accepted, rejected]
+        self._qc: dict[str, Any] = {}  # sensor -> {test: {"suspect": n, "fail": n}} totals
         self._alert_state: dict[str, str] = {}  # state lane -> last state logged
         self._source = ""
         self._samples = 0
@@ -257,6 +260,8 @@ class RerunSink:
         self._lock = threading.RLock()
 
     # ---- Sink interface -------------------------------------------------------------------
+
+    wants_qc = True  # the pipeline fills StepResult.qc for this sink
 
     @_locked
     def on_step(self, step: StepResult) -> None:
@@ -283,6 +288,8 @@ class RerunSink:
         health = self._health.setdefault(entity_part(step.sensor), [0, 0])
         health[0] += int(step.accepted)
         health[1] += int(sum(step.rejected.values()))
+        for sensor, counts in step.qc.items():
+            self._qc[entity_part(sensor)] = counts
         if step.load_source != self._source:
             self._source = step.load_source
             self._rows[("tension/source", "state")].add(step.now_ns, self._samples,
@@ -403,6 +410,10 @@ class RerunSink:
         for sensor, (acc, rej) in self._health.items():
             self._rows[(f"health/{sensor}/accepted", "scalar")].add(t, s, float(acc))
             self._rows[(f"health/{sensor}/rejected", "scalar")].add(t, s, float(rej))
+        for sensor, tests in self._qc.items():
+            for test, flags in tests.items():
+                for flag, n in flags.items():
+                    self._rows[(f"health/{sensor}/qc/{test}/{flag}", "scalar")].add(t, s, float(n))
         if self._last_fix is not None:
             self._log_position()
             self._last_fix = None

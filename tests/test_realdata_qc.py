@@ -1,0 +1,186 @@
+"""Issue 17 acceptance: QARTOD QC with the shipped configuration on real and simulated records.
+
+Only ``buoymon import`` / ``simulate`` and ``buoymon replay`` produce the reports; the
+per-sample flags the reports cannot hold (which jump, which spike) come from the same
+validator with the same shipped configuration. Real data is read in place from
+../shared/realdata.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from monitor.cli import main
+from monitor.config import default_config
+from monitor.qartod import FAIL, SPIKE, SUSPECT
+from monitor.validate import StreamValidator
+from replay.reader import LogReader
+
+SHARED = next(
+    (p / "shared" for p in Path(__file__).resolve().parents if (p / "shared/realdata").is_dir()),
+    None,
+)
+pytestmark = pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
+LBF = 4.4482216152605  # N
+NEVER = np.iinfo(np.int64).min
+
+
+def _replay(tmp_path: Path, name: str, log: Path) -> dict:
+    report = tmp_path / f"{name}.json"
+    assert main(["replay", str(log), "--report", str(report), "--no-progress"]) == 0
+    return json.loads(report.read_text())
+
+
+def _import_replay(tmp_path: Path, name: str, header: str, rows) -> dict:
+    csv, log = tmp_path / f"{name}.csv", tmp_path / f"{name}.mcap"
+    csv.write_text(header + "\n" + "\n".join(rows) + "\n")
+    assert main(["import", str(csv), "-o", str(log), "--buoy-id", "vaps"]) == 0
+    return _replay(tmp_path, name, log)
+
+
+def _flags(sensor: str, t_ns: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per sample: flagged (QARTOD suspect or fail, or rejected) by the shipped validator."""
+    v = StreamValidator(sensor, default_config().validate[sensor])
+    codes = v.check(t_ns, values, NEVER)
+    qc = StreamValidator(sensor, default_config().validate[sensor]).qc
+    flags, spike_prev = qc.check(t_ns, values)
+    flags[SPIKE, :-1] = spike_prev[1:]
+    return (codes != 0) | np.isin(flags, (SUSPECT, FAIL)).any(axis=0)
+
+
+def _fail_fraction(report: dict, sensor: str) -> float:
+    s = report["samples"][sensor]
+    total = s["accepted"] + sum(s["rejected"].values())
+    return max(c["fail"] for c in s["qc"].values()) / total
+
+
+@pytest.fixture(scope="module")
+def spotter():
+    d = np.genfromtxt(SHARED / "realdata/spotter_clallam_1945/0026_FLT.CSV", delimiter=",",
+                      skip_header=1, usecols=(1, 2, 3, 4))
+    return d[:, 0] - d[0, 0], d[:, 1:] / 1000.0  # s; x, y, z in m
+
+
+def _spotter_rows(s, xyz, rows: slice):
+    return [f"{a!r},{x!r},{y!r},{z!r}" for a, (x, y, z) in
+            zip(s[rows].tolist(), xyz[rows].tolist())]
+
+
+def test_spotter_every_glitch_jump_is_flagged(spotter):
+    s, xyz = spotter
+    t = np.rint(s * 1e9).astype(np.int64)
+    values = np.stack([xyz[:, 2], xyz[:, 0], xyz[:, 1]])  # heave, surge, sway
+    flagged = _flags("motion", t, values)
+    jump = np.abs(np.diff(values, axis=1)).max(axis=0)
+    for size, share in ((5.0, 1.0), (1.0, 0.9)):
+        j = np.flatnonzero(jump > size)
+        caught = flagged[j] | flagged[j + 1]
+        assert j.shape[0] >= (8 if size == 5 else 600)  # the record's glitches are there
+        assert caught.mean() >= share, (size, caught.mean())
+    # the clean window (rows 466-176,000) is nearly untouched: < 0.02 % flagged
+    assert flagged[466:176_000].mean() < 2e-4
+
+
+def test_spotter_full_record_replay_reports_qc_and_the_motion_source(tmp_path, spotter):
+    s, xyz = spotter
+    report = _import_replay(tmp_path, "full", "time_s,surge_m,sway_m,heave_m",
+                            _spotter_rows(s, xyz, slice(0, None)))
+    motion = report["samples"]["motion"]
+    assert report["motion_sensor"] == "motion"  # "auto" found the displacement stream
+    assert report["load_problems"] == [
+        "no tension samples (no load cell): the load is the motion estimate"]
+    assert motion["qc"]["rate_of_change"]["suspect"] > 600
+    assert motion["qc"]["spike"]["fail"] > 0 and motion["rejected"]["spike"] > 0
+    # the glitches drive the estimate past the breaking load: counted and alerted
+    assert report["tension_N"]["samples_estimate_above_break"] > 0
+    assert any(a["rule"] == "line_load_above_breaking_strength" and a["severity"] == "critical"
+               for a in report["alerts"])
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not met: most glitch excursions (5-17 m, 2-4 m/s) are positions and speeds the VAPS "
+    "mooring can reach, so they are flagged suspect but used (the watch-circle location fail "
+    "rejects 114); whole record 445 kN / damage 5.5e3 against 23.6 kN / 9.8e-3 for the clean "
+    "window (with motion_rate_hz = 2.5, the record's rate: 102 kN / 8.0 against 5.9 kN / 1e-5)"))
+def test_spotter_glitches_do_not_make_the_answer(tmp_path, spotter):
+    s, xyz = spotter
+    full = _import_replay(tmp_path, "full", "time_s,surge_m,sway_m,heave_m",
+                          _spotter_rows(s, xyz, slice(0, None)))
+    clean = _import_replay(tmp_path, "clean", "time_s,surge_m,sway_m,heave_m",
+                           _spotter_rows(s, xyz, slice(466, 176_000)))
+    assert full["tension_N"]["max"] <= 1.5 * clean["tension_N"]["max"]
+    d_full = full["components"]["conductor"]["damage"]
+    assert d_full <= 2.0 * clean["components"]["conductor"]["damage"]
+
+
+def test_maine_load_cell_under_a_thousandth_fail(tmp_path):
+    raw = np.genfromtxt(SHARED / "realdata/maine_endline_loadcell/"
+                        "17348481-2018.11.30-09.58.27-15.csv", delimiter=",", usecols=(1, 2))
+    rows = [f"{a!r},{b * LBF!r}" for a, b in raw.tolist()]
+    report = _import_replay(tmp_path, "maine", "time_s,tension_N", rows)
+    t = report["samples"]["tension"]
+    assert t["accepted"] + sum(t["rejected"].values()) == raw.shape[0]
+    assert _fail_fraction(report, "tension") < 1e-3
+    assert sum(t["rejected"].values()) / raw.shape[0] < 1e-3
+
+
+def test_cdip_datawell_under_a_thousandth_fail(tmp_path):
+    raw = np.genfromtxt(SHARED / "realdata/cdip_datawell_raw/cdip.raw", delimiter=",")
+    # status, heave, north, west in cm at 1.28 Hz, no time stamps
+    rows = [f"{i / 1.28!r},{n / 100!r},{-w / 100!r},{h / 100!r}"
+            for i, (_, h, n, w) in enumerate(raw.tolist())]
+    report = _import_replay(tmp_path, "cdip", "time_s,surge_m,sway_m,heave_m", rows)
+    m = report["samples"]["motion"]
+    assert m["accepted"] + sum(m["rejected"].values()) == raw.shape[0]
+    assert _fail_fraction(report, "motion") < 1e-3
+    assert sum(m["rejected"].values()) / raw.shape[0] < 1e-3
+
+
+def _tension(log: Path) -> tuple[np.ndarray, np.ndarray]:
+    blocks = [b for b in LogReader(log) if b.sensor == "tension"]
+    return (np.concatenate([b.t_ns for b in blocks]),
+            np.concatenate([b.fields["tension_N"] for b in blocks]))
+
+
+@pytest.fixture(scope="module")
+def storm(tmp_path_factory):
+    d = tmp_path_factory.mktemp("storm")
+    sim = ["simulate", "--hours", "2", "--hs", "3", "--tp", "8", "--seed", "4",
+           "--load-model", "wavfor"]
+    assert main([*sim, "-o", str(d / "clean.mcap")]) == 0
+    assert main([*sim, "--spikes", "0.001", "--nans", "0.001", "-o", str(d / "faults.mcap")]) == 0
+    return d
+
+
+def test_storm_spikes_are_all_flagged_and_do_not_change_the_damage(storm):
+    t, clean = _tension(storm / "clean.mcap")
+    t2, faulty = _tension(storm / "faults.mcap")
+    assert np.array_equal(t, t2)
+    spikes = np.flatnonzero(np.isfinite(faulty) & (faulty != clean))
+    assert spikes.shape[0] > 50
+    codes = StreamValidator("tension", default_config().validate["tension"]).check(
+        t, faulty[None, :], NEVER)
+    assert np.all(codes[spikes] != 0)  # every spike rejected (fail), not only flagged
+    a = _replay(storm, "clean", storm / "clean.mcap")
+    b = _replay(storm, "faults", storm / "faults.mcap")
+    assert a["samples"]["tension"]["rejected"] == dict.fromkeys(
+        a["samples"]["tension"]["rejected"], 0)
+    da = a["components"]["conductor"]["damage_committed"]
+    db = b["components"]["conductor"]["damage_committed"]
+    assert abs(db - da) <= 0.02 * da
+
+
+def test_hs3_sea_over_break_loads_are_alerted_and_reported(tmp_path):
+    log = tmp_path / "hs3.mcap"
+    assert main(["simulate", "--hours", "2", "--hs", "3", "--tp", "8", "--seed", "4",
+                 "-o", str(log)]) == 0
+    report = _replay(tmp_path, "hs3", log)
+    assert report["tension_N"]["samples_above_break"] > 0
+    assert report["tension_N"]["max"] > 45_000.0
+    fired = [a for a in report["alerts"] if a["rule"] == "line_load_above_breaking_strength"]
+    assert fired and fired[0]["severity"] == "critical"
+    assert fired[0]["summary"] == "line load above breaking strength (45 kN)"
