@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "design": "replay.cmd_design",
     "forecast": "replay.cmd_forecast",
     "run": "monitor.cmd_run",
+    "bridge": "monitor.cmd_bridge",
     "shore": "monitor.shore",
     "check-config": "monitor.cmd_check_config",
     "record": "monitor.cmd_record",
