@@ -27,7 +27,8 @@ compressive mean; a mean at or above the ultimate strength ``ultimate_Pa`` gives
 damage (the part has failed statically); SWT/Walker give no damage when S_max <= 0.
 
 Presets: ``vaps_copper()`` (seed 004, Marks annealed copper x 0.42),
-``dnv_rp_c203(detail, environment)`` (DNV-RP-C203 Edition April 2016, Tables 2-1 air and
+``vaps_lab_calibrated()`` (the same shape fitted to seed 004's lab failures, models.lab_fatigue),
+``dnv_rp_c203(detail, environment, knee)`` (DNV-RP-C203 Edition April 2016, Tables 2-1 air and
 2-2 seawater with cathodic protection; the 2024 edition changed B1 to C2 and is not
 tabulated here), ``dnv_chain_studless()`` (DNV-OS-E301 studless chain, m = 3,
 a_D = 6.0e10, stress range in MPa on the nominal area).
@@ -186,13 +187,32 @@ class SNCurve:
                              low_stress=low_stress, **options)
 
     @classmethod
+    def vaps_lab_calibrated(cls, low_stress: LowStress = "haibach", **options) -> "SNCurve":
+        """``vaps_copper`` shifted in life to seed 004's lab failures (App. 2), x 3.74 in life.
+
+        Fitted by ``models.lab_fatigue.vaps_lab_calibration`` (method, mean-stress convention
+        and uncertainty documented there): the test-calibrated alternative to the
+        handbook-conservative ``vaps_copper``.
+        """
+        from models.lab_fatigue import vaps_lab_calibration  # it builds on this module
+
+        return vaps_lab_calibration(cls.vaps_copper(low_stress=low_stress)).curve(**options)
+
+    @classmethod
     def dnv_rp_c203(cls, detail: str, environment: Literal["air", "seawater_cp"] = "air",
+                    knee: Literal["intersection", "cycles"] = "intersection",
                     **options) -> "SNCurve":
         """DNV-RP-C203 Edition April 2016 curve ``detail`` (B1 ... W3).
 
         ``environment="air"``: Table 2-1; ``"seawater_cp"``: Table 2-2 (seawater with
         cathodic protection). Bilinear, m2 = 5 continues below the knee (no cut-off, as
         the RP prescribes for variable amplitude). Thickness effects are left to ``scf``.
+
+        ``knee``: ``"intersection"`` (default, the RP's tables as printed) uses the printed
+        log a2, so the knee is where the two lines cross (its N is 1e7 / 1e6 to the printed
+        digits); ``"cycles"`` forces the knee to exactly N = 1e7 (air) / 1e6 (seawater_cp)
+        and recomputes log a2 = log N_knee + m2 log S_knee with S_knee from the first
+        segment, as qats and fatpack do (lives below the knee differ by about 0.15 %).
         """
         if detail not in _DNV_2016_AIR:
             raise ValueError(f"unknown DNV-RP-C203 (2016) detail {detail!r}; one of {sorted(_DNV_2016_AIR)}")
@@ -201,6 +221,11 @@ class SNCurve:
             log_a1 = _DNV_2016_SEAWATER_CP_LOG_A1[detail]
         elif environment != "air":
             raise ValueError(f"environment must be 'air' or 'seawater_cp', got {environment!r}")
+        if knee == "cycles":
+            log_n_knee = 7.0 if environment == "air" else 6.0
+            log_a2 = log_n_knee + m2 * (log_a1 - log_n_knee) / m1
+        elif knee != "intersection":
+            raise ValueError(f"knee must be 'intersection' or 'cycles', got {knee!r}")
         return cls.multi_slope((m1, m2), (log_a1, log_a2), name=f"DNV-RP-C203:2016 {detail} {environment}",
                                **options)
 
