@@ -15,7 +15,8 @@ forces), the conductor on r_2 = r_1 + R_i (R_i the helix radius). Over a bend an
 In the bend test the conductor slides over a gauge length (842.5 mm: the sample's straight
 lengths along the lay, item 4). In a moulding it is locked at the bend, so the default gauge
 is the neutral arc itself and the strain is R_i / r_1 (the outer conductor's fibre strain),
-whatever the angle; a ``gauge_length_m`` models a conductor free to slide that far.
+whatever the angle of a bend (0 when straight); a ``gauge_length_m`` models a conductor free to
+slide that far.
 
 Stress at the termination: sigma = SCF x sqrt((sigma_a + sigma_b + E_i eps_bend)^2 + 3 tau^2),
 the ductile rule of App. 4 with the helix's axial, bending and shear terms
@@ -77,10 +78,10 @@ def bend_arc_lengths(bend: TerminationBend, helix_radius_m: float) -> tuple[floa
 def bend_strain(bend: TerminationBend, helix_radius_m: float) -> float:
     """Conductor bending strain (conductor arc - neutral arc) / gauge, seed 004 App. 3A items 3-5.
 
-    With the default gauge (the neutral arc) this is R_i / r_1, also at a zero angle (the limit).
+    With the default gauge (the neutral arc) this is R_i / r_1 for any bend, 0 when straight.
     """
     if bend.gauge_length_m is None:
-        return float(helix_radius_m / bend.bend_radius_m)
+        return float(helix_radius_m / bend.bend_radius_m) if bend.bend_angle_rad > 0 else 0.0
     neutral, conductor = bend_arc_lengths(bend, helix_radius_m)
     return float((conductor - neutral) / bend.gauge_length_m)
 

@@ -20,7 +20,10 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
                                      ``remaining_life_days`` (null = nothing accrues),
-                                     ``kind``, ``lay``}
+                                     ``kind``, ``lay``, ``location`` (free_span | termination),
+                                     ``samples_beyond_yield``: load samples whose hot-spot
+                                     stress exceeded the conductor's yield (the elastic model
+                                     and the S-N curve do not hold: damage underestimated)}
 ``alerts``                           alert transitions (monitor.alerts records as dicts), the
                                      newest 10,000; ``alerts_dropped`` counts older ones
 ``inputs``                           files read and the reader's statistics (lost data)
@@ -82,6 +85,8 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
             "remaining_life_days": figures["remaining_life_days"],
             "kind": c.kind,
             "lay": c.lay,
+            "location": c.location,
+            "samples_beyond_yield": int(figures.get("samples_beyond_yield") or 0),
         }
         if "damage_by_source" in figures:
             comps[name]["damage_by_source"] = figures["damage_by_source"]
@@ -158,6 +163,10 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
             f"{life if life == '-' else life + ' d':>11s}"
         )
+    for name, c in report["components"].items():
+        if c.get("samples_beyond_yield"):
+            lines.append(f"  {name}: {c['samples_beyond_yield']:,d} samples beyond the conductor's "
+                         "yield: elastic model beyond yield, damage underestimated")
     for name, c in report["components"].items():
         split = c.get("damage_by_source")
         if split and split["estimated"]:

@@ -57,7 +57,7 @@ class RecordingEngine:
 def hooks(monkeypatch):
     engines = []
 
-    def engine(config, buoy_id, endurance, state):
+    def engine(config, buoy_id, endurance, state, yield_Pa=None):
         e = RecordingEngine()
         engines.append(e)
         return e

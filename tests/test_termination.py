@@ -30,8 +30,9 @@ def test_app3a_bend_test_numbers():
 
 def test_locked_conductor_strain_is_helix_radius_over_bend_radius():
     # the moulding locks the conductor: gauge = neutral arc, strain R_i / r_1 for any angle
-    for angle in (0.0, 0.3, math.pi / 2):
+    for angle in (1e-6, 0.3, math.pi / 2):
         assert bend_strain(TerminationBend(0.6, angle), 9.2e-3) == pytest.approx(9.2e-3 / 0.6, rel=1e-15)
+    assert bend_strain(TerminationBend(0.6, 0.0), 9.2e-3) == 0.0  # straight: no bend
 
 
 def test_termination_stress_ductile_rule():
