@@ -21,7 +21,7 @@ Since cos(a) / cos(a') = cos(a) sqrt(1 + tan^2 a'), the axial term is evaluated 
 E_i | cos(a) sqrt((1 + e_c)^2 + (C' / P)^2) - 1 |, which needs no trigonometry per sample
 (the hot path of the monitor evaluates it at every tension sample).
 
-Twist boundary condition (issue 20; seed 004 sections 2-3, App. 1)
+Twist boundary condition (issue 20; seed 004 section 2, App. 1; docs/CONDUCTOR.md)
 ------------------------------------------------------------------
 App. 1 measured the core with its end free to turn: e_c = T / (A_c E_c), twist per unit length
 theta / P = G_c T. Reciprocity (Maxwell-Betti) makes the core's compliance symmetric, so a
@@ -31,16 +31,17 @@ being its torsional stiffness (not measured by the seed):
     e_c = T / (A_c E_c) + G_c M,        theta / P = G_c T + M / K_c.
 
 - ``twist_restraint="free"`` (slip ring at the buoy, the seed's assumption): M = 0.
-- ``"restrained"`` (both ends held, e.g. slip ring seized and anchor sunk, section 3): the
+- ``"restrained"`` (both ends held, e.g. slip ring seized and anchor sunk, section 2): the
   torque balance theta = 0 gives M = -K_c G_c T and e_c = T (1 / (A_c E_c) - G_c^2 K_c): no
   twist, so the lay hand no longer matters, and the core is stiffer by 1 / (1 - G_c^2 K_c A_c E_c)
   (0.2 % per N m^2 of K_c for the VAPS core; K_c = 0, the default, neglects it).
-- ``"limited"`` (the anchor bridle: +/-75 deg, section 3): the core twists freely until the
+- ``"limited"`` (the anchor bridle: +/-75 deg, section 2): the core twists freely until the
   total twist G_c T L over ``twist_length_m`` L reaches ``twist_limit_rad`` Phi; beyond,
   theta / P = Phi / L and M = (Phi / L - G_c T) K_c. Zero twist at zero tension is assumed.
 
 Termination bending (``models.termination``) and yield (``HelixCable.conductor_yield_Pa``, the
-copper's tensile yield, seed 004 section 8: 68.9 MPa) are evaluated outside this module.
+copper's tensile yield, 68.9 MPa, seed 004 quoting the Materials Selector) are used outside
+this module.
 
 Public API
 ----------
@@ -143,7 +144,7 @@ class HelixCable:
         The conductor metal area (16 mm^2) is CABLE2's DATA value; the wire diameter
         (0.07 mm) is App. 4's figure for #22 AWG as printed; Poisson's ratio 0.34 is a
         handbook value for copper (the seed gives none). Conductor yield 68.9 MPa: annealed
-        copper, Materials Selector (1978), section 8. Twist free (slip ring, section 2).
+        copper, Materials Selector (1978), as the seed quotes it. Twist free (slip ring, section 2).
         """
         return cls(core_area_m2=42.1e-6, core_modulus_Pa=81.4e9, core_twist_modulus=24.4e-6,
                    pitch_m=0.174, helix_radius_m=9.2e-3, conductor_modulus_Pa=19.5e9,
@@ -167,6 +168,15 @@ class HelixCable:
                                         - self.core_twist_modulus ** 2 * self.core_torsional_stiffness_Nm2)
             rg = 0.0
         return float(k), float(tan_a), float(cos_a), float(rg)
+
+    @cached_property
+    def _kernel_args(self) -> dict[str, tuple[float, float, float, float, float] | None]:
+        # per lay, computed once: the monitor asks for them at every block
+        if self.core_compressibility != 0.0 or self.twist_restraint == "limited":
+            return {"left": None, "right": None}
+        k, tan_a, cos_a, rg = self._axial_coefficients
+        return {lay: (k, tan_a, cos_a, (1.0 if lay == self.core_twist_hand else -1.0) * rg,
+                      self.conductor_modulus_Pa) for lay in ("left", "right")}
 
 
 @dataclass(frozen=True)
@@ -271,11 +281,11 @@ def axial_kernel_args(cable: HelixCable, lay: Lay) -> tuple[float, float, float,
     """(k, tan a, cos a, +-R G_c, E_i): the arguments of the compiled axial-stress kernel
     (``_fatigue_loops.axial_stress``) for this cable and lay, or None when the axial
     stress needs the general formula (a compressible core, or limited twist: piecewise)."""
-    sign = _lay_sign(lay, cable)
-    if cable.core_compressibility != 0.0 or cable.twist_restraint == "limited":
-        return None
-    k, tan_a, cos_a, rg = cable._axial_coefficients
-    return k, tan_a, cos_a, sign * rg, cable.conductor_modulus_Pa
+    try:
+        return cable._kernel_args[lay]
+    except (KeyError, TypeError):  # not a lay (TypeError: not even hashable)
+        _check_lay(lay)
+        raise
 
 
 def _first_bad(out: np.ndarray) -> int:

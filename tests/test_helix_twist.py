@@ -1,4 +1,4 @@
-"""Twist boundary condition of the helix model (issue 20, seed 004 sections 2-3, App. 1 and 4).
+"""Twist boundary condition of the helix model (issue 20, seed 004 section 2, App. 1 and 4).
 
 The oracle is an independent trigonometric evaluation of Knapp's axial stress (App. 4,
 sigma = E_i |cos a / cos a' (1 + e_c) - 1|, a' = atan((2 pi R + R theta) / (P (1 + e_c)))) with
