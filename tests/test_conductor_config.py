@@ -11,7 +11,8 @@ import pytest
 
 from models.helix import HelixCable, conductor_stress
 from models.termination import TerminationBend, termination_stress
-from monitor.components import Component, build_cable
+from monitor.cmd_status import render
+from monitor.components import Component, build_cable, build_sn_curve
 from monitor.config import ConfigError, config_with, default_config
 from replay.lab_validation import lab_tension_blocks, lab_validation, predict
 from replay.report import build_report, summary_text
@@ -111,6 +112,9 @@ def test_yield_in_report_status_and_alerts():
     assert all("elastic model beyond yield: damage underestimated" in a["summary"] for a in fired)
     text = summary_text(build_report(config, rep, [], None))
     assert "conductor: " in text and "beyond the conductor's yield" in text
+    screen = render("daemon", pipeline.status())  # `buoymon status`
+    assert "BEYOND YIELD" in screen and f"{n}" in screen
+    assert "elastic model beyond yield: damage underestimated (conductor, conductor_termination)" in screen
     # below yield on the free span: counted nowhere, no alert for it
     p2, _ = run_blocks(config, _storm_blocks(config, 8900.0))
     rep2 = p2.report()
@@ -132,3 +136,16 @@ def test_lab_test_through_the_pipeline():
     calibrated = config_with(config, component=[{**config.raw["component"][0], "sn_curve": "vaps_lab_calibrated"}])
     got = predict(calibrated, 8.9e3, n_cycles=100)["conductor"]
     assert got == pytest.approx(LAB["vaps_lab_calibrated"]["predicted_cycles"][0], rel=2e-3)
+
+
+def test_dnv_knee_convention_from_the_configuration():
+    c = default_config()
+    comp = {**c.raw["component"][0], "kind": "axial", "area_m2": 1e-4}
+    del comp["lay"]
+    for preset, log_a2 in (("dnv_rp_c203:D:air", 15.606), ("dnv_rp_c203:D:air:intersection", 15.606),
+                           ("dnv_rp_c203:D:air:cycles", 7 + 5 * (12.164 - 7) / 3)):
+        cfg = config_with(c, component=[{**comp, "sn_curve": preset}])
+        assert build_sn_curve(cfg.components[0]).log_a[1] == pytest.approx(log_a2, abs=1e-12)
+    cfg = config_with(c, component=[{**comp, "sn_curve": "dnv_rp_c203:D:air:continuous"}])
+    with pytest.raises(ConfigError, match="knee must be"):
+        build_sn_curve(cfg.components[0])
