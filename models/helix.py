@@ -22,7 +22,7 @@ E_i | cos(a) sqrt((1 + e_c)^2 + (C' / P)^2) - 1 |, which needs no trigonometry p
 (the hot path of the monitor evaluates it at every tension sample).
 
 Twist boundary condition (issue 20; seed 004 section 2, App. 1; docs/CONDUCTOR.md)
-------------------------------------------------------------------
+----------------------------------------------------------------------------------
 App. 1 measured the core with its end free to turn: e_c = T / (A_c E_c), twist per unit length
 theta / P = G_c T. Reciprocity (Maxwell-Betti) makes the core's compliance symmetric, so a
 torque M on the core adds G_c M to its strain and M / K_c to its twist per length, K_c [N m^2/rad]

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.lab_fatigue import LAB_FAILURES, cam_tension
+from models.lab_fatigue import LAB_FAILURES, LAB_RATE_HZ, cam_tension
 from monitor.blocks import SampleBlock
 from monitor.config import Config
 from replay.runner import run_blocks
@@ -34,8 +34,6 @@ class LabPrediction:
 def lab_tension_blocks(buoy_id: str, peak_N: float, n_cycles: int, sample_rate_hz: float = 10.0,
                        block_s: float = 1.0) -> list[SampleBlock]:
     """The cam test as load-cell blocks of ``block_s`` seconds at ``sample_rate_hz``."""
-    from models.lab_fatigue import LAB_RATE_HZ
-
     per_cycle = int(round(sample_rate_hz / LAB_RATE_HZ))
     t_s, tension = cam_tension(peak_N, n_cycles, per_cycle)
     t_ns = T0_NS + np.round(t_s * 1e9).astype(np.int64)
