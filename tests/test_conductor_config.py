@@ -149,3 +149,21 @@ def test_dnv_knee_convention_from_the_configuration():
     cfg = config_with(c, component=[{**comp, "sn_curve": "dnv_rp_c203:D:air:continuous"}])
     with pytest.raises(ConfigError, match="knee must be"):
         build_sn_curve(cfg.components[0])
+
+
+def test_cli_lab_test(tmp_path, capsys):
+    from monitor.cli import main
+
+    assert main(["lab-test", "--cycles", "50", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert [r["observed_cycles"] for r in rows] == LAB["observed_cycles"]
+    np.testing.assert_allclose([r["predicted_cycles"]["conductor"] for r in rows],
+                               LAB["shipped_vaps_copper"]["predicted_cycles"], rtol=2e-3)
+    assert main(["lab-test", "--cycles", "50"]) == 0
+    text = capsys.readouterr().out
+    assert "25,000" in text and "(x0.32)" in text and "(vaps_copper)" in text
+    assert main(["lab-test", "--cycles", "1"]) == 2
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[buoy]\n")
+    assert main(["lab-test", "--config", str(bad)]) == 2
+    assert "config error" in capsys.readouterr().err
