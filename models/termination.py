@@ -39,11 +39,14 @@ Public API
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
-from models.helix import HelixCable, Lay, stress_terms
+from models._jit import compile_loop, jitable
+from models.helix import HelixCable, Lay, axial_kernel_args, stress_terms
 
 
 @dataclass(frozen=True)
@@ -87,13 +90,72 @@ def bend_strain(bend: TerminationBend, helix_radius_m: float) -> float:
 
 
 def termination_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay,
-                       bend: TerminationBend) -> np.ndarray:
+                       bend: TerminationBend,
+                       backend: Literal["auto", "numba", "numpy"] = "auto") -> np.ndarray:
     """Conductor stress [Pa] in the termination at cable tension(s) [N], without the SCF.
 
     sqrt((sigma_a + sigma_b + E_i eps_bend)^2 + 3 tau^2) (seed 004 App. 4's ductile rule, the
     bend of App. 3A as an added axial strain). The helix terms follow the cable's twist
-    boundary condition. NaN/inf tension raises ValueError.
+    boundary condition. NaN/inf tension raises ValueError. Where the helix's axial kernel
+    applies (free or restrained twist, incompressible core) the terms are evaluated without
+    trigonometry (``_stress``), in one compiled loop when numba is available (``backend``);
+    otherwise by ``helix.stress_terms``.
     """
-    sigma_a, sigma_b, tau = stress_terms(tension_N, cable, lay)
     sigma_bend = cable.conductor_modulus_Pa * bend_strain(bend, cable.helix_radius_m)
-    return np.sqrt((sigma_a + sigma_b + sigma_bend) ** 2 + 3.0 * tau ** 2)
+    args = axial_kernel_args(cable, lay)
+    if args is None:  # limited twist or a compressible core: App. 4 with its trigonometry
+        sigma_a, sigma_b, tau = stress_terms(tension_N, cable, lay)
+        return np.sqrt((sigma_a + sigma_b + sigma_bend) ** 2 + 3.0 * tau ** 2)
+    t = np.asarray(tension_N, dtype=np.float64)
+    coefs = _coefficients(cable, args, sigma_bend)
+    if backend != "numpy" and _loop_compiled is not None:
+        out = np.empty(t.size)
+        bad = _loop_compiled(t.reshape(-1), *coefs, out)
+        out = out.reshape(t.shape)
+    else:  # the same expression on arrays
+        out = _stress(t, *coefs)
+        flat = out.reshape(-1)
+        bad = -1 if np.all(np.isfinite(flat)) else int(np.flatnonzero(~np.isfinite(flat))[0])
+    if bad >= 0:
+        raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {bad})")
+    return out
+
+
+def _coefficients(cable: HelixCable, args: tuple[float, float, float, float, float],
+                  sigma_bend: float) -> tuple[float, ...]:
+    """The per-sample formula's constants (see ``_stress``)."""
+    k, tan_a, cos_a, rg, e_mod = args
+    sin_a = tan_a * cos_a
+    d_over_2r = cable.conductor_wire_diameter_m / (2.0 * cable.helix_radius_m)
+    g_mod = e_mod / (2.0 * (1.0 + cable.poisson_ratio))
+    return (k, tan_a, cos_a, rg, e_mod, e_mod * d_over_2r * sin_a, sin_a,
+            g_mod * d_over_2r * sin_a * cos_a, sigma_bend)
+
+
+@jitable
+def _stress(t, k, tan_a, cos_a, rg, e_mod, c_bend, sin_a, c_shear, sigma_bend):
+    """App. 4 without trigonometry, as the helix's axial kernel: with y = 1 + e_c = 1 + k T and
+    x = C'/P = tan a +/- R G_c T, r = sqrt(x^2 + y^2) gives cos a' = y / r, sin a' = x / r and
+    cos a / cos a' (1 + e_c) = cos a r. Then sigma_a = E_i |cos a r - 1|,
+    sigma_b = E_i d/(2R) sin a (x / r - sin a cos a r),
+    tau = G_i d/(2R) sin a cos a (y / (r cos a) - cos a r) (squared below, so no |.|)."""
+    y = 1.0 + k * t
+    x = tan_a + rg * t
+    r = np.sqrt(x * x + y * y)
+    ratio = cos_a * r
+    normal = np.abs(ratio - 1.0) * e_mod + c_bend * (x / r - sin_a * ratio) + sigma_bend
+    tau = c_shear * (y / (r * cos_a) - ratio)
+    return np.sqrt(normal * normal + 3.0 * tau * tau)
+
+
+def _loop(t, k, tan_a, cos_a, rg, e_mod, c_bend, sin_a, c_shear, sigma_bend, out):
+    """``out[i] = _stress(t[i], ...)``; returns the first non-finite index or -1."""
+    for i in range(t.shape[0]):
+        out[i] = _stress(t[i], k, tan_a, cos_a, rg, e_mod, c_bend, sin_a, c_shear, sigma_bend)
+    for i in range(t.shape[0]):
+        if not math.isfinite(out[i]):
+            return i
+    return -1
+
+
+_loop_compiled = compile_loop(_loop)
