@@ -52,13 +52,14 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
     """Record until ``stop`` is set; returns the number of messages written."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     with zenoh_io.open_session(zc) as session:
-        sub = zenoh_io.declare_enqueuing_subscriber(session, f"buoy/{buoy_id}/**", q)
+        sub = zenoh_io.declare_enqueuing_subscriber(session, f"buoy/{buoy_id}/**", q,
+                                                   history=True)
         # tells the shore (and tests) that this buoy's traffic is being recorded
         token = session.liveliness().declare_token(recorder_token_key(buoy_id))
         try:
             while not stop.is_set():
                 try:
-                    _, key, payload, recv_ns = q.get(timeout=0.2)
+                    _, key, payload, recv_ns, _ = q.get(timeout=0.2)
                 except queue.Empty:
                     recorder.maybe_flush()
                     continue
@@ -67,7 +68,7 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
             token.undeclare()
             sub.undeclare()
             while not q.empty():
-                _, key, payload, recv_ns = q.get_nowait()
+                _, key, payload, recv_ns, _ = q.get_nowait()
                 _write(recorder, codec, key, payload, recv_ns)
             recorder.close()
     return recorder.messages
