@@ -262,7 +262,7 @@ class Daemon:
                 self._extensions = self._attach(self.session, self.pipeline)
                 declared.extend(_Closing(e) for e in self._extensions)
             subscriber = zenoh_io.declare_enqueuing_subscriber(
-                self.session, zenoh_io.sensor_key(self.buoy_id), self._q, history=False)
+                self.session, zenoh_io.sensor_key(self.buoy_id), self._q)
             declared.append(zenoh_io.declare_publisher_watch(self.session, self.buoy_id,
                                                              self._q))
             log.info("daemon ready", extra={"fields": {
@@ -309,20 +309,26 @@ class Daemon:
                 # a backlog is worked off in slices so status, checkpoints and the watchdog
                 # keep their pace
                 self._drain(time.monotonic() + _MAX_TURN_S)
-            now = time.monotonic()
-            if (now - self._last_status_mono >= zc.status_interval_s
-                    or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
-                self._publish_status()
-            for ext in self._extensions:
-                ext.poll()
-            self._checkpoint(self._checkpointer.maybe_save)
-            if self.recorder is not None:
-                self.recorder.maybe_flush()
-                self._note_flush()
-            if now >= self._next_release_mono:  # at once, then now and then: a steady daemon
-                release_compiler_pages()        # never runs the compiler (monitor.memory)
-                self._next_release_mono = now + _RELEASE_EVERY_S
-            self._pet_watchdog(now)
+            self._duties()
+
+    def _duties(self) -> None:
+        """Status, extensions, checkpoint, recorder flush, compiler pages, watchdog: each
+        when due (called between slices of work, never inside a block)."""
+        zc = self.config.zenoh
+        now = time.monotonic()
+        if (now - self._last_status_mono >= zc.status_interval_s
+                or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
+            self._publish_status()
+        for ext in self._extensions:
+            ext.poll()
+        self._checkpoint(self._checkpointer.maybe_save)
+        if self.recorder is not None:
+            self.recorder.maybe_flush()
+            self._note_flush()
+        if now >= self._next_release_mono:  # at once, then now and then: a steady daemon
+            release_compiler_pages()        # never runs the compiler (monitor.memory)
+            self._next_release_mono = now + _RELEASE_EVERY_S
+        self._pet_watchdog(now)
 
     def _checkpoint(self, save: Callable[[], Any]) -> None:
         """Save via ``save``; a failure (disk full, database gone) is counted, logged, shown
@@ -420,7 +426,11 @@ class Daemon:
                     fetched.append((block, key, payload, origin))
         fetched.sort(key=lambda f: f[0].t_last_ns)  # stable: a stream's own order is kept
         taken: dict[str, int] = {}
+        turn_ends = time.monotonic() + _MAX_TURN_S
         for block, key, payload, origin in fetched:
+            if time.monotonic() > turn_ends:  # an hour's backlog: keep status and watchdog going
+                self._duties()
+                turn_ends = time.monotonic() + _MAX_TURN_S
             if self._take(key, payload, block, block.recv_ns, origin):
                 self.sequences.recovered_from_cache(block.sensor, 1)
                 taken[block.sensor] = taken.get(block.sensor, 0) + 1

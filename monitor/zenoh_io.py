@@ -82,15 +82,15 @@ def monitor_token_key(buoy_id: str) -> str:
 
 
 def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
-                                 q: "queue.SimpleQueue[tuple]", history: bool) -> Any:
+                                 q: "queue.SimpleQueue[tuple]") -> Any:
     """Subscribe to ``key`` with Zenoh's advanced subscriber; every sample is put on ``q`` as
     ``("data", key, bytes, recv_ns, Origin | None)``.
 
     Recovery: a message lost in transit is fetched again from its publisher's cache
-    (heartbeat-driven), and delivery stays in order per publisher. ``history``: on start and
-    whenever a publisher appears, ask the publishers' caches for everything they hold (what
-    ``buoymon record`` does; the daemon instead fetches only what its checkpoint lacks, see
-    :func:`declare_publisher_watch` and :func:`fetch_cached`).
+    (heartbeat-driven), and delivery stays in order per publisher. No history: what a
+    (re)starting process missed is fetched by number (:func:`declare_publisher_watch`,
+    :func:`fetch_cached`), since Zenoh's history can be overtaken, and then dropped, by live
+    messages of a publisher that reconnects at the same moment.
     """
 
     def on_sample(sample: zenoh.Sample) -> None:
@@ -102,7 +102,6 @@ def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
 
     return zenoh.ext.declare_advanced_subscriber(
         session, key, on_sample,
-        history=zenoh.ext.HistoryConfig(detect_late_publishers=True) if history else None,
         recovery=zenoh.ext.RecoveryConfig(heartbeat=True))
 
 
