@@ -296,7 +296,7 @@ def test_a_daemon_down_longer_than_the_cache_counts_and_alerts_what_it_missed(tm
         while _checkpointed_sn(tmp_path) != {"tension": 9, "imu": 9}:
             assert time.monotonic() < deadline, _checkpointed_sn(tmp_path)
             time.sleep(0.1)
-        before = query_state(port, buoy=BUOY)["status"]["streams"]
+        before = query_state(port, buoy=BUOY)["status"]["counters"]["messages"]
         d.kill9()
         for block in blocks[20:100]:  # 10..49 per stream; the cache keeps 40..49
             sensor.publish_block(block)
@@ -307,11 +307,11 @@ def test_a_daemon_down_longer_than_the_cache_counts_and_alerts_what_it_missed(tm
     finally:
         sensor.close()
     assert d.terminate() == 0
-    for stream in ("tension", "imu"):
-        s = status["streams"][stream]
-        # (the first life took the cache too: a publisher seen for the first time)
-        assert (s["samples_missed"], s["recovered"] - before[stream]["recovered"],
-                s["redelivered"] - before[stream]["redelivered"]) == (30, 10, 0), s
+    assert {s: status["streams"][s]["samples_missed"] for s in ("tension", "imu")} == \
+        {"tension": 30, "imu": 30}
+    # the 10 still cached per stream were taken once (from the cache; any second copy that
+    # Zenoh's own recovery delivers is counted as redelivered, not taken)
+    assert status["counters"]["messages"] - before == 20
 
 
 def _checkpointed_sn(tmp: Path) -> dict:
@@ -506,6 +506,50 @@ def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_p
     assert statuses and statuses[-1]["buoy_id"] == BUOY
     live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
     assert committed(replayed_figures(config, files)) == committed(live)
+
+
+def test_record_command_killed_and_restarted_keeps_every_sample(tmp_path):
+    """`buoymon record` is killed with SIGKILL mid-stream (losing its unflushed chunk) and
+    restarted: it takes the sensor publishers' caches again, so the recordings hold every
+    sample and replay to the figures of the original log."""
+    port = free_port()
+    blocks = synthetic_blocks(120)
+    log = write_log(tmp_path / "sim.mcap", blocks)
+    cfg = write_config(tmp_path, port, load_source="measured", record=True)
+    config = load_config(cfg)
+    d = start_daemon(cfg, tmp_path)
+    out_dir = tmp_path / "recorded"
+
+    def start_recorder() -> subprocess.Popen:
+        rec = subprocess.Popen([sys.executable, "-m", "monitor.cli", "record", "--config",
+                                str(cfg), "-o", str(out_dir)], env=ENV,
+                               stderr=subprocess.DEVNULL)
+        with client_session(port) as session:
+            deadline = time.monotonic() + 60
+            while not list(session.liveliness().get(recorder_token_key(BUOY), timeout=1)):
+                assert time.monotonic() < deadline and rec.poll() is None, "recorder not up"
+                time.sleep(0.1)
+        return rec
+
+    rec = start_recorder()
+    sensor = publish(log, port, speed=15.0)  # 8 s of publishing
+    time.sleep(3.0)
+    rec.kill()
+    rec.wait(10)
+    time.sleep(1.0)
+    rec = start_recorder()
+    assert sensor.wait(timeout=120) == 0
+    deadline = time.monotonic() + 60
+    while not _recorded_up_to(out_dir, blocks[-1].t_last_ns):
+        assert time.monotonic() < deadline, "recorder never wrote the last block"
+        time.sleep(0.2)
+    rec.terminate()
+    assert rec.wait(30) == 0
+    assert d.terminate() == 0
+    recorded = replayed_figures(config, sorted(out_dir.glob("*.mcap")))
+    clean = replayed_figures(config, [log])
+    assert recorded["samples"]["tension"]["accepted"] == 120 * 20
+    assert committed(recorded) == committed(clean)
 
 
 def _recorded_up_to(directory: Path, t_ns: int) -> bool:
