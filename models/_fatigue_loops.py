@@ -287,6 +287,18 @@ def _cycle_damage(ranges, counts, params, ln_s, d):
         d[i] = select(ranges[i] * scale >= cutoff, counts[i] * exp_det(d[i]), 0.0)
 
 
+def damage_loop(ranges, counts, params):
+    """Damage of each cycle (``_cycle_damage``, chunk by chunk): the one S-N evaluation
+    behind ``SNCurve.damage_per_cycle`` as behind the committing loops, hence their bits."""
+    n = ranges.shape[0]
+    d = np.empty(n)
+    ln_s = np.empty(min(CHUNK, n))
+    for i in range(0, n, CHUNK):
+        end = min(i + CHUNK, n)
+        _cycle_damage(ranges[i:end], counts[i:end], params, ln_s, d[i:end])
+    return d
+
+
 @jitable
 def _commit_damage(ranges, counts, d, table, inv_width, committed):
     """Add d[:n] to ``committed`` one by one in order and bin the ranges; returns
@@ -513,6 +525,7 @@ def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_wi
 axial_compiled = compile_loop(axial_loop)
 feed_compiled = compile_loop(feed_loop)
 commit_compiled = compile_loop(commit_loop)
+damage_compiled = compile_loop(damage_loop)
 residue_compiled = compile_loop(residue_loop)
 ticks_compiled = compile_loop(ticks_loop)
 tension_compiled = compile_loop(tension_loop)

@@ -45,6 +45,9 @@ from typing import Literal
 
 import numpy as np
 
+from models._fatigue_loops import damage_compiled as _damage_compiled
+from models._fatigue_loops import damage_loop as _damage_loop
+
 
 LowStress = Literal["miner", "cutoff", "haibach"]
 MeanCorrection = Literal["none", "goodman", "gerber", "walker", "swt"]
@@ -223,42 +226,49 @@ class SNCurve:
             knees.append(e)
         return np.asarray(m), np.asarray(log_a), np.asarray(knees[::-1])
 
-    def effective_range_MPa(self, range_Pa, mean_Pa=None) -> np.ndarray:
-        """Stress range in MPa entering the curve: mean-corrected, times scf and derating."""
-        s = np.asarray(range_Pa, dtype=np.float64) * self.scf
-        if not np.all(s >= 0) or not np.all(np.isfinite(s)):
-            raise ValueError("stress ranges must be finite and >= 0")
-        if self.mean_correction != "none":
-            if mean_Pa is None:
-                raise ValueError(f"mean_correction={self.mean_correction!r} needs mean stresses")
-            sm = np.asarray(mean_Pa, dtype=np.float64) * self.scf
-            s = _mean_corrected(s, sm, self.mean_correction, self.ultimate_Pa, self.walker_gamma)
-        return s * (self.derating / _MPA)
+    @cached_property
+    def kernel_params(self) -> np.ndarray:
+        """The curve as the compiled loops read it (``models._fatigue_loops``): [scale from
+        nominal Pa ranges to the curve's MPa (scf x derating / 1e6), cut-off MPa (0 if
+        none), n_seg, m_i..., ln(dff / a_i)..., ascending segment bounds MPa...]."""
+        m, log_a, bounds = self._segments
+        cutoff = float(self.endurance_MPa) if self.low_stress == "cutoff" else 0.0
+        with np.errstate(divide="ignore"):
+            return np.concatenate(([self.scf * self.derating / _MPA, cutoff, m.size], m,
+                                   np.log(self.dff * 10.0 ** -log_a), bounds))
 
     @cached_property
-    def _power_law(self) -> tuple[np.ndarray, np.ndarray | float, np.ndarray]:
-        """(m, dff / a per segment, ascending bounds in MPa): the per-cycle damage factors,
-        computed once. A single segment keeps a scalar coefficient (numpy's scalar power,
-        as evaluated before this cache existed: the values stay bit-identical)."""
-        m, log_a, bounds = self._segments
-        coef = self.dff * 10.0 ** -log_a[0] if m.size == 1 else self.dff * 10.0 ** -log_a
-        return m, coef, bounds
+    def _mpa_params(self) -> np.ndarray:
+        """``kernel_params`` for ranges already in the curve's MPa (scale 1: exact)."""
+        params = self.kernel_params.copy()
+        params[0] = 1.0
+        return params
+
+    def effective_range_MPa(self, range_Pa, mean_Pa=None) -> np.ndarray:
+        """Stress range in MPa entering the curve: mean-corrected, times scf and derating."""
+        r = np.asarray(range_Pa, dtype=np.float64)
+        if not np.all(r >= 0) or not np.all(np.isfinite(r)):
+            raise ValueError("stress ranges must be finite and >= 0")
+        if self.mean_correction == "none":
+            return r * self.kernel_params[0]  # one product, as the compiled loops scale
+        if mean_Pa is None:
+            raise ValueError(f"mean_correction={self.mean_correction!r} needs mean stresses")
+        sm = np.asarray(mean_Pa, dtype=np.float64) * self.scf
+        s = _mean_corrected(r * self.scf, sm, self.mean_correction, self.ultimate_Pa, self.walker_gamma)
+        return s * (self.derating / _MPA)
 
     def damage_per_cycle(self, range_Pa, counts=1.0, mean_Pa=None) -> np.ndarray:
-        """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa."""
-        return self._damage_of(self.effective_range_MPa(range_Pa, mean_Pa), counts)
+        """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa.
 
-    def _damage_of(self, s: np.ndarray, counts) -> np.ndarray:
-        """Damage of effective ranges ``s`` (MPa, see ``effective_range_MPa``) times counts."""
-        m, coef, bounds = self._power_law
-        if m.size == 1:
-            d = np.power(s, m[0]) * coef
-        else:
-            seg = m.size - 1 - np.searchsorted(bounds, s, side="right")
-            d = np.power(s, m[seg]) * coef[seg]
-        if self.low_stress == "cutoff":
-            d = np.where(s < self.endurance_MPa, 0.0, d)
-        return d * np.asarray(counts, dtype=np.float64)
+        Evaluated by the compiled loops' own per-cycle function (``_fatigue_loops.damage_loop``,
+        exp(m ln S + ln(dff / a)) with their log and exp), so a cycle's damage has the same
+        bits here as in the committed Miner sum."""
+        s, n = np.broadcast_arrays(self.effective_range_MPa(range_Pa, mean_Pa),
+                                   np.asarray(counts, dtype=np.float64))
+        loop = _damage_compiled if _damage_compiled is not None else _damage_loop
+        d = loop(np.ascontiguousarray(s).reshape(-1), np.ascontiguousarray(n).reshape(-1),
+                 self._mpa_params)
+        return d.reshape(s.shape)[()]
 
     def cycles_to_failure(self, range_Pa, mean_Pa=None) -> np.ndarray:
         """N(S) for stress ranges in Pa (inf below a cut-off or for zero range); excludes dff."""
