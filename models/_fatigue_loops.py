@@ -368,11 +368,12 @@ def _commit_chunks(ranges, counts, params, table, inv_width, committed, ln_s, d)
 
 # ------------------------------------------------------------------ residue
 @jitable
-def _residue_cycles(st, pts, r, c):
+def _residue_cycles(st, pts, r, mn, c):
     """The counter's open residue (stack, then the running extreme once the direction is
-    known) counted as ASTM E1049 counts the end of a series, in its order (as
-    ``rainflow_stream._astm_cycles``): ranges into ``r``, counts (0.5 or 1.0) into ``c``;
-    ``pts`` is scratch. All three hold at least the residue's length. Returns the count."""
+    known) counted as ASTM E1049 counts the end of a series (three-point rule, the start
+    point moving on with each half cycle), in its order: ranges into ``r``, means into
+    ``mn``, counts (0.5 or 1.0) into ``c``; ``pts`` is scratch. All four hold at least the
+    residue's length. Returns the count."""
     ns = int(st[NS])
     n = ns + (1 if st[DIR] != 0.0 else 0)
     top = 0
@@ -387,6 +388,7 @@ def _residue_cycles(st, pts, r, c):
             if x < y:
                 break
             r[k] = y
+            mn[k] = 0.5 * (pts[top - 3] + pts[top - 2])
             if top - start == 3:  # Y holds the starting point: a half cycle
                 c[k] = 0.5
                 start += 1
@@ -397,16 +399,25 @@ def _residue_cycles(st, pts, r, c):
             k += 1
     for i in range(start, top - 1):
         r[k] = abs(pts[i] - pts[i + 1])
+        mn[k] = 0.5 * (pts[i] + pts[i + 1])
         c[k] = 0.5
         k += 1
     return k
 
 
+def residue_cycles_loop(st):
+    """``_residue_cycles`` of the counter state ``st``: (3, k) ranges, means, counts."""
+    n = int(st[NS]) + 1
+    out = np.empty((3, n))
+    k = _residue_cycles(st, np.empty(n), out[0], out[1], out[2])
+    return out[:, :k]
+
+
 @jitable
-def _residue_damage(st, params, pts, r, c, ln_s, d):
+def _residue_damage(st, params, pts, r, mn, c, ln_s, d):
     """Miner damage of the residue cycles (``_residue_cycles``), each as ``_cycle_damage``
     computes it, summed in counting order; the arrays are scratch of the residue's length."""
-    k = _residue_cycles(st, pts, r, c)
+    k = _residue_cycles(st, pts, r, mn, c)
     _cycle_damage(r[:k], c[:k], params, ln_s, d)
     total = 0.0
     for i in range(k):
@@ -418,7 +429,7 @@ def residue_loop(st, params):
     """``_residue_damage`` of the counter state ``st`` (one compiled call)."""
     n = int(st[NS]) + 1
     return _residue_damage(st, params, np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                           np.empty(n))
+                           np.empty(n), np.empty(n))
 
 
 # -------------------------------------------------------------------- ticks
@@ -444,7 +455,7 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     ln_s = np.empty(CHUNK)
     d = np.empty(CHUNK)
     ones = np.ones(out_r.shape[0])
-    scratch = np.empty((5, 64))  # the residue's scratch, grown when the residue is longer
+    scratch = np.empty((6, 64))  # the residue's scratch, grown when the residue is longer
     start = stops[k - 1] if k > 0 else 0
     while k < n_ticks:
         stop = stops[k]
@@ -463,9 +474,9 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
         if residue:
             ns = int(st[NS])
             if ns + 1 > scratch.shape[1]:
-                scratch = np.empty((5, 2 * (ns + 1)))
+                scratch = np.empty((6, 2 * (ns + 1)))
             t_residue[k] = _residue_damage(st, params, scratch[0], scratch[1], scratch[2],
-                                           scratch[3], scratch[4])
+                                           scratch[3], scratch[4], scratch[5])
         start = stop
         k += 1
     return k, nc, committed
@@ -527,5 +538,6 @@ feed_compiled = compile_loop(feed_loop)
 commit_compiled = compile_loop(commit_loop)
 damage_compiled = compile_loop(damage_loop)
 residue_compiled = compile_loop(residue_loop)
+residue_cycles_compiled = compile_loop(residue_cycles_loop)
 ticks_compiled = compile_loop(ticks_loop)
 tension_compiled = compile_loop(tension_loop)
