@@ -482,57 +482,6 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     return k, nc, committed
 
 
-# --------------------------------------------------------------------- fused
-def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_width, committed):
-    """Tension -> axial stress -> rainflow -> Miner, chunk by chunk.
-
-    The same computations, in the same order, as ``axial_loop``, ``feed_loop`` and
-    ``commit_loop`` one after the other (hence the same bits), without the block-sized
-    intermediate arrays. Returns (committed, cycles, samples consumed); consumed <
-    len(t) when the stack storage may overflow (grow it and call again with the rest).
-    Each chunk's stresses are checked before the chunk is counted (one pass over the
-    tensions, not two): consumed = -(i + 1) if the stress of t[i] is not finite. Then
-    ``st[:HEADER + ns]`` and ``table[1]`` may hold the earlier chunks' changes, which the
-    caller undoes from a copy when ``t`` was longer than one chunk.
-    """
-    n = t.shape[0]
-    ns = int(st[NS])
-    cand = st[CAND]
-    dirn = st[DIR]
-    hyst = st[HYST]
-    limit = st.shape[0] - HEADER
-    w = min(CHUNK, n)
-    stress = np.empty(w)
-    tp = np.empty(w)
-    kmax = min(limit, ns + n) // 2 + 2  # cycles one chunk can close
-    ranges = np.empty(kmax)
-    means = np.empty(kmax)
-    ln_s = np.empty(kmax)
-    d = np.empty(kmax)
-    ones = np.ones(kmax)
-    cycles = 0.0
-    i = 0
-    while i < n and ns + CHUNK <= limit:
-        end = min(i + CHUNK, n)
-        for j in range(end - i):
-            stress[j] = axial_stress(t[i + j], k, tan_a, cos_a, rg_signed, e_mod)
-        if not _all_finite(stress[:end - i]):
-            for j in range(end - i):
-                if not math.isfinite(stress[j]):
-                    return committed, cycles, -(i + j + 1)
-        j, ns, cand, dirn = _begin(st, stress, 0, end - i, ns, cand, dirn, hyst)
-        m, cand, dirn = _turning_points(stress[j:end - i], cand, dirn, hyst, tp)
-        ns, nc = _close_cycles(st, ns, tp, m, ranges, means, 0)
-        _cycle_damage(ranges[:nc], ones[:nc], params, ln_s, d)
-        committed, more = _commit_damage(ranges[:nc], ones[:nc], d, table, inv_width, committed)
-        cycles += more
-        i = end
-    st[NS] = ns
-    st[CAND] = cand
-    st[DIR] = dirn
-    return committed, cycles, i
-
-
 axial_compiled = compile_loop(axial_loop)
 feed_compiled = compile_loop(feed_loop)
 commit_compiled = compile_loop(commit_loop)
@@ -540,4 +489,3 @@ damage_compiled = compile_loop(damage_loop)
 residue_compiled = compile_loop(residue_loop)
 residue_cycles_compiled = compile_loop(residue_cycles_loop)
 ticks_compiled = compile_loop(ticks_loop)
-tension_compiled = compile_loop(tension_loop)

@@ -2,10 +2,10 @@
 
 ``MinerAccumulator(sn_curve, histogram_edges_Pa=None, rate_window_s=86400.0,
 rate_buckets=24, reference_cycles=1e7, backend="auto")``
-  ``add_cycles(ranges_Pa, counts, means_Pa=None, time_s=None) -> float``
+  ``add_cycles(ranges_Pa, means_Pa, counts, time_s=None) -> float``
       commit closed cycles (never revised); returns the damage they added. ``time_s``
       (seconds, any epoch, non-decreasing) dates them for the damage rate.
-  ``set_provisional(ranges_Pa, counts, means_Pa=None) -> float``
+  ``set_provisional(ranges_Pa, means_Pa, counts) -> float``
       replace the provisional damage (the rainflow residue's half cycles).
   ``set_provisional_from(rainflow) -> float``  the same from a ``StreamingRainflow``.
   ``residue_damage(rainflow) -> float``  that figure without storing it (one compiled pass,
@@ -110,8 +110,11 @@ class MinerAccumulator:
         return self._table[1]
 
     # ------------------------------------------------------------------ updating
-    def add_cycles(self, ranges_Pa, counts, means_Pa=None, time_s: float | None = None) -> float:
-        """Commit closed cycles; return the damage they add (see module docstring)."""
+    def add_cycles(self, ranges_Pa, means_Pa, counts, time_s: float | None = None) -> float:
+        """Commit closed cycles; return the damage they add (see module docstring).
+
+        The order of ``StreamingRainflow.feed``'s result: ``add_cycles(*rainflow.feed(x))``;
+        ``means_Pa`` may be None for a curve without mean-stress correction."""
         r = np.asarray(ranges_Pa, dtype=np.float64)
         n = np.asarray(counts, dtype=np.float64)
         if n.shape != r.shape:
@@ -170,7 +173,7 @@ class MinerAccumulator:
         np.add.at(self._hist, idx[inside], n[inside])
         return self._committed - start
 
-    def set_provisional(self, ranges_Pa, counts, means_Pa=None) -> float:
+    def set_provisional(self, ranges_Pa, means_Pa, counts) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""
         d = self.sn_curve.damage_per_cycle(np.asarray(ranges_Pa, dtype=np.float64),
                                            np.asarray(counts, dtype=np.float64), means_Pa)

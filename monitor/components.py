@@ -140,7 +140,7 @@ class Component:
     def commit(self, tick_end_ns: int) -> None:
         """End of an alert tick: add the pending cycles to the Miner sum in one step."""
         ranges, means, counts = self._pending
-        self.miner.add_cycles(ranges, counts, means, time_s=tick_end_ns / 1e9)
+        self.miner.add_cycles(ranges, means, counts, time_s=tick_end_ns / 1e9)
         self._pending = [_EMPTY, _EMPTY, _EMPTY]
 
     def run_ticks(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],

@@ -71,12 +71,12 @@ def test_every_path_gives_the_same_bits(name, cycles):
     # committed Miner sums, compiled and numpy: each cycle's damage added in order
     for backend in ("numba", "numpy"):
         miner = MinerAccumulator(curve, backend=backend)
-        assert miner.add_cycles(ranges, counts) == _seq_sum(0.0, d)
+        assert miner.add_cycles(ranges, None, counts) == _seq_sum(0.0, d)
         assert miner.damage_committed == _seq_sum(0.0, d)
     # one cycle per accumulator: the committed figure is the cycle's damage itself
     for i in range(0, N, 997):
         miner = MinerAccumulator(curve)
-        miner.add_cycles(ranges[i:i + 1], counts[i:i + 1])
+        miner.add_cycles(ranges[i:i + 1], None, counts[i:i + 1])
         assert miner.damage_committed == d[i]
 
 
@@ -87,7 +87,7 @@ def test_mean_corrected_paths_give_the_same_bits(cycles):
     np.testing.assert_array_equal(d, oracle(curve, ranges, counts, means))
     assert d.max() > 0 and np.count_nonzero(d) > N // 2
     miner = MinerAccumulator(curve)
-    miner.add_cycles(ranges, counts, means)
+    miner.add_cycles(ranges, means, counts)
     assert miner.damage_committed == _seq_sum(0.0, d)
 
 
