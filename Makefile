@@ -41,6 +41,7 @@ alertmanager:
 
 test: $(VENV)/.installed-test chromium alertmanager
 	cd $(CURDIR) && $(VENV)/bin/lint-imports --no-cache
+	$(PY) -m mypy
 	$(PY) -m pytest -q
 
 # every benchmark script prints its figures (the 30-day replay takes a few minutes)

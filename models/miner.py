@@ -233,7 +233,7 @@ class MinerAccumulator:
         return self._rate
 
     def _rate_per_day(self) -> float:
-        if self._t_last is None or self._t_last <= self._t_first:
+        if self._t_last is None or self._t_first is None or self._t_last <= self._t_first:
             return 0.0
         width = self.rate_window_s / self.rate_buckets
         newest = math.floor(self._t_last / width)

@@ -213,12 +213,19 @@ class SNCurve:
         return cls.basquin(3.0, float(np.log10(6.0e10)), name="DNV-OS-E301 studless chain", **options)
 
     # -------------------------------------------------------------------- evaluation
+    @property
+    def _endurance(self) -> float:
+        """``endurance_MPa``, which ``__post_init__`` requires for a cut-off or Haibach tail."""
+        if self.endurance_MPa is None:
+            raise ValueError(f"SNCurve {self.name!r} has no endurance_MPa")
+        return float(self.endurance_MPa)
+
     @cached_property
     def _segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(m, log_a, ascending lower bounds in MPa) including a Haibach tail."""
         m, log_a, knees = list(self.m), list(self.log_a), list(self.knees_MPa)
         if self.low_stress == "haibach":
-            e = float(self.endurance_MPa)
+            e = self._endurance
             m_tail = 2.0 * m[-1] - 1.0
             log_n_e = log_a[-1] - m[-1] * np.log10(e)
             m.append(m_tail)
@@ -232,7 +239,7 @@ class SNCurve:
         nominal Pa ranges to the curve's MPa (scf x derating / 1e6), cut-off MPa (0 if
         none), n_seg, m_i..., ln(dff / a_i)..., ascending segment bounds MPa...]."""
         m, log_a, bounds = self._segments
-        cutoff = float(self.endurance_MPa) if self.low_stress == "cutoff" else 0.0
+        cutoff = self._endurance if self.low_stress == "cutoff" else 0.0
         with np.errstate(divide="ignore"):
             return np.concatenate(([self.scf * self.derating / _MPA, cutoff, m.size], m,
                                    np.log(self.dff * 10.0 ** -log_a), bounds))
@@ -291,7 +298,7 @@ class SNCurve:
         seg = np.searchsorted(n_knees, n, side="left")
         s = 10.0 ** ((log_a[seg] - np.log10(n)) / m[seg])
         if self.low_stress == "cutoff":
-            s = np.maximum(s, self.endurance_MPa)
+            s = np.maximum(s, self._endurance)
         return s * _MPA / (self.scf * self.derating)
 
     # ------------------------------------------------------------------ persistence
