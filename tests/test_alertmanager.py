@@ -28,9 +28,9 @@ from daemon_harness import BUOY, ENV, DaemonProcess, free_port, write_config
 from test_daemon_live import HARNESS, Client, _block
 
 AM_BIN = shutil.which("prometheus-alertmanager") or shutil.which("alertmanager")
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.integration, pytest.mark.skipif(
     AM_BIN is None, reason="prometheus-alertmanager is not installed (make test installs the "
-                           "Debian package prometheus-alertmanager when it can)")
+                           "Debian package prometheus-alertmanager when it can)")]
 RESOLVE_TIMEOUT_S = 5
 
 

@@ -40,6 +40,8 @@ from daemon_harness import (  # noqa: E402
     ENV, DaemonProcess, free_port, query_state, wait_until_state,
 )
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 SHIPPED = Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml"
 BUOY = "vaps"
 T0_NS = 1_750_000_000 * 10**9

@@ -108,6 +108,7 @@ def _buoymon(*args: str, cwd: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.integration  # the CLI end to end
 def test_forecast_command_of_the_seed_storm(tmp_path):
     """Ten hours of the seed 004 storm as a forecast: the projection reaches the demo's
     figure (about 0.6 in 10 h, docs/README) and dates the 0.1 and 0.5 alert thresholds."""

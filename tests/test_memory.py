@@ -24,6 +24,7 @@ def test_compiler_mappings_parses_proc_maps(tmp_path):
     assert compiler_mappings(str(tmp_path / "absent")) == []
 
 
+@pytest.mark.integration  # a fresh interpreter
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux only")
 def test_release_drops_the_compiler_pages_and_kernels_still_run():
     code = textwrap.dedent("""

@@ -39,7 +39,7 @@ def stress() -> np.ndarray:
     return conductor_stress(_wave_tension(120_000, 1), HelixCable.vaps_biw(), "left")
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
+@pytest.mark.parametrize("backend", ["numba", pytest.param("numpy", marks=pytest.mark.slow)])
 def test_committed_damage_is_bit_identical_for_any_split(stress, backend):
     curve = SNCurve.vaps_copper()
     whole = _replay(stress, [], curve, backend)

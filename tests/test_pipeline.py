@@ -120,6 +120,7 @@ def test_axial_component_is_tension_over_area(hooks):
     assert rep["components"]["conductor"]["damage"] > 2 * rep["components"]["right"]["damage"]
 
 
+@pytest.mark.slow
 def test_same_samples_same_results_for_any_blocking(hooks):
     config = two_components()
     data = sea(900, gap=(300, 340))

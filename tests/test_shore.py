@@ -22,6 +22,8 @@ from replay.reader import iter_blocks
 from replay.runner import run_blocks
 from replay.writer import LogWriter
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 ROOT = Path(__file__).resolve().parents[1]
 T0_NS = 1_750_000_000 * 10**9
 SECONDS = 120
