@@ -41,6 +41,8 @@ from typing import Literal
 
 import numpy as np
 
+from models import _fatigue_loops as _loops
+
 # the compiled loop and the layout of the state vector it shares with the numpy backend
 from models._fatigue_loops import CAND as _CAND
 from models._fatigue_loops import CHUNK as _CHUNK
@@ -51,8 +53,6 @@ from models._fatigue_loops import NS as _NS
 from models._fatigue_loops import STARTED as _STARTED
 from models._fatigue_loops import feed_compiled as _feed_compiled
 from models._fatigue_loops import feed_loop as _feed_loop
-from models._fatigue_loops import residue_cycles_compiled as _residue_cycles_compiled
-from models._fatigue_loops import residue_cycles_loop as _residue_cycles_loop
 
 Backend = Literal["auto", "numba", "numpy"]
 
@@ -160,7 +160,7 @@ class StreamingRainflow:
         may still pair two residue ranges into a full cycle (1.0) that the four-point rule
         keeps open, which is what makes closed + residue cycles total the ASTM counts.
         """
-        loop = _residue_cycles_compiled if _residue_cycles_compiled is not None else _residue_cycles_loop
+        loop = _loops.residue_cycles_compiled or _loops.residue_cycles_loop
         cycles = loop(self._st)
         return cycles[0], cycles[1], cycles[2]
 

@@ -45,8 +45,7 @@ from typing import Literal
 
 import numpy as np
 
-from models._fatigue_loops import damage_compiled as _damage_compiled
-from models._fatigue_loops import damage_loop as _damage_loop
+from models import _fatigue_loops as _loops
 
 
 LowStress = Literal["miner", "cutoff", "haibach"]
@@ -272,7 +271,8 @@ class SNCurve:
         bits here as in the committed Miner sum."""
         s, n = np.broadcast_arrays(self.effective_range_MPa(range_Pa, mean_Pa),
                                    np.asarray(counts, dtype=np.float64))
-        loop = _damage_compiled if _damage_compiled is not None else _damage_loop
+        # looked up per call: the compiled loop is loaded (numba imported) only when used
+        loop = _loops.damage_compiled or _loops.damage_loop
         d = loop(np.ascontiguousarray(s).reshape(-1), np.ascontiguousarray(n).reshape(-1),
                  self._mpa_params)
         return d.reshape(s.shape)[()]
