@@ -269,8 +269,10 @@ class SNCurve:
         Evaluated by the compiled loops' own per-cycle function (``_fatigue_loops.damage_loop``,
         exp(m ln S + ln(dff / a)) with their log and exp), so a cycle's damage has the same
         bits here as in the committed Miner sum."""
-        s, n = np.broadcast_arrays(self.effective_range_MPa(range_Pa, mean_Pa),
-                                   np.asarray(counts, dtype=np.float64))
+        s = self.effective_range_MPa(range_Pa, mean_Pa)
+        n = np.asarray(counts, dtype=np.float64)
+        if n.shape != s.shape:
+            s, n = np.broadcast_arrays(s, n)
         # looked up per call: the compiled loop is loaded (numba imported) only when used
         loop = _loops.damage_compiled or _loops.damage_loop
         d = loop(np.ascontiguousarray(s).reshape(-1), np.ascontiguousarray(n).reshape(-1),
