@@ -203,7 +203,7 @@ def payload_bound(n: int, nf: int) -> int:
 def put_payload(out, k, t, vals, a, b):
     """Encode samples ``a:b`` of ``t``/``vals`` (n_fields, N) at ``out[k]``; return end position.
 
-    Bulk writers call it per block into one buffer; :func:`encode_samples` wraps it.
+    The numba twin of :func:`encode_samples` for bulk writers (same bytes).
     """
     n = b - a
     out[k] = 0x09
@@ -233,18 +233,38 @@ def put_payload(out, k, t, vals, a, b):
     return k
 
 
+@lru_cache(maxsize=4096)
+def _varint(x: int) -> bytes:
+    if x < 0x80:
+        return bytes((x,))
+    out = bytearray()
+    while x >= 0x80:
+        out.append((x & 0x7F) | 0x80)
+        x >>= 7
+    out.append(x)
+    return bytes(out)
+
+
+_VALUE_TAGS = tuple(bytes(((FIRST_VALUE_FIELD + i) << 3 | 2,)) for i in range(8))
+
+
 def encode_samples(t_ns: np.ndarray, values: Sequence[np.ndarray]) -> bytes:
     """Payload bytes of one block: ``t_ns`` int64 (n,), ``values`` float64 arrays in field order.
 
     The caller guarantees the shapes (``SampleBlock`` does); ``n`` must be at least 1.
-    One encoder for live blocks and bulk writers: :func:`put_payload` on this block alone.
     """
     n = t_ns.shape[0]
-    vals = np.empty((len(values), n))
-    for f, v in enumerate(values):
-        vals[f] = v
-    out = np.empty(payload_bound(n, vals.shape[0]), np.uint8)
-    return out[:put_payload(out, 0, np.ascontiguousarray(t_ns, dtype=np.int64), vals, 0, n)].tobytes()
+    parts = [b"\x09", t_ns[:1].astype("<i8", copy=False).tobytes()]
+    period = _regular_period(t_ns)
+    if period > 0:
+        parts += (b"\x10", _varint(period))
+    elif period < 0:
+        packed = _zigzag_varints(t_ns).tobytes()
+        parts += (b"\x1a", _varint(len(packed)), packed)
+    size = _varint(8 * n)
+    for tag, v in zip(_VALUE_TAGS, values):
+        parts += (tag, size, v.astype("<f8", copy=False).tobytes())
+    return b"".join(parts)
 
 
 def encode_block(block: SampleBlock) -> bytes:
