@@ -177,14 +177,11 @@ class Component:
         cycles = tuple(np.concatenate(p) for p in zip(*parts)) if parts else (_EMPTY,) * 3
         return TickRun(cycles, out)
 
-    def _committed_with_pending(self) -> float:
-        """The committed damage the next tick end will give: the pending cycles' damage added
-        one by one in closure order, as ``MinerAccumulator.add_cycles`` adds it (same bits)."""
-        ranges, means, counts = self._pending
+    def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
+        """Damage of the pending cycles, each as the committed ones' (``damage_per_cycle``)."""
         if ranges.shape[0] == 0:
-            return self.miner.damage_committed
-        d = self.sn_curve.damage_per_cycle(ranges, counts, means)
-        return float(np.cumsum(np.concatenate(([self.miner.damage_committed], d)))[-1])
+            return 0.0
+        return float(np.sum(self.sn_curve.damage_per_cycle(ranges, counts, means)))
 
     def figures(self) -> dict[str, float]:
         """damage (with pending cycles and the open residue as half cycles), committed, rate, life.
@@ -192,7 +189,7 @@ class Component:
         ``damage_committed`` includes cycles closed since the last tick, computed fresh here
         and not accumulated, so reading figures never changes the state.
         """
-        committed = self._committed_with_pending()
+        committed = self.miner.damage_committed + self._damage(*self._pending)
         damage = committed + self.miner.residue_damage(self.rainflow)
         rate = float(self.miner.damage_rate_per_day)
         return {

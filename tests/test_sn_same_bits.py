@@ -108,8 +108,9 @@ def test_residue_damage_is_the_per_cycle_damage_summed(name):
     assert MinerAccumulator(curve).residue_damage(rf) == want
 
 
-def test_component_figures_before_the_tick_equal_the_commit():
-    """Figures read between ticks add the pending cycles as the commit will add them."""
+def test_component_figures_price_pending_cycles_as_the_commit_does():
+    """Figures read between ticks add the pending cycles, each cycle's damage the bits the
+    commit at the tick end gives it (one S-N function; before issue 18 a second formula)."""
     config = default_config()
     comp = Component(dataclasses.replace(config.components[0]), build_cable(config), config.fatigue)
     rng = np.random.default_rng(9)
@@ -118,8 +119,11 @@ def test_component_figures_before_the_tick_equal_the_commit():
     comp.feed(stress[:20_000])
     comp.commit(10**9)
     comp.feed(stress[20_000:])
-    assert comp._pending[0].size > 100
-    before = comp.figures()["damage_committed"]
-    assert before > comp.miner.damage_committed
-    comp.commit(2 * 10**9)
-    assert comp.miner.damage_committed == before
+    ranges, means, counts = comp._pending
+    assert ranges.size > 100
+    d = oracle(comp.sn_curve, ranges, counts)
+    assert comp.figures()["damage_committed"] == comp.miner.damage_committed + float(np.sum(d))
+    for i in range(0, ranges.size, 7):  # each pending cycle, committed on its own
+        miner = MinerAccumulator(comp.sn_curve)
+        miner.add_cycles(ranges[i:i + 1], means[i:i + 1], counts[i:i + 1])
+        assert miner.damage_committed == d[i]
