@@ -172,7 +172,7 @@ class Component:
     def commit(self, tick_end_ns: int) -> None:
         """End of an alert tick: add the pending cycles to the Miner sum in one step."""
         ranges, means, counts = self._pending
-        self.miner.add_cycles(ranges, counts, means, time_s=tick_end_ns / 1e9)
+        self.miner.add_cycles(ranges, means, counts, time_s=tick_end_ns / 1e9)
         self._pending = [_EMPTY, _EMPTY, _EMPTY]
 
     def run_ticks(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],
@@ -210,6 +210,7 @@ class Component:
         return TickRun(cycles, out)
 
     def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
+        """Damage of the pending cycles, each as the committed ones' (``damage_per_cycle``)."""
         if ranges.shape[0] == 0:
             return 0.0
         return float(np.sum(self.sn_curve.damage_per_cycle(ranges, counts, means)))

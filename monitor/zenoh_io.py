@@ -20,13 +20,13 @@ import queue
 import time
 from typing import Any, NamedTuple, Protocol
 
-import numpy as np
 import zenoh
 import zenoh.ext
 
 from monitor.blocks import SampleBlock, parse_sensor_topic, validate_buoy_id
 from monitor.daemon_config import ZenohConfig
 from monitor.recorder import ChannelSpec
+from monitor.strict_json import to_json_bytes  # noqa: F401  (callers use zenoh_io.to_json_bytes)
 
 
 def session_config_dict(zc: ZenohConfig) -> dict[str, Any]:
@@ -211,23 +211,6 @@ def declare_data_publisher(session: zenoh.Session, key: str,
 def declare_json_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     """A reliable, blocking publisher for JSON documents (status, alerts)."""
     return declare_data_publisher(session, key, "application/json")
-
-
-def to_json_bytes(doc: Any) -> bytes:
-    """Strict JSON (non-finite floats become null) encoded as UTF-8."""
-    return json.dumps(_finite(doc), separators=(",", ":"), allow_nan=False).encode()
-
-
-def _finite(x: Any) -> Any:
-    if isinstance(x, (np.generic, np.ndarray)):
-        return _finite(x.tolist())
-    if isinstance(x, float):
-        return x if x == x and x not in (float("inf"), float("-inf")) else None
-    if isinstance(x, dict):
-        return {str(k): _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    return x
 
 
 class BlockCodec(Protocol):

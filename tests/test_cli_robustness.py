@@ -12,6 +12,8 @@ import pytest
 from monitor.cli import main
 from replay.writer import LogWriter, Series
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 T0 = 946_684_800 * 10**9  # 2000-01-01T00:00:00Z
 
 

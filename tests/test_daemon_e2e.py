@@ -40,6 +40,9 @@ from replay.writer import LogWriter  # noqa: E402
 from daemon_harness import (  # noqa: E402
     ENV, DaemonProcess, free_port, query_state, wait_until_state,
 )
+from waiting import wait_for  # noqa: E402
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 SHIPPED = Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml"
 BUOY = "vaps"
@@ -180,18 +183,30 @@ def test_live_over_zenoh_equals_replay_of_the_recording(tmp_path):
         pub = publish(log, port, speed=50.0)
         out, err = pub.communicate(timeout=120)
         assert pub.returncode == 0 and out.strip() == str(len(blocks)), err
-        st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
-                              buoy=BUOY)["status"]
+        full = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                                buoy=BUOY)
+        st = full["status"]
         # the newest load sample that fed fatigue, and its wall-clock age (fatigue_blind)
         assert blocks[-1].t_last_ns - 20 * 10**9 < st["load_t_ns"] <= blocks[-1].t_last_ns
         assert 0 <= st["fatigue_feed_age_s"] < 60.0 and st["health"]["ok"]
-        time.sleep(1.0)  # alerts go out before the reply that ended the wait: margin only
+        # until every firing transition the daemon has emitted by now has arrived as a PUT
+        n_fired = sum(a["state"] == "firing" for a in full["state"]["pipeline"]["alert_history"])
+        received = []
+
+        def all_fired_arrived() -> bool:
+            while not alerts.empty():
+                received.append(alerts.get()[2])
+            return sum(bool(p) and json.loads(p)["rule"] not in LIVE_RULES
+                       for p in received) >= n_fired
+
+        assert wait_for(all_fired_arrived, 30)
         sub.undeclare()
     assert d.terminate() == 0
     published = []  # alert PUTs (a clearing alert is a DELETE, with an empty payload)
     live_rules = set()  # the wall-clock rules' alerts (the 2025 log is behind the logger clock)
     while not alerts.empty():
-        payload = alerts.get()[2]
+        received.append(alerts.get()[2])
+    for payload in received:
         if payload:
             rec = json.loads(payload)
             if rec["rule"] in LIVE_RULES:

@@ -2,8 +2,12 @@
 
 import json
 
+import pytest
+
 from monitor.cli import main
 from replay.cmd_demo import AS_BUILT, OPPOSITE, TERMINATION, comparison, demo_config
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 
 def test_demo_config_has_both_lays_of_the_same_cable():

@@ -80,6 +80,7 @@ def test_buoy_job_is_the_replay_command_path_with_state_across_files(archive, se
     assert rep["samples"]["tension"]["accepted"] == FILES * MINUTES * 60 * 20
 
 
+@pytest.mark.integration  # a process pool
 def test_process_pool_equals_serial_to_the_last_bit(serial):
     archives, reports = serial
     pooled = run_fleet(archives, fleet_config(), workers=2)
@@ -87,6 +88,7 @@ def test_process_pool_equals_serial_to_the_last_bit(serial):
     assert json.dumps(pooled) == json.dumps(reports)
 
 
+@pytest.mark.integration  # a dask cluster
 def test_dask_local_cluster_equals_serial_to_the_last_bit(serial):
     distributed = pytest.importorskip("dask.distributed")
     archives, reports = serial

@@ -12,6 +12,8 @@ from monitor.cli import main
 from monitor.daemon_config import ZenohConfig
 from replay.reader import LogReader
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 
 def free_port() -> int:
     with socket.socket() as s:
