@@ -14,13 +14,14 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      (p99 on a fixed histogram, ~3 N bins), and how many samples
                                      were ``samples_measured`` / ``samples_estimated``, and
                                      ``samples_estimate_clamped``: estimates of motion outside
-                                     the estimator's table, held at its edge
+                                     the estimator's table, held at its edge;
+                                     ``breaking_load_N`` the configured breaking load
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
                                      ``damage_by_source`` (monitor.damage_split),
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
                                      ``remaining_life_days`` (null = nothing accrues),
-                                     ``kind``, ``lay``}
+                                     ``kind``, ``lay``, ``derating``}
 ``alerts``                           alert transitions (monitor.alerts records as dicts), the
                                      newest 10,000; ``alerts_dropped`` counts older ones
 ``inputs``                           files read and the reader's statistics (lost data)
@@ -43,6 +44,9 @@ from typing import Any, Mapping, Sequence
 
 from monitor.atomic_file import atomic_write_text
 from monitor.config import Config
+from monitor.viz.findings import findings, findings_text
+from monitor.viz.human import remaining_life_text
+from monitor.viz.report_data import parse_report
 
 REPORT_VERSION = 1
 
@@ -82,6 +86,7 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
             "remaining_life_days": figures["remaining_life_days"],
             "kind": c.kind,
             "lay": c.lay,
+            "derating": c.derating,
         }
         if "damage_by_source" in figures:
             comps[name]["damage_by_source"] = figures["damage_by_source"]
@@ -94,7 +99,8 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
         "time_start_ns": pipeline_report["time_start_ns"],
         "time_end_ns": pipeline_report["time_end_ns"],
         "samples": pipeline_report["samples"],
-        "tension_N": pipeline_report["tension_N"],
+        "tension_N": {**pipeline_report["tension_N"],
+                      "breaking_load_N": config.load.breaking_load_N},
         "load_source_at_end": pipeline_report["load_source"],
         "motion_sensor": pipeline_report.get("motion_sensor"),
         "load_problems": list(pipeline_report.get("load_problems", [])),
@@ -129,8 +135,13 @@ def _num(x: float | str | None, fmt: str) -> str:
 
 
 def summary_text(report: Mapping[str, Any]) -> str:
-    """A few lines for a person: what was read, the load, the damage per component, alerts."""
-    lines = [f"buoy {report['buoy_id']}: {report['time_start'] or '-'} .. {report['time_end'] or '-'}"]
+    """For a person: the findings (as on the HTML page; monitor.viz.findings), then the
+    details: what was read, the load, the damage per component, alerts."""
+    lines = []
+    if report["time_start"] is not None:  # without samples there is no finding to state
+        lines += [findings_text(findings(parse_report(report))), "", "Details:"]
+    lines.append(f"buoy {report['buoy_id']}: {report['time_start'] or '-'} .. "
+                 f"{report['time_end'] or '-'}")
     for sensor, s in report["samples"].items():
         rej = {k: v for k, v in s["rejected"].items() if v}
         rej_text = ", ".join(f"{k} {v}" for k, v in rej.items()) or "none"
@@ -149,14 +160,16 @@ def summary_text(report: Mapping[str, Any]) -> str:
     for problem in report.get("load_problems") or []:
         lines.append(f"  LOAD: {problem}")
     lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
-                 f"{'max stress':>11s} {'life left':>11s}")
+                 f"{'max stress':>11s}  life left")
     for name, c in report["components"].items():
-        life = _num(c["remaining_life_days"], ".3g")
+        life = c["remaining_life_days"]
+        # null: nothing accrues (the writer's form of an infinite life)
+        life = math.inf if life is None else float(life)
         peak = c["max_stress_Pa"]
         lines.append(
             f"  {name:24s} {c['damage']:11.3e} {c['damage_committed']:11.3e} "
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
-            f"{life if life == '-' else life + ' d':>11s}"
+            f" {remaining_life_text(life)}"
         )
     for name, c in report["components"].items():
         split = c.get("damage_by_source")
