@@ -93,6 +93,7 @@ class Component:
     damage_history: Series | None = None
     hist_edges_Pa: np.ndarray | None = None
     hist_counts: np.ndarray | None = None
+    hist_max_range_Pa: float | None = None
     sn_ranges_Pa: np.ndarray | None = None
     sn_cycles: np.ndarray | None = None
     sn_endurance_Pa: float | None = None
@@ -182,6 +183,8 @@ def _component(name: str, c: Any) -> Component:
             raise ValueError(f"report: {where}.histogram.edges_Pa: need >= 2 increasing edges")
         opt["hist_edges_Pa"] = edges
         opt["hist_counts"] = _array(h.get("counts"), f"{where}.histogram.counts", len(edges) - 1)
+        if h.get("max_range_Pa") is not None:
+            opt["hist_max_range_Pa"] = _num(h["max_range_Pa"], f"{where}.histogram.max_range_Pa")
     if "sn_curve" in c:
         s = _mapping(c["sn_curve"], f"{where}.sn_curve")
         ranges = _array(s.get("ranges_Pa"), f"{where}.sn_curve.ranges_Pa")
