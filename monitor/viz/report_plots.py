@@ -117,7 +117,8 @@ def plot_tension(r: Report) -> Figure:
     ax = fig.add_subplot()
     h = r.tension_history
     if h is not None and len(h.t_s):
-        d = _dates(h.t_s)
+        # the first bin starts on the bin grid, up to a bin before the first sample
+        d = _dates(np.maximum(h.t_s, r.time_start_ns / 1e9))
         ax.fill_between(d, h.columns["min"] / 1e3, h.columns["max"] / 1e3, step="post",
                         color="#9ecae1", label="min-max per bin")
         ax.plot(d, h.columns["mean"] / 1e3, drawstyle="steps-post", color="#08519c", label="mean")
