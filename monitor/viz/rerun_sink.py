@@ -7,17 +7,18 @@ have accumulated, so logging costs a few numpy operations per step and one Rerun
 per flush; memory is bounded by the flush thresholds.
 
 Timelines: ``sensor_time`` (timestamp, ns since the epoch) and ``sample`` (index of the load
-sample since the sink started). Entities (SI units; the unit is in each series' display name):
+sample since the sink started). Entities (display units as the report's page and terminal:
+kN for tension, MPa for stress; the unit is in each series' display name):
 
 ==================================  ==========================  =============================
 entity                              archetype                   content
 ==================================  ==========================  =============================
-``tension/load``                    Scalars [min, max]          load used for fatigue (N),
+``tension/load``                    Scalars [min, max]          load used for fatigue (kN),
                                                                 envelope per ``envelope_s``
-``tension/measured``                Scalars                     measured tension (N)
-``tension/estimated``               Scalars                     motion estimate (N)
+``tension/measured``                Scalars                     measured tension (kN)
+``tension/estimated``               Scalars                     motion estimate (kN)
 ``tension/source``                  StateChange                 measured / estimated / none
-``stress/<component>``              Scalars [min, max]          conductor stress (Pa)
+``stress/<component>``              Scalars [min, max]          conductor stress (MPa)
 ``damage/<component>/committed``    Scalars                     Miner sum of closed cycles
 ``damage/<component>/provisional``  Scalars                     committed + open residue
 ``damage_rate/<component>``         Scalars                     damage per day (1/d)
@@ -36,6 +37,10 @@ entity                              archetype                   content
 ``position/anchor``, ``position/watch_circle``  Points2D / LineStrips2D (static)
 ``mooring/line``                    LineStrips3D                cable shape (m, z up)
 ==================================  ==========================  =============================
+
+Rows are logged at sensor times of the data: the slow rows (damage, health, histograms, shape)
+at the step's newest load sample, none before the first sample any block carried, so the
+``sensor_time`` timeline spans the replayed data and no panel opens empty.
 
 With ``envelope_s = 0`` the ``tension/load`` and ``stress/*`` entities hold every sample as a
 single scalar instead of a [min, max] pair.
@@ -247,7 +252,8 @@ class RerunSink:
         self._alert_state: dict[str, str] = {}  # state lane -> last state logged
         self._source = ""
         self._samples = 0
-        self._now_ns = 0
+        self._now_ns = 0  # sensor time the sink's slow rows are logged at (see _row_time)
+        self._first_data_ns: int | None = None  # first sample of any raw block
         self._next_slow = self._next_snap = self._next_shape = self._last_snap = 0
         self._last_fix: tuple[int, float, float] | None = None
         self._origin: tuple[float, float] | None = None
@@ -276,9 +282,12 @@ class RerunSink:
             self._want_blueprint = False
         n0, n = self._samples, len(step.t_ns)
         self._samples += n
-        self._now_ns = max(self._now_ns, int(step.now_ns))
-        high = {"tension/load": step.tension_N}
-        high.update({f"stress/{name}": c.stress_Pa for name, c in comps.items()})
+        t = self._row_time(step)
+        if t is not None:
+            self._now_ns = max(self._now_ns, t)
+        # display units, as the report's page and terminal: kN, MPa
+        high = {"tension/load": step.tension_N / 1e3}
+        high.update({f"stress/{name}": c.stress_Pa / 1e6 for name, c in comps.items()})
         self._high.add(step.t_ns, n0, high)
         for name, comp in comps.items():
             hist = self._hist.get(name)
@@ -290,13 +299,16 @@ class RerunSink:
         health[1] += int(sum(step.rejected.values()))
         for sensor, counts in step.qc.items():
             self._qc[entity_part(sensor)] = counts
-        if step.load_source != self._source:
-            self._source = step.load_source
-            self._rows[("tension/source", "state")].add(step.now_ns, self._samples,
-                                                        step.load_source)
         for record in step.alerts:
             self.on_alert(record)
-        t = int(step.now_ns)
+        if t is None:  # before the first sample: nothing to show yet
+            self._pending += n + 1
+            self._maybe_flush()
+            return
+        t = self._now_ns
+        if step.load_source != self._source:
+            self._source = step.load_source
+            self._rows[("tension/source", "state")].add(t, self._samples, step.load_source)
         if t >= self._next_slow:
             self._sample_slow(step, comps)
             self._next_slow = self._next_after(t, self._slow_ns)
@@ -304,7 +316,7 @@ class RerunSink:
             self._snapshot_histograms(t)
             self._next_snap = self._next_after(t, self._snap_ns)
         if self._shape is not None and t >= self._next_shape:
-            if self._log_shape(step):
+            if self._log_shape(step, t):
                 self._next_shape = self._next_after(t, self._shape_ns)
         self._pending += n + 1
         self._maybe_flush()
@@ -312,6 +324,10 @@ class RerunSink:
     @_locked
     def on_block(self, block: SampleBlock) -> None:
         """Raw sensor blocks the pipeline does not summarise in a step: GNSS positions."""
+        if len(block):
+            first = int(block.t_ns.min())
+            if self._first_data_ns is None or first < self._first_data_ns:
+                self._first_data_ns = first
         if block.sensor != "gnss" or not len(block):
             return
         lat, lon = block.fields["lat_deg"], block.fields["lon_deg"]
@@ -385,6 +401,18 @@ class RerunSink:
 
     # ---- internals --------------------------------------------------------------------------
 
+    def _row_time(self, step: StepResult) -> int | None:
+        """Sensor time for the step's slow rows (damage, health, histograms, shape): its
+        newest load sample, or ``step.now_ns`` when later (live). The replay's ``now_ns`` is
+        its processing horizon, which lags the data by the reorder window: rows there would
+        start the timeline before the first sample. None while that time precedes the data."""
+        t = int(step.now_ns)
+        if len(step.t_ns):
+            t = max(t, int(step.t_ns.max()))
+        if self._first_data_ns is not None and t < self._first_data_ns:
+            return None
+        return t
+
     @staticmethod
     def _next_after(t_ns: int, interval_ns: int) -> int:
         return (t_ns // interval_ns + 1) * interval_ns if interval_ns > 0 else t_ns + 1
@@ -395,11 +423,11 @@ class RerunSink:
             self.flush()
 
     def _sample_slow(self, step: StepResult, comps: Mapping[str, Any]) -> None:
-        t, s = int(step.now_ns), self._samples
+        t, s = self._now_ns, self._samples
         for entity, value in (("tension/measured", step.measured_tension_N),
                               ("tension/estimated", step.estimated_tension_N)):
             if math.isfinite(value):
-                self._rows[(entity, "scalar")].add(t, s, float(value))
+                self._rows[(entity, "scalar")].add(t, s, float(value) / 1e3)  # kN
         for name, c in comps.items():
             for entity, value in ((f"damage/{name}/committed", c.damage_committed),
                                   (f"damage/{name}/provisional", c.damage),
@@ -444,7 +472,7 @@ class RerunSink:
             self._rows[(f"rainflow/{name}/range_mean", "tensor")].add(t_ns, self._samples,
                                                                       hist.matrix.copy())
 
-    def _log_shape(self, step: StepResult) -> bool:
+    def _log_shape(self, step: StepResult, t_ns: int) -> bool:
         tension = float(step.tension_N[-1]) if len(step.tension_N) else math.nan
         if not math.isfinite(tension):
             tension = next((v for v in (step.measured_tension_N, step.estimated_tension_N)
@@ -460,14 +488,14 @@ class RerunSink:
         b = math.radians(self.opt.bearing_deg)
         pts = np.column_stack((np.asarray(x) * math.sin(b), np.asarray(x) * math.cos(b),
                                np.asarray(z))).astype(np.float32)
-        self._rows[("mooring/line", "strip3d")].add(int(step.now_ns), self._samples, pts)
+        self._rows[("mooring/line", "strip3d")].add(t_ns, self._samples, pts)
         return True
 
     def _style(self, entity: str, envelope: bool) -> None:
         if entity in self._styled:
             return
         self._styled.add(entity)
-        unit = "N" if entity.startswith("tension") else "Pa"
+        unit = "kN" if entity.startswith("tension") else "MPa"
         label = entity.split("/", 1)[-1]
         names = [f"{label} min [{unit}]", f"{label} max [{unit}]"] if envelope else [
             f"{label} [{unit}]"]
