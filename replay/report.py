@@ -28,8 +28,8 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
 ``design_life_years``                the configured design life
 
 Optional plot fields (with ``buoymon replay --html``, also in the ``--report`` JSON then, so
-``buoymon report`` can draw it again; docs/REPORT_FORMAT.md): ``tension_history`` and per
-component ``damage_history``, ``histogram``, ``sn_curve``. They describe this replay only (a
+``buoymon report`` can draw it again; docs/REPORT_FORMAT.md): ``tension_history``,
+``sea_state`` and per component ``damage_history``, ``histogram``, ``sn_curve``. They describe this replay only (a
 log replayed in parts with ``--state`` has each part's history), so they are left out of a
 plain ``--report``, whose components stay equal between split and one-pass replays.
 """
