@@ -44,11 +44,13 @@ from typing import Any, Mapping, Sequence
 
 from monitor.atomic_file import atomic_write_text
 from monitor.config import Config
+from monitor.viz.alert_view import alert_episodes
 from monitor.viz.findings import findings, findings_text
-from monitor.viz.human import remaining_life_text
+from monitor.viz.human import remaining_life_text, tension_text
 from monitor.viz.report_data import parse_report
 
 REPORT_VERSION = 1
+MAX_EPISODE_LINES = 20  # alert episodes listed in the terminal summary; the page lists all
 
 
 def iso_utc(t_ns: int | None) -> str | None:
@@ -138,8 +140,10 @@ def summary_text(report: Mapping[str, Any]) -> str:
     """For a person: the findings (as on the HTML page; monitor.viz.findings), then the
     details: what was read, the load, the damage per component, alerts."""
     lines = []
+    parsed = None
     if report["time_start"] is not None:  # without samples there is no finding to state
-        lines += [findings_text(findings(parse_report(report))), "", "Details:"]
+        parsed = parse_report(report)
+        lines += [findings_text(findings(parsed)), "", "Details:"]
     lines.append(f"buoy {report['buoy_id']}: {report['time_start'] or '-'} .. "
                  f"{report['time_end'] or '-'}")
     for sensor, s in report["samples"].items():
@@ -152,8 +156,10 @@ def summary_text(report: Mapping[str, Any]) -> str:
             if flagged:
                 lines.append(f"  {'':8s} QC {flag}: {flagged}")
     t = report["tension_N"]
-    lines.append(f"  tension  min {_num(t['min'], '.0f')} N, mean {_num(t['mean'], '.0f')} N, "
-                 f"max {_num(t['max'], '.0f')} N, p99 {_num(t['p99'], '.0f')} N "
+    kn = {k: tension_text(math.nan if t[k] is None else float(t[k]))
+          for k in ("min", "mean", "max", "p99")}
+    lines.append(f"  tension  min {kn['min']}, mean {kn['mean']}, max {kn['max']}, "
+                 f"p99 {kn['p99']} "
                  f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated"
                  + (f", {t['samples_estimate_clamped']:,d} of them outside the estimator's range"
                     if t.get("samples_estimate_clamped") else "") + ")")
@@ -186,8 +192,17 @@ def summary_text(report: Mapping[str, Any]) -> str:
     if t_flags:
         lines.append("  tension: " + ", ".join(t_flags) + " (see the alerts)")
     dropped = report.get("alerts_dropped") or 0
+    episodes = alert_episodes(parsed.alerts) if parsed is not None else []
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)"
+                 + (f" in {len(episodes)} episode(s), re-sends collapsed" if episodes else "")
                  + (f" (and {dropped:,d} older ones not kept)" if dropped else ""))
+    for ep in episodes[:MAX_EPISODE_LINES]:
+        lines.append(f"    {ep.severity:8s} {ep.rule} / {ep.component}: fired {iso_utc(ep.first_fired_ns)}"
+                     + (f", re-sent {ep.resends}x" if ep.resends else "")
+                     + (f", cleared {iso_utc(ep.cleared_ns)}" if ep.cleared_ns
+                        else ", still firing at the end"))
+    if len(episodes) > MAX_EPISODE_LINES:
+        lines.append(f"    ... and {len(episodes) - MAX_EPISODE_LINES} more (see the report)")
     read = report["inputs"]["read"]
     damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
                                        "bad_payloads", "late", "duplicates")}

@@ -151,3 +151,24 @@ def test_alert_episodes_collapse_resends():
     assert (eps[1].first_fired_ns, eps[1].last_resent_ns, eps[1].cleared_ns) == (
         t0 + h, t0 + int(4.5 * h), t0 + 5 * h)
     assert eps[2].cleared_ns == 0 and eps[2].last_resent_ns == 0
+
+
+def test_terminal_summary_leads_with_the_findings_and_collapses_alerts():
+    from replay.report import summary_text
+
+    rep = _report(conductor=_comp(0.6432, 142.35, 0.27226, 1.3104),
+                  conductor_right_lay=_comp(0.04397, 84.76, 11.233, 0.08511, lay="right"))
+    rep["alerts"] = ([_alert("stress", "conductor", "fire", 1.0)]
+                     + [_alert("stress", "conductor", "resend", 1.0 + k) for k in (1, 2, 3)]
+                     + [_alert("stress", "conductor", "clear", 5.0)])
+    rep["alerts_dropped"] = 0
+    text = summary_text(rep)
+    lines = text.splitlines()
+    assert lines[0] == "What was replayed:"
+    assert text.index("Comparison:") < text.index("Details:")
+    # 9100 N -> 9.10 kN in the details as in the findings; life in words
+    assert "tension  min 2.10 kN, mean 5.00 kN, max 9.10 kN, p99 8.20 kN" in text
+    assert any(l.split()[:1] == ["conductor"] and l.endswith("  6.5 h") for l in lines)
+    assert "  alerts: 5 transition(s) in 1 episode(s), re-sends collapsed" in lines
+    assert ("    warning  stress / conductor: fired 2023-11-14T23:13:20.000Z, re-sent 3x, "
+            "cleared 2023-11-15T03:13:20.000Z") in lines
