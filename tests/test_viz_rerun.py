@@ -296,3 +296,13 @@ def test_qartod_flag_totals_are_logged_per_stream_and_test(tmp_path):
     np.testing.assert_array_equal(scalars(data["health/tension/qc/spike/suspect"]), picked)
     np.testing.assert_array_equal(scalars(data["health/tension/qc/spike/fail"]),
                                   [2 * k for k in picked])
+
+
+def test_histogram_bars_carry_their_stress_axis_in_mpa(tmp_path):
+    data, _ = record(tmp_path, RerunOptions())
+    bars = data["rainflow/left/histogram"]
+    # static: bin centres 1, 3, ..., 299 MPa and 2 MPa widths (the default 0..300 MPa bins)
+    centres = np.array(bars["BarChart:abscissa"][0][0]["buffer"])
+    widths = np.array(bars["BarChart:widths"][0])
+    np.testing.assert_allclose(centres, np.arange(1.0, 300.0, 2.0), rtol=1e-12)
+    np.testing.assert_allclose(widths, 2.0, rtol=1e-6)

@@ -24,7 +24,7 @@ entity                              archetype                   content
 ``damage_rate/<component>``         Scalars                     damage per day (1/d)
 ``remaining_life/<component>``      Scalars                     remaining life (d)
 ``rainflow/<component>/histogram``  BarChart                    cumulative cycle counts per
-                                                                stress-range bin
+                                                                stress-range bin (x: MPa)
 ``rainflow/<component>/range_mean`` Tensor (range x mean)       cumulative range-mean counts
 ``alerts/state/<rule>/<component>`` StateChange                 ok / info / warning / critical
 ``alerts/log``                      TextLog (levels)            one line per alert transition
@@ -293,6 +293,7 @@ class RerunSink:
             hist = self._hist.get(name)
             if hist is None:
                 hist = self._hist[name] = CycleHistogram(self._range_edges, self._mean_edges)
+                self._log_bar_axis(name)
             hist.add(comp.ranges_Pa, comp.means_Pa, comp.counts)
         health = self._health.setdefault(entity_part(step.sensor), [0, 0])
         health[0] += int(step.accepted)
@@ -462,6 +463,16 @@ class RerunSink:
         t, lat, lon = self._last_fix
         e, n = local_east_north(np.array([lat]), np.array([lon]), *self._origin)
         self._rows[("position/buoy", "point2d")].add(t, self._samples, (float(e[0]), float(n[0])))
+
+    def _log_bar_axis(self, name: str) -> None:
+        """The histogram bars' x axis in MPa, as the report's: static bin centres and widths
+        (as component batches: ``BarChart.from_fields`` cannot leave the values out)."""
+        edges = self._range_edges / 1e6
+        self.rec.log(f"rainflow/{name}/histogram", [
+            rr.components.TensorDataBatch(rr.TensorData(array=(edges[:-1] + edges[1:]) / 2))
+            .described(rr.BarChart.descriptor_abscissa()),
+            rr.components.LengthBatch(np.diff(edges)).described(rr.BarChart.descriptor_widths()),
+        ], static=True)
 
     def _snapshot_histograms(self, t_ns: int) -> None:
         self._last_snap = t_ns
