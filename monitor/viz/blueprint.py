@@ -49,6 +49,8 @@ def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
     )
     return rrb.Blueprint(
         rrb.Vertical(loads, fatigue, geometry, status, row_shares=[3, 3, 3, 2]),
-        rrb.TimePanel(timeline="sensor_time"),
+        # following: the time cursor on the newest data, so histograms, the range-mean
+        # matrix and the position open complete (live: they keep up)
+        rrb.TimePanel(timeline="sensor_time", play_state="following"),
         collapse_panels=True,
     )
