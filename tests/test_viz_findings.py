@@ -172,3 +172,10 @@ def test_terminal_summary_leads_with_the_findings_and_collapses_alerts():
     assert "  alerts: 5 transition(s) in 1 episode(s), re-sends collapsed" in lines
     assert ("    warning  stress / conductor: fired 2023-11-14T23:13:20.000Z, re-sent 3x, "
             "cleared 2023-11-15T03:13:20.000Z") in lines
+
+
+def test_damage_that_stopped_accruing_projects_no_end_of_life():
+    r = parse_report(_report(c=_comp(0.2, 60.0, "inf", 0.0)))
+    assert findings(r).verdicts == [
+        "c (left-lay conductor): damage 0.200 in 10 h (peak stress 60.0 MPa); none accrued at "
+        "the end of the replay, so no end of life is projected."]

@@ -145,6 +145,9 @@ def test_full_report_writes_all_plots(rendered):
     # remaining life in words: 20.4 d -> "20 days"; "inf" -> unlimited
     assert "20.4" not in page and "<td>20 days</td>" in page
     assert "<td>unlimited (no damage accrues)</td>" in page
+    # only the reasons that rejected something; counts with thousands separators
+    assert ("<td>tension</td><td>720,000</td><td>15</td><td>nan: 3, spike: 12</td>" in page
+            and "<td>imu</td><td>360,000</td><td>0</td><td>-</td>" in page)
     # the alert table: one row per episode (fired 5 h after T0, cleared at 7 h)
     assert ("<td>tension_high</td><td>cable</td><td>2023-11-15 03:13:20 UTC</td><td>-</td>"
             "<td>0</td><td>2023-11-15 05:13:20 UTC</td><td>tension 9.1 kN &gt; 9 kN</td>") in page

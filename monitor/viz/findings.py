@@ -80,11 +80,13 @@ def _verdict(c: Component, r: Report, span_days: float) -> str:
     if c.damage <= 0.0:
         return (head + f"no fatigue damage (peak stress {stress_text(c.max_stress_Pa)}, "
                 "no cycle that the S-N curve counts).")
-    life = remaining_life_text(c.remaining_life_days)
     text = (head + f"damage {number_text(c.damage)} in {duration_text(span_days)} "
-            f"(peak stress {stress_text(c.max_stress_Pa)}); at the latest rate "
-            f"({number_text(c.damage_rate_per_day)} per day) it fails in {life}")
-    if design and math.isfinite(c.remaining_life_days):
+            f"(peak stress {stress_text(c.max_stress_Pa)})")
+    if not math.isfinite(c.remaining_life_days):
+        return text + "; none accrued at the end of the replay, so no end of life is projected."
+    text += (f"; at the latest rate ({number_text(c.damage_rate_per_day)} per day) it fails in "
+             f"{remaining_life_text(c.remaining_life_days)}")
+    if design:
         short = c.remaining_life_days < design * DAYS_PER_YEAR
         text += (f", short of the {design:g}-year design life" if short
                  else f", beyond the {design:g}-year design life")

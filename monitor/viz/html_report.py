@@ -94,8 +94,8 @@ def _summary(r: Report) -> str:
              "</p>"]
     parts.append(_table(
         ["channel", "accepted", "rejected", "rejected by reason"],
-        [[e(ch), str(acc), str(sum(rej.values())),
-          e(", ".join(f"{k}: {v}" for k, v in sorted(rej.items())) or "-")]
+        [[e(ch), f"{acc:,d}", f"{sum(rej.values()):,d}",
+          e(", ".join(f"{k}: {v:,d}" for k, v in sorted(rej.items()) if v) or "-")]
          for ch, (acc, rej) in sorted(r.samples.items())]))
     t = r.tension
     parts.append(_table(["tension", "min", "mean", "p99", "max"],
