@@ -320,6 +320,18 @@ def test_plots_are_readable():
                      "endurance 6 MPa (conductor_field_derated)"]
 
 
+def test_every_curve_shows_in_the_embedded_pixels(tmp_path):
+    """The PNGs (byte-identical to the page's data URIs) hold each curve's own colour."""
+    out = write_report(parse_report(storm_report()), tmp_path / "storm.html")
+    damage = imread(out.png_paths["damage"])
+    for colour, _ in STYLES[:3]:  # 0.044, 0.64 and 15 all drawn on the log axis
+        assert has_colour(damage, colour), colour
+    hist = imread(out.png_paths["histogram"])
+    assert has_colour(hist, STYLES[0][0]) and has_colour(hist, STYLES[1][0])
+    sn = imread(out.png_paths["sn"])
+    assert has_colour(sn, STYLES[0][0]) and has_colour(sn, STYLES[2][0])
+
+
 def _dump_dom(page: Path, tmp_path: Path) -> str:
     cmd = [str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
            "--disable-background-networking", "--disable-component-update", "--disable-sync",
