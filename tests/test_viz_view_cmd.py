@@ -108,3 +108,17 @@ def test_port_listeners_names_this_process():
         (me,) = port_listeners(port)
         assert me.pid == os.getpid() and "pytest" in me.command
     assert port_listeners(port) == []
+
+
+def test_native_viewer_refuses_a_taken_grpc_port(rrd, capsys):
+    import socket
+
+    from monitor.cli import main
+
+    with socket.socket() as s:  # this test process holds the port
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        assert main(["view", str(rrd), "--native", "--grpc-port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert f"gRPC port {port} is already in use by pid {os.getpid()} (" in err

@@ -75,9 +75,15 @@ def run(args: argparse.Namespace) -> int:
 
 def _serve(args: argparse.Namespace) -> int:
     from monitor.viz.rerun_options import RerunOptions
-    from monitor.viz.rerun_outputs import analytics_disabled_env, rerun_command, serve_web_viewer
+    from monitor.viz.rerun_outputs import (analytics_disabled_env, check_ports_free,
+                                           rerun_command, serve_web_viewer)
 
     if args.native:
+        try:
+            check_ports_free({"gRPC": args.grpc_port})
+        except RuntimeError as exc:
+            print(f"buoymon view: {exc}", file=sys.stderr)
+            return 2
         # the desktop viewer also hosts a gRPC server, on all interfaces unless told otherwise;
         # subprocess.call kills it when a stop signal raises here
         cmd = rerun_command() + ["--bind", "127.0.0.1", "--port", str(args.grpc_port),

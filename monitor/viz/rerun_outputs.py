@@ -106,10 +106,11 @@ def _wait_listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None
     raise RuntimeError(f"rerun web viewer did not listen on 127.0.0.1:{port} within {timeout_s} s")
 
 
-def _check_ports_free(options: RerunOptions) -> None:
-    """RuntimeError naming the process that holds a port the viewer needs: started anyway,
-    the new viewer could not bind, and the URL would show the old viewer's recording."""
-    for what, port in (("web", options.web_port), ("gRPC", options.grpc_port)):
+def check_ports_free(ports: dict[str, int]) -> None:
+    """RuntimeError naming the process that holds a port a viewer needs ({what: port}):
+    started anyway, the new viewer could not bind, and the URL would show the old viewer's
+    recording."""
+    for what, port in ports.items():
         holders = port_listeners(port)
         if holders:
             raise RuntimeError(
@@ -136,7 +137,7 @@ def serve_web_viewer(options: RerunOptions, config_home: Path | None = None,
     """Start a web viewer bound to 127.0.0.1 with a capped buffer (oldest data dropped),
     serving live data sent to its gRPC proxy or the given ``.rrd`` files. RuntimeError when
     a port is held by another process (named in the message)."""
-    _check_ports_free(options)
+    check_ports_free({"web": options.web_port, "gRPC": options.grpc_port})
     cmd = rerun_command() + [
         "--serve-web", "--bind", "127.0.0.1",
         "--port", str(options.grpc_port), "--web-viewer-port", str(options.web_port),
