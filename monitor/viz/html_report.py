@@ -44,6 +44,8 @@ img{max-width:100%;border:1px solid #eee}.note{color:#777;font-style:italic}
 #findings{background:#f7f9fc;border:1px solid #d0d7e2;padding:.2em 1.2em 1em}
 #findings h3{font-size:1em;margin:.9em 0 .3em}#findings ul{margin:0;padding-left:1.3em}
 #findings li{margin:.2em 0}
+table.alerts td,table.alerts th{text-align:left}table.alerts td:nth-child(4),
+table.alerts td:nth-child(5){white-space:nowrap}
 """
 
 
@@ -68,10 +70,10 @@ def _fmt(x: float, unit: str = "", scale: float = 1.0) -> str:
     return f"{x / scale:.4g}{(' ' + unit) if unit else ''}"
 
 
-def _table(header: list[str], rows: list[list[str]]) -> str:
+def _table(header: list[str], rows: list[list[str]], cls: str = "") -> str:
     head = "".join(f"<th>{h}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
+    return f"<table{f' class={cls!r}' if cls else ''}><tr>{head}</tr>{body}</table>"
 
 
 def _findings(r: Report) -> str:
@@ -125,7 +127,7 @@ def _alert_table(r: Report) -> str:
     note = (f"<p class='note'>{len(r.alerts)} alert transitions in {len(episodes)} "
             "episodes; re-sent notifications are counted, not listed.</p>")
     return _table(["severity", "rule", "component", "first fired", "last re-sent",
-                   "re-sends", "cleared", "summary"], rows) + note
+                   "re-sends", "cleared", "summary"], rows, "alerts") + note
 
 
 def render_png(fig) -> bytes:
