@@ -179,3 +179,16 @@ def test_damage_that_stopped_accruing_projects_no_end_of_life():
     assert findings(r).verdicts == [
         "c (left-lay conductor): damage 0.200 in 10 h (peak stress 60.0 MPa); none accrued at "
         "the end of the replay, so no end of life is projected."]
+
+
+def test_status_screen_shows_remaining_life_in_words():
+    from monitor.cmd_status import render
+
+    text = render("daemon", {"buoy_id": "vaps", "components": {
+        "conductor": {"damage": 0.6432, "remaining_life_days": 0.2722595920799383},
+        "right": {"damage": 1e-12, "remaining_life_days": 4.1e107},
+        "spent": {"damage": 15.0, "remaining_life_days": 0.0}}})
+    rows = {line.split()[0]: line for line in text.splitlines() if line.startswith("  ")}
+    assert rows["conductor"].endswith("  6.5 h")
+    assert rows["right"].endswith("  more than 1,000 years") and "e+107" not in text
+    assert rows["spent"].endswith("  none (failed)")
