@@ -306,3 +306,17 @@ def test_histogram_bars_carry_their_stress_axis_in_mpa(tmp_path):
     widths = np.array(bars["BarChart:widths"][0])
     np.testing.assert_allclose(centres, np.arange(1.0, 300.0, 2.0), rtol=1e-12)
     np.testing.assert_allclose(widths, 2.0, rtol=1e-6)
+
+
+def test_extreme_remaining_lives_are_drawn_at_the_1000_year_cap(tmp_path):
+    import dataclasses
+
+    steps = make_steps(3)
+    for step, life in zip(steps, (4.1e107, math.inf, 20.0)):
+        c = step.components["left"]
+        step.components["left"] = dataclasses.replace(c, remaining_life_days=life)
+    data, _ = record(tmp_path, RerunOptions(slow_interval_s=0.5), steps=steps)
+    # 1000 years = 365,250 days; a finite life below the cap is kept as is
+    np.testing.assert_array_equal(scalars(data["remaining_life/left"]), [365250.0, 365250.0, 20.0])
+    assert data["remaining_life/left"]["SeriesLines:names"][0] == [
+        "left [d] (more than 1,000 years at the cap)"]

@@ -22,7 +22,8 @@ entity                              archetype                   content
 ``damage/<component>/committed``    Scalars                     Miner sum of closed cycles
 ``damage/<component>/provisional``  Scalars                     committed + open residue
 ``damage_rate/<component>``         Scalars                     damage per day (1/d)
-``remaining_life/<component>``      Scalars                     remaining life (d)
+``remaining_life/<component>``      Scalars                     remaining life (d), capped at
+                                                                1,000 years (infinite too)
 ``rainflow/<component>/histogram``  BarChart                    cumulative cycle counts per
                                                                 stress-range bin (x: MPa)
 ``rainflow/<component>/range_mean`` Tensor (range x mean)       cumulative range-mean counts
@@ -70,6 +71,7 @@ from monitor.blocks import SampleBlock
 from monitor.events import Observation, StepResult
 from monitor.viz.alert_view import alert_fields
 from monitor.viz.cycle_histogram import CycleHistogram
+from monitor.viz.human import DAYS_PER_YEAR, LONG_LIFE_YEARS
 from monitor.viz.rerun_options import RerunOptions
 
 log = logging.getLogger(__name__)
@@ -81,6 +83,7 @@ SAMPLE = "sample"
 # anchor towards the buoy, z up from the anchor (see monitor.viz.cable_shape).
 ShapeProvider = Callable[[float], tuple[np.ndarray, np.ndarray]]
 
+LONG_LIFE_DAYS = LONG_LIFE_YEARS * DAYS_PER_YEAR  # remaining lives are drawn up to this
 _TEXT_LEVEL = {"critical": "CRITICAL", "warning": "WARN", "info": "INFO"}
 _EARTH_RADIUS_M = 6_371_008.8  # mean Earth radius (IUGG); local tangent-plane approximation
 
@@ -247,6 +250,7 @@ class RerunSink:
         self._rows: dict[tuple[str, str], _Rows] = defaultdict(_Rows)  # (entity, kind) -> rows
         self._hist: dict[str, CycleHistogram] = {}
         self._styled: set[str] = set()
+        self._life_named: set[str] = set()
         self._health: dict[str, list[int]] = {}  # sensor -> [accepted, rejected]
         self._qc: dict[str, Any] = {}  # sensor -> {test: {"suspect": n, "fail": n}} totals
         self._alert_state: dict[str, str] = {}  # state lane -> last state logged
@@ -430,10 +434,18 @@ class RerunSink:
             if math.isfinite(value):
                 self._rows[(entity, "scalar")].add(t, s, float(value) / 1e3)  # kN
         for name, c in comps.items():
+            if name not in self._life_named:
+                self._life_named.add(name)
+                self.rec.log(f"remaining_life/{name}", rr.SeriesLines(
+                    names=[f"{name} [d] (more than {LONG_LIFE_YEARS:,.0f} years at the cap)"]),
+                    static=True)
+            # as the report says "more than 1,000 years", a 4e107-day life (a curve's tail)
+            # is drawn at that cap, where it would otherwise flatten every other line
+            life = min(c.remaining_life_days, LONG_LIFE_DAYS)
             for entity, value in ((f"damage/{name}/committed", c.damage_committed),
                                   (f"damage/{name}/provisional", c.damage),
                                   (f"damage_rate/{name}", c.damage_rate_per_day),
-                                  (f"remaining_life/{name}", c.remaining_life_days)):
+                                  (f"remaining_life/{name}", life)):
                 if math.isfinite(value):
                     self._rows[(entity, "scalar")].add(t, s, float(value))
         for sensor, (acc, rej) in self._health.items():
