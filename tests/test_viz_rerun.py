@@ -301,11 +301,14 @@ def test_qartod_flag_totals_are_logged_per_stream_and_test(tmp_path):
 def test_histogram_bars_carry_their_stress_axis_in_mpa(tmp_path):
     data, _ = record(tmp_path, RerunOptions())
     bars = data["rainflow/left/histogram"]
-    # static: bin centres 1, 3, ..., 299 MPa and 2 MPa widths (the default 0..300 MPa bins)
+    # static: the default bins, 2 MPa wide to 100 MPa (centres 1, 3, ..., 99), then 10 MPa
+    # wide to 300 MPa (centres 105, 115, ..., 295)
     centres = np.array(bars["BarChart:abscissa"][0][0]["buffer"])
     widths = np.array(bars["BarChart:widths"][0])
-    np.testing.assert_allclose(centres, np.arange(1.0, 300.0, 2.0), rtol=1e-12)
-    np.testing.assert_allclose(widths, 2.0, rtol=1e-6)
+    np.testing.assert_allclose(centres, np.concatenate((np.arange(1.0, 100.0, 2.0),
+                                                        np.arange(105.0, 300.0, 10.0))),
+                               rtol=1e-12)
+    np.testing.assert_allclose(widths, [2.0] * 50 + [10.0] * 20, rtol=1e-6)
 
 
 def test_extreme_remaining_lives_are_drawn_at_the_1000_year_cap(tmp_path):
