@@ -5,8 +5,9 @@ matplotlib Figure, or None when the report lacks the data for it (the page then 
 
 Readability rules (issue 19): time axes span the replayed data (first to last sample); damage
 is on a log axis so a 0.04 and a 15 are both visible; every component has its own colour and
-line style, and components whose curves are identical (the same S-N curve, the same cycle
-histogram) share one curve whose legend names them all, so no curve hides under another;
+line style, and components whose curves coincide (equal cycle histograms; S-N curves within
+``SAME_CURVE_DECADES`` of each other) share one curve whose legend names them all, so no
+curve hides under another;
 legends sit outside the data; stresses in MPa, tensions in kN.
 """
 
