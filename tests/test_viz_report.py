@@ -350,6 +350,20 @@ def test_findings_lead_the_page_in_chromium(tmp_path):
     text = re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", dom))
     # the findings come first, before the details and the plots
     assert dom.index("id=\"findings\"") < dom.index("<h2>Details</h2>") < dom.index("plot-tension")
+    # the plots' axes as the page states them under each plot (read from the figures):
+    # time axes from the first sample (T0 = 2023-11-14 22:13:20 UTC) to the last (+10 h)
+    span = "2023-11-14 22:13:20 UTC to 2023-11-15 08:13:20 UTC"
+    for key in ("tension", "damage", "alerts"):
+        assert re.search(rf"id=\"caption-{key}\"[^>]*>x: sensor time \(UTC\), {span}\.",
+                         dom), key
+    damage = re.search(r'id="caption-damage"[^>]*>([^<]*)<', dom).group(1)
+    y0, y1 = map(float, re.search(r"y: Miner damage incl. open cycles, (\S+) to (\S+) \(log "
+                                  r"scale\)", damage).groups())
+    # damage histories run 15.024 sqrt((t + 60 s) / 36000 s) ... down to the right lay's
+    # 0.04397 sqrt(60 / 36000) = 0.00180 at the first point (t = T0): all inside the axis
+    assert y0 < 0.04397 * math.sqrt(60 / 36000) and y1 > 15.024
+    assert damage.endswith("shown: conductor; conductor_right_lay; conductor_field_derated; "
+                           "failure (damage 1).")
     for sentence in (
             "conductor (left-lay conductor) takes 15 times the damage of conductor_right_lay "
             "(right-lay conductor), at 1.7 times its peak stress.",

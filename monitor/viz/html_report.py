@@ -18,7 +18,7 @@ from monitor.viz.alert_view import alert_episodes
 from monitor.viz.findings import findings
 from monitor.viz.human import number_text, remaining_life_text, stress_text
 from monitor.viz.report_data import Report
-from monitor.viz.report_plots import PLOTS
+from monitor.viz.report_plots import PLOTS, caption
 
 _TITLES = {
     "tension": "Tension summary",
@@ -43,7 +43,7 @@ img{max-width:100%;border:1px solid #eee}.note{color:#777;font-style:italic}
 .critical{color:#d62828;font-weight:bold}.warning{color:#b07500;font-weight:bold}
 #findings{background:#f7f9fc;border:1px solid #d0d7e2;padding:.2em 1.2em 1em}
 #findings h3{font-size:1em;margin:.9em 0 .3em}#findings ul{margin:0;padding-left:1.3em}
-#findings li{margin:.2em 0}
+#findings li{margin:.2em 0}figure{margin:0}figcaption{font-size:.85em}
 table.alerts td,table.alerts th{text-align:left}table.alerts td:nth-child(4),
 table.alerts td:nth-child(5){white-space:nowrap}
 """
@@ -152,7 +152,10 @@ def write_report(report: Report, html_path: str | Path) -> RenderedReport:
         png.write_bytes(data)
         pngs[key] = png
         uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
-        sections.append(f"<h2>{title}</h2><img id='plot-{key}' alt='{title}' src='{uri}'>")
+        what = html.escape(caption(fig), quote=True)
+        sections.append(f"<h2>{title}</h2><figure><img id='plot-{key}' alt='{title}: {what}' "
+                        f"src='{uri}'><figcaption id='caption-{key}' class='note'>{what}"
+                        "</figcaption></figure>")
         if key == "alerts":
             sections.append(_alert_table(report))
     title = f"Fatigue report: buoy {html.escape(report.buoy_id)}"

@@ -313,6 +313,29 @@ def _span(ax, y: int, start_ns: int, end_ns: int, severity: str) -> None:
             color=SEVERITY_COLOURS.get(severity, "#969696"))
 
 
+def caption(fig: Figure) -> str:
+    """What the figure's first axes show, read back from them: the x and y labels and
+    ranges (dates for a time axis), the y scale, and the legend's entries. The page prints
+    it under the plot (and its tests read it there)."""
+    ax = fig.axes[0]
+    x0, x1 = ax.get_xlim()
+    if isinstance(ax.xaxis.get_major_formatter(), mdates.ConciseDateFormatter):
+        fmt = "%Y-%m-%d %H:%M:%S UTC"
+        xr = f"{mdates.num2date(x0).strftime(fmt)} to {mdates.num2date(x1).strftime(fmt)}"
+    else:
+        xr = f"{x0:.3g} to {x1:.3g}" + (f" ({ax.get_xscale()} scale)"
+                                        if ax.get_xscale() != "linear" else "")
+    y0, y1 = ax.get_ylim()
+    parts = [f"x: {ax.get_xlabel()}, {xr}"]
+    if ax.get_ylabel():  # (no range for categories: components, alert lanes)
+        parts.append(f"y: {ax.get_ylabel()}, {y0:.3g} to {y1:.3g}"
+                     + (f" ({ax.get_yscale()} scale)" if ax.get_yscale() != "linear" else ""))
+    legend = ax.get_legend()
+    if legend is not None:
+        parts.append("shown: " + "; ".join(t.get_text() for t in legend.get_texts()))
+    return ". ".join(parts) + "."
+
+
 PLOTS = {
     "tension": plot_tension,
     "damage": plot_damage,
