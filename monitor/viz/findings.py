@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
@@ -125,7 +126,7 @@ def _replayed(r: Report, span_days: float) -> list[str]:
            f"{_utc(r.time_start_ns)} to {_utc(r.time_end_ns)} ({duration_text(span_days)})."]
     s = r.sea_state
     if s is not None:
-        def rng(x: dict, unit: str, fmt: str) -> str:
+        def rng(x: Mapping[str, float], unit: str, fmt: str) -> str:
             if x["max"] - x["min"] < 0.05 * abs(x["mean"]):
                 return f"{x['mean']:{fmt}} {unit}"
             return f"{x['mean']:{fmt}} {unit} ({x['min']:{fmt}} to {x['max']:{fmt}} {unit})"

@@ -165,7 +165,7 @@ def _component(name: str, c: Any) -> Component:
     where = f"components.{name}"
     c = _mapping(c, where)
     try:
-        base = {k: _num(c[k], f"{where}.{k}") for k in (
+        base: dict[str, Any] = {k: _num(c[k], f"{where}.{k}") for k in (
             "damage", "damage_committed", "cycles", "max_stress_Pa", "damage_rate_per_day",
             "remaining_life_days")}
     except KeyError as exc:
