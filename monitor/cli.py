@@ -31,6 +31,9 @@ COMMANDS: dict[str, str] = {
     "view": "monitor.viz.cmd_view",
 }
 
+# commands that run the compiled models: the first run after an install says it compiles
+COMPUTING = {"simulate", "import", "replay", "demo", "design", "forecast", "run"}
+
 
 def build_parser(argv: Sequence[str]) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
@@ -57,6 +60,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from monitor.logs import setup_logging
 
         setup_logging(args.log_level)
+        if args.command in COMPUTING:
+            from monitor.first_run import announce_compiles
+
+            announce_compiles()
         try:
             return int(args.func(args) or 0)
         except OSError as exc:
