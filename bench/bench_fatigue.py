@@ -46,10 +46,10 @@ import re
 import sys
 import time
 
-import numba
 import numpy as np
 
 from models import _fatigue_loops
+from models._jit import numba_module
 from models.fatigue import FatigueStream, MinerAccumulator, SNCurve, StreamingRainflow
 from models.helix import HelixCable, axial_kernel_args, conductor_stress
 
@@ -107,7 +107,7 @@ def vector_instructions() -> str:
     """Packed divide/sqrt instructions in a fresh (uncached, so inspectable) compilation of
     the fused loop: the damage pass's log/exp and the stress loop vectorise when these
     show ymm/zmm registers."""
-    loop = numba.njit(error_model="numpy")(_fatigue_loops.tension_loop)
+    loop = numba_module().njit(error_model="numpy")(_fatigue_loops.tension_loop)
     miner = MinerAccumulator(SNCurve.vaps_copper())
     loop(wave_tension(100), *axial_kernel_args(HelixCable.vaps_biw(), "left"), StreamingRainflow()._st,
          miner._params, miner._table, miner._inv_width, 0.0)

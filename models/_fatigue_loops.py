@@ -510,9 +510,15 @@ def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_wi
     return committed, cycles, i
 
 
-axial_compiled = compile_loop(axial_loop)
-feed_compiled = compile_loop(feed_loop)
-commit_compiled = compile_loop(commit_loop)
-residue_compiled = compile_loop(residue_loop)
-ticks_compiled = compile_loop(ticks_loop)
-tension_compiled = compile_loop(tension_loop)
+_LOOPS = {"axial_compiled": axial_loop, "feed_compiled": feed_loop, "commit_compiled": commit_loop,
+          "residue_compiled": residue_loop, "ticks_compiled": ticks_loop, "tension_compiled": tension_loop}
+
+
+def __getattr__(name: str):
+    """``<loop>_compiled``: the loop compiled (None without numba) on first access, then a
+    plain module attribute: importing numba is left to the first process that runs a loop
+    (models._jit says what that saves)."""
+    if name not in _LOOPS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    compiled = globals()[name] = compile_loop(_LOOPS[name])
+    return compiled

@@ -43,7 +43,8 @@ import numpy as np
 from models._fatigue_loops import CHUNK as _CHUNK
 from models._fatigue_loops import HEADER as _HEADER
 from models._fatigue_loops import NS as _NS
-from models._fatigue_loops import tension_compiled, ticks_compiled
+from models import _fatigue_loops as _loops
+from models._jit import HAVE_NUMBA
 from models.helix import HelixCable, Lay, axial_kernel_args, conductor_stress
 from models.miner import MinerAccumulator
 from models.rainflow_stream import StreamingRainflow
@@ -62,7 +63,7 @@ class FatigueStream:
         self.rainflow = rainflow
         self.miner = miner
         self._args = axial_kernel_args(cable, lay)  # checks lay
-        self._fused = (tension_compiled is not None and self._args is not None and rainflow.backend == "numba"
+        self._fused = (HAVE_NUMBA and self._args is not None and rainflow.backend == "numba"
                        and miner.backend == "numba" and not miner._needs_means)
 
     def feed_tension(self, tension_N, time_s: float | None = None) -> float:
@@ -80,7 +81,7 @@ class FatigueStream:
         undo = (rf._st[:_HEADER + int(rf._st[_NS])].copy(), miner._table[1].copy()) if t.size > _CHUNK else None
         committed, cycles, used = miner._committed, 0.0, 0
         while True:
-            committed, more, n = tension_compiled(t[used:], *self._args, rf._st, miner._params, miner._table,
+            committed, more, n = _loops.tension_compiled(t[used:], *self._args, rf._st, miner._params, miner._table,
                                                   miner._inv_width, committed)
             if n < 0:
                 if undo is not None:
@@ -114,6 +115,7 @@ def commit_ticks(rainflow: StreamingRainflow, miner: MinerAccumulator, stress_Pa
                  residue: bool = True) -> TickCommits | None:
     """Stress samples through the counter and the accumulator tick by tick in one compiled
     pass (see the module docstring); None when that pass is unavailable."""
+    ticks_compiled = _loops.ticks_compiled
     if (ticks_compiled is None or rainflow.backend != "numba" or miner.backend != "numba"
             or miner._needs_means):
         return None

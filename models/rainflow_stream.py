@@ -49,8 +49,9 @@ from models._fatigue_loops import HEADER as _HEADER
 from models._fatigue_loops import HYST as _HYST
 from models._fatigue_loops import NS as _NS
 from models._fatigue_loops import STARTED as _STARTED
-from models._fatigue_loops import feed_compiled as _feed_compiled
+from models import _fatigue_loops as _loops
 from models._fatigue_loops import feed_loop as _feed_loop
+from models._jit import HAVE_NUMBA
 
 Backend = Literal["auto", "numba", "numpy"]
 
@@ -96,13 +97,13 @@ class StreamingRainflow:
         if not (isinstance(hysteresis, (int, float)) and math.isfinite(hysteresis) and hysteresis >= 0):
             raise ValueError(f"hysteresis must be a finite number >= 0, got {hysteresis!r}")
         if backend == "auto":
-            backend = "numba" if _feed_compiled is not None else "numpy"
+            backend = "numba" if HAVE_NUMBA else "numpy"
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'auto', 'numba' or 'numpy', got {backend!r}")
-        if backend == "numba" and _feed_compiled is None:
+        if backend == "numba" and not HAVE_NUMBA:
             raise ValueError("backend='numba' requested but numba is not importable")
         self.backend = backend
-        self._feed = _feed_compiled if backend == "numba" else _feed_numpy
+        self._feed = _loops.feed_compiled if backend == "numba" else _feed_numpy
         self._st = np.zeros(_HEADER + max(int(_capacity), 2 * _CHUNK))
         self._st[_HYST] = float(hysteresis)
         self._samples = 0

@@ -22,7 +22,7 @@ from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, load_target
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
-    p = sub.add_parser("status", help="show a running daemon's status (or its last checkpoint)",
+    p = sub.add_parser("status",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", default=DEFAULT_CONFIG, metavar="CFG.toml",
                    help=f"the daemon's configuration (default {DEFAULT_CONFIG})")
