@@ -103,6 +103,41 @@ def stage_split(tension: np.ndarray) -> None:
           f"{ranges.size} cycles)")
 
 
+def versus_pylife(tension: np.ndarray, repeats: int = 5) -> None:
+    """The library path in one block (``run(..., "separate")``: stress, counting and Miner
+    damage) against pyLife's compiled ``FourPointDetector`` counting the same tensions into
+    a ``LoopValueRecorder`` (detection only), runs interleaved so that both see the same
+    load of the shared machine; best of ``repeats`` each, and their ratio (issue 22:
+    >= 1.5x)."""
+    try:
+        import pylife.stress.rainflow as pylife_rf
+    except ImportError:
+        print("pyLife is not installed (pip install pylife): no comparison")
+        return
+
+    def pylife_run() -> tuple[float, float, int]:
+        t0, c0 = time.perf_counter(), time.process_time()
+        detector = pylife_rf.FourPointDetector(recorder=pylife_rf.LoopValueRecorder())
+        detector.process(tension)
+        return (time.perf_counter() - t0, time.process_time() - c0,
+                len(detector.recorder.values_from))
+
+    pylife_run()  # first call: pandas and the extension load
+    ours, theirs = [], []
+    for _ in range(repeats):
+        theirs.append(pylife_run())
+        ours.append(run(tension, tension.size, "numba", "separate"))
+    n = tension.size
+    rates = {name: (n / min(r[0] for r in runs) / 1e6, n / min(r[1] for r in runs) / 1e6)
+             for name, runs in (("ours", ours), ("pylife", theirs))}
+    cycles = len(StreamingRainflow().feed(conductor_stress(tension, HelixCable.vaps_biw(), "left"))[0])
+    print(f"library path, one block of {n:.3g}: {rates['ours'][0]:.1f} M samples/s wall, "
+          f"{rates['ours'][1]:.1f} CPU ({cycles} cycles); pyLife FourPointDetector.process: "
+          f"{rates['pylife'][0]:.1f} wall, {rates['pylife'][1]:.1f} CPU ({theirs[0][2]} cycles)")
+    print(f"ratio to pyLife in this run: {rates['ours'][0] / rates['pylife'][0]:.2f}x wall, "
+          f"{rates['ours'][1] / rates['pylife'][1]:.2f}x CPU")
+
+
 def vector_instructions() -> str:
     """Packed divide/sqrt instructions in a fresh (uncached, so inspectable) compilation of
     the fused loop: the damage pass's log/exp and the stress loop vectorise when these
@@ -143,6 +178,7 @@ def main() -> None:
     print(f"committed damage {damages[('separate', 'numba', n)]:.9e}; identical for all paths, "
           f"backends and block sizes over the whole series: {len(set(damages.values())) == 1}")
     stage_split(tension)
+    versus_pylife(tension)
     print(f"packed divide/sqrt in the compiled fused loop: {vector_instructions()}")
 
 

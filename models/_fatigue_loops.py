@@ -238,24 +238,32 @@ def _count(st, x, i, stop, tp, ranges, means, k):
     return i, k
 
 
-def feed_loop(st, x):
-    """Process samples ``x`` into state ``st``; return (cycles (3, k), samples consumed).
+def cycle_room(st, n):
+    """Columns of a ``feed_loop`` output for ``n`` more samples: each closed cycle removes
+    two stack points, so this bounds the cycles one call can close."""
+    return (int(st[NS]) + n) // 2 + 2
+
+
+def feed_loop(st, x, out):
+    """Process samples ``x`` into state ``st``, closing cycles into ``out`` (3 rows of at
+    least ``cycle_room(st, len(x))``: ranges, means, counts); return (cycles closed,
+    samples consumed).
 
     Returns consumed = -(i + 1) without touching ``st`` if x[i] is not finite, and
     consumed < len(x) when the stack storage in ``st`` may overflow (the caller grows it
-    and calls again with the rest).
+    and calls again with the rest). The caller allocates ``out`` with numpy, which advises
+    large arrays for transparent huge pages where numba's allocations get 4 kB pages: on a
+    block of 1e7 samples the first-touch page faults of the cycles took 22 ms of a 75 ms
+    call (measured 2026-11-25, 2-core Xeon). Only the used prefix of each row is touched.
     """
     n = x.shape[0]
     if not _all_finite(x):
         for i in range(n):
             if not math.isfinite(x[i]):
-                return np.empty((3, 0)), -(i + 1)
-    # each closed cycle removes two stack points, so this bounds the cycles of this call;
-    # only the used prefix of each row is ever touched (fresh pages are costly)
-    out = np.empty((3, (int(st[NS]) + n) // 2 + 2))
+                return 0, -(i + 1)
     i, k = _count(st, x, 0, n, np.empty(min(CHUNK, n)), out[0], out[1], 0)
     out[2, :k] = 1.0
-    return out[:, :k], i
+    return k, i
 
 
 # --------------------------------------------------------------------- Miner

@@ -50,6 +50,7 @@ from models._fatigue_loops import HYST as _HYST
 from models._fatigue_loops import NS as _NS
 from models._fatigue_loops import STARTED as _STARTED
 from models import _fatigue_loops as _loops
+from models._fatigue_loops import cycle_room as _cycle_room
 from models._fatigue_loops import feed_loop as _feed_loop
 from models._jit import HAVE_NUMBA
 
@@ -76,6 +77,13 @@ def _run_ends(x: np.ndarray, st: np.ndarray) -> np.ndarray:
     return ends if st[_STARTED] != 0.0 else np.concatenate((z[:1], ends))
 
 
+def _feed_compiled(st: np.ndarray, x: np.ndarray):
+    """The compiled loop, into an output allocated here (``_fatigue_loops.feed_loop``)."""
+    out = np.empty((3, _cycle_room(st, x.size)))
+    k, used = _loops.feed_compiled(st, x, out)
+    return out[:, :k], used
+
+
 def _feed_numpy(st: np.ndarray, x: np.ndarray):
     """Pure numpy/Python twin of the compiled loop: same state machine on run ends only."""
     bad = np.flatnonzero(~np.isfinite(x))
@@ -86,8 +94,9 @@ def _feed_numpy(st: np.ndarray, x: np.ndarray):
         return np.empty((3, 0)), x.size
     # the state machine gives the same result on any subsequence that keeps every run
     # end; feed() has grown the stack storage so that the whole block fits
-    cycles, _ = _feed_loop(st, ends)
-    return cycles, x.size
+    out = np.empty((3, _cycle_room(st, ends.size)))
+    k, _ = _feed_loop(st, ends, out)
+    return out[:, :k], x.size
 
 
 class StreamingRainflow:
@@ -103,7 +112,7 @@ class StreamingRainflow:
         if backend == "numba" and not HAVE_NUMBA:
             raise ValueError("backend='numba' requested but numba is not importable")
         self.backend = backend
-        self._feed = _loops.feed_compiled if backend == "numba" else _feed_numpy
+        self._feed = _feed_compiled if backend == "numba" else _feed_numpy
         self._st = np.zeros(_HEADER + max(int(_capacity), 2 * _CHUNK))
         self._st[_HYST] = float(hysteresis)
         self._samples = 0
