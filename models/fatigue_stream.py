@@ -40,10 +40,10 @@ from typing import Sequence
 
 import numpy as np
 
+from models import _fatigue_loops as _loops
 from models._fatigue_loops import CHUNK as _CHUNK
 from models._fatigue_loops import HEADER as _HEADER
 from models._fatigue_loops import NS as _NS
-from models import _fatigue_loops as _loops
 from models._jit import HAVE_NUMBA
 from models.helix import HelixCable, Lay, axial_kernel_args, conductor_stress
 from models.miner import MinerAccumulator
@@ -81,8 +81,8 @@ class FatigueStream:
         undo = (rf._st[:_HEADER + int(rf._st[_NS])].copy(), miner._table[1].copy()) if t.size > _CHUNK else None
         committed, cycles, used = miner._committed, 0.0, 0
         while True:
-            committed, more, n = _loops.tension_compiled(t[used:], *self._args, rf._st, miner._params, miner._table,
-                                                  miner._inv_width, committed)
+            committed, more, n = _loops.tension_compiled(t[used:], *self._args, rf._st, miner._params,
+                                                         miner._table, miner._inv_width, committed)
             if n < 0:
                 if undo is not None:
                     rf._st[:undo[0].size] = undo[0]

@@ -135,8 +135,8 @@ class MinerAccumulator:
             # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
             added = self._commit_numpy(r, n, self.sn_curve.effective_range_MPa(r, means_Pa))
         elif self.backend == "numba":
-            committed, added, cycles, bad = _loops.commit_compiled(r, n, self._params, self._table, self._inv_width,
-                                                             self._committed)
+            committed, added, cycles, bad = _loops.commit_compiled(r, n, self._params, self._table,
+                                                                   self._inv_width, self._committed)
             if bad >= 0:
                 raise ValueError(f"cycle {bad} has an invalid range or count ({r[bad]!r}, {n[bad]!r})")
             self._committed = committed

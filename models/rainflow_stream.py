@@ -42,6 +42,7 @@ from typing import Literal
 import numpy as np
 
 # the compiled loop and the layout of the state vector it shares with the numpy backend
+from models import _fatigue_loops as _loops
 from models._fatigue_loops import CAND as _CAND
 from models._fatigue_loops import CHUNK as _CHUNK
 from models._fatigue_loops import DIR as _DIR
@@ -49,7 +50,6 @@ from models._fatigue_loops import HEADER as _HEADER
 from models._fatigue_loops import HYST as _HYST
 from models._fatigue_loops import NS as _NS
 from models._fatigue_loops import STARTED as _STARTED
-from models import _fatigue_loops as _loops
 from models._fatigue_loops import cycle_room as _cycle_room
 from models._fatigue_loops import feed_loop as _feed_loop
 from models._jit import HAVE_NUMBA
