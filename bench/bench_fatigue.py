@@ -36,6 +36,24 @@ The numba and numpy backends now give the same committed damage to the last bit 
 The compiled fused loop shows packed vdivpd/vsqrtpd on ymm registers (LLVM prefers
 256-bit vectors on this CPU): the stress and log/exp loops vectorise.
 
+Issue 22 (the library path against pyLife, same run): measured 2026-11-25 on the same
+machine, load average 6-8 from other work (wall times wait for a core: CPU is the fair
+figure), M samples/s:
+
+    separate numba, one block of 1e7: 69 (2026-11-21) -> 127.5 CPU, 60.3 wall
+    stages: conductor_stress 292 -> 741, StreamingRainflow.feed 123 -> 231,
+            MinerAccumulator.add_cycles 295 -> 460 (7.6 ns per cycle)
+    pyLife 2.3.1 FourPointDetector.process (LoopValueRecorder), same tensions: 70.7 CPU,
+            24.3 wall; ratio 1.80x CPU, 1.72x wall (target 1.5x)
+
+What changed: the counter's cycle output is allocated by numpy, which advises large
+arrays for transparent huge pages (numba's own allocations fault in 4 kB pages: 22 ms of
+a 75 ms feed of 1e7 samples), and conductor_stress flags non-finite stresses in its
+arithmetic loop instead of a second pass. Block-20 and fused figures are unchanged within
+the noise (3.31 and 8.25 M samples/s CPU). Tried and dropped: the first two four-point
+tests of a turning point without a branch (feed 231 -> 87: the pops' store-to-load chain
+is longer than the mispredictions it avoids).
+
 Run: PYTHONPATH=. python bench/bench_fatigue.py [n_samples]
 """
 
