@@ -40,11 +40,12 @@ Issue 22 (the library path against pyLife, same run): measured 2026-11-25 on the
 machine, load average 6-8 from other work (wall times wait for a core: CPU is the fair
 figure), M samples/s:
 
-    separate numba, one block of 1e7: 69 (2026-11-21) -> 127.5 CPU, 60.3 wall
-    stages: conductor_stress 292 -> 741, StreamingRainflow.feed 123 -> 231,
-            MinerAccumulator.add_cycles 295 -> 460 (7.6 ns per cycle)
-    pyLife 2.3.1 FourPointDetector.process (LoopValueRecorder), same tensions: 70.7 CPU,
-            24.3 wall; ratio 1.80x CPU, 1.72x wall (target 1.5x)
+    separate numba, one block of 1e7: 91 -> 127.5 CPU (60.3 wall)
+    stages: conductor_stress 588 -> 741, StreamingRainflow.feed 144 -> 231,
+            MinerAccumulator.add_cycles 430 -> 460 (unchanged code: noise; 7.6 ns per cycle)
+    pyLife 2.3.1 FourPointDetector.process (LoopValueRecorder), same tensions: 59-71 CPU
+            over the session's runs; in the final run 70.7 CPU, 24.3 wall: ratio 1.80x
+            CPU, 1.72x wall (before: 1.54x CPU; target 1.5x)
 
 What changed: the counter's cycle output is allocated by numpy, which advises large
 arrays for transparent huge pages (numba's own allocations fault in 4 kB pages: 22 ms of
