@@ -3,7 +3,7 @@
 1. A notice on stderr when the process compiles a kernel. numba compiles a kernel on its
    first call unless its on-disk cache (``__pycache__`` beside the source, or
    ``NUMBA_CACHE_DIR``) holds the machine code; compiling all of buoymon's takes about
-   25 s on the 2-core machine, which must never pass in silence inside a user's command
+   35 s of CPU on the 2-core machine, which must never pass in silence inside a command
    (issue 22). ``buoymon warmup`` fills the cache at install and service start; when a
    command still has to compile (cache cleared or not writable, numba upgraded, a kernel
    edited), one line says so, naming the first kernel.

@@ -2,11 +2,11 @@
 
 numba compiles a kernel the first time a process calls it and keeps the machine code in its
 cache (``__pycache__`` beside the source, or ``NUMBA_CACHE_DIR``); later processes load it.
-Compiling them all takes about 25 s on the 2-core machine, so it happens here, when the
-product is installed or the service starts (``make demo``, ``make test``, the systemd unit's
-``ExecStartPre``), never silently in a user's first command (a command that still has to
-compile says so on stderr: monitor.numba_setup). With a filled cache this loads each
-kernel once and exits (about 2 s, bench/bench_startup.py).
+Compiling them all takes about 35 s of CPU on the 2-core machine, so it happens here, when
+the product is installed or the service starts (``make demo``, ``make test``, the systemd
+unit's ``ExecStartPre``), never silently in a user's first command (a command that still
+has to compile says so on stderr: monitor.numba_setup). With a filled cache this loads
+each kernel once and exits (about 1 s of CPU, bench/bench_startup.py).
 
 It runs each path through its kernels on throwaway data: a 36-second simulated log per load
 model (sea, buoy motion, catenary, axial dynamics, WAVFOR; the log writer and encoder),
@@ -59,9 +59,13 @@ def warm_up(folder: Path, config_path: str | None = None) -> None:
     stream.feed_tension(np.array([1000.0, 3000.0, 500.0, 2500.0]), time_s=0.0)
     if config_path is not None:
         from monitor.config import load_config
+        from monitor.load_source import build_estimator
         from monitor.pipeline import Pipeline
 
-        Pipeline(load_config(config_path)).close()  # runs each kernel once (Pipeline._warm_up)
+        config = load_config(config_path)
+        Pipeline(config).close()  # runs each kernel once (Pipeline._warm_up)
+        if config.load.source != "measured":  # built at the first motion block otherwise
+            build_estimator(config)  # its catenary table goes to the model cache
 
 
 def run(args: argparse.Namespace) -> int:

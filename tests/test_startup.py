@@ -26,9 +26,9 @@ def _python(code: str, **env: str) -> subprocess.CompletedProcess:
     return proc
 
 
-def _buoymon(*args: str) -> subprocess.CompletedProcess:
+def _buoymon(*args: str, **env: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "monitor.cli", *args], capture_output=True,
-                          text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)},
+                          text=True, cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO), **env},
                           timeout=600)
 
 
@@ -103,10 +103,17 @@ def test_a_compilation_is_announced_and_numba_starts_without_scipy():
 def test_after_warmup_no_command_compiles(tmp_path):
     """`buoymon warmup` covers the kernels of simulate, replay and the library's fused
     fatigue pass: afterwards none of them announces a compilation. (The first run after a
-    kernel changed compiles here, inside warmup, which is what it is for.)"""
-    warm = _buoymon("warmup")
+    kernel changed compiles here, inside warmup, which is what it is for.) With --config,
+    as the service runs it, it also leaves the estimator's catenary table in the model
+    cache."""
+    models = tmp_path / "model-cache"
+    cfg = tmp_path / "deeper.toml"  # another mooring than the demo's: its own table
+    cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
+                   .replace("depth_m = 23.0", "depth_m = 24.0", 1))
+    warm = _buoymon("warmup", "--config", str(cfg), BUOYMON_CACHE_DIR=str(models))
     assert warm.returncode == 0, warm.stderr
     assert "kernels ready" in warm.stdout
+    assert sorted(p.name.split("-")[0] for p in models.iterdir()) == ["estimator"] * 2
     log = tmp_path / "x.mcap"
     sim = _buoymon("simulate", "-o", str(log), "--hours", "0.005", "--hs", "2", "--tp", "7",
                    "--seed", "3", "--load-model", "wavfor")
