@@ -118,9 +118,14 @@ def test_after_warmup_no_command_compiles(tmp_path):
     sim = _buoymon("simulate", "-o", str(log), "--hours", "0.005", "--hs", "2", "--tp", "7",
                    "--seed", "3", "--load-model", "wavfor")
     assert sim.returncode == 0, sim.stderr
-    rep = _buoymon("replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress")
-    assert rep.returncode == 0, rep.stderr
+    rep = _python(_IMPORTED_AFTER.format(
+        argv=["replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress"]))
+    out = json.loads(rep.stdout.splitlines()[-1])
+    assert out["status"] == 0
     assert NOTICE_START not in sim.stderr + rep.stderr
+    # nor does a replay import what it does not use (rerun alone took 0.44 s)
+    assert not {m.split(".")[0] for m in out["modules"]} & {"rerun", "matplotlib", "zenoh", "dask"}
+    assert "scipy.linalg" not in out["modules"]
     assert json.loads((tmp_path / "r.json").read_text())["samples"]["tension"]["accepted"] == 360
     lib = _python("import numpy as np\n"
                   "from monitor.numba_setup import prepare_numba\n"
