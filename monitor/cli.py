@@ -11,6 +11,8 @@ import importlib
 import sys
 from typing import Sequence
 
+from monitor.numba_setup import prepare_numba
+
 # command name -> (module that registers it, one-line summary for `buoymon --help`). A
 # module is imported only when its command runs: importing all of them (numpy, numba,
 # mcap...) made `buoymon --help` take 0.65 s instead of 0.03 s (bench/bench_startup.py).
@@ -68,13 +70,12 @@ def build_parser(argv: Sequence[str]) -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    prepare_numba()  # before any command module is imported: some import numba
     try:
         args = build_parser(argv).parse_args(argv)
-        from monitor.numba_setup import prepare_numba
         from monitor.logs import setup_logging
 
         setup_logging(args.log_level)
-        prepare_numba()
         try:
             return int(args.func(args) or 0)
         except OSError as exc:

@@ -35,6 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def warm_up(folder: Path, config_path: str | None = None) -> None:
     """Call every kernel once, writing scratch files in ``folder``; with ``config_path``,
     also build that configuration's pipeline (filling the model cache for it)."""
+    # imported here, not with the module: `buoymon warmup --help` then stays instant (the
+    # kernels' modules bring numpy and numba, 0.4 s)
     import numpy as np
 
     from models.fatigue import FatigueStream, MinerAccumulator, SNCurve, StreamingRainflow
