@@ -26,6 +26,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                "(at install and service start, so that no command has to)"),
     "design": ("replay.cmd_design",
                "annual damage and design life per component from a sea-state record"),
+    "lab-test": ("replay.cmd_lab_test",
+                 "seed 004's lab fatigue test through the monitor: predicted vs observed"),
     "forecast": ("replay.cmd_forecast", "projected fatigue damage over a sea-state forecast"),
     "run": ("monitor.cmd_run", "run the live monitoring daemon (Zenoh in, status out)"),
     "bridge": ("monitor.cmd_bridge", "read instruments (serial, TCP, UDP, files, stdin) and "

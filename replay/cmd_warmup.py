@@ -12,7 +12,8 @@ It runs each path through its kernels on throwaway data: a 36-second simulated l
 model (sea, buoy motion, catenary, axial dynamics, WAVFOR; the log writer and encoder),
 both logs replayed through the pipeline with the demo's components (reader, decoder,
 validation, QARTOD, motion estimator, rainflow, Miner, alert ticks), the live daemon's
-Zenoh codec, and the library's fused fatigue pass (models.fatigue.FatigueStream).
+Zenoh codec, and the library's per-call path (conductor_stress -> StreamingRainflow.feed ->
+MinerAccumulator.add_cycles, with the residue and the S-N curve's damage per cycle).
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ def warm_up(folder: Path, config_path: str | None = None) -> None:
     # kernels' modules bring numpy and numba, 0.4 s)
     import numpy as np
 
-    from models.fatigue import FatigueStream, MinerAccumulator, SNCurve, StreamingRainflow
-    from models.helix import HelixCable
+    from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow
+    from models.helix import HelixCable, conductor_stress
     from monitor import zenoh_io
     from replay.cmd_demo import demo_config
     from replay.reader import LogReader
@@ -56,9 +57,12 @@ def warm_up(folder: Path, config_path: str | None = None) -> None:
     codec = zenoh_io.default_codec()
     block = next(iter(LogReader([logs[0]], coalesce=False)))
     codec.decode(f"buoy/{block.buoy_id}/sensor/{block.sensor}", codec.encode(block), 0)
-    stream = FatigueStream(HelixCable.vaps_biw(), "left", StreamingRainflow(),
-                           MinerAccumulator(SNCurve.vaps_copper()))
-    stream.feed_tension(np.array([1000.0, 3000.0, 500.0, 2500.0]), time_s=0.0)
+    rainflow, miner = StreamingRainflow(), MinerAccumulator(SNCurve.vaps_copper())
+    stress = conductor_stress(np.array([1e3, 3e3, 500.0, 2.5e3, 800.0]), HelixCable.vaps_biw())
+    miner.add_cycles(*rainflow.feed(stress), time_s=0.0)
+    miner.residue_damage(rainflow)
+    ranges, means, counts = rainflow.residue_half_cycles()
+    miner.sn_curve.damage_per_cycle(ranges, counts, means)
     if config_path is not None:
         from monitor.config import load_config
         from monitor.load_source import build_estimator

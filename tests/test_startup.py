@@ -101,8 +101,8 @@ def test_a_compilation_is_announced_and_numba_starts_without_scipy():
 
 
 def test_after_warmup_no_command_compiles(tmp_path):
-    """`buoymon warmup` covers the kernels of simulate, replay and the library's fused
-    fatigue pass: afterwards none of them announces a compilation. (The first run after a
+    """`buoymon warmup` covers the kernels of simulate, replay and the library's per-call
+    fatigue path: afterwards none of them announces a compilation. (The first run after a
     kernel changed compiles here, inside warmup, which is what it is for.) With --config,
     as the service runs it, it also leaves the estimator's catenary table in the model
     cache."""
@@ -130,9 +130,12 @@ def test_after_warmup_no_command_compiles(tmp_path):
     lib = _python("import numpy as np\n"
                   "from monitor.numba_setup import prepare_numba\n"
                   "prepare_numba()\n"
-                  "from models.fatigue import FatigueStream, MinerAccumulator, SNCurve, StreamingRainflow\n"
-                  "from models.helix import HelixCable\n"
-                  "s = FatigueStream(HelixCable.vaps_biw(), 'left', StreamingRainflow(),\n"
-                  "                  MinerAccumulator(SNCurve.vaps_copper()))\n"
-                  "s.feed_tension(np.array([1e3, 5e3, 1e3, 6e3]), time_s=0.0)\n")
+                  "from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow\n"
+                  "from models.helix import HelixCable, conductor_stress\n"
+                  "rf, miner = StreamingRainflow(), MinerAccumulator(SNCurve.vaps_copper())\n"
+                  "x = conductor_stress(np.array([1e3, 5e3, 1e3, 6e3, 2e3]), HelixCable.vaps_biw())\n"
+                  "miner.add_cycles(*rf.feed(x), time_s=0.0)\n"
+                  "miner.residue_damage(rf)\n"
+                  "r, m, c = rf.residue_half_cycles()\n"
+                  "miner.sn_curve.damage_per_cycle(r, c, m)\n")
     assert NOTICE_START not in lib.stderr
