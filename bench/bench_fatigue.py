@@ -46,7 +46,8 @@ figure), M samples/s:
             MinerAccumulator.add_cycles 430 -> 460 (unchanged code: noise; 7.6 ns per cycle)
     pyLife 2.3.1 FourPointDetector.process (LoopValueRecorder), same tensions: 59-71 CPU
             over the session's runs; in the final run 70.7 CPU, 24.3 wall: ratio 1.80x
-            CPU, 1.72x wall (before: 1.54x CPU; target 1.5x)
+            CPU, 1.72x wall (before: 1.54x CPU; target 1.5x); after merging main (load
+            average 5): ours 131.4 CPU / 130.6 wall, pyLife 71.8 / 71.3: 1.83x both
 
 What changed: the counter's cycle output is allocated by numpy, which advises large
 arrays for transparent huge pages (numba's own allocations fault in 4 kB pages: 22 ms of

@@ -29,6 +29,9 @@ in s; "before" is main at 98e57db measured in the same session (``--repo``):
     warmup into an empty numba cache      -            80.4 / 34.6 (--compile)
     daemon start, empty numba cache       -            47.3 / 13.7 (one run, by hand)
 
+After merging main (best of 3, load average 5-6): --help 0.04 / 0.04, check-config
+0.16 / 0.20, replay 0.78 / 0.77, warmup --config 1.05 / 1.02, daemon 0.55 / 0.62.
+
 The daemon's start (0.6 s to READY=1) is far under the 5 s target once the kernels are
 cached: the 11-12 s the issue measured was compilation (47 s wall, 13.7 s CPU here with
 an empty numba cache), which the unit's ExecStartPre (``buoymon warmup --config``) now
