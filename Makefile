@@ -49,6 +49,7 @@ test: $(VENV)/.installed-test chromium alertmanager
 
 # the unit tests alone (no daemons, servers, browsers or whole records): under a minute
 test-fast: $(VENV)/.installed-test
+	$(VENV)/bin/buoymon warmup
 	$(PY) -m pytest -q -m "not integration and not slow"
 
 # every benchmark script prints its figures (the 30-day replay takes a few minutes)

@@ -10,9 +10,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from monitor.cli import COMMANDS
 from monitor.numba_setup import NOTICE
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 REPO = Path(__file__).resolve().parents[1]
 NOTICE_START = NOTICE.split("(")[0]
 HEAVY = ("numpy", "numba", "scipy", "rerun", "zenoh", "matplotlib", "dask", "mcap")
