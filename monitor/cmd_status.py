@@ -23,7 +23,7 @@ from monitor.viz.human import remaining_life_text
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
-    p = sub.add_parser("status", help="show a running daemon's status (or its last checkpoint)",
+    p = sub.add_parser("status",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", default=DEFAULT_CONFIG, metavar="CFG.toml",
                    help=f"the daemon's configuration (default {DEFAULT_CONFIG})")

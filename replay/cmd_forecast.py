@@ -37,7 +37,7 @@ TP_EDGES_S = np.arange(1.0, 25.0 + 1e-9, 1.0)
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "forecast", help="projected fatigue damage over a sea-state forecast",
+        "forecast",
         description="Project each component's damage over a sea-state forecast: damage at "
                     "the end with a band, when each damage alert threshold is crossed, and "
                     "the remaining life at the end.")

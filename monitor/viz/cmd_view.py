@@ -41,7 +41,7 @@ def stop_signals_raise() -> Iterator[None]:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="open .rrd recordings in a Rerun viewer (analytics off)")
+    p = sub.add_parser("view")
     p.add_argument("recordings", type=Path, nargs="+", help=".rrd files")
     p.add_argument("--native", action="store_true", help="desktop viewer instead of web")
     p.add_argument("--web-port", type=int, default=9090)
