@@ -31,7 +31,9 @@ from monitor.sensors import SensorPublisher
 from test_daemon_e2e import committed, flushed_figures, replayed_figures
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "realdata"
+# ../shared/realdata beside the repository (or beside a parent: a worktree)
+SHARED = next((p / "shared" / "realdata" for p in REPO.parents
+               if (p / "shared" / "realdata").is_dir()), REPO.parent / "shared" / "realdata")
 MAINE = SHARED / "maine_endline_loadcell" / "17348481-2018.11.30-09.58.27-15.csv"
 LOC = SHARED / "spotter_clallam_1945" / "0026_LOC.CSV"
 LBF = 4.4482216
@@ -226,6 +228,7 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
         return master
 
     master = plug()
+    stopping = False
     bridge_cfg = tmp_path / "bridge.toml"
     bridge_cfg.write_text(
         f'[buoy]\nid = "maine"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
@@ -270,8 +273,25 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
                 >= t_last - horizon
 
         st = wait_until_state(port, arrived, buoy="maine", timeout=120)
-    finally:
+        # the bridge's counters reach the daemon's status: every line read, each fault by
+        # reason, the unplug; the line cut by it is no line, the tail read after the replug
+        # (the link was idle first) is one, and a bad time
+        src = wait_until_state(port, lambda s: s["status"].get("bridge", {}).get(
+            "sources", {}).get("loadcell", {}).get("lines") == n + len(faults) + 1,
+            buoy="maine", timeout=30)["status"]["bridge"]["sources"]["loadcell"]
+        assert src["samples"] == n
+        assert src["rejected"] == {"garbled": 1, "columns": 1, "non_numeric": 1, "bad_time": 1}
+        assert src["events"] == {"disconnected": 1, "partial_line": 1}
+        # a bridge that stops says so in its last status, at once
         b.terminate()
+        stopping = True
+        t0 = time.monotonic()
+        wait_until_state(port, lambda s: s["status"]["bridge"]["sources"]["loadcell"]["state"]
+                         == "stopped", buoy="maine", timeout=30)
+        assert time.monotonic() - t0 < 5.0
+    finally:
+        if b.poll() is None and not stopping:  # one SIGTERM, as systemd sends
+            b.terminate()
         _, err = b.communicate(timeout=30)
         assert d.terminate() == 0
         for m, s in masters:
@@ -281,10 +301,29 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
                 except OSError:
                     pass
     assert b.returncode == 0, err
-    # the same samples through `buoymon import` + `buoymon replay`
+    config = load_config(daemon_cfg)
+    live = checkpointed_figures(config, tmp_path / "st.sqlite")
+    replayed = import_and_replay(tmp_path, expected_lines, config)
+    assert st["status"]["streams"]["tension"]["accepted"] > 0.95 * n
+    assert live["samples"]["tension"] == replayed["samples"]["tension"]
+    assert committed(live) == committed(replayed)
+
+
+def checkpointed_figures(config, state_path: Path) -> dict:
+    """The figures of a stopped daemon's last checkpoint, its ordering buffer flushed."""
+    from monitor.checkpoint import CheckpointStore
+
+    store = CheckpointStore(state_path)
+    final = store.load().state["pipeline"]
+    store.close()
+    return flushed_figures(config, final)
+
+
+def import_and_replay(tmp_path: Path, lines: list[str], config) -> dict:
+    """The figures of Maine load-cell ``lines`` through `buoymon import` + `buoymon replay`."""
     csv = tmp_path / "maine.csv"
     rows = ["time,tension_N"]
-    for ln in expected_lines:
+    for ln in lines:
         c = ln.split(",")
         ts = c[0].strip()
         iso = f"{ts[:10]}T{ts[11:]}Z"
@@ -294,13 +333,4 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "import", str(csv), "-o", str(log),
                           "--buoy-id", "maine"], env=ENV, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    config = load_config(daemon_cfg)
-    from monitor.checkpoint import CheckpointStore
-    store = CheckpointStore(tmp_path / "st.sqlite")
-    final = store.load().state["pipeline"]
-    store.close()
-    live = flushed_figures(config, final)
-    replayed = replayed_figures(config, [log])
-    assert st["status"]["streams"]["tension"]["accepted"] > 0.95 * n
-    assert live["samples"]["tension"] == replayed["samples"]["tension"]
-    assert committed(live) == committed(replayed)
+    return replayed_figures(config, [log])

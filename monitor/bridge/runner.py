@@ -8,9 +8,21 @@ strictly within a source: a sample at or before the last one is counted
 (``time_backwards``) and dropped, so no garbage time reaches the monitor.
 
 Status: every ``status_interval_s`` a JSON document on ``buoy/<id>/bridge/status``: per
-source its transport, stream, whether connected, counters (lines, samples, blocks) and
-rejections by reason, the time source (``instrument`` or ``receive``) and the age of the
-last sample. Each reason is logged at most once a minute per source.
+source its transport, stream, whether connected, its ``state``, counters (lines, samples,
+blocks) and rejections by reason, the time source (``instrument`` or ``receive``) and the
+ages of the last line and sample. Each reason is logged at most once a minute per source.
+
+A source's ``state`` makes a dead instrument loud within ``stall_s``: ``reading`` (connected,
+a line within ``stall_s``, or connected less than ``stall_s`` ago), ``stalled`` (connected,
+no line for ``stall_s``: a cable cut on the far side, an instrument hung), ``connecting``
+(not connected for less than ``stall_s``: starting, a reconnect) and ``disconnected`` (not
+connected for ``stall_s``: a device unplugged, a socket refused); the last status of a
+bridge that stops says ``stopped``. Each change is logged (a warning when it leaves
+``reading``); the daemon alerts on it (``bridge_source``).
+
+:meth:`Bridge.run` serves in a process of its own (``buoymon bridge``); :meth:`Bridge.open`,
+:meth:`Bridge.step` and :meth:`Bridge.close` let the daemon run it between its own work
+(:mod:`monitor.bridge.embedded`).
 """
 
 from __future__ import annotations
@@ -51,19 +63,35 @@ class SourceState:
     time_source: str | None = None
     last_t_ns: int | None = None
     last_sample_mono: float | None = None
+    last_line_mono: float | None = None
+    # when ``connected`` last changed (or the bridge started): what a state's age counts from
+    link_mono: float = field(default_factory=time.monotonic)
+    state: str = "connecting"
     t: list[int] = field(default_factory=list)
     values: list[list[float]] = field(default_factory=list)
     block_opened_mono: float = 0.0
     logged: dict[str, float] = field(default_factory=dict)
 
+    def current_state(self, now_mono: float) -> str:
+        """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
+        quiet_s = now_mono - max(self.link_mono, self.last_line_mono or self.link_mono)
+        if self.connected:
+            return "reading" if quiet_s <= self.cfg.stall_s else "stalled"
+        return "connecting" if quiet_s <= self.cfg.stall_s else "disconnected"
+
     def status(self, now_mono: float) -> dict[str, Any]:
         return {"sensor": self.cfg.sensor, "transport": self.cfg.transport,
-                "format": self.cfg.format, "connected": self.connected, "lines": self.lines,
+                "format": self.cfg.format, "connected": self.connected, "state": self.state,
+                "stall_s": self.cfg.stall_s, "lines": self.lines,
                 "samples": self.samples, "blocks": self.blocks,
                 "rejected": dict(self.rejected), "events": dict(self.events),
                 "time_source": self.time_source,
-                "last_sample_age_s": None if self.last_sample_mono is None
-                else now_mono - self.last_sample_mono}
+                "last_line_age_s": _age(now_mono, self.last_line_mono),
+                "last_sample_age_s": _age(now_mono, self.last_sample_mono)}
+
+
+def _age(now_mono: float, then: float | None) -> float | None:
+    return None if then is None else now_mono - then
 
 
 class Bridge:
@@ -78,6 +106,7 @@ class Bridge:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._status_pub: Any = None
+        self._next_status = 0.0
 
     def stop(self) -> None:
         self._stop.set()
@@ -99,51 +128,88 @@ class Bridge:
             th.start()
             self._threads.append(th)
 
-    def run(self, until: Callable[[], bool] = lambda: False) -> None:
-        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end."""
+    def open(self) -> None:
+        """Declare the status publisher and start the reader threads."""
         self._status_pub = zenoh_io.declare_json_publisher(
             self.publisher.session, f"buoy/{self.cfg.buoy_id}/bridge/status")
         self.start_readers()
-        next_status = time.monotonic()
+        self._next_status = time.monotonic()
+
+    def step(self, wait_s: float, budget_s: float) -> None:
+        """Handle what the readers queued (waiting up to ``wait_s`` for the first item, for
+        at most ``budget_s`` in all), then close due blocks and publish a due status."""
+        deadline = time.monotonic() + budget_s
         try:
-            while not self._stop.is_set() and not until():
-                try:
-                    item = self._q.get(timeout=0.05)
-                except queue.Empty:
-                    item = None
-                if item is not None:
-                    self.handle(*item)
-                now = time.monotonic()
-                for src in self.sources:
-                    if src.t and now - src.block_opened_mono >= src.cfg.block_s:
-                        self._flush(src)
-                if now >= next_status:
-                    self.publish_status()
-                    next_status = now + self.cfg.status_interval_s
-        finally:
-            self._stop.set()
-            for th in self._threads:
-                th.join(2.0)
-            while True:  # what the readers queued before they stopped
-                try:
-                    self.handle(*self._q.get_nowait())
-                except queue.Empty:
+            item = self._q.get(timeout=wait_s) if wait_s > 0 else self._q.get_nowait()
+            while True:
+                self.handle(*item)
+                if time.monotonic() >= deadline:
                     break
-            for src in self.sources:
+                item = self._q.get_nowait()
+        except queue.Empty:
+            pass
+        now = time.monotonic()
+        for src in self.sources:
+            if src.t and now - src.block_opened_mono >= src.cfg.block_s:
                 self._flush(src)
+        self._update_states(now)
+        if now >= self._next_status:
+            self.publish_status()
+            self._next_status = now + self.cfg.status_interval_s
+
+    def close(self) -> None:
+        """Stop the readers, handle what they queued, flush every block, a last status."""
+        self._stop.set()
+        for th in self._threads:
+            th.join(2.0)
+        while True:  # what the readers queued before they stopped
+            try:
+                self.handle(*self._q.get_nowait())
+            except queue.Empty:
+                break
+        for src in self.sources:
+            self._flush(src)
+            src.state = "stopped"
+        if self._status_pub is not None:
             self.publish_status()
             self._status_pub.undeclare()
+            self._status_pub = None
+
+    def run(self, until: Callable[[], bool] = lambda: False) -> None:
+        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end."""
+        self.open()
+        try:
+            while not self._stop.is_set() and not until():
+                self.step(0.05, 0.25)
+        finally:
+            self.close()
+
+    def _update_states(self, now_mono: float) -> None:
+        for src in self.sources:
+            state = src.current_state(now_mono)
+            if state == src.state:
+                continue
+            fields = {"source": src.cfg.name, "state": state, "was": src.state,
+                      "transport": src.cfg.transport, "stall_s": src.cfg.stall_s}
+            if state in ("stalled", "disconnected"):
+                log.warning("bridge source %s", state, extra={"fields": fields})
+            else:
+                log.info("bridge source %s", state, extra={"fields": fields})
+            src.state = state
 
     def handle(self, i: int, kind: str, data: Any, recv_ns: int) -> None:
         src = self.sources[i]
         if kind == "connected":
-            src.connected = bool(data)
+            if src.connected != bool(data):
+                src.connected = bool(data)
+                src.link_mono = time.monotonic()
             return
         if kind == "event":
             src.events[data] += 1
             self._log(src, data)
             return
         src.lines += 1
+        src.last_line_mono = time.monotonic()
         try:
             line = data.decode("ascii")
             if not line.isprintable():
@@ -197,6 +263,7 @@ class Bridge:
     def status(self) -> dict[str, Any]:
         now = time.monotonic()
         return {"buoy_id": self.cfg.buoy_id, "wall_time_ns": time.time_ns(),
+                "status_interval_s": self.cfg.status_interval_s,
                 "sources": {s.cfg.name: s.status(now) for s in self.sources}}
 
     def publish_status(self) -> None:
