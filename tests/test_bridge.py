@@ -130,6 +130,7 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
     path.write_bytes(b"")
     bad = [nmea("GPRMC,000000.00,V,,,,,,,010101,,"), sentences[3][:-2] + "00",  # no fix, bad cs
            "$GPRMC,garbled", "\x00\xff\xfe binary", sentences[5][:20]]
+    fault_at = {10: 0, 20: 1, 30: 2, 35: 3, 50: 4}  # sentence index -> fault after it
 
     def feed() -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as u, \
@@ -142,8 +143,8 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
                 tc.sendall(line[10:])
                 f.write(line)
                 f.flush()
-                if k in (10, 30):
-                    junk = (bad[k % len(bad)] + "\r\n").encode("latin-1")
+                if k in fault_at:
+                    junk = (bad[fault_at[k]] + "\r\n").encode("latin-1")
                     u.sendto(junk, ("127.0.0.1", udp_port))
                     tc.sendall(junk)
                     f.write(junk)
@@ -166,7 +167,7 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
                 "path": str(path)}]}
 
     def settle(b: Bridge) -> bool:
-        return all(s.samples + sum(s.rejected.values()) >= 60 for s in b.sources)
+        return all(s.samples + sum(s.rejected.values()) >= 65 for s in b.sources)
 
     bridge, col = run_bridge(raw, feed, port, settle)
     try:
@@ -184,7 +185,8 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
         for tt, la in zip(t.tolist(), lat.tolist()):
             assert la == pytest.approx(exp[tt][0], abs=1e-7)
         rej = by["gps_udp"].rejected
-        assert sum(rej.values()) == 2 and set(rej) <= {"no_fix", "checksum", "garbled"}
+        # a sentence cut short or garbled loses its checksum: "checksum" (required)
+        assert rej == {"no_fix": 1, "checksum": 3, "garbled": 1}
         assert col.status and set(col.status[-1]["sources"]) == set(by)
     finally:
         col.close()
@@ -334,3 +336,28 @@ def import_and_replay(tmp_path: Path, lines: list[str], config) -> dict:
                           "--buoy-id", "maine"], env=ENV, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     return replayed_figures(config, [log])
+
+
+def test_nmea_gga_and_rmc_of_one_fix_give_one_sample():
+    """A receiver sends GGA and RMC for each fix (and GSA, VTG...): one sample per fix, at
+    the RMC's date; the repeats and other sentences are counted, not published."""
+    from monitor.bridge.formats import Rejected, parser
+
+    cfg = parse_bridge_config({"buoy": {"id": "b"}, "source": [
+        {"name": "gps", "sensor": "gnss", "transport": "stdin"}]}).sources[0]
+    parse = parser(cfg)
+    rmc, fixes = spotter_sentences(3)
+    out, reasons = [], []
+    for s, (ts, lat, lon) in zip(rmc, fixes):
+        f = s.split(",")  # the same fix as GGA: hhmmss, lat, N, lon, W, quality 1
+        for line in (s, nmea(f"GPGGA,{f[1]},{f[3]},N,{f[5]},W,1,08,0.9,1.0,M,-20.0,M,,"),
+                     nmea("GPVTG,0.0,T,,M,0.1,N,0.2,K,A")):
+            try:
+                out.append(parse(line, 0))
+            except Rejected as exc:
+                reasons.append(str(exc))
+    assert [t for t, _, _ in out] == [ts for ts, _, _ in fixes]
+    for (_, v, src), (_, lat, lon) in zip(out, fixes):
+        assert v["lat_deg"] == pytest.approx(lat, abs=1e-7) and src == "instrument"
+        assert v["lon_deg"] == pytest.approx(lon, abs=1e-7)
+    assert sorted(reasons) == ["other_sentence"] * 3 + ["repeat_fix"] * 3

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from datetime import datetime, timezone
-from typing import Callable
+from typing import Any, Callable
 
 import pynmea2
 
@@ -106,8 +106,10 @@ def csv_header(cfg: SourceConfig) -> Callable[[str, int], Sample]:
 
 def nmea(cfg: SourceConfig) -> Callable[[str, int], Sample]:
     """GGA and RMC sentences (checksums required and verified) -> the gnss stream. GGA carries
-    no date: it takes the last valid RMC's, else the receive time's UTC date."""
-    state = {"date": None}
+    no date: it takes the last valid RMC's, else the receive time's UTC date. A receiver
+    sends both for each fix: the second of a fix's time is ``repeat_fix``, as other
+    sentences (GSA, GSV, VTG, ...) are ``other_sentence``: counted, not faults."""
+    state: dict[str, Any] = {"date": None, "t": None}
 
     def parse(line: str, recv_ns: int) -> Sample:
         try:
@@ -131,12 +133,17 @@ def nmea(cfg: SourceConfig) -> Callable[[str, int], Sample]:
             else:
                 raise Rejected("other_sentence")
             lat, lon, hms = msg.latitude, msg.longitude, msg.timestamp
-        except (ValueError, TypeError, AttributeError):
+        except Rejected:
+            raise
+        except (ValueError, TypeError, AttributeError):  # a field pynmea2 cannot read
             raise Rejected("garbled") from None
         if hms is None or not (-90 <= lat <= 90 and -180 <= lon <= 180):
             raise Rejected("garbled")
         dt = datetime.combine(day, hms).replace(tzinfo=timezone.utc)
         t = int(dt.timestamp()) * 10**9 + dt.microsecond * 1000
+        if t == state["t"]:
+            raise Rejected("repeat_fix")
+        state["t"] = t
         return t, {"lat_deg": float(lat), "lon_deg": float(lon)}, "instrument"
 
     return parse

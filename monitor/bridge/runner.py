@@ -46,8 +46,10 @@ from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.bridge")
 _LOG_EVERY_S = 60.0
-# reasons that are not faults of the data (header lines of a CSV file)
+# reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
+# sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
+_UNLOGGED = {"other_sentence", "repeat_fix"}
 
 
 @dataclass
@@ -239,7 +241,8 @@ class Bridge:
         if reason in _QUIET:
             return
         src.rejected[reason] += 1
-        self._log(src, reason)
+        if reason not in _UNLOGGED:
+            self._log(src, reason)
 
     def _log(self, src: SourceState, reason: str) -> None:
         now = time.monotonic()
