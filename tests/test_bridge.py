@@ -361,3 +361,81 @@ def test_nmea_gga_and_rmc_of_one_fix_give_one_sample():
         assert v["lat_deg"] == pytest.approx(lat, abs=1e-7) and src == "instrument"
         assert v["lon_deg"] == pytest.approx(lon, abs=1e-7)
     assert sorted(reasons) == ["other_sentence"] * 3 + ["repeat_fix"] * 3
+
+
+def test_tcp_client_reconnects_and_a_dead_address_does_not_hold_the_others(tmp_path):
+    """A TCP client source connects to the instrument (a server here), which drops the
+    connection mid-line and comes back: disconnected, the cut line dropped, reconnected
+    within reconnect_s; a new connection may start mid-line (a serial-to-Ethernet converter
+    streams on), so its first line is dropped too. A second source pointing at a closed port keeps failing (counted)
+    without holding the first."""
+    lines = maine_lines(300)
+    srv = socket.create_server(("127.0.0.1", 0))
+    iport, port = srv.getsockname()[1], free_port()
+    raw = {"buoy": {"id": "t1"}, "bridge": {"connect": [f"tcp/127.0.0.1:{port}"]},
+           "source": [
+               {"name": "cell", "sensor": "tension", "transport": "tcp_client",
+                "port": iport, "reconnect_s": 0.2, "columns": {"tension_N": 2},
+                "time_column": 0, "time_format": "%Y-%m-%d-%H:%M:%S.%f"},
+               {"name": "nobody", "sensor": "gnss", "transport": "tcp_client",
+                "port": free_port(), "reconnect_s": 0.2}]}
+
+    def feed() -> None:
+        with srv:
+            conn, _ = srv.accept()
+            conn.sendall("".join(ln + "\n" for ln in lines[:150]).encode())
+            conn.sendall(lines[150].encode()[:12])  # cut by the drop
+            time.sleep(0.2)
+            conn.close()
+            conn, _ = srv.accept()  # the bridge connects again
+            with conn:
+                conn.sendall("".join(ln + "\n" for ln in lines[151:]).encode())
+                time.sleep(0.5)
+
+    bridge, col = run_bridge(raw, feed, port, lambda b: b.sources[0].samples >= 298)
+    try:
+        cell, nobody = bridge.sources
+        assert cell.samples == 298 and not cell.rejected
+        # the drop, and the instrument's close at the end
+        assert cell.events["disconnected"] == 2 and cell.events["partial_line"] == 2
+        assert nobody.events["disconnected"] >= 3 and nobody.lines == 0
+        got = np.concatenate([b.fields["tension_N"] for b in col.blocks()])
+        exp = [float(ln.split(",")[2]) for k, ln in enumerate(lines) if k not in (150, 151)]
+        assert got.tolist() == [v for v in exp]  # scale 1: the lbf as sent
+    finally:
+        col.close()
+
+
+def test_stdin_csv_through_a_bridge_process(tmp_path):
+    """`producer | buoymon bridge`: buoymon import's CSV columns on stdin; the last line
+    without a newline counts; the bridge exits at the end of its input."""
+    port = free_port()
+    col = Collector(port)
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(f'[buoy]\nid = "t1"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                   '[[source]]\nname = "csv"\nsensor = "tension"\ntransport = "stdin"\n'
+                   'format = "csv"\n')
+    rows = ["time_s,tension_N"] + [f"{1_750_000_000 + k * 0.05:.2f},{1000.0 + k}"
+                                   for k in range(100)]
+    rows.insert(40, "1750000001.00,not a number")
+    try:
+        p = subprocess.Popen([sys.executable, "-m", "monitor.cli", "--log-level", "warning",
+                              "bridge", "--config", str(cfg)], env=ENV, stdin=subprocess.PIPE,
+                             stderr=subprocess.PIPE)
+        time.sleep(1.5)  # connected to the collector
+        p.stdin.write("\n".join(rows).encode())  # no newline at the end
+        p.stdin.close()
+        deadline = time.monotonic() + 30
+        got = []
+        while time.monotonic() < deadline and sum(len(b) for b in got) < 100:
+            time.sleep(0.2)
+            got.extend(col.blocks())
+        p.terminate()
+        p.wait(30)
+    finally:
+        col.close()
+    t = np.concatenate([b.t_ns for b in got])
+    v = np.concatenate([b.fields["tension_N"] for b in got])
+    assert v.tolist() == [1000.0 + k for k in range(100)]
+    assert t[0] == 1_750_000_000 * 10**9 and t[-1] == 1_750_000_004_950_000_000
+    assert col.status[-1]["sources"]["csv"]["rejected"] == {"non_numeric": 1}

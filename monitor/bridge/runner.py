@@ -1,7 +1,7 @@
 """Runs the configured sources: lines -> samples -> blocks -> publisher, and the status.
 
-Reader threads only queue what they read; one thread parses, cuts blocks, publishes and
-reports, so every Zenoh call happens on it. A block closes when a sample lies ``block_s``
+One thread reads every source (:class:`monitor.bridge.transports.Links`), parses, cuts
+blocks, publishes and reports. A block closes when a sample lies ``block_s``
 after its first one, or when ``block_s`` of wall-clock time has passed since its first
 sample arrived (a quiet instrument still gets its samples out). Times must increase
 strictly within a source: a sample at or before the last one is counted
@@ -20,15 +20,13 @@ connected for ``stall_s``: a device unplugged, a socket refused); the last statu
 bridge that stops says ``stopped``. Each change is logged (a warning when it leaves
 ``reading``); the daemon alerts on it (``bridge_source``).
 
-:meth:`Bridge.run` serves in a process of its own (``buoymon bridge``); :meth:`Bridge.open`,
-:meth:`Bridge.step` and :meth:`Bridge.close` let the daemon run it between its own work
-(:mod:`monitor.bridge.embedded`).
+:meth:`Bridge.run` serves in a process of its own (``buoymon bridge``), or in a thread of
+the daemon (:mod:`monitor.bridge.embedded`).
 """
 
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections import Counter
@@ -40,18 +38,17 @@ import numpy as np
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.bridge.config import BridgeConfig, SourceConfig
 from monitor.bridge.formats import Rejected, parser
-from monitor.bridge.transports import ReceiveClock, run_transport
+from monitor.bridge.transports import LINKS, LineSplitter, Link, Links, ReceiveClock
 from monitor.sensors import PublisherOptions, SensorPublisher
 from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.bridge")
 _LOG_EVERY_S = 60.0
 # closing blocks on the wall clock, states, status: checked this often, not after every read
-# (at 5 x 1 kHz a check per read was most of the bridge's CPU)
 _DUTY_S = 0.01
-# after a wake-up, wait this long so one turn takes the reads of every source (a wake-up per
-# read of each source costs more than the lines' parsing)
-_COALESCE_S = 0.002
+# shortest time between two turns of the bridge's loop (its latency): a turn per read of each
+# source would cost more than the lines' parsing
+_PACE_S = 0.004
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
@@ -110,55 +107,43 @@ class Bridge:
         self.publisher = publisher
         self.clock = ReceiveClock()
         self.sources = [SourceState(s, parser(s)) for s in cfg.sources]
-        self._q: "queue.SimpleQueue[tuple[int, str, Any, int]]" = queue.SimpleQueue()
         self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._links: Links | None = None
         self._status_pub: Any = None
         self._next_status = 0.0
         self._next_duties = 0.0
 
     def stop(self) -> None:
+        """Ask :meth:`run` to return (safe from signal handlers and other threads)."""
         self._stop.set()
 
-    def start_readers(self) -> None:
-        for i, src in enumerate(self.sources):
-            def emit(lines: list[bytes], recv_ns: int, i: int = i) -> None:
-                self._q.put((i, "lines", lines, recv_ns))
+    def _link(self, i: int) -> Link:
+        src = self.sources[i]
 
-            def event(reason: str, i: int = i) -> None:
-                self._q.put((i, "event", reason, 0))
+        def emit(lines: list[bytes], recv_ns: int) -> None:
+            self.handle(i, "lines", lines, recv_ns)
 
-            def connected(up: bool, i: int = i) -> None:
-                self._q.put((i, "connected", up, 0))
+        def event(reason: str) -> None:
+            self.handle(i, "event", reason, 0)
 
-            th = threading.Thread(target=run_transport, name=f"bridge-{src.cfg.name}",
-                                  args=(src.cfg, emit, event, self._stop, self.clock, connected),
-                                  daemon=True)
-            th.start()
-            self._threads.append(th)
+        def connected(up: bool) -> None:
+            self.handle(i, "connected", up, 0)
+
+        return LINKS[src.cfg.transport](src.cfg, LineSplitter(emit, event, self.clock), event,
+                                        connected)
 
     def open(self) -> None:
-        """Declare the status publisher and start the reader threads."""
+        """Declare the status publisher; the links open at the first :meth:`step`."""
         self._status_pub = zenoh_io.declare_json_publisher(
             self.publisher.session, f"buoy/{self.cfg.buoy_id}/bridge/status")
-        self.start_readers()
+        self._links = Links([self._link(i) for i in range(len(self.sources))])
         self._next_status = time.monotonic()
 
-    def step(self, wait_s: float, budget_s: float) -> None:
-        """Handle what the readers queued (waiting up to ``wait_s`` for the first item, for
-        at most ``budget_s`` in all), then close due blocks and publish a due status."""
-        deadline = time.monotonic() + budget_s
-        try:
-            item = self._q.get(timeout=wait_s) if wait_s > 0 else self._q.get_nowait()
-            if wait_s > 0:  # let the other sources' reads of this moment queue up too
-                time.sleep(_COALESCE_S)
-            while True:
-                self.handle(*item)
-                if time.monotonic() >= deadline:
-                    break
-                item = self._q.get_nowait()
-        except queue.Empty:
-            pass
+    def step(self, wait_s: float) -> None:
+        """Read what the instruments sent (waiting up to ``wait_s`` for something), then
+        close due blocks, update the states and publish a due status."""
+        assert self._links is not None, "open() first"
+        self._links.pump(wait_s)
         now = time.monotonic()
         if now < self._next_duties:
             return
@@ -172,15 +157,10 @@ class Bridge:
             self._next_status = now + self.cfg.status_interval_s
 
     def close(self) -> None:
-        """Stop the readers, handle what they queued, flush every block, a last status."""
-        self._stop.set()
-        for th in self._threads:
-            th.join(2.0)
-        while True:  # what the readers queued before they stopped
-            try:
-                self.handle(*self._q.get_nowait())
-            except queue.Empty:
-                break
+        """Close the links, flush every block, publish a last status (``stopped``)."""
+        if self._links is not None:
+            self._links.close()
+            self._links = None
         for src in self.sources:
             self._flush(src)
             src.state = "stopped"
@@ -190,11 +170,17 @@ class Bridge:
             self._status_pub = None
 
     def run(self, until: Callable[[], bool] = lambda: False) -> None:
-        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end."""
+        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end.
+        A turn at most every ``_PACE_S``: meanwhile the instruments' bytes wait in the
+        kernel's buffers, so a turn takes many lines of every source at once."""
         self.open()
         try:
             while not self._stop.is_set() and not until():
-                self.step(0.05, 0.25)
+                began = time.monotonic()
+                self.step(0.05)
+                rest = began + _PACE_S - time.monotonic()
+                if rest > 0:
+                    time.sleep(rest)
         finally:
             self.close()
 
