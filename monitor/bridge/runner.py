@@ -77,6 +77,10 @@ class SourceState:
     block_opened_mono: float = 0.0
     logged: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def block_ns(self) -> int:
+        return int(self.cfg.block_s * 1e9)
+
     def current_state(self, now_mono: float) -> str:
         """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
         quiet_s = now_mono - max(self.link_mono, self.last_line_mono or self.link_mono)
@@ -229,12 +233,12 @@ class Bridge:
         if src.last_t_ns is not None and t_ns <= src.last_t_ns:
             self._reject(src, "time_backwards")
             return
-        if src.t and t_ns - src.t[0] >= int(src.cfg.block_s * 1e9):
+        if src.t and t_ns - src.t[0] >= src.block_ns:
             self._flush(src)
         if not src.t:
             src.block_opened_mono = now_mono
         src.t.append(t_ns)
-        src.values.append([vals[f] for f in SENSOR_FIELDS[src.cfg.sensor]])
+        src.values.append(vals)
         src.last_t_ns = t_ns
         src.time_source = time_source
         src.samples += 1
