@@ -11,14 +11,28 @@
    (TCP flow control: nothing is lost), until the bridge's status counts them all: lines per
    second and CPU per 1000 lines at saturation.
 
-Measured 2026-11-25 on the 2-core development machine (AMD EPYC, shared with 7 other jobs;
-issue 16's targets: 5 x 1 kHz under 5 % of one core, under 5 ms of latency per block), with
-a reader thread per source and the parsing thread waking on each read (2 ms coalescing):
-5,001 lines/s read; bridge CPU 16.6 % of one core, 33.2 ms per 1000 lines; block latency
-from the closing line p50 4.1 ms, p99 18.7 ms (from the last sample p50 6.1 ms); flat out
-105,800 lines/s at 3.6 ms per 1000 lines. Targets NOT met: at 1 kHz the cost is the wake-ups
-(a read every 2 ms per source, each a hand-over between Python threads), 9 x the parsing
-(the flat-out figure).
+Measured 2026-11-25 on the 2-core development machine (AMD EPYC, shared with 7 other jobs,
+load average 6-7 during the runs; issue 16's targets: 5 x 1 kHz under 5 % of one core, under
+5 ms of latency per block):
+
+=============================  ======================  =====================================
+                               reader thread per       one thread for all sources
+                               source (first version)  (selectors, a turn every >= 4 ms)
+=============================  ======================  =====================================
+5 x 1 kHz: bridge CPU          16.6 % of one core      9.8 % of one core
+  per 1000 lines               33.2 ms                 19.6 ms
+  latency, closing line        p50 4.1, p99 18.7 ms    p50 8.5, p99 17.3 ms
+  latency, last sample         p50 6.1 ms              p50 10.7, p99 19.5 ms
+flat out, one TCP source       105,800 lines/s,        201,000 lines/s, 3.1 ms per 1000
+                               3.6 ms per 1000 lines   lines
+idle (5 sources, no data)      0.4 %                   0.6 %
+=============================  ======================  =====================================
+
+Targets NOT met here. CPU: the flat-out cost (3.1 ms per 1000 lines: 1.6 % of a core at 5,000
+lines/s) is what parsing costs; the rest at 1 kHz is waking up 250 times a second on a
+loaded machine (cold caches after every sleep). Latency: a turn every 4 ms adds 2 ms on
+average; the rest is waiting for a CPU on this machine (7 runnable jobs on 2 cores), which a
+buoy's logger would not see. Both figures move by +-30 % between runs here.
 
 Usage: PYTHONPATH=. python bench/bench_bridge.py [--seconds 20] [--burst 200000]
 """
