@@ -458,3 +458,51 @@ def test_unix_time_cells_are_exact_or_rejected(cell, ns):
             instrument_time(cell, "unix")
     else:
         assert instrument_time(cell, "unix") == ns
+
+
+def _listening(pid: int) -> list[tuple[str, str, int]]:
+    """(protocol, local address, port) of every socket the process listens or binds on (TCP
+    in LISTEN, UDP bound), from /proc: its socket inodes matched in /proc/net/*."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    out = []
+    for proto in ("tcp", "udp", "tcp6", "udp6"):
+        for row in Path(f"/proc/net/{proto}").read_text().splitlines()[1:]:
+            cells = row.split()
+            local, state, inode = cells[1], cells[3], cells[9]
+            if inode in inodes and (proto.startswith("udp") or state == "0A"):
+                addr, port = local.split(":")
+                ip = (socket.inet_ntop(socket.AF_INET, bytes.fromhex(addr)[::-1])
+                      if len(addr) == 8 else "v6:" + addr)
+                out.append((proto, ip, int(port, 16)))
+    return out
+
+
+def test_the_bridge_listens_on_loopback_only_and_only_where_configured(tmp_path):
+    """The bridge process's Zenoh session listens on nothing (it connects out); its TCP
+    server and UDP sources bind 127.0.0.1 by default, on their configured ports."""
+    port, tport, uport = free_port(), free_port(), free_port()
+    col = Collector(port)
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(f'[buoy]\nid = "t1"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                   f'[[source]]\nname = "a"\nsensor = "gnss"\ntransport = "tcp_server"\n'
+                   f'port = {tport}\n[[source]]\nname = "b"\nsensor = "gnss"\n'
+                   f'transport = "udp"\nport = {uport}\n')
+    p = subprocess.Popen([sys.executable, "-m", "monitor.cli", "--log-level", "warning",
+                          "bridge", "--config", str(cfg)], env=ENV, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 30
+        while not col.status and time.monotonic() < deadline:  # running and connected
+            time.sleep(0.1)
+        got = sorted(_listening(p.pid))
+    finally:
+        p.terminate()
+        p.wait(30)
+        col.close()
+    assert got == sorted([("tcp", "127.0.0.1", tport), ("udp", "127.0.0.1", uport)])
