@@ -171,6 +171,16 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
                      _n(c.get("damage_rate_per_day")),
                      _n(c.get("remaining_life_days"), "{:.4g}", " d")))
     out += ["components:", *_table(rows)]
+    sources = (doc.get("bridge") or {}).get("sources") or {}
+    if sources:  # the instruments read by a bridge (docs/SENSORS.md)
+        rows = [("SOURCE", "STATE", "LAST LINE", "LINES", "SAMPLES", "REJECTED")]
+        for name, b in sorted(sources.items()):
+            rej = " ".join(f"{k}={v}" for k, v in sorted((b.get("rejected") or {}).items()))
+            rows.append((f"{name} ({b.get('transport')} -> {b.get('sensor')})",
+                         str(b.get("state")).upper() if b.get("state") != "reading"
+                         else "reading", _n(b.get("last_line_age_s"), "{:.1f}", " s ago"),
+                         str(b.get("lines", 0)), str(b.get("samples", 0)), rej or "0"))
+        out += ["bridge:", *_table(rows)]
     active = (doc.get("alerts") or {}).get("active", [])
     out.append(f"active alerts: {len(active)}")
     if active:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
 import sys
 import time
 import tty
@@ -14,7 +15,7 @@ import urllib.request
 
 import pytest
 
-from daemon_harness import DaemonProcess, free_port, wait_until_state
+from daemon_harness import ENV, DaemonProcess, free_port, wait_until_state
 from monitor.config import load_config
 from test_bridge import (LBF, MAINE, REPO, checkpointed_figures, committed, import_and_replay,
                          maine_lines, pytestmark)  # noqa: F401 (pytestmark: skip without data)
@@ -107,6 +108,13 @@ def test_bridge_inside_the_daemon_pty_to_damage_counters_metrics_and_a_stall(tmp
         assert metric(text, "buoymon_bridge_source_state", state="stalled", **lab) == 1
         assert metric(text, "buoymon_alert_firing", rule="bridge_source",
                       component="loadcell") == 1
+        screen = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config",
+                                 str(cfg)], env=ENV, capture_output=True, text=True, timeout=60)
+        row = next(ln for ln in screen.stdout.splitlines()
+                   if ln.strip().startswith("loadcell (serial -> tension)"))
+        cells = row.split()  # name (transport -> stream), state, last line, counts, rejected
+        assert cells[4] == "STALLED" and cells[7] == "ago", screen.stdout
+        assert cells[8:] == ["602", "600", "columns=1", "non_numeric=1"], screen.stdout
         # it talks again: reading, the alert clears
         write(range(600, 1200))
         wait_until_state(port, lambda s: bridge_source(s).get("samples") == 1200
