@@ -17,7 +17,7 @@ import pytest
 
 from daemon_harness import ENV, DaemonProcess, free_port, wait_until_state
 from monitor.config import load_config
-from test_bridge import (LBF, MAINE, REPO, checkpointed_figures, committed, import_and_replay,
+from test_bridge import (LBF, REPO, checkpointed_figures, committed, import_and_replay,
                          maine_lines, pytestmark)  # noqa: F401 (pytestmark: skip without data)
 
 STALL_S = 1.0

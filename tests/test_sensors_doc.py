@@ -15,7 +15,6 @@ import tty
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from daemon_harness import ENV, free_port
 from monitor.bridge.config import parse_bridge_config
