@@ -32,7 +32,10 @@ Targets NOT met here. CPU: the flat-out cost (3.1 ms per 1000 lines: 1.6 % of a 
 lines/s) is what parsing costs; the rest at 1 kHz is waking up 250 times a second on a
 loaded machine (cold caches after every sleep). Latency: a turn every 4 ms adds 2 ms on
 average; the rest is waiting for a CPU on this machine (7 runnable jobs on 2 cores), which a
-buoy's logger would not see. Both figures move by +-30 % between runs here.
+buoy's logger would not see. Both figures move by +-30 % between runs here. The turn period
+(monitor.bridge.runner._PACE_S) trades one for the other: 8 ms gave 6.7 % of a core and
+p50 11 ms, 4 ms (shipped) 9.3 % and p50 6 ms, 2 ms 13 % and p50 6 ms (12-s runs): a turn
+costs about 0.2 ms here, a line 3 us.
 
 Usage: PYTHONPATH=. python bench/bench_bridge.py [--seconds 20] [--burst 200000]
 """
