@@ -506,3 +506,52 @@ def test_the_bridge_listens_on_loopback_only_and_only_where_configured(tmp_path)
         p.wait(30)
         col.close()
     assert got == sorted([("tcp", "127.0.0.1", tport), ("udp", "127.0.0.1", uport)])
+
+
+def test_followed_files_truncated_in_place_and_started_at_their_end(tmp_path):
+    """A logger that truncates its file in place (logrotate's copytruncate): read again from
+    the start, counted as truncated; a source with from_start = false skips what the file
+    held before the bridge started; 5000 bytes without a newline are overlong, dropped."""
+    lines = maine_lines(200)
+    a, b = tmp_path / "a.log", tmp_path / "b.log"
+    a.write_text("")
+    b.write_text("".join(ln + "\n" for ln in lines[:50]))  # before the bridge: skipped
+    port = free_port()
+    src = {"sensor": "tension", "transport": "file", "columns": {"tension_N": 2},
+           "time_column": 0, "time_format": "%Y-%m-%d-%H:%M:%S.%f"}
+    raw = {"buoy": {"id": "t1"}, "bridge": {"connect": [f"tcp/127.0.0.1:{port}"]},
+           "source": [{**src, "name": "a", "path": str(a)},
+                      {**src, "name": "b", "path": str(b), "from_start": False}]}
+
+    def feed() -> None:
+        with open(a, "ab") as fa, open(b, "ab") as fb:
+            for k, ln in enumerate(lines[50:]):
+                if k == 75:  # once the bridge has read it all (copytruncate loses the rest)
+                    time.sleep(1.0)
+                    fa.truncate(0)  # copytruncate: the same file, emptied
+                    fa.seek(0)
+                    time.sleep(0.3)
+                if k == 100:
+                    fb.write(b"x" * 5000)  # no newline: a runaway line
+                    fb.write(b"\n")
+                fa.write((ln + "\n").encode())
+                fb.write((ln + "\n").encode())
+                fa.flush()
+                fb.flush()
+                if k % 25 == 0:
+                    time.sleep(0.1)
+
+    bridge, col = run_bridge(raw, feed, port,
+                             lambda br: all(s.samples >= 149 for s in br.sources))
+    try:
+        sa, sb = bridge.sources
+        assert sa.samples == 150 and sa.events == {"truncated": 1} and not sa.rejected
+        assert sb.samples == 150 and not sb.rejected and sb.events == {"overlong": 1}
+        by = {}
+        for blk in col.blocks():
+            by.setdefault(blk.sensor, []).append(blk)
+        got = np.concatenate([blk.fields["tension_N"] for blk in by["tension"]])
+        exp = [float(ln.split(",")[2]) for ln in lines[50:]]
+        assert sorted(got.tolist()) == sorted(exp * 2)
+    finally:
+        col.close()
