@@ -69,5 +69,9 @@ def test_the_bridge_reaches_serial_devices_through_dialout_and_nothing_else():
     assert sorted(v for k, v in keys if k == "DeviceAllow") == [
         "char-ttyACM rw", "char-ttyS rw", "char-ttyUSB rw"]
     assert ("After", "buoymon.service") in keys and ("Restart", "always") in keys
+    # the block encoder runs numba kernels: executable memory allowed, a writable cache
+    assert "MemoryDenyWriteExecute" not in dict(keys)
+    assert ("Environment", "NUMBA_CACHE_DIR=/var/cache/buoymon-bridge/numba") in keys
+    assert ("CacheDirectory", "buoymon-bridge") in keys
     daemon = dict(re.findall(r"^(\w+)=(.*)$", (UNITS / "buoymon.service").read_text(), re.M))
     assert daemon["PrivateDevices"] == "yes" and daemon["Type"] == "notify"
