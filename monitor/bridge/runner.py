@@ -77,9 +77,10 @@ class SourceState:
     block_opened_mono: float = 0.0
     logged: dict[str, float] = field(default_factory=dict)
 
-    @property
-    def block_ns(self) -> int:
-        return int(self.cfg.block_s * 1e9)
+    block_ns: int = 0  # block_s in ns (set from cfg)
+
+    def __post_init__(self) -> None:
+        self.block_ns = int(self.cfg.block_s * 1e9)
 
     def current_state(self, now_mono: float) -> str:
         """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
@@ -213,12 +214,12 @@ class Bridge:
             self._log(src, data)
             return
         now = time.monotonic()
+        src.lines += len(data)
+        src.last_line_mono = now
         for line in data:
             self._line(src, line, recv_ns, now)
 
     def _line(self, src: SourceState, data: bytes, recv_ns: int, now_mono: float) -> None:
-        src.lines += 1
-        src.last_line_mono = now_mono
         try:
             line = data.decode("ascii")
             if not line.isprintable():
