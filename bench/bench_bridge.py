@@ -17,18 +17,19 @@ load average 6-7 during the runs; issue 16's targets: 5 x 1 kHz under 5 % of one
 
 =============================  ======================  =====================================
                                reader thread per       one thread for all sources
-                               source (first version)  (selectors, a turn every >= 4 ms)
+                               source (first version)  (selectors, a turn every >= 4 ms),
+                                                       leaner per-line path (two runs)
 =============================  ======================  =====================================
-5 x 1 kHz: bridge CPU          16.6 % of one core      9.8 % of one core
-  per 1000 lines               33.2 ms                 19.6 ms
-  latency, closing line        p50 4.1, p99 18.7 ms    p50 8.5, p99 17.3 ms
-  latency, last sample         p50 6.1 ms              p50 10.7, p99 19.5 ms
-flat out, one TCP source       105,800 lines/s,        201,000 lines/s, 3.1 ms per 1000
+5 x 1 kHz: bridge CPU          16.6 % of one core      7.0 and 8.5 % of one core
+  per 1000 lines               33.2 ms                 13.9 and 16.8 ms
+  latency, closing line        p50 4.1, p99 18.7 ms    p50 5.6 and 7.3, p99 12.4 and 23 ms
+  latency, last sample         p50 6.1 ms              p50 7.6 and 9.2 ms
+flat out, one TCP source       105,800 lines/s,        202,900 lines/s, 2.9 ms per 1000
                                3.6 ms per 1000 lines   lines
 idle (5 sources, no data)      0.4 %                   0.6 %
 =============================  ======================  =====================================
 
-Targets NOT met here. CPU: the flat-out cost (3.1 ms per 1000 lines: 1.6 % of a core at 5,000
+Targets NOT met here. CPU: the flat-out cost (2.9 ms per 1000 lines: 1.5 % of a core at 5,000
 lines/s) is what parsing costs; the rest at 1 kHz is waking up 250 times a second on a
 loaded machine (cold caches after every sleep). Latency: a turn every 4 ms adds 2 ms on
 average; the rest is waiting for a CPU on this machine (7 runnable jobs on 2 cores), which a
