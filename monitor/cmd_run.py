@@ -35,12 +35,16 @@ def load_daemon_config(path: str) -> DaemonConfig:
 
 def build_daemon(path: str) -> Daemon:
     """Load and validate the whole configuration, then build (not start) the daemon."""
+    from monitor.bridge.config import parse_bridge_config  # noqa: PLC0415
+    from monitor.bridge.watch import BridgeWatch  # noqa: PLC0415
     from monitor.config import load_config  # noqa: PLC0415 (heavy: models, numba)
     from monitor.pipeline import Pipeline  # noqa: PLC0415
     from monitor.zenoh_io import default_codec  # noqa: PLC0415
 
     cfg = load_config(path)
     dcfg = load_daemon_config(path)
+    # [[source]]: the bridge runs inside the daemon (monitor.bridge.embedded)
+    bridge_cfg = parse_bridge_config(cfg.raw) if "source" in cfg.raw else None
 
     visual: list[Any] = []
 
@@ -50,6 +54,11 @@ def build_daemon(path: str) -> Daemon:
 
     def attach(session: Any, pipeline: Pipeline) -> list[Any]:
         out: list[Any] = [ClosingSinks(visual)]  # flushed and closed when the daemon stops
+        out.append(BridgeWatch(session, cfg.buoy.id))  # bridges' status, in-process or not
+        if bridge_cfg is not None:  # pynmea2, pyserial: imported only with sources
+            from monitor.bridge.embedded import EmbeddedBridge  # noqa: PLC0415
+
+            out.append(EmbeddedBridge(session, bridge_cfg))
         if hasattr(pipeline.alerts, "apply_command"):  # an alert rules engine is installed
             out.append(AlertDelivery(session, pipeline, cfg.raw.get("alerts", {})))
         return out

@@ -181,6 +181,16 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
     out += ["components:", *_table(rows)]
     if beyond:  # the elastic helix model and the S-N curve do not hold there (docs/CONDUCTOR.md)
         out.append(f"elastic model beyond yield: damage underestimated ({', '.join(beyond)})")
+    sources = (doc.get("bridge") or {}).get("sources") or {}
+    if sources:  # the instruments read by a bridge (docs/SENSORS.md)
+        rows = [("SOURCE", "STATE", "LAST LINE", "LINES", "SAMPLES", "REJECTED")]
+        for name, b in sorted(sources.items()):
+            rej = " ".join(f"{k}={v}" for k, v in sorted((b.get("rejected") or {}).items()))
+            rows.append((f"{name} ({b.get('transport')} -> {b.get('sensor')})",
+                         str(b.get("state")).upper() if b.get("state") != "reading"
+                         else "reading", _n(b.get("last_line_age_s"), "{:.1f}", " s ago"),
+                         str(b.get("lines", 0)), str(b.get("samples", 0)), rej or "0"))
+        out += ["bridge:", *_table(rows)]
     active = (doc.get("alerts") or {}).get("active", [])
     out.append(f"active alerts: {len(active)}")
     if active:

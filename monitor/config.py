@@ -43,7 +43,11 @@ SECTION_PARSERS: dict[str, str] = {
     "health": "monitor.daemon_config:HealthConfig.from_dict",
     "metrics": "monitor.daemon_config:MetricsConfig.from_dict",
     "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
+    "bridge": "monitor.bridge.config:parse_bridge_section",
+    "source": "monitor.bridge.config:parse_sources",
 }
+# external sections that are arrays of tables ([[source]]), not tables
+LIST_SECTIONS = ("source",)
 
 CORE_SECTIONS = (
     "buoy", "mooring", "cable", "component", "fatigue", "load", "validate", "ordering", "alerts",
@@ -325,10 +329,12 @@ class Config:
     raw: Mapping[str, Any] = field(repr=False)
     source: str = "<dict>"
 
-    def section(self, name: str) -> Mapping[str, Any]:
-        """The raw table of a top-level section ({} when absent), for the module that owns it."""
+    def section(self, name: str) -> Any:
+        """The raw table of a top-level section ({} when absent; the list of tables of a
+        :data:`LIST_SECTIONS` one), for the module that owns it."""
         value = self.raw.get(name, {})
-        if not isinstance(value, Mapping):
+        if not isinstance(value, Mapping) and not (name in LIST_SECTIONS
+                                                   and isinstance(value, list)):
             raise ConfigError(f"config error: {name} = {_fmt(value)}: must be a table")
         return value
 

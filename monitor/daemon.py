@@ -76,7 +76,8 @@ class Extension(Protocol):
     def close(self) -> None: ...
 
     # optional: ``status_fields(self) -> Mapping[str, Any]``, merged into the top level of the
-    # status document (e.g. ``{"delivery": {...}}``)
+    # status document (e.g. ``{"delivery": {...}}``); ``finish_input(self)``, called at
+    # shutdown before the daemon stops intake (an input inside the daemon sends its last data)
 
 
 # attach(session, pipeline) -> extensions; may add sinks to ``pipeline.sinks``
@@ -275,6 +276,10 @@ class Daemon:
             self.notifier.ready(f"monitoring buoy {self.buoy_id}")
             self._serve()
             self.notifier.stopping()
+            for ext in self._extensions:
+                finish = getattr(ext, "finish_input", None)
+                if finish is not None:
+                    finish()
             subscriber.undeclare()  # stop intake, then finish what already arrived
             self._drain()
             self._publish_status()

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from monitor.blocks import validate_buoy_id
 from monitor.daemon_config import StateConfig, ZenohConfig
 
-DEFAULT_CONFIG = "/etc/buoymon/buoymon.toml"  # the path of monitor/systemd/buoymon.service
+DEFAULT_CONFIG = "/etc/buoymon/buoymon.toml"  # the path of packaging/systemd/buoymon.service
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 
 

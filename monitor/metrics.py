@@ -52,6 +52,7 @@ class StatusCollector:
         yield from _component_metrics(buoy, doc.get("components") or {})
         yield from _daemon_metrics(buoy, doc)
         yield from _alert_metrics(buoy, doc)
+        yield from _bridge_metrics(buoy, (doc.get("bridge") or {}).get("sources") or {})
 
 
 def _gauge(name: str, doc: str, labels: list[str]) -> GaugeMetricFamily:
@@ -187,6 +188,49 @@ def _alert_metrics(buoy: str, doc: Mapping[str, Any]) -> Iterator[Metric]:
             if key in c:
                 fam.add_metric([buoy, ch], _f(c[key]))
         yield fam
+
+
+# bridge source status counter -> (metric name, help)
+_BRIDGE_COUNTERS = {
+    "lines": ("buoymon_bridge_lines", "Lines read from the instrument"),
+    "samples": ("buoymon_bridge_samples", "Lines parsed into samples"),
+    "blocks": ("buoymon_bridge_blocks", "Blocks published"),
+}
+BRIDGE_STATES = ("reading", "connecting", "stalled", "disconnected", "stopped", "silent")
+
+
+def _bridge_metrics(buoy: str, sources: Mapping[str, Any]) -> Iterator[Metric]:
+    """Per bridge source (monitor.bridge.watch): counters, rejections by reason, link events,
+    its state (one-hot) and the ages of its last line and its last report."""
+    lab = ["buoy", "source", "sensor"]
+    for key, (name, help_) in _BRIDGE_COUNTERS.items():
+        c = CounterMetricFamily(name, help_, labels=lab)
+        for src, b in sorted(sources.items()):
+            c.add_metric([buoy, src, str(b.get("sensor"))], _f(b.get(key, 0)))
+        yield c
+    for key, name, what in (("rejected", "buoymon_bridge_rejected_lines", "reason"),
+                            ("events", "buoymon_bridge_link_events", "event")):
+        c = CounterMetricFamily(name, f"Bridge {key} by {what}", labels=[*lab, what])
+        for src, b in sorted(sources.items()):
+            for k, n in sorted((b.get(key) or {}).items()):
+                c.add_metric([buoy, src, str(b.get("sensor")), k], _f(n))
+        yield c
+    state = _gauge("buoymon_bridge_source_state", "1 for the bridge source's current state",
+                   [*lab, "state"])
+    for src, b in sorted(sources.items()):
+        for st in BRIDGE_STATES:
+            state.add_metric([buoy, src, str(b.get("sensor")), st],
+                             1.0 if b.get("state") == st else 0.0)
+    yield state
+    for key, name, help_ in (
+            ("last_line_age_s", "buoymon_bridge_line_age_seconds", "Seconds since the bridge "
+             "source read a line (NaN: none yet)"),
+            ("status_age_s", "buoymon_bridge_status_age_seconds", "Seconds since the bridge "
+             "last reported this source")):
+        g = _gauge(name, help_, lab)
+        for src, b in sorted(sources.items()):
+            g.add_metric([buoy, src, str(b.get("sensor"))], _f(b.get(key)))
+        yield g
 
 
 def make_registry(source: StatusSource) -> CollectorRegistry:

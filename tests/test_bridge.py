@@ -31,7 +31,9 @@ from monitor.sensors import SensorPublisher
 from test_daemon_e2e import committed, flushed_figures, replayed_figures
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared" / "realdata"
+# ../shared/realdata beside the repository (or beside a parent: a worktree)
+SHARED = next((p / "shared" / "realdata" for p in REPO.parents
+               if (p / "shared" / "realdata").is_dir()), REPO.parent / "shared" / "realdata")
 MAINE = SHARED / "maine_endline_loadcell" / "17348481-2018.11.30-09.58.27-15.csv"
 LOC = SHARED / "spotter_clallam_1945" / "0026_LOC.CSV"
 LBF = 4.4482216
@@ -128,6 +130,7 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
     path.write_bytes(b"")
     bad = [nmea("GPRMC,000000.00,V,,,,,,,010101,,"), sentences[3][:-2] + "00",  # no fix, bad cs
            "$GPRMC,garbled", "\x00\xff\xfe binary", sentences[5][:20]]
+    fault_at = {10: 0, 20: 1, 30: 2, 35: 3, 50: 4}  # sentence index -> fault after it
 
     def feed() -> None:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as u, \
@@ -140,8 +143,8 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
                 tc.sendall(line[10:])
                 f.write(line)
                 f.flush()
-                if k in (10, 30):
-                    junk = (bad[k % len(bad)] + "\r\n").encode("latin-1")
+                if k in fault_at:
+                    junk = (bad[fault_at[k]] + "\r\n").encode("latin-1")
                     u.sendto(junk, ("127.0.0.1", udp_port))
                     tc.sendall(junk)
                     f.write(junk)
@@ -164,7 +167,7 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
                 "path": str(path)}]}
 
     def settle(b: Bridge) -> bool:
-        return all(s.samples + sum(s.rejected.values()) >= 60 for s in b.sources)
+        return all(s.samples + sum(s.rejected.values()) >= 65 for s in b.sources)
 
     bridge, col = run_bridge(raw, feed, port, settle)
     try:
@@ -182,7 +185,8 @@ def test_nmea_over_udp_tcp_and_a_growing_file_with_faults(tmp_path):
         for tt, la in zip(t.tolist(), lat.tolist()):
             assert la == pytest.approx(exp[tt][0], abs=1e-7)
         rej = by["gps_udp"].rejected
-        assert sum(rej.values()) == 2 and set(rej) <= {"no_fix", "checksum", "garbled"}
+        # a sentence cut short or garbled loses its checksum: "checksum" (required)
+        assert rej == {"no_fix": 1, "checksum": 3, "garbled": 1}
         assert col.status and set(col.status[-1]["sources"]) == set(by)
     finally:
         col.close()
@@ -226,6 +230,7 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
         return master
 
     master = plug()
+    stopping = False
     bridge_cfg = tmp_path / "bridge.toml"
     bridge_cfg.write_text(
         f'[buoy]\nid = "maine"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
@@ -270,8 +275,29 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
                 >= t_last - horizon
 
         st = wait_until_state(port, arrived, buoy="maine", timeout=120)
-    finally:
+        # the bridge's counters reach the daemon's status: every line read, each fault by
+        # reason, the unplug. The line cut by it is no line; the tail written 1 s after the
+        # replug is a line (a bad time) if the bridge had reopened the port and seen it idle
+        # by then, else the fragment before the first newline (partial): timing under load
+        src = wait_until_state(port, lambda s: s["status"].get("bridge", {}).get(
+            "sources", {}).get("loadcell", {}).get("samples") == n,
+            buoy="maine", timeout=30)["status"]["bridge"]["sources"]["loadcell"]
+        tail_read = src["lines"] - n - len(faults)
+        assert tail_read in (0, 1)
+        assert src["rejected"] == {"garbled": 1, "columns": 1, "non_numeric": 1,
+                                   **({"bad_time": 1} if tail_read else {})}
+        assert src["events"]["partial_line"] == 2 - tail_read
+        assert src["events"]["disconnected"] >= 1
+        # a bridge that stops says so in its last status, at once
         b.terminate()
+        stopping = True
+        t0 = time.monotonic()
+        wait_until_state(port, lambda s: s["status"]["bridge"]["sources"]["loadcell"]["state"]
+                         == "stopped", buoy="maine", timeout=30)
+        assert time.monotonic() - t0 < 5.0
+    finally:
+        if b.poll() is None and not stopping:  # one SIGTERM, as systemd sends
+            b.terminate()
         _, err = b.communicate(timeout=30)
         assert d.terminate() == 0
         for m, s in masters:
@@ -281,10 +307,29 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
                 except OSError:
                     pass
     assert b.returncode == 0, err
-    # the same samples through `buoymon import` + `buoymon replay`
+    config = load_config(daemon_cfg)
+    live = checkpointed_figures(config, tmp_path / "st.sqlite")
+    replayed = import_and_replay(tmp_path, expected_lines, config)
+    assert st["status"]["streams"]["tension"]["accepted"] > 0.95 * n
+    assert live["samples"]["tension"] == replayed["samples"]["tension"]
+    assert committed(live) == committed(replayed)
+
+
+def checkpointed_figures(config, state_path: Path) -> dict:
+    """The figures of a stopped daemon's last checkpoint, its ordering buffer flushed."""
+    from monitor.checkpoint import CheckpointStore
+
+    store = CheckpointStore(state_path)
+    final = store.load().state["pipeline"]
+    store.close()
+    return flushed_figures(config, final)
+
+
+def import_and_replay(tmp_path: Path, lines: list[str], config) -> dict:
+    """The figures of Maine load-cell ``lines`` through `buoymon import` + `buoymon replay`."""
     csv = tmp_path / "maine.csv"
     rows = ["time,tension_N"]
-    for ln in expected_lines:
+    for ln in lines:
         c = ln.split(",")
         ts = c[0].strip()
         iso = f"{ts[:10]}T{ts[11:]}Z"
@@ -294,13 +339,219 @@ def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(t
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "import", str(csv), "-o", str(log),
                           "--buoy-id", "maine"], env=ENV, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    config = load_config(daemon_cfg)
-    from monitor.checkpoint import CheckpointStore
-    store = CheckpointStore(tmp_path / "st.sqlite")
-    final = store.load().state["pipeline"]
-    store.close()
-    live = flushed_figures(config, final)
-    replayed = replayed_figures(config, [log])
-    assert st["status"]["streams"]["tension"]["accepted"] > 0.95 * n
-    assert live["samples"]["tension"] == replayed["samples"]["tension"]
-    assert committed(live) == committed(replayed)
+    return replayed_figures(config, [log])
+
+
+def test_nmea_gga_and_rmc_of_one_fix_give_one_sample():
+    """A receiver sends GGA and RMC for each fix (and GSA, VTG...): one sample per fix, at
+    the RMC's date; the repeats and other sentences are counted, not published."""
+    from monitor.bridge.formats import Rejected, parser
+
+    cfg = parse_bridge_config({"buoy": {"id": "b"}, "source": [
+        {"name": "gps", "sensor": "gnss", "transport": "stdin"}]}).sources[0]
+    parse = parser(cfg)
+    rmc, fixes = spotter_sentences(3)
+    out, reasons = [], []
+    for s, (ts, lat, lon) in zip(rmc, fixes):
+        f = s.split(",")  # the same fix as GGA: hhmmss, lat, N, lon, W, quality 1
+        for line in (s, nmea(f"GPGGA,{f[1]},{f[3]},N,{f[5]},W,1,08,0.9,1.0,M,-20.0,M,,"),
+                     nmea("GPVTG,0.0,T,,M,0.1,N,0.2,K,A")):
+            try:
+                out.append(parse(line, 0))
+            except Rejected as exc:
+                reasons.append(str(exc))
+    assert [t for t, _, _ in out] == [ts for ts, _, _ in fixes]
+    for (_, (la, lo), src), (_, lat, lon) in zip(out, fixes):  # lat_deg, lon_deg
+        assert la == pytest.approx(lat, abs=1e-7) and src == "instrument"
+        assert lo == pytest.approx(lon, abs=1e-7)
+    assert sorted(reasons) == ["other_sentence"] * 3 + ["repeat_fix"] * 3
+
+
+def test_tcp_client_reconnects_and_a_dead_address_does_not_hold_the_others(tmp_path):
+    """A TCP client source connects to the instrument (a server here), which drops the
+    connection mid-line and comes back: disconnected, the cut line dropped, reconnected
+    within reconnect_s; a new connection may start mid-line (a serial-to-Ethernet converter
+    streams on), so its first line is dropped too. A second source pointing at a closed port keeps failing (counted)
+    without holding the first."""
+    lines = maine_lines(300)
+    srv = socket.create_server(("127.0.0.1", 0))
+    iport, port = srv.getsockname()[1], free_port()
+    raw = {"buoy": {"id": "t1"}, "bridge": {"connect": [f"tcp/127.0.0.1:{port}"]},
+           "source": [
+               {"name": "cell", "sensor": "tension", "transport": "tcp_client",
+                "port": iport, "reconnect_s": 0.2, "columns": {"tension_N": 2},
+                "time_column": 0, "time_format": "%Y-%m-%d-%H:%M:%S.%f"},
+               {"name": "nobody", "sensor": "gnss", "transport": "tcp_client",
+                "port": free_port(), "reconnect_s": 0.2}]}
+
+    def feed() -> None:
+        with srv:
+            conn, _ = srv.accept()
+            conn.sendall("".join(ln + "\n" for ln in lines[:150]).encode())
+            conn.sendall(lines[150].encode()[:12])  # cut by the drop
+            time.sleep(0.2)
+            conn.close()
+            conn, _ = srv.accept()  # the bridge connects again
+            with conn:
+                conn.sendall("".join(ln + "\n" for ln in lines[151:]).encode())
+                time.sleep(0.5)
+
+    bridge, col = run_bridge(raw, feed, port, lambda b: b.sources[0].samples >= 298)
+    try:
+        cell, nobody = bridge.sources
+        assert cell.samples == 298 and not cell.rejected
+        # the drop, and the instrument's close at the end
+        assert cell.events["disconnected"] == 2 and cell.events["partial_line"] == 2
+        assert nobody.events["disconnected"] >= 3 and nobody.lines == 0
+        got = np.concatenate([b.fields["tension_N"] for b in col.blocks()])
+        exp = [float(ln.split(",")[2]) for k, ln in enumerate(lines) if k not in (150, 151)]
+        assert got.tolist() == [v for v in exp]  # scale 1: the lbf as sent
+    finally:
+        col.close()
+
+
+def test_stdin_csv_through_a_bridge_process(tmp_path):
+    """`producer | buoymon bridge`: buoymon import's CSV columns on stdin; the last line
+    without a newline counts; the bridge exits at the end of its input."""
+    port = free_port()
+    col = Collector(port)
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(f'[buoy]\nid = "t1"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                   '[[source]]\nname = "csv"\nsensor = "tension"\ntransport = "stdin"\n'
+                   'format = "csv"\n')
+    rows = ["time_s,tension_N"] + [f"{1_750_000_000 + k * 0.05:.2f},{1000.0 + k}"
+                                   for k in range(100)]
+    rows.insert(40, "1750000001.00,not a number")
+    try:
+        p = subprocess.Popen([sys.executable, "-m", "monitor.cli", "--log-level", "warning",
+                              "bridge", "--config", str(cfg)], env=ENV, stdin=subprocess.PIPE,
+                             stderr=subprocess.PIPE)
+        time.sleep(1.5)  # connected to the collector
+        p.stdin.write("\n".join(rows).encode())  # no newline at the end
+        p.stdin.close()
+        deadline = time.monotonic() + 30
+        got = []
+        while time.monotonic() < deadline and sum(len(b) for b in got) < 100:
+            time.sleep(0.2)
+            got.extend(col.blocks())
+        p.terminate()
+        p.wait(30)
+    finally:
+        col.close()
+    t = np.concatenate([b.t_ns for b in got])
+    v = np.concatenate([b.fields["tension_N"] for b in got])
+    assert v.tolist() == [1000.0 + k for k in range(100)]
+    assert t[0] == 1_750_000_000 * 10**9 and t[-1] == 1_750_000_004_950_000_000
+    assert col.status[-1]["sources"]["csv"]["rejected"] == {"non_numeric": 1}
+
+
+@pytest.mark.parametrize("cell, ns", [
+    ("1750000012.345", 1_750_000_012_345_000_000), (" 1750000012 ", 1_750_000_012 * 10**9),
+    ("1750000012.123456789123", 1_750_000_012_123_456_789),  # beyond ns: cut, not rounded
+    ("-1.5", None), ("1_000", None), ("+5", None), ("1e9", None), ("1750000012.", None),
+    ("", None)])
+def test_unix_time_cells_are_exact_or_rejected(cell, ns):
+    from monitor.bridge.formats import Rejected, instrument_time
+
+    if ns is None:
+        with pytest.raises(Rejected, match="bad_time"):
+            instrument_time(cell, "unix")
+    else:
+        assert instrument_time(cell, "unix") == ns
+
+
+def _listening(pid: int) -> list[tuple[str, str, int]]:
+    """(protocol, local address, port) of every socket the process listens or binds on (TCP
+    in LISTEN, UDP bound), from /proc: its socket inodes matched in /proc/net/*."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    out = []
+    for proto in ("tcp", "udp", "tcp6", "udp6"):
+        for row in Path(f"/proc/net/{proto}").read_text().splitlines()[1:]:
+            cells = row.split()
+            local, state, inode = cells[1], cells[3], cells[9]
+            if inode in inodes and (proto.startswith("udp") or state == "0A"):
+                addr, port = local.split(":")
+                ip = (socket.inet_ntop(socket.AF_INET, bytes.fromhex(addr)[::-1])
+                      if len(addr) == 8 else "v6:" + addr)
+                out.append((proto, ip, int(port, 16)))
+    return out
+
+
+def test_the_bridge_listens_on_loopback_only_and_only_where_configured(tmp_path):
+    """The bridge process's Zenoh session listens on nothing (it connects out); its TCP
+    server and UDP sources bind 127.0.0.1 by default, on their configured ports."""
+    port, tport, uport = free_port(), free_port(), free_port()
+    col = Collector(port)
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(f'[buoy]\nid = "t1"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                   f'[[source]]\nname = "a"\nsensor = "gnss"\ntransport = "tcp_server"\n'
+                   f'port = {tport}\n[[source]]\nname = "b"\nsensor = "gnss"\n'
+                   f'transport = "udp"\nport = {uport}\n')
+    p = subprocess.Popen([sys.executable, "-m", "monitor.cli", "--log-level", "warning",
+                          "bridge", "--config", str(cfg)], env=ENV, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 30
+        while not col.status and time.monotonic() < deadline:  # running and connected
+            time.sleep(0.1)
+        got = sorted(_listening(p.pid))
+    finally:
+        p.terminate()
+        p.wait(30)
+        col.close()
+    assert got == sorted([("tcp", "127.0.0.1", tport), ("udp", "127.0.0.1", uport)])
+
+
+def test_followed_files_truncated_in_place_and_started_at_their_end(tmp_path):
+    """A logger that truncates its file in place (logrotate's copytruncate): read again from
+    the start, counted as truncated; a source with from_start = false skips what the file
+    held before the bridge started; 5000 bytes without a newline are overlong, dropped."""
+    lines = maine_lines(200)
+    a, b = tmp_path / "a.log", tmp_path / "b.log"
+    a.write_text("")
+    b.write_text("".join(ln + "\n" for ln in lines[:50]))  # before the bridge: skipped
+    port = free_port()
+    src = {"sensor": "tension", "transport": "file", "columns": {"tension_N": 2},
+           "time_column": 0, "time_format": "%Y-%m-%d-%H:%M:%S.%f"}
+    raw = {"buoy": {"id": "t1"}, "bridge": {"connect": [f"tcp/127.0.0.1:{port}"]},
+           "source": [{**src, "name": "a", "path": str(a)},
+                      {**src, "name": "b", "path": str(b), "from_start": False}]}
+
+    def feed() -> None:
+        with open(a, "ab") as fa, open(b, "ab") as fb:
+            for k, ln in enumerate(lines[50:]):
+                if k == 75:  # once the bridge has read it all (copytruncate loses the rest)
+                    time.sleep(1.0)
+                    fa.truncate(0)  # copytruncate: the same file, emptied
+                    fa.seek(0)
+                    time.sleep(0.3)
+                if k == 100:
+                    fb.write(b"x" * 5000)  # no newline: a runaway line
+                    fb.write(b"\n")
+                fa.write((ln + "\n").encode())
+                fb.write((ln + "\n").encode())
+                fa.flush()
+                fb.flush()
+                if k % 25 == 0:
+                    time.sleep(0.1)
+
+    bridge, col = run_bridge(raw, feed, port,
+                             lambda br: all(s.samples >= 149 for s in br.sources))
+    try:
+        sa, sb = bridge.sources
+        assert sa.samples == 150 and sa.events == {"truncated": 1} and not sa.rejected
+        assert sb.samples == 150 and not sb.rejected and sb.events == {"overlong": 1}
+        by = {}
+        for blk in col.blocks():
+            by.setdefault(blk.sensor, []).append(blk)
+        got = np.concatenate([blk.fields["tension_N"] for blk in by["tension"]])
+        exp = [float(ln.split(",")[2]) for ln in lines[50:]]
+        assert sorted(got.tolist()) == sorted(exp * 2)
+    finally:
+        col.close()

@@ -48,3 +48,34 @@ def test_units_and_counters_follow_prometheus_conventions():
     assert got[("buoymon_outbox_dropped_total", (("buoy", "b1"), ("channel", "webhook")))] == 1
     assert got[("buoymon_checkpoint_age_seconds", (("buoy", "b1"),))] == 1.5
     assert any(name.startswith("process_") for name, _ in got)
+
+
+def test_bridge_source_families():
+    """Each bridge source of the status (monitor.bridge.watch) becomes counters, a one-hot
+    state and ages; a source that has read nothing yet has a NaN line age."""
+    doc = {"buoy_id": "b1", "bridge": {"sources": {
+        "cell": {"sensor": "tension", "state": "stalled", "lines": 12, "samples": 10,
+                 "blocks": 3, "rejected": {"columns": 2}, "events": {"disconnected": 1},
+                 "last_line_age_s": 7.5, "status_age_s": 0.4},
+        "gps": {"sensor": "gnss", "state": "connecting", "lines": 0, "samples": 0,
+                "blocks": 0, "rejected": {}, "events": {}, "last_line_age_s": None,
+                "status_age_s": 0.4}}}}
+    text = generate_latest(make_registry(lambda: doc)).decode()
+    got = {(s.name, tuple(sorted(s.labels.items()))): s.value
+           for f in text_string_to_metric_families(text) for s in f.samples}
+    cell = (("buoy", "b1"), ("sensor", "tension"), ("source", "cell"))
+    gps = (("buoy", "b1"), ("sensor", "gnss"), ("source", "gps"))
+    assert got[("buoymon_bridge_lines_total", cell)] == 12
+    assert got[("buoymon_bridge_samples_total", cell)] == 10
+    assert got[("buoymon_bridge_blocks_total", cell)] == 3
+    assert got[("buoymon_bridge_rejected_lines_total", (*cell[:1], ("reason", "columns"),
+                                                         *cell[1:]))] == 2
+    assert got[("buoymon_bridge_link_events_total", (*cell[:1], ("event", "disconnected"),
+                                                      *cell[1:]))] == 1
+    states = {dict(k[1])["state"]: v for k, v in got.items()
+              if k[0] == "buoymon_bridge_source_state" and dict(k[1])["source"] == "cell"}
+    assert states == {"reading": 0, "connecting": 0, "stalled": 1, "disconnected": 0,
+                      "stopped": 0, "silent": 0}
+    assert got[("buoymon_bridge_line_age_seconds", cell)] == 7.5
+    assert math.isnan(got[("buoymon_bridge_line_age_seconds", gps)])
+    assert got[("buoymon_bridge_status_age_seconds", gps)] == 0.4

@@ -28,6 +28,10 @@ alert_outbox_dropped     critical     an alert channel's ``dropped_total`` rose 
 (channel)                             ``hold_s``
 checkpoint_failed        critical     the last checkpoint attempt failed
 (checkpoint)
+bridge_source (source)   warning      a bridge source is ``stalled`` (no line for its
+                                      ``stall_s``), ``disconnected``, ``stopped`` (its bridge
+                                      exited) or ``silent`` (its bridge stopped reporting):
+                                      monitor.bridge.runner, monitor.bridge.watch
 =======================  ===========  =========================================================
 
 Records have the shape of every other alert (:class:`AlertRecord`) and take the same delivery
@@ -47,7 +51,8 @@ from typing import Any, Iterable, Mapping
 from monitor.alerts.records import AlertRecord
 
 LIVE_RULES = ("data_age", "data_rejected", "fatigue_blind", "clock_skew", "time_restart", "samples_missed",
-              "alert_delivery_refused", "alert_outbox_dropped", "checkpoint_failed")
+              "alert_delivery_refused", "alert_outbox_dropped", "checkpoint_failed",
+              "bridge_source")
 log = logging.getLogger(__name__)
 # rules whose firing makes /healthz fail: the daemon cannot do its job
 HEALTH_RULES = ("data_age", "data_rejected", "fatigue_blind", "checkpoint_failed")
@@ -177,6 +182,15 @@ class LiveAlerts:
                 out.append(self._increase("alert_outbox_dropped", ch, "critical",
                                           int(c["dropped_total"]), wall_ns,
                                           f"alert channel {ch}: outbox dropped notifications"))
+        sources = ((doc.get("bridge") or {}).get("sources") or {})
+        for name, b in sorted(sources.items()):
+            state = str(b.get("state"))
+            quiet = b.get("last_line_age_s")
+            out.append(Condition(
+                "bridge_source", name, "warning", state in ("stalled", "disconnected", "stopped", "silent"),
+                _num(quiet), _num(b.get("stall_s")), "s",
+                f"bridge source {name} ({b.get('transport')} -> {b.get('sensor')}): {state}, "
+                f"last line {'never' if quiet is None else f'{_num(quiet):.0f} s ago'}"))
         ckpt = doc.get("checkpoint")
         if ckpt is not None:
             out.append(Condition(

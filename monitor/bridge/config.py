@@ -42,6 +42,7 @@ class SourceConfig:
     time_format: str = "unix"  # "unix" seconds, or a datetime.strptime format (UTC)
     block_s: float = 1.0
     reconnect_s: float = 2.0
+    stall_s: float = 5.0  # no line for this long (or not connected): the source is down
 
 
 @dataclass(frozen=True)
@@ -135,29 +136,29 @@ def _source(where: str, d: Any) -> SourceConfig:
         scale=maps["scale"], offset=maps["offset"], time_column=tc,
         time_format=_str(where, d, "time_format", "unix"),
         block_s=_num(where, d, "block_s", 1.0), reconnect_s=_num(where, d, "reconnect_s", 2.0),
+        stall_s=_num(where, d, "stall_s", 5.0),
     )
 
 
-def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
-    """The bridge's sections of a parsed TOML document."""
-    buoy = raw.get("buoy", {})
-    if not isinstance(buoy, Mapping) or "id" not in buoy:
-        raise _err("buoy.id", None, "is required")
-    try:
-        buoy_id = validate_buoy_id(buoy["id"])
-    except ValueError as exc:
-        raise _err("buoy.id", buoy["id"], str(exc)) from None
-    b = raw.get("bridge", {})
+_BRIDGE_KEYS = ("connect", "status_interval_s", "cache_blocks")
+
+
+def parse_bridge_section(b: Any) -> tuple[tuple[str, ...], float, int]:
+    """``[bridge]``: (connect endpoints, status interval, cache blocks per stream)."""
     if not isinstance(b, Mapping):
         raise _err("bridge", b, "must be a table")
     for k in b:
-        if k not in ("connect", "status_interval_s", "cache_blocks"):
-            raise _err(f"bridge.{k}", b[k], "unknown key; expected connect, status_interval_s, "
-                                             "cache_blocks")
+        if k not in _BRIDGE_KEYS:
+            raise _err(f"bridge.{k}", b[k], f"unknown key; expected one of {list(_BRIDGE_KEYS)}")
     connect = b.get("connect", ["tcp/127.0.0.1:7447"])
     if not isinstance(connect, list) or not connect or not all(isinstance(e, str) for e in connect):
         raise _err("bridge.connect", connect, "must be a non-empty list of Zenoh endpoints")
-    sources = raw.get("source", [])
+    return (tuple(connect), _num("bridge", b, "status_interval_s", 1.0),
+            _int("bridge", b, "cache_blocks", 3600, 1, 10_000_000))
+
+
+def parse_sources(sources: Any) -> tuple[SourceConfig, ...]:
+    """The ``[[source]]`` tables (at least one; unique names)."""
     if not isinstance(sources, list) or not sources:
         raise _err("source", sources, "at least one [[source]] is required")
     parsed = tuple(_source(f"source[{i}]", s) for i, s in enumerate(sources))
@@ -165,9 +166,21 @@ def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
     for n in names:
         if names.count(n) > 1:
             raise _err("source.name", n, "must be unique")
-    return BridgeConfig(buoy_id, tuple(connect), parsed,
-                        _num("bridge", b, "status_interval_s", 1.0),
-                        _int("bridge", b, "cache_blocks", 3600, 1, 10_000_000))
+    return parsed
+
+
+def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
+    """The bridge's sections of a parsed TOML document: ``[buoy] id``, ``[bridge]``,
+    ``[[source]]`` (the same in a bridge's own file and in the daemon's)."""
+    buoy = raw.get("buoy", {})
+    if not isinstance(buoy, Mapping) or "id" not in buoy:
+        raise _err("buoy.id", None, "is required")
+    try:
+        buoy_id = validate_buoy_id(buoy["id"])
+    except ValueError as exc:
+        raise _err("buoy.id", buoy["id"], str(exc)) from None
+    connect, interval, cache = parse_bridge_section(raw.get("bridge", {}))
+    return BridgeConfig(buoy_id, connect, parse_sources(raw.get("source", [])), interval, cache)
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:

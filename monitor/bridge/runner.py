@@ -1,22 +1,32 @@
 """Runs the configured sources: lines -> samples -> blocks -> publisher, and the status.
 
-Reader threads only queue what they read; one thread parses, cuts blocks, publishes and
-reports, so every Zenoh call happens on it. A block closes when a sample lies ``block_s``
+One thread reads every source (:class:`monitor.bridge.transports.Links`), parses, cuts
+blocks, publishes and reports. A block closes when a sample lies ``block_s``
 after its first one, or when ``block_s`` of wall-clock time has passed since its first
 sample arrived (a quiet instrument still gets its samples out). Times must increase
 strictly within a source: a sample at or before the last one is counted
 (``time_backwards``) and dropped, so no garbage time reaches the monitor.
 
 Status: every ``status_interval_s`` a JSON document on ``buoy/<id>/bridge/status``: per
-source its transport, stream, whether connected, counters (lines, samples, blocks) and
-rejections by reason, the time source (``instrument`` or ``receive``) and the age of the
-last sample. Each reason is logged at most once a minute per source.
+source its transport, stream, whether connected, its ``state``, counters (lines, samples,
+blocks) and rejections by reason, the time source (``instrument`` or ``receive``) and the
+ages of the last line and sample. Each reason is logged at most once a minute per source.
+
+A source's ``state`` makes a dead instrument loud within ``stall_s``: ``reading`` (connected,
+a line within ``stall_s``, or connected less than ``stall_s`` ago), ``stalled`` (connected,
+no line for ``stall_s``: a cable cut on the far side, an instrument hung), ``connecting``
+(not connected for less than ``stall_s``: starting, a reconnect) and ``disconnected`` (not
+connected for ``stall_s``: a device unplugged, a socket refused); the last status of a
+bridge that stops says ``stopped``. Each change is logged (a warning when it leaves
+``reading``); the daemon alerts on it (``bridge_source``).
+
+:meth:`Bridge.run` serves in a process of its own (``buoymon bridge``), or in a thread of
+the daemon (:mod:`monitor.bridge.embedded`).
 """
 
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections import Counter
@@ -28,14 +38,21 @@ import numpy as np
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.bridge.config import BridgeConfig, SourceConfig
 from monitor.bridge.formats import Rejected, parser
-from monitor.bridge.transports import ReceiveClock, run_transport
+from monitor.bridge.transports import LINKS, LineSplitter, Link, Links, ReceiveClock
 from monitor.sensors import PublisherOptions, SensorPublisher
 from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.bridge")
 _LOG_EVERY_S = 60.0
-# reasons that are not faults of the data (header lines of a CSV file)
+# closing blocks on the wall clock, states, status: checked this often, not after every read
+_DUTY_S = 0.01
+# shortest time between two turns of the bridge's loop (its latency): a turn per read of each
+# source would cost more than the lines' parsing
+_PACE_S = 0.004
+# reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
+# sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
+_UNLOGGED = {"other_sentence", "repeat_fix"}
 
 
 @dataclass
@@ -51,19 +68,40 @@ class SourceState:
     time_source: str | None = None
     last_t_ns: int | None = None
     last_sample_mono: float | None = None
+    last_line_mono: float | None = None
+    # when ``connected`` last changed (or the bridge started): what a state's age counts from
+    link_mono: float = field(default_factory=time.monotonic)
+    state: str = "connecting"
     t: list[int] = field(default_factory=list)
     values: list[list[float]] = field(default_factory=list)
     block_opened_mono: float = 0.0
     logged: dict[str, float] = field(default_factory=dict)
 
+    block_ns: int = 0  # block_s in ns (set from cfg)
+
+    def __post_init__(self) -> None:
+        self.block_ns = int(self.cfg.block_s * 1e9)
+
+    def current_state(self, now_mono: float) -> str:
+        """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
+        quiet_s = now_mono - max(self.link_mono, self.last_line_mono or self.link_mono)
+        if self.connected:
+            return "reading" if quiet_s <= self.cfg.stall_s else "stalled"
+        return "connecting" if quiet_s <= self.cfg.stall_s else "disconnected"
+
     def status(self, now_mono: float) -> dict[str, Any]:
         return {"sensor": self.cfg.sensor, "transport": self.cfg.transport,
-                "format": self.cfg.format, "connected": self.connected, "lines": self.lines,
+                "format": self.cfg.format, "connected": self.connected, "state": self.state,
+                "stall_s": self.cfg.stall_s, "lines": self.lines,
                 "samples": self.samples, "blocks": self.blocks,
                 "rejected": dict(self.rejected), "events": dict(self.events),
                 "time_source": self.time_source,
-                "last_sample_age_s": None if self.last_sample_mono is None
-                else now_mono - self.last_sample_mono}
+                "last_line_age_s": _age(now_mono, self.last_line_mono),
+                "last_sample_age_s": _age(now_mono, self.last_sample_mono)}
+
+
+def _age(now_mono: float, then: float | None) -> float | None:
+    return None if then is None else now_mono - then
 
 
 class Bridge:
@@ -74,76 +112,114 @@ class Bridge:
         self.publisher = publisher
         self.clock = ReceiveClock()
         self.sources = [SourceState(s, parser(s)) for s in cfg.sources]
-        self._q: "queue.SimpleQueue[tuple[int, str, Any, int]]" = queue.SimpleQueue()
         self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._links: Links | None = None
         self._status_pub: Any = None
+        self._next_status = 0.0
+        self._next_duties = 0.0
 
     def stop(self) -> None:
+        """Ask :meth:`run` to return (safe from signal handlers and other threads)."""
         self._stop.set()
 
-    def start_readers(self) -> None:
-        for i, src in enumerate(self.sources):
-            def emit(line: bytes, recv_ns: int, i: int = i) -> None:
-                self._q.put((i, "line", line, recv_ns))
+    def _link(self, i: int) -> Link:
+        src = self.sources[i]
 
-            def event(reason: str, i: int = i) -> None:
-                self._q.put((i, "event", reason, 0))
+        def emit(lines: list[bytes], recv_ns: int) -> None:
+            self.handle(i, "lines", lines, recv_ns)
 
-            def connected(up: bool, i: int = i) -> None:
-                self._q.put((i, "connected", up, 0))
+        def event(reason: str) -> None:
+            self.handle(i, "event", reason, 0)
 
-            th = threading.Thread(target=run_transport, name=f"bridge-{src.cfg.name}",
-                                  args=(src.cfg, emit, event, self._stop, self.clock, connected),
-                                  daemon=True)
-            th.start()
-            self._threads.append(th)
+        def connected(up: bool) -> None:
+            self.handle(i, "connected", up, 0)
 
-    def run(self, until: Callable[[], bool] = lambda: False) -> None:
-        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end."""
+        return LINKS[src.cfg.transport](src.cfg, LineSplitter(emit, event, self.clock), event,
+                                        connected)
+
+    def open(self) -> None:
+        """Declare the status publisher; the links open at the first :meth:`step`."""
         self._status_pub = zenoh_io.declare_json_publisher(
             self.publisher.session, f"buoy/{self.cfg.buoy_id}/bridge/status")
-        self.start_readers()
-        next_status = time.monotonic()
-        try:
-            while not self._stop.is_set() and not until():
-                try:
-                    item = self._q.get(timeout=0.05)
-                except queue.Empty:
-                    item = None
-                if item is not None:
-                    self.handle(*item)
-                now = time.monotonic()
-                for src in self.sources:
-                    if src.t and now - src.block_opened_mono >= src.cfg.block_s:
-                        self._flush(src)
-                if now >= next_status:
-                    self.publish_status()
-                    next_status = now + self.cfg.status_interval_s
-        finally:
-            self._stop.set()
-            for th in self._threads:
-                th.join(2.0)
-            while True:  # what the readers queued before they stopped
-                try:
-                    self.handle(*self._q.get_nowait())
-                except queue.Empty:
-                    break
-            for src in self.sources:
+        self._links = Links([self._link(i) for i in range(len(self.sources))])
+        self._next_status = time.monotonic()
+
+    def step(self, wait_s: float) -> None:
+        """Read what the instruments sent (waiting up to ``wait_s`` for something), then
+        close due blocks, update the states and publish a due status."""
+        assert self._links is not None, "open() first"
+        self._links.pump(wait_s)
+        now = time.monotonic()
+        if now < self._next_duties:
+            return
+        self._next_duties = now + _DUTY_S
+        for src in self.sources:
+            if src.t and now - src.block_opened_mono >= src.cfg.block_s:
                 self._flush(src)
+        self._update_states(now)
+        if now >= self._next_status:
+            self.publish_status()
+            self._next_status = now + self.cfg.status_interval_s
+
+    def close(self) -> None:
+        """Close the links, flush every block, publish a last status (``stopped``)."""
+        if self._links is not None:
+            self._links.close()
+            self._links = None
+        for src in self.sources:
+            self._flush(src)
+            src.state = "stopped"
+        if self._status_pub is not None:
             self.publish_status()
             self._status_pub.undeclare()
+            self._status_pub = None
+
+    def run(self, until: Callable[[], bool] = lambda: False) -> None:
+        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end.
+        A turn at most every ``_PACE_S``: meanwhile the instruments' bytes wait in the
+        kernel's buffers, so a turn takes many lines of every source at once."""
+        self.open()
+        try:
+            while not self._stop.is_set() and not until():
+                began = time.monotonic()
+                self.step(0.05)
+                rest = began + _PACE_S - time.monotonic()
+                if rest > 0:
+                    time.sleep(rest)
+        finally:
+            self.close()
+
+    def _update_states(self, now_mono: float) -> None:
+        for src in self.sources:
+            state = src.current_state(now_mono)
+            if state == src.state:
+                continue
+            fields = {"source": src.cfg.name, "state": state, "was": src.state,
+                      "transport": src.cfg.transport, "stall_s": src.cfg.stall_s}
+            if state in ("stalled", "disconnected"):
+                log.warning("bridge source %s", state, extra={"fields": fields})
+            else:
+                log.info("bridge source %s", state, extra={"fields": fields})
+            src.state = state
 
     def handle(self, i: int, kind: str, data: Any, recv_ns: int) -> None:
         src = self.sources[i]
         if kind == "connected":
-            src.connected = bool(data)
+            if src.connected != bool(data):
+                src.connected = bool(data)
+                src.link_mono = time.monotonic()
             return
         if kind == "event":
             src.events[data] += 1
             self._log(src, data)
             return
-        src.lines += 1
+        now = time.monotonic()
+        src.lines += len(data)
+        src.last_line_mono = now
+        for line in data:
+            self._line(src, line, recv_ns, now)
+
+    def _line(self, src: SourceState, data: bytes, recv_ns: int, now_mono: float) -> None:
         try:
             line = data.decode("ascii")
             if not line.isprintable():
@@ -158,22 +234,23 @@ class Bridge:
         if src.last_t_ns is not None and t_ns <= src.last_t_ns:
             self._reject(src, "time_backwards")
             return
-        if src.t and t_ns - src.t[0] >= int(src.cfg.block_s * 1e9):
+        if src.t and t_ns - src.t[0] >= src.block_ns:
             self._flush(src)
         if not src.t:
-            src.block_opened_mono = time.monotonic()
+            src.block_opened_mono = now_mono
         src.t.append(t_ns)
-        src.values.append([vals[f] for f in SENSOR_FIELDS[src.cfg.sensor]])
+        src.values.append(vals)
         src.last_t_ns = t_ns
         src.time_source = time_source
         src.samples += 1
-        src.last_sample_mono = time.monotonic()
+        src.last_sample_mono = now_mono
 
     def _reject(self, src: SourceState, reason: str) -> None:
         if reason in _QUIET:
             return
         src.rejected[reason] += 1
-        self._log(src, reason)
+        if reason not in _UNLOGGED:
+            self._log(src, reason)
 
     def _log(self, src: SourceState, reason: str) -> None:
         now = time.monotonic()
@@ -197,6 +274,7 @@ class Bridge:
     def status(self) -> dict[str, Any]:
         now = time.monotonic()
         return {"buoy_id": self.cfg.buoy_id, "wall_time_ns": time.time_ns(),
+                "status_interval_s": self.cfg.status_interval_s,
                 "sources": {s.cfg.name: s.status(now) for s in self.sources}}
 
     def publish_status(self) -> None:
