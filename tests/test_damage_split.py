@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from monitor.damage_split import ASSUMED_ERROR, MIN_CAL_TICKS, DamageSplit
@@ -36,6 +37,7 @@ def test_the_band_is_calibrated_on_the_measured_estimated_residual_by_hand():
     two.ticks({"c": [0.0] * 10}, rows[:10])
     two = DamageSplit({"c": 3.0}, two.state())
     two.ticks({"c": [0.0] * 21}, rows[10:])
+    assert two.state() == one.state()  # to the last bit
     for s in (one, two):
         u, how = s.relative_error()
         assert how == "residual" and s.cal_n == MIN_CAL_TICKS == 30
@@ -47,3 +49,28 @@ def test_the_band_is_calibrated_on_the_measured_estimated_residual_by_hand():
     assert f["estimated"] == 1.0
     assert f["estimated_low"] == pytest.approx((1 - math.sqrt(0.039)) ** 3, rel=1e-12)  # 0.5167
     assert f["estimated_high"] == pytest.approx((1 + math.sqrt(0.039)) ** 3, rel=1e-12)  # 1.7170
+
+
+def test_sums_run_left_to_right_so_any_slab_split_gives_the_same_bits():
+    rng = np.random.default_rng(7)
+    committed = np.cumsum(rng.random(500) * 10.0 ** rng.integers(-12, 0, 500)).tolist()
+    rows = [(int(k), 4, float(m), float(e)) for k, m, e in
+            zip(rng.integers(0, 5, 500), rng.uniform(50, 5000, 500), rng.uniform(0, 6000, 500))]
+    one = DamageSplit({"c": 4.5})
+    one.ticks({"c": committed}, rows)
+    measured = estimated = cal = 0.0
+    last = 0.0
+    for c, (k, n, m, e) in zip(committed, rows):  # the loop the sums stand for
+        measured += (c - last) * (k / n)
+        estimated += (c - last) * (1.0 - k / n)
+        if m >= 100.0:
+            cal += ((e - m) / m) ** 2
+        last = c
+    assert (one.parts["c"]["measured"], one.parts["c"]["estimated"], one.cal_sum_sq) == (
+        measured, estimated, cal)
+    for cuts in ((1, 2, 499), (250,), tuple(range(7, 500, 7))):
+        s = DamageSplit({"c": 4.5})
+        for a, b in zip((0, *cuts), (*cuts, 500)):
+            s = DamageSplit({"c": 4.5}, s.state())
+            s.ticks({"c": committed[a:b]}, rows[a:b])
+        assert s.state() == one.state()
