@@ -30,6 +30,15 @@ stream, the over-break rule, the damage split): default config on one core 1.04 
 194 MB. In-process best of 3 on one core (default config): 0.72-0.79 s / 0.82-0.86 s. The QC
 kernels take ~0.06 s of the 2-day replay (3.5 M tension + 1.7 M three-field IMU samples).
 
+Measured 2026-11-25 on the same machine (load average 4-5 from other jobs), the cost of QC in
+today's tree (which also monitors the termination, so twice the rules per tick of the 11-24
+figures): 1-day log of this script, in-process ``run_blocks`` on one core, CPU time best of 16
+in 4 interleaved rounds: the tree with QC stubbed out (``StreamQC.check`` returning passes,
+no damage split, no over-break rule) 0.479 s (median of rounds 0.497 s), the shipped QC
+0.516 s (0.527 s): +7.8 % (+6 %), after the damage split's per-tick Python sums became one
+cumulative sum each (same bits: additions in the same order) and the QC kernel's tallies
+moved into locals; report and state of the replay identical to the last bit before and after.
+
 Usage: python bench/bench_replay.py [--days 30] [--baseline-days 1] [--dir DIR [--reuse]] [--keep]
 """
 

@@ -22,7 +22,8 @@ Velocities and accelerations are backward differences of the displacements, cont
 blocks through the saved state. Output flags (bitwise, per sample): SLACK (estimate <= 0,
 clipped to 0), ANCHOR_LIFTED and OUT_OF_RANGE (from the quasi-static model or the configured
 calibrated range), FLAT_CORD (the top angle exceeds the flat-cord limit of the jerk model),
-SETTLING (IMU integrator warming up, or the first two samples of a stream).
+SETTLING (IMU integrator warming up, or the first two samples of a stream or after a
+:meth:`MotionTensionEstimator.restart`).
 """
 
 from __future__ import annotations
@@ -218,13 +219,16 @@ class EstimatorState:
     """Everything the estimator carries between blocks (JSON-ready via to_dict/from_dict).
 
     history: last two (surge, sway, heave) positions, oldest first, or None at stream start;
-    jerk_y: the jerk ODE state V|V| (m^2/s^2); imu: the IMU integrator memory, if used.
+    jerk_y: the jerk ODE state V|V| (m^2/s^2); imu: the IMU integrator memory, if used;
+    settling: how many of the next samples still settle (a fresh stream's first two, however
+    the stream is split into blocks).
     """
 
     history: list[list[float]] | None = None
     jerk_y: float = 0.0
     samples_seen: int = 0
     imu: dict | None = field(default=None)
+    settling: int = 0
 
     def to_dict(self) -> dict:
         return {
@@ -232,6 +236,7 @@ class EstimatorState:
             "jerk_y": self.jerk_y,
             "samples_seen": self.samples_seen,
             "imu": self.imu,
+            "settling": self.settling,
         }
 
     @classmethod
@@ -248,7 +253,8 @@ class EstimatorState:
         if not math.isfinite(y):
             raise ValueError(f"estimator state jerk_y must be finite, got {y!r}")
         seen = int(d.get("samples_seen", 0))
-        return cls(history=hist, jerk_y=y, samples_seen=seen, imu=d.get("imu"))
+        return cls(history=hist, jerk_y=y, samples_seen=seen, imu=d.get("imu"),
+                   settling=int(d.get("settling", 0)))
 
 
 def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]:
@@ -338,6 +344,7 @@ class MotionTensionEstimator:
         self._hist = None if st.history is None else np.asarray(st.history, dtype=float).T.copy()
         self._jerk_y = float(st.jerk_y)
         self._seen = int(st.samples_seen)
+        self._settling = int(st.settling)
         self._imu_saved = st.imu
         self._imu: DisplacementIntegrator | None = None
         c = config
@@ -355,6 +362,13 @@ class MotionTensionEstimator:
             self._drag_k = c.drag.tension_coefficient
             self._drag_b = c.dt / c.drag.mu if c.drag.mu > 0 else math.inf
 
+    def restart(self) -> None:
+        """Forget the motion history and the jerk ODE: the next sample starts a fresh stream
+        at rest (its first two estimates SETTLING). For a gap in the input, across which
+        differences of positions are no velocities or accelerations."""
+        self._hist = None
+        self._jerk_y = 0.0
+
     @property
     def state(self) -> EstimatorState:
         """A snapshot of the stream state (history, jerk ODE, IMU filter memory)."""
@@ -363,6 +377,7 @@ class MotionTensionEstimator:
             jerk_y=self._jerk_y,
             samples_seen=self._seen,
             imu=self._imu.state() if self._imu is not None else self._imu_saved,
+            settling=self._settling,
         )
 
     # ------------------------------------------------------------------ inputs
@@ -453,7 +468,10 @@ class MotionTensionEstimator:
         if settling is not None:
             flags[settling] |= np.uint8(Flag.SETTLING)
         if fresh:
-            flags[:2] |= np.uint8(Flag.SETTLING)
+            self._settling = 2
+        if self._settling:
+            flags[:self._settling] |= np.uint8(Flag.SETTLING)
+            self._settling = max(self._settling - n, 0)
         self._hist = p[:, -2:].copy()
         self._seen += n
         return Estimate(total, np.asarray(t_qs, dtype=float), axial, drag, angle, flags)

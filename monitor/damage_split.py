@@ -57,16 +57,15 @@ class DamageSplit:
             delta = np.diff(v, prepend=p["committed"])
             delta[delta < 0] = 0.0  # (a reset)
             p["committed"] = float(v[-1])
-            # sequential sums: the same figures for any split of the ticks into slabs
-            for d, f in zip((delta * frac).tolist(), (delta * (1.0 - frac)).tolist()):
-                p["measured"] += d
-                p["estimated"] += f
+            # sequential sums (a cumulative sum adds in order, as a loop would): the same
+            # figures for any split of the ticks into slabs
+            p["measured"] = _running_sum(p["measured"], delta * frac)
+            p["estimated"] = _running_sum(p["estimated"], delta * (1.0 - frac))
         with np.errstate(invalid="ignore", divide="ignore"):
             cal = (meas >= MIN_CAL_N) & ~np.isnan(est)
             rel = (est[cal] - meas[cal]) / meas[cal]
         self.cal_n += int(rel.shape[0])
-        for r in (rel * rel).tolist():
-            self.cal_sum_sq += r
+        self.cal_sum_sq = _running_sum(self.cal_sum_sq, rel * rel)
 
     def relative_error(self) -> tuple[float, str]:
         """``(u, "residual" | "assumed")``: see the module docstring."""
@@ -91,3 +90,11 @@ class DamageSplit:
     def state(self) -> dict[str, Any]:
         return {"parts": {n: dict(p) for n, p in self.parts.items()}, "cal_n": self.cal_n,
                 "cal_sum_sq": self.cal_sum_sq}
+
+
+def _running_sum(start: float, terms: np.ndarray) -> float:
+    """``start + terms[0] + terms[1] + ...`` added left to right (np.sum would add pairwise,
+    so a split of the terms would change the last bits)."""
+    if terms.shape[0] == 0:
+        return start
+    return float(np.cumsum(np.concatenate(([start], terms)))[-1])

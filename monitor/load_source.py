@@ -73,26 +73,56 @@ class _ModelsEstimator:
     the table's edge, marked ``clamped``: in a storm these are the buoy's largest excursions,
     the line near taut, and leaving them out would understate fatigue; the
     :class:`LoadSelector` counts the ones that feed fatigue, so the report shows them.
+
+    A gap in the accepted displacement samples longer than the stream's ``stale_after_s``
+    (silence, or a run of QC rejections) restarts the model: its velocities and accelerations
+    are differences of consecutive samples, and across a gap they are none (the Spotter
+    record's 501 s gap ends in a displacement filter reset, 17 m from the last position:
+    differenced as one step, 445 kN). The two samples after the gap settle (no estimate).
     """
 
-    def __init__(self, est_module: Any, model: Any, sensor: str) -> None:
+    def __init__(self, est_module: Any, model: Any, sensor: str, gap_ns: float,
+                 last_t_ns: int | None) -> None:
         self._flags = est_module.Flag
         self.model, self.sensor = model, sensor
+        self.gap_ns, self.last_t_ns = gap_ns, last_t_ns
 
     def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
              want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         if self.sensor == "imu":
             e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
                                         fields["accel_z_mps2"], want=want)
+            flags, tension = e.flags, e.tension
         else:
-            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"],
-                                  want=want)
-        ok = (e.flags & np.uint8(self._flags.SETTLING)) == 0
-        clamped = (e.flags & np.uint8(self._flags.OUT_OF_RANGE)) != 0
-        return t_ns[ok], np.asarray(e.tension, dtype=np.float64)[ok], clamped[ok]
+            flags, tension = self._displacements(t_ns, fields, want)
+        if t_ns.shape[0]:
+            self.last_t_ns = int(t_ns[-1])
+        ok = (flags & np.uint8(self._flags.SETTLING)) == 0
+        clamped = (flags & np.uint8(self._flags.OUT_OF_RANGE)) != 0
+        return t_ns[ok], np.asarray(tension, dtype=np.float64)[ok], clamped[ok]
+
+    def _displacements(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
+                       want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The model over the stretches between gaps, restarted at each gap."""
+        n = t_ns.shape[0]
+        last = self.last_t_ns if self.last_t_ns is not None else (int(t_ns[0]) if n else 0)
+        cuts = np.flatnonzero(np.diff(t_ns, prepend=np.int64(last)) > self.gap_ns).tolist()
+        bounds = sorted({0, *cuts, n})
+        flags, tension = [], []
+        for a, b in zip(bounds[:-1], bounds[1:]) if n else [(0, 0)]:
+            if cuts and a == cuts[0]:
+                cuts.pop(0)
+                self.model.restart()
+            e = self.model.update(fields["heave_m"][a:b], fields["surge_m"][a:b],
+                                  fields["sway_m"][a:b], want=None if want is None else want[a:b])
+            flags.append(e.flags)
+            tension.append(e.tension)
+        if len(flags) == 1:
+            return flags[0], tension[0]
+        return np.concatenate(flags), np.concatenate(tension)
 
     def state(self) -> dict[str, Any]:
-        return self.model.state.to_dict()
+        return {**self.model.state.to_dict(), "last_t_ns": self.last_t_ns}
 
 
 def build_estimator(config: Config, state: Mapping[str, Any] | None = None,
@@ -110,8 +140,10 @@ def build_estimator(config: Config, state: Mapping[str, Any] | None = None,
     saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
     model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
     configured = config.load.motion_sensor
-    return _ModelsEstimator(estimator, model,
-                            sensor or ("imu" if configured == "auto" else configured))
+    sensor = sensor or ("imu" if configured == "auto" else configured)
+    last = None if not state or state.get("last_t_ns") is None else int(state["last_t_ns"])
+    return _ModelsEstimator(estimator, model, sensor,
+                            config.validate[sensor].stale_after_s * 1e9, last)
 
 
 class LoadSelector:

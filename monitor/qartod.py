@@ -362,15 +362,19 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
     flags[2] = rt
     flags[3] = ft
     spike_prev[:] = sp
+    # tallies in locals (stores into ``counts`` each sample would not vectorise)
+    g3 = g4 = s3 = s4 = r3 = r4 = f3 = f4 = 0
     for i in range(n):
-        counts[0, 0] += gr[i] == 3
-        counts[0, 1] += gr[i] == 4
-        counts[1, 0] += sp[i] == 3
-        counts[1, 1] += sp[i] == 4
-        counts[2, 0] += rt[i] == 3
-        counts[2, 1] += rt[i] == 4
-        counts[3, 0] += ft[i] == 3
-        counts[3, 1] += ft[i] == 4
+        g3 += gr[i] == 3
+        g4 += gr[i] == 4
+        s3 += sp[i] == 3
+        s4 += sp[i] == 4
+        r3 += rt[i] == 3
+        r4 += rt[i] == 4
+        f3 += ft[i] == 3
+        f4 += ft[i] == 4
+    counts[0, 0], counts[0, 1], counts[1, 0], counts[1, 1] = g3, g4, s3, s4
+    counts[2, 0], counts[2, 1], counts[3, 0], counts[3, 1] = r3, r4, f3, f4
     for i in range(max(0, n - cap), n):
         ring_t[ring_head] = t[i]
         for f in range(nf):

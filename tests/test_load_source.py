@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from monitor.config import default_config
-from monitor.load_source import ESTIMATED, MEASURED, LoadSelector
+from monitor.load_source import ESTIMATED, MEASURED, LoadSelector, build_estimator
 
 S = 1_000_000_000
 
@@ -109,3 +109,39 @@ def test_motion_outside_the_estimators_table_is_counted_as_clamped():
     assert b["tension_N"]["samples_estimate_clamped"] == outside > 100
     assert b["tension_N"]["samples_estimated"] == a["tension_N"]["samples_estimated"]
     assert b["samples"]["motion"]["accepted"] == n and b["samples"]["motion"]["rejected"]["spike"] == 0
+
+
+def _displacement(n: int, t0_s: float, offset_m: float) -> tuple[np.ndarray, dict]:
+    k = np.arange(n)
+    t = np.rint((t0_s + 0.1 * k) * 1e9).astype(np.int64)
+    heave = 0.5 * np.sin(2 * np.pi * k / 52.5)
+    return t, {"heave_m": heave, "surge_m": offset_m + 0.3 * heave, "sway_m": 0.1 * heave}
+
+
+def test_a_gap_longer_than_stale_restarts_the_estimator():
+    """After 20 s of silence (motion stale_after_s = 5 s) the stream resumes 8 m further
+    surge: the estimate after the gap is exactly that of a fresh estimator fed only the
+    samples after it (its first two settle), not a jump of 8 m differenced as one 0.1 s
+    step; any split of the stream into blocks, with the state saved between, gives the same."""
+    cfg = default_config()
+    t1, f1 = _displacement(300, 0.0, 0.0)
+    t2, f2 = _displacement(300, 49.9, 8.0)  # 20 s after t1's last sample
+    t = np.concatenate([t1, t2])
+    f = {k: np.concatenate([f1[k], f2[k]]) for k in f1}
+    e_t, e_v, _ = build_estimator(cfg, sensor="motion").feed(t, f)
+    fresh_t, fresh_v, _ = build_estimator(cfg, sensor="motion").feed(t2, f2)
+    assert fresh_t.shape[0] == 298 and np.array_equal(fresh_t, e_t[-298:])
+    assert np.array_equal(fresh_v, e_v[-298:])  # bit for bit
+    assert e_t.shape[0] == 2 * 298
+    # across the gap, without the restart, the 8 m step would be one 80 m/s difference
+    joined_t = np.concatenate([t1, t2 - t2[0] + t1[-1] + 100_000_000])
+    _, joined_v, _ = build_estimator(cfg, sensor="motion").feed(joined_t, f)
+    assert joined_v[298] > 5 * e_v.max()
+    # split anywhere (the gap inside a block, or at a block's first sample), state saved
+    for cut in (150, 300, 301, 450):
+        a = build_estimator(cfg, sensor="motion")
+        out_a = a.feed(t[:cut], {k: v[:cut] for k, v in f.items()})
+        b = build_estimator(cfg, a.state(), sensor="motion")
+        out_b = b.feed(t[cut:], {k: v[cut:] for k, v in f.items()})
+        assert np.array_equal(np.concatenate([out_a[0], out_b[0]]), e_t)
+        assert np.array_equal(np.concatenate([out_a[1], out_b[1]]), e_v)

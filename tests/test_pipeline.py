@@ -356,6 +356,13 @@ def test_model_residual_rule_sees_the_estimate_while_the_load_cell_is_healthy(mo
     assert p.report()["tension_N"]["samples_estimated"] == 0  # fatigue saw the load cell only
     fired = p.report()["alerts"][0]
     assert fired["value"] == pytest.approx(2000.0, abs=100.0)
+    # the same tick means calibrate the band of estimated damage: 30 of the ticks read
+    # -2000 / ~7000 N (the estimate 2 kN under the biased cell), the others 0, so the RMS
+    # relative residual is 2/7 sqrt(30 / ticks), within the swell's +-130 N on a tick mean
+    split = p.report()["components"]["conductor"]["damage_by_source"]
+    assert split["estimate_error_from"] == "residual" and 85 <= split["calibration_ticks"] <= 90
+    assert split["estimate_relative_error"] == pytest.approx(
+        2 / 7 * math.sqrt(30 / split["calibration_ticks"]), rel=0.01)
 
 
 def test_alert_history_keeps_the_newest_and_counts_the_dropped(hooks, monkeypatch):
