@@ -15,6 +15,7 @@ import tempfile
 from pathlib import Path
 
 from monitor.cli_paths import check_output
+from monitor.quanta import add_quantum_option, parse_quanta
 from replay.cmd_replay import MIN_SPEED
 from replay.simulate import LOAD_MODELS, SimConfig, simulate
 
@@ -56,6 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --publish: X times real time (default: as fast as possible)")
     p.add_argument("--allow-remote", action="store_true",
                    help="with --publish: allow an endpoint that is not on the loopback interface")
+    add_quantum_option(p)
     p.set_defaults(func=run)
 
 
@@ -94,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
                         buoy_id=args.buoy_id, start=args.start, dropouts=args.dropouts,
                         spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span,
-                        load_model=args.load_model)
+                        load_model=args.load_model, quanta=parse_quanta(args.quantum))
     except ValueError as e:
         print(f"buoymon simulate: {e}", file=sys.stderr)
         return 2

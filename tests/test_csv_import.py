@@ -100,7 +100,9 @@ def test_cli_import_round_trip_keeps_irregular_sampling(tmp_path, capsys):
     blocks = [b for b in reader if b.sensor == "tension"]
     expected_t = Y2000 + np.round(t_s * 1e6).astype(np.int64) * 1000
     assert np.array_equal(np.concatenate([b.t_ns for b in blocks]), expected_t)
-    assert np.array_equal(np.concatenate([b.fields["tension_N"] for b in blocks]), tension)
+    # every sample within half a quantum (0.1 N by default) of the CSV's
+    got = np.concatenate([b.fields["tension_N"] for b in blocks])
+    assert np.all(np.abs(got - tension) <= 0.05) and np.any(np.abs(got - tension) > 0.04)
     # ~1 s blocks on the second grid
     assert len(blocks) == len(np.unique(expected_t // 10**9))
     assert {b.buoy_id for b in blocks} == {"vaps-1"} and reader.stats[0].messages == 2 * len(blocks)

@@ -11,6 +11,7 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.quanta import DEFAULT_QUANTA
 from replay.reader import LogReader, iter_blocks, reference_blocks, time_span
 from replay.writer import LogWriter, Series, alert_topic, status_topic
 
@@ -19,9 +20,12 @@ S = 10**9
 
 
 def _blk(sensor, t, seed=0, buoy="b1"):
+    """Random samples on each field's quantum grid (as the decoder computes them), so they
+    come back from a log bit for bit."""
     rng = np.random.default_rng(seed)
     t = np.asarray(t, np.int64)
-    fields = {f: rng.normal(size=t.shape[0]) for f in SENSOR_FIELDS[sensor]}
+    fields = {f: rng.integers(-20_000, 20_000, t.shape[0]).astype(np.float64) * DEFAULT_QUANTA[f]
+              for f in SENSOR_FIELDS[sensor]}
     return SampleBlock(buoy, sensor, t, fields)
 
 
@@ -65,7 +69,7 @@ def test_file_is_standard_indexed_mcap_with_crcs(mixed_log):
     assert summary.statistics.message_count == len(msgs) == 80 + 4 + n_motion + 1
     assert len(summary.chunk_indexes) > 5
     by_topic = {c.topic: (s.encoding, c.message_encoding, s.name) for s, c, _ in msgs}
-    assert by_topic["buoy/b1/sensor/tension"] == ("protobuf", "protobuf", "buoymon.v1.TensionBlock")
+    assert by_topic["buoy/b1/sensor/tension"] == ("protobuf", "protobuf", "buoymon.v2.TensionBlock")
     assert by_topic["buoy/b1/monitor/status"] == ("jsonschema", "json", "buoymon.v1.Status")
     assert "buoy/b1/monitor/alert/damage_rate/conductor_left" in by_topic
     for s, c, m in msgs:
@@ -92,8 +96,11 @@ def test_generic_protobuf_decoding_from_the_stored_descriptor_set(mixed_log):
             cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
             m = cls.FromString(msg.data)
             if channel.topic.endswith("tension"):
-                t = m.t0_ns + m.period_ns * np.arange(len(m.tension_N))
-                got.append((msg.publish_time, msg.log_time, t, np.array(m.tension_N)))
+                q = m.tension_N  # docs/LOG_FORMAT.md: value = quantum * running sum of delta
+                t = m.t0_ns + m.period_ns * np.arange(len(q.delta))
+                v = np.cumsum(np.array(q.delta, np.int64)).astype(np.float64) * q.quantum
+                assert q.quantum == 0.1 and not q.raw_index
+                got.append((msg.publish_time, msg.log_time, t, v))
     tension = [b for b in blocks if b.sensor == "tension"]
     assert len(got) == len(tension) == 40
     for k, ((pub, log, t, v), b) in enumerate(zip(got, tension)):
@@ -158,9 +165,10 @@ def test_out_of_order_and_duplicates_within_the_window(tmp_path):
 
 def test_messages_later_than_the_window_are_counted_late_and_delivered(tmp_path):
     path = tmp_path / "late.mcap"
-    with LogWriter(path, chunk_size=1024) as w:
+    with LogWriter(path) as w:
         for k in [*range(10, 200), 3]:
             w.write_block(_blk("tension", _seconds("tension", k, 20)), T0 + 300 * S)
+            w.flush(fsync=False)  # one message per chunk: the reader releases after each
     reader = LogReader(path, coalesce=False, reorder_window_s=2)
     firsts = [(b.t_first_ns - T0) // S for b in reader]
     # 198 and 199 are still held in the window when 3 arrives: 3 joins (and leads) that release
