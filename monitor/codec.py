@@ -455,18 +455,33 @@ def _varint_run(buf, p, end, wt):
 
 @numba.njit(cache=True, inline="always")
 def _count_varints(buf, a, b):
-    """Number of varints in ``buf[a:b]``, -1 if one is cut."""
+    """Number of varints in ``buf[a:b]``, -1 if one is cut or longer than 10 bytes (so the
+    decoding loops may trust every run they are given)."""
     n = 0
-    while a < b:
-        _, a = _read_varint(buf, a, b)
-        if a < 0:
-            return -1
-        n += 1
+    run = 0
+    for i in range(a, b):
+        if buf[i] < 0x80:
+            n += 1
+            run = 0
+        else:
+            run += 1
+            if run >= 10:
+                return -1
+    if run:
+        return -1
     return n
 
 
 @numba.njit(cache=True)
-def _scan_quantized(buf, p, end, sub):
+def _read_f64(buf, p, scratch):
+    """The little-endian double at ``buf[p]``, through ``scratch`` (float64 (1,)): no
+    allocation per value in the decoding loops."""
+    scratch.view(np.uint8)[:] = buf[p:p + 8]
+    return scratch[0]
+
+
+@numba.njit(cache=True)
+def _scan_quantized(buf, p, end, sub, scratch):
     """Validate one ``Quantized`` body ``buf[p:end]``; return ``(samples, status)``."""
     nd = 0
     ni = 0
@@ -480,7 +495,7 @@ def _scan_quantized(buf, p, end, sub):
         fnum = tag >> 3
         wt = tag & 7
         if fnum == sub[0] and wt == 1 and p + 8 <= end:
-            q = buf[p:p + 8].copy().view(np.float64)[0]
+            q = _read_f64(buf, p, scratch)
             p += 8
         elif (fnum == sub[1] or fnum == sub[2]) and (wt == 0 or wt == 2):
             a, p = _varint_run(buf, p, end, wt)
@@ -513,47 +528,53 @@ def _scan_quantized(buf, p, end, sub):
             return 0, BAD_WIRE
     if not (q > 0 and q < np.inf):
         return 0, BAD_QUANTUM
-    if ni != nr or top >= nd:
+    if ni != nr or ni > nd or top >= nd:
         return 0, BAD_COUNTS
     return nd, OK
 
 
 @numba.njit(cache=True)
-def _fill_quantized(buf, p, end, sub, out, vb, pos):
+def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
     """Decode a ``Quantized`` body validated by :func:`_scan_quantized` into
-    ``out[pos:pos + n]`` (``vb``: the same row as bytes, for the raw samples)."""
+    ``out[pos:pos + n]`` (``vb``: the same row as bytes, for the raw samples; ``idx``: room
+    for the raw indices, at least ``n``)."""
     q = 0.0
-    nraw = 0
     a0 = p
     while p < end:  # the quantum first: it may follow the deltas
         tag, p = _read_varint(buf, p, end)
         if tag >> 3 == sub[0] and tag & 7 == 1:
-            q = buf[p:p + 8].copy().view(np.float64)[0]
-        elif tag >> 3 == sub[2] and (tag & 7 == 0 or tag & 7 == 2):
-            a, b = _varint_run(buf, p, end, tag & 7)
-            nraw += _count_varints(buf, a, b)
+            q = _read_f64(buf, p, scratch)
         p = _skip(buf, p, end, tag & 7)
     p = a0
     acc = 0
     i = pos
-    idx = np.empty(nraw, np.int64)
     r = 0
     w = 0
     while p < end:
         tag, p = _read_varint(buf, p, end)
         fnum = tag >> 3
         wt = tag & 7
-        if (fnum == sub[1] or fnum == sub[2]) and (wt == 0 or wt == 2):
+        if fnum == sub[1] and (wt == 0 or wt == 2):
             a, p = _varint_run(buf, p, end, wt)
-            while a < p:
-                z, a = _read_varint(buf, a, p)
-                if fnum == sub[1]:
+            # the hot loop of a replay: one pass over the bytes of validated varints
+            z = 0
+            shift = 0
+            for s in range(a, p):
+                byte = np.int64(buf[s])
+                z |= (byte & 0x7F) << shift
+                if byte < 0x80:
                     acc += _unzigzag(z)
                     out[i] = acc * q
                     i += 1
+                    z = 0
+                    shift = 0
                 else:
-                    idx[r] = z
-                    r += 1
+                    shift += 7
+        elif fnum == sub[2] and (wt == 0 or wt == 2):
+            a, p = _varint_run(buf, p, end, wt)
+            while a < p:
+                idx[r], a = _read_varint(buf, a, p)
+                r += 1
         elif fnum == sub[3] and (wt == 1 or wt == 2):
             ln = 8
             if wt == 2:
@@ -579,6 +600,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
     periods = np.zeros(m, np.int64)
     cnt = np.zeros(nf, np.int64)
     seen = np.zeros(nf, np.bool_)
+    scratch = np.empty(1, np.float64)
     # pass 1: validate and count samples per message
     for k in range(m):
         p = offs[k]
@@ -622,7 +644,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
                     st = REPEATED_FIELD
                     break
                 seen[j] = True
-                c, st = _scan_quantized(buf, p, p + ln, sub)
+                c, st = _scan_quantized(buf, p, p + ln, sub, scratch)
                 if st != OK:
                     break
                 cnt[j] = c
@@ -668,6 +690,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
     vals = np.empty((nf, total), np.float64)
     vb = vals.view(np.uint8)
     fill = np.zeros(nf, np.int64)
+    idx = np.empty(nsamp.max() if m else 0, np.int64)
     # pass 2: fill times and values (messages already validated)
     pos = 0
     for k in range(m):
@@ -691,7 +714,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
                     noff += 1
             elif j >= 0 and quantized and wt == 2:
                 ln, p = _read_varint(buf, p, end)
-                _fill_quantized(buf, p, p + ln, sub, vals[j], vb[j], pos)
+                _fill_quantized(buf, p, p + ln, sub, vals[j], vb[j], pos, scratch, idx)
                 p += ln
             elif j >= 0 and not quantized and (wt == 2 or wt == 1):
                 ln = 8

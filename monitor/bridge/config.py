@@ -13,6 +13,7 @@ from typing import Any, Mapping
 
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.config import ConfigError
+from monitor.quanta import quanta as sensor_quanta
 
 TRANSPORTS = ("serial", "tcp_client", "tcp_server", "udp", "file", "stdin")
 FORMATS = ("delimited", "nmea", "csv")
@@ -51,6 +52,7 @@ class BridgeConfig:
     sources: tuple[SourceConfig, ...]
     status_interval_s: float = 1.0
     cache_blocks: int = 3600
+    quanta: Mapping[str, float] = field(default_factory=dict)  # field -> quantum on the wire
 
 
 def _err(key: str, value: Any, why: str) -> ConfigError:
@@ -151,9 +153,9 @@ def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
     if not isinstance(b, Mapping):
         raise _err("bridge", b, "must be a table")
     for k in b:
-        if k not in ("connect", "status_interval_s", "cache_blocks"):
+        if k not in ("connect", "status_interval_s", "cache_blocks", "quanta"):
             raise _err(f"bridge.{k}", b[k], "unknown key; expected connect, status_interval_s, "
-                                             "cache_blocks")
+                                             "cache_blocks, quanta")
     connect = b.get("connect", ["tcp/127.0.0.1:7447"])
     if not isinstance(connect, list) or not connect or not all(isinstance(e, str) for e in connect):
         raise _err("bridge.connect", connect, "must be a non-empty list of Zenoh endpoints")
@@ -165,9 +167,17 @@ def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
     for n in names:
         if names.count(n) > 1:
             raise _err("source.name", n, "must be unique")
+    quanta = b.get("quanta", {})
+    try:
+        if not isinstance(quanta, Mapping):
+            raise ValueError("must be a table of field = quantum")
+        for sensor in SENSOR_FIELDS:
+            sensor_quanta(sensor, quanta)
+    except (ValueError, TypeError) as exc:
+        raise _err("bridge.quanta", quanta, str(exc)) from None
     return BridgeConfig(buoy_id, tuple(connect), parsed,
                         _num("bridge", b, "status_interval_s", 1.0),
-                        _int("bridge", b, "cache_blocks", 3600, 1, 10_000_000))
+                        _int("bridge", b, "cache_blocks", 3600, 1, 10_000_000), dict(quanta))
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:
