@@ -37,9 +37,8 @@ field order, unknown fields skipped) and flags malformed payloads instead of rai
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import numba
 import numpy as np

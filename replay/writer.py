@@ -4,8 +4,11 @@ A small MCAP writer of our own (records per https://mcap.dev/spec) rather than
 ``mcap.writer.Writer``: the latter manages ~175 k messages/s in pure Python, too slow for the
 30-day logs of the benchmark and the simulator. The file layout is a standard indexed MCAP:
 
-    magic, Header, [Schema, Channel]*, (Chunk, MessageIndex*)*, DataEnd,
+    magic, Header, [Schema, Channel]*, Chunk*, DataEnd,
     summary (Schema*, Channel*, Statistics, ChunkIndex*), SummaryOffset*, Footer, magic
+
+(MessageIndex records after each chunk only with ``message_index=True``.) Sensor payloads are
+the compact protobuf blocks of :mod:`monitor.codec`, each field stored to its quantum.
 
 Schemas and channels are written at top level (never inside a chunk) so a damaged chunk can
 never take a channel definition with it; chunks are zstd-compressed with the CRC32 of their

@@ -263,3 +263,34 @@ def test_time_span_from_the_summary_and_first_last_in_stats(mixed_log, tmp_path)
     list(reader)
     assert min(pubs) == T0
     assert (reader.stats[0].first_ns, reader.stats[0].last_ns) == (min(pubs), max(pubs))
+
+
+def test_coalesced_blocks_span_at_most_coalesce_s_so_replay_keeps_every_sample(tmp_path):
+    """80 min of tension and IMU in ONE chunk (compact samples make chunks long): the reader
+    cuts the release into <= 600 s blocks, so the replay's ordering (1 h horizon) never
+    passes a stream by; every sample is accepted, as with one block per message."""
+    from monitor.config import default_config
+    from replay.reader import COALESCE_NS
+    from replay.runner import run_blocks
+
+    path = tmp_path / "long.mcap"
+    n = 80 * 60
+    t20 = T0 + np.arange(n * 20, dtype=np.int64) * (S // 20)
+    rng = np.random.default_rng(4)
+    series = [Series("vaps", "tension", t20, 5000 + 300 * rng.normal(size=(1, t20.shape[0]))),
+              Series("vaps", "imu", t20[::2], 0.5 * rng.normal(size=(3, n * 10)))]
+    with LogWriter(path, chunk_size=64 << 20) as w:
+        w.write_series(series)
+    reader = LogReader(path)
+    blocks = list(reader)
+    assert reader.stats[0].chunks == 1
+    assert max(int(b.t_ns[-1] - b.t_ns[0]) for b in blocks) < COALESCE_NS + S
+    per_message = list(LogReader(path, coalesce=False))
+    for sensor in ("tension", "imu"):
+        a = np.concatenate([b.t_ns for b in blocks if b.sensor == sensor])
+        b = np.concatenate([b.t_ns for b in per_message if b.sensor == sensor])
+        assert np.array_equal(a, b)
+    samples = run_blocks(default_config(), iter(blocks))[0].report()["samples"]
+    for sensor, count in (("tension", n * 20), ("imu", n * 10)):
+        assert samples[sensor]["accepted"] == count  # not so with 80 min blocks: time_backwards
+        assert not any(samples[sensor]["rejected"].values())
