@@ -267,7 +267,7 @@ def test_time_span_from_the_summary_and_first_last_in_stats(mixed_log, tmp_path)
 
 def test_coalesced_blocks_span_at_most_coalesce_s_so_replay_keeps_every_sample(tmp_path):
     """80 min of tension and IMU in ONE chunk (compact samples make chunks long): the reader
-    cuts the release into <= 600 s blocks, so the replay's ordering (1 h horizon) never
+    cuts the release into <= 1800 s blocks, so the replay's ordering (1 h horizon) never
     passes a stream by; every sample is accepted, as with one block per message."""
     from monitor.config import default_config
     from replay.reader import COALESCE_NS
