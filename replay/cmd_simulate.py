@@ -114,6 +114,10 @@ def run(args: argparse.Namespace) -> int:
 
             pace = "as fast as possible" if args.speed is None else f"at {args.speed:g}x real time"
             print(f"publishing to {args.publish} {pace} ...", flush=True)
-            sent = publish_logs([str(path)], publisher_config([args.publish]), args.speed)
+            from monitor.zenoh_io import ProtobufCodec
+
+            # on the wire with the log's quanta: its samples are on that grid already
+            sent = publish_logs([str(path)], publisher_config([args.publish]), args.speed,
+                                codec=ProtobufCodec(cfg.quanta))
             print(f"published {sent:,} blocks on buoy/{cfg.buoy_id}/sensor/*")
     return 0
