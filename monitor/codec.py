@@ -548,7 +548,6 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
     acc = 0
     i = pos
     r = 0
-    w = 0
     while p < end:
         tag, p = _read_varint(buf, p, end)
         fnum = tag >> 3
@@ -574,9 +573,15 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
             while a < p:
                 idx[r], a = _read_varint(buf, a, p)
                 r += 1
-        elif fnum == sub[3] and (wt == 1 or wt == 2):
+        else:
+            p = _skip(buf, p, end, wt)
+    p = a0
+    w = 0
+    while p < end and w < r:  # raw samples last: their indices may come after them
+        tag, p = _read_varint(buf, p, end)
+        if tag >> 3 == sub[3] and (tag & 7 == 1 or tag & 7 == 2):
             ln = 8
-            if wt == 2:
+            if tag & 7 == 2:
                 ln, p = _read_varint(buf, p, end)
             for s in range(p, p + ln, 8):
                 base = (pos + idx[w]) * 8
@@ -584,8 +589,7 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
                 w += 1
             p += ln
         else:
-            p = _skip(buf, p, end, wt)
-    return w
+            p = _skip(buf, p, end, tag & 7)
 
 
 @numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread

@@ -186,6 +186,20 @@ def test_unpacked_fields_unknown_fields_and_any_order_decode():
     assert _generic_values(m.tension_N).tolist() == [5.0, 4.0]
 
 
+def test_raw_samples_decode_whatever_the_field_order():
+    """raw_value before raw_index, an unpacked raw value: the same samples."""
+    nan, big = struct.pack("<d", np.nan), struct.pack("<d", 1e300)
+    for quantized in (
+            b"\x09" + struct.pack("<d", 0.5) + b"\x12\x03\x02\x00\x00"
+            + b"\x1a\x02\x01\x02" + b"\x22\x10" + nan + big,
+            b"\x22\x10" + nan + big + b"\x1a\x02\x01\x02" + b"\x12\x03\x02\x00\x00"
+            + b"\x09" + struct.pack("<d", 0.5),
+            b"\x21" + nan + b"\x1a\x02\x01\x02" + b"\x21" + big
+            + b"\x12\x03\x02\x00\x00" + b"\x09" + struct.pack("<d", 0.5)):
+        v = codec.decode_block("b", "tension", _tension(quantized)).fields["tension_N"]
+        assert v[0] == 0.5 and np.isnan(v[1]) and v[2] == 1e300
+
+
 def _tension(quantized: bytes, head: bytes = b"\x09" + struct.pack("<q", T0) + b"\x10\x05"):
     return head + b"\x22" + bytes((len(quantized),)) + quantized
 
