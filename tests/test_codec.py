@@ -284,3 +284,35 @@ def test_shipped_proto_file_matches_the_runtime_schemas():
     assert "  Quantized accel_z_mps2 = 6;  // m/s^2" in shipped
     assert "  repeated sint64 delta = 2;  // quanta" in shipped
     assert "  sfixed64 t0_ns = 1;  // ns" in shipped
+
+
+def test_mutated_payloads_decode_consistently_or_raise_value_error():
+    """3000 random byte edits of valid payloads (NaN and irregular times included): the
+    decoder, which has no bounds checks of its own, validates before it writes; every result
+    is a ValueError or a block whose fields all have one value per time."""
+    rng = np.random.default_rng(7)
+    payloads = []
+    for sensor, t in (("tension", T0 + np.arange(20) * 10**8),
+                      ("imu", T0 + np.cumsum(rng.integers(1, 10**8, 9)))):
+        blk = _block(sensor, np.asarray(t, np.int64), scale=100.0)
+        blk.fields[next(iter(SENSOR_FIELDS[sensor]))][3] = np.nan
+        payloads.append((sensor, codec.encode_block(blk)))
+    rejected = 0
+    for k in range(3000):
+        sensor, p = payloads[k % 2]
+        b = bytearray(p)
+        i = int(rng.integers(0, len(b)))
+        edit = k % 3
+        if edit == 0:
+            b[i] = int(rng.integers(0, 256))
+        elif edit == 1:
+            del b[i:i + int(rng.integers(1, 4))]
+        else:
+            b[i:i] = bytes(rng.integers(0, 256, 2).astype(np.uint8))
+        try:
+            out = codec.decode_block("b", sensor, bytes(b))
+        except ValueError:
+            rejected += 1
+            continue
+        assert all(v.shape == out.t_ns.shape for v in out.fields.values())
+    assert 1000 < rejected < 3000
