@@ -14,7 +14,12 @@ prints:
   task, so W <= buoys).
 
 The machine is shared: the load average before each run is printed so a low figure can be
-judged. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep] [--repeat R]
+judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
+decode, reorder and coalesce, all threads) against the serial run's.
+
+Measured on the 2-core machine shared with other jobs, 2026-11-25, ``--buoys 4 --days 15``
+(compact logs): serial 71.8 s wall, 32.4 CPU-s; 2 workers 54.9 s wall, workers 17.0 + 16.8
+CPU-s; 197 CPU-s per buoy-year, reading 32 % of it. Details in docs/FLEET.md. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep] [--repeat R]
 [--measured-only]
 """
 
@@ -139,6 +144,17 @@ def timed_run(archives, config, workers: int) -> tuple[float, float, list[float]
     return time.perf_counter() - start, time.process_time() - cpu, children.per_process(), reports
 
 
+def read_only_cpu(archives) -> float:
+    """CPU seconds (all threads) to read every buoy's files as the replay does, no pipeline."""
+    from replay.reader import LogReader
+
+    cpu = time.process_time()
+    for a in archives:
+        for _ in LogReader(list(a.files)):
+            pass
+    return time.process_time() - cpu
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--buoys", type=int, default=12)
@@ -190,6 +206,11 @@ def main() -> None:
         print(f"contention-free speed-up (serial CPU / busiest worker's CPU): "
               f"{cpu1 / min(critical):.2f}x")
         tension = sum(r["samples"]["tension"]["accepted"] for r in rep1)
+        read_cpu = read_only_cpu(archives)
+        print(f"where the CPU goes: reading the archive alone (inflate, decode, order) "
+              f"{read_cpu:.1f} CPU-s = {read_cpu / cpu1:.0%} of the serial run; the pipeline "
+              f"(validation and QC, load selection, motion estimator, rainflow and Miner, "
+              f"alert ticks) the other {1 - read_cpu / cpu1:.0%}")
         buoy_years = tension / (20 * 86400 * 365.25)  # from the data: 20 Hz tension
         print(f"serial: {tension / wall1 / 1e6:.2f} M tension samples/s, "
               f"{wall1 / buoy_years:.0f} s per buoy-year wall, {cpu1 / buoy_years:.0f} CPU-s per "

@@ -3,20 +3,33 @@
 The schemas are built at run time with ``descriptor_pb2`` (no protoc, no generated code) and
 stored in every log as a serialized ``FileDescriptorSet`` (MCAP schema encoding ``protobuf``),
 so Foxglove, Rerun or any protobuf library decode the payloads without buoymon. Each sensor of
-:data:`monitor.blocks.SENSOR_FIELDS` gets one message type ``buoymon.v1.<Sensor>Block``::
+:data:`monitor.blocks.SENSOR_FIELDS` gets one message type ``buoymon.v2.<Sensor>Block``::
 
+    message Quantized {                    // one field's samples, exact to half a quantum
+      double quantum = 1;                  // the sensor's resolution, field units
+      repeated sint64 delta = 2;           // value[i] = quantum * (delta[0] + ... + delta[i])
+      repeated uint32 raw_index = 3;       // samples stored as they are (NaN, inf, huge) ...
+      repeated double raw_value = 4;       // ... at these indices, with these values
+    }
     message TensionBlock {                 // ImuBlock, MotionBlock, GnssBlock, WavesBlock alike
       sfixed64 t0_ns = 1;                  // sensor time of the first sample, ns since epoch
       uint64   period_ns = 2;              // sample i is at t0_ns + i * period_ns (regular)
       repeated sint64 t_offset_ns = 3;     // irregular: sample i is at t0_ns + t_offset_ns[i]
-      repeated double tension_N = 4;       // the sensor's fields, in SENSOR_FIELDS order, SI
+      Quantized tension_N = 4;             // the sensor's fields, in SENSOR_FIELDS order, SI
     }
+
+A value is stored as the integer ``k = rint(value / quantum)`` when ``float(k) * quantum`` lies
+within half a quantum of it (checked when encoding, so the bound holds exactly as the decoder
+computes it); the packed zigzag varints of the differences of ``k`` are a few bytes that zstd
+shrinks further, where a float64 sample cost 8 incompressible bytes. Anything else (NaN, inf,
+a value beyond 2**52 quanta) is kept bit for bit in ``raw_value`` (its ``delta`` is 0).
 
 Exactly one time base is used: ``t_offset_ns`` (one entry per sample) when present, otherwise
 ``period_ns``; a one-sample block needs neither. Every value field has one entry per sample.
 
-Encoding is hand-written (it is a handful of bytes around ``ndarray.tobytes``) because the
-generic protobuf runtime costs more per block than the rest of the log writer together.
+Logs of the first format (``buoymon.v1``: ``repeated double`` value fields) still decode: the
+format of a channel is read from the schema stored with it (:func:`field_numbers_from_schema`).
+Encoding is a numba kernel (:func:`put_payload`) shared by the live path and the bulk writer.
 Decoding of many messages at once is a numba kernel over the raw bytes (:func:`decode_many`);
 it accepts anything a conforming encoder may produce (packed or unpacked repeated fields, any
 field order, unknown fields skipped) and flags malformed payloads instead of raising.
@@ -25,31 +38,41 @@ field order, unknown fields skipped) and flags malformed payloads instead of rai
 from __future__ import annotations
 
 from functools import lru_cache
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import numba
 import numpy as np
 from google.protobuf import descriptor_pb2
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.quanta import quanta
 
-PACKAGE = "buoymon.v1"
+PACKAGE = "buoymon.v2"
+QUANTIZED = "Quantized"
+QUANTIZED_FILE = "buoymon/v2/quantized.proto"
 FIELD_T0 = 1
 FIELD_PERIOD = 2
 FIELD_OFFSETS = 3
 FIRST_VALUE_FIELD = 4
+# fields of Quantized
+Q_QUANTUM, Q_DELTA, Q_RAW_INDEX, Q_RAW_VALUE = 1, 2, 3, 4
+QUANTIZED_FIELDS = ("quantum", "delta", "raw_index", "raw_value")
 
 # decode status codes (one per message)
 OK = 0
 BAD_WIRE = 1  # truncated varint/field or an impossible wire type
-BAD_COUNTS = 2  # value fields (or time offsets) disagree on the number of samples
+BAD_COUNTS = 2  # value fields (or time offsets, raw samples) disagree on the number of samples
 NO_TIME_BASE = 3  # several samples but neither period_ns > 0 nor t_offset_ns
 NO_T0 = 4  # t0_ns missing
+BAD_QUANTUM = 5  # a quantized field without a finite quantum > 0
+REPEATED_FIELD = 6  # a quantized field given twice in one message
 STATUS_TEXT = {
     BAD_WIRE: "malformed protobuf",
     BAD_COUNTS: "fields disagree on the number of samples",
     NO_TIME_BASE: "several samples but no period_ns or t_offset_ns",
     NO_T0: "t0_ns missing",
+    BAD_QUANTUM: "quantum missing, not finite or not > 0",
+    REPEATED_FIELD: "a quantized value field appears twice",
 }
 
 
@@ -69,14 +92,29 @@ def _check_sensor(sensor: str) -> None:
         raise ValueError(f"unknown sensor {sensor!r}; expected one of {sorted(SENSOR_FIELDS)}")
 
 
+def _quantized_file() -> descriptor_pb2.FileDescriptorProto:
+    fdp = descriptor_pb2.FieldDescriptorProto
+    proto = descriptor_pb2.FileDescriptorProto(name=QUANTIZED_FILE, package=PACKAGE,
+                                               syntax="proto3")
+    msg = proto.message_type.add(name=QUANTIZED)
+    for name, number, typ, label in (
+            ("quantum", Q_QUANTUM, fdp.TYPE_DOUBLE, fdp.LABEL_OPTIONAL),
+            ("delta", Q_DELTA, fdp.TYPE_SINT64, fdp.LABEL_REPEATED),
+            ("raw_index", Q_RAW_INDEX, fdp.TYPE_UINT32, fdp.LABEL_REPEATED),
+            ("raw_value", Q_RAW_VALUE, fdp.TYPE_DOUBLE, fdp.LABEL_REPEATED)):
+        msg.field.add(name=name, number=number, type=typ, label=label)
+    return proto
+
+
 @lru_cache(maxsize=None)
 def file_descriptor_set(sensor: str) -> bytes:
-    """Serialized ``FileDescriptorSet`` describing the sensor's block message."""
+    """Serialized ``FileDescriptorSet`` describing the sensor's block message (two files:
+    ``Quantized``, then the block that imports it)."""
     _check_sensor(sensor)
     fdp = descriptor_pb2.FieldDescriptorProto
     proto = descriptor_pb2.FileDescriptorProto(
-        name=f"buoymon/v1/{sensor}.proto", package=PACKAGE, syntax="proto3"
-    )
+        name=f"buoymon/v2/{sensor}.proto", package=PACKAGE, syntax="proto3",
+        dependency=[QUANTIZED_FILE])
     msg = proto.message_type.add(name=message_name(sensor))
     msg.field.add(name="t0_ns", number=FIELD_T0, type=fdp.TYPE_SFIXED64, label=fdp.LABEL_OPTIONAL)
     msg.field.add(name="period_ns", number=FIELD_PERIOD, type=fdp.TYPE_UINT64,
@@ -84,68 +122,93 @@ def file_descriptor_set(sensor: str) -> bytes:
     msg.field.add(name="t_offset_ns", number=FIELD_OFFSETS, type=fdp.TYPE_SINT64,
                   label=fdp.LABEL_REPEATED)
     for i, name in enumerate(SENSOR_FIELDS[sensor]):
-        msg.field.add(name=name, number=FIRST_VALUE_FIELD + i, type=fdp.TYPE_DOUBLE,
-                      label=fdp.LABEL_REPEATED)
-    return descriptor_pb2.FileDescriptorSet(file=[proto]).SerializeToString(deterministic=True)
+        msg.field.add(name=name, number=FIRST_VALUE_FIELD + i, type=fdp.TYPE_MESSAGE,
+                      type_name=f".{PACKAGE}.{QUANTIZED}", label=fdp.LABEL_OPTIONAL)
+    return descriptor_pb2.FileDescriptorSet(
+        file=[_quantized_file(), proto]).SerializeToString(deterministic=True)
 
 
 def proto_text() -> str:
     """The schemas as ``.proto`` source, rendered from the descriptors (``monitor/buoymon.proto``
     is this text, kept for readers and for protoc users; a test checks they agree)."""
-    names = {descriptor_pb2.FieldDescriptorProto.TYPE_SFIXED64: "sfixed64",
-             descriptor_pb2.FieldDescriptorProto.TYPE_UINT64: "uint64",
-             descriptor_pb2.FieldDescriptorProto.TYPE_SINT64: "sint64",
-             descriptor_pb2.FieldDescriptorProto.TYPE_DOUBLE: "double"}
+    fdp = descriptor_pb2.FieldDescriptorProto
+    names = {fdp.TYPE_SFIXED64: "sfixed64", fdp.TYPE_UINT64: "uint64", fdp.TYPE_SINT64: "sint64",
+             fdp.TYPE_DOUBLE: "double", fdp.TYPE_UINT32: "uint32", fdp.TYPE_MESSAGE: QUANTIZED}
+    units = {"quantum": "field units", "delta": "quanta", "raw_index": "sample index",
+             "raw_value": "field units"}
     lines = ["// buoymon log format: one message per block of samples of one sensor.",
              "// Generated from monitor/codec.py (proto_text); see docs/LOG_FORMAT.md.",
              'syntax = "proto3";', "", f"package {PACKAGE};"]
+    messages = [(_quantized_file().message_type[0], units)]
     for sensor, fields in SENSOR_FIELDS.items():
         fds = descriptor_pb2.FileDescriptorSet.FromString(file_descriptor_set(sensor))
-        msg = fds.file[0].message_type[0]
+        messages.append((fds.file[-1].message_type[0], fields))
+    for msg, unit_of in messages:
         lines += ["", f"message {msg.name} {{"]
         for fld in msg.field:
             rep = "repeated " if fld.label == fld.LABEL_REPEATED else ""
-            unit = fields.get(fld.name) or "ns"
+            unit = unit_of.get(fld.name) or "ns"
             lines.append(f"  {rep}{names[fld.type]} {fld.name} = {fld.number};  // {unit}")
         lines.append("}")
     return "\n".join(lines) + "\n"
 
 
-FieldNumbers = tuple[int, int, int, tuple[int, ...]]  # t0, period, offsets, value fields
+# t0, period, offsets, value fields, Quantized's (quantum, delta, raw_index, raw_value) or
+# (-1, -1, -1, -1) for value fields of packed doubles (the v1 format)
+FieldNumbers = tuple[int, int, int, tuple[int, ...], tuple[int, int, int, int]]
+DOUBLES = (-1, -1, -1, -1)
 
 
 @lru_cache(maxsize=None)
 def field_numbers_from_schema(schema_data: bytes, name: str, sensor: str) -> FieldNumbers:
-    """Field numbers ``(t0, period, offsets, values...)`` of message ``name`` in a stored schema.
+    """Field numbers of message ``name`` in a stored schema, and its value encoding.
 
     Read from the schema in the file (not assumed) so a log written by another tool with a
-    different numbering still decodes. Raises ValueError naming what is missing.
+    different numbering, or by an older buoymon (``repeated double`` values), still decodes.
+    Raises ValueError naming what is missing or not understood.
     """
     fds = descriptor_pb2.FileDescriptorSet.FromString(schema_data)
-    for f in fds.file:
-        for m in f.message_type:
-            full = f"{f.package}.{m.name}" if f.package else m.name
-            if full != name:
-                continue
-            numbers = {fld.name: fld.number for fld in m.field}
-            wanted = ["t0_ns", *SENSOR_FIELDS[sensor]]
-            missing = [w for w in wanted if w not in numbers]
-            if missing:
-                raise ValueError(f"schema {name}: missing fields {missing}")
-            values = tuple(numbers[w] for w in SENSOR_FIELDS[sensor])
-            return (numbers["t0_ns"], numbers.get("period_ns", -1),
-                    numbers.get("t_offset_ns", -1), values)
-    raise ValueError(f"schema data does not define message {name!r}")
+    messages = {(f"{f.package}.{m.name}" if f.package else m.name): m
+                for f in fds.file for m in f.message_type}
+    m = messages.get(name)
+    if m is None:
+        raise ValueError(f"schema data does not define message {name!r}")
+    fields = {fld.name: fld for fld in m.field}
+    wanted = ["t0_ns", *SENSOR_FIELDS[sensor]]
+    missing = [w for w in wanted if w not in fields]
+    if missing:
+        raise ValueError(f"schema {name}: missing fields {missing}")
+    fdp = descriptor_pb2.FieldDescriptorProto
+    value_fields = [fields[w] for w in SENSOR_FIELDS[sensor]]
+    types = {(f.type, f.type_name) for f in value_fields}
+    if types == {(fdp.TYPE_DOUBLE, "")}:
+        sub = DOUBLES
+    elif len(types) == 1 and value_fields[0].type == fdp.TYPE_MESSAGE:
+        inner = messages.get(value_fields[0].type_name.lstrip("."))
+        numbers = {fld.name: fld.number for fld in inner.field} if inner is not None else {}
+        if "quantum" not in numbers or "delta" not in numbers:
+            raise ValueError(f"schema {name}: value type {value_fields[0].type_name} "
+                             "lacks quantum/delta fields")
+        sub = tuple(numbers.get(k, -1) for k in QUANTIZED_FIELDS)
+    else:
+        raise ValueError(f"schema {name}: value fields must all be double or all "
+                         f"{QUANTIZED}")
+    return (fields["t0_ns"].number, fields["period_ns"].number if "period_ns" in fields else -1,
+            fields["t_offset_ns"].number if "t_offset_ns" in fields else -1,
+            tuple(f.number for f in value_fields), sub)
 
 
 DEFAULT_FIELD_NUMBERS = {
     s: (FIELD_T0, FIELD_PERIOD, FIELD_OFFSETS,
-        tuple(range(FIRST_VALUE_FIELD, FIRST_VALUE_FIELD + len(f))))
+        tuple(range(FIRST_VALUE_FIELD, FIRST_VALUE_FIELD + len(f))),
+        (Q_QUANTUM, Q_DELTA, Q_RAW_INDEX, Q_RAW_VALUE))
     for s, f in SENSOR_FIELDS.items()
 }
 
 
 # ----------------------------------------------------------------------------------- encode
+
+_EXACT = 2.0 ** 52  # beyond this many quanta a float64 no longer holds every integer
 
 
 @numba.njit(cache=True)
@@ -163,22 +226,19 @@ def _regular_period(t: np.ndarray) -> int:
     return p
 
 
-@numba.njit(cache=True)
-def _zigzag_varints(t: np.ndarray) -> np.ndarray:
-    """Packed sint64 encoding of ``t - t[0]``."""
-    out = np.empty(t.shape[0] * 10, np.uint8)
-    k = 0
-    t0 = t[0]
-    for i in range(t.shape[0]):
-        d = t[i] - t0
-        z = np.uint64((d << 1) ^ (d >> 63))
-        while z >= 0x80:
-            out[k] = np.uint8((z & np.uint64(0x7F)) | np.uint64(0x80))
-            z >>= np.uint64(7)
-            k += 1
-        out[k] = np.uint8(z)
-        k += 1
-    return out[:k]
+@numba.njit(cache=True, inline="always")
+def _zigzag(d):
+    return np.uint64((d << 1) ^ (d >> 63))
+
+
+@numba.njit(cache=True, inline="always")
+def _varint_size(z):
+    z = np.uint64(z)
+    n = 1
+    while z >= 0x80:
+        z >>= np.uint64(7)
+        n += 1
+    return n
 
 
 @numba.njit(cache=True, inline="always")
@@ -193,85 +253,126 @@ def _put_varint(out, k, z):
     return k + 1
 
 
+@numba.njit(cache=True, inline="always")
+def _quantize(v, q):
+    """``(k, True)`` when ``float(k) * q`` is within ``q / 2`` of ``v`` (the decoder's exact
+    arithmetic), ``(0, False)`` for a sample to keep raw (NaN, inf, too many quanta)."""
+    x = v / q
+    if not abs(x) < _EXACT:  # NaN fails too
+        return 0, False
+    k = np.rint(x)
+    # at a tie, k * q may round to just over q / 2 away while a neighbour is just within
+    for c in (k, k - 1.0, k + 1.0):
+        if abs(c * q - v) <= 0.5 * q:
+            return np.int64(c), True
+    return 0, False
+
+
 @numba.njit(cache=True)
 def payload_bound(n: int, nf: int) -> int:
     """Upper bound of the payload size of an ``n``-sample block with ``nf`` value fields."""
-    return 9 + 11 + 11 + 10 * n + nf * (11 + 8 * n)
+    return 9 + 11 + 11 + 10 * n + nf * (60 + 29 * n)
 
 
 @numba.njit(cache=True)
-def put_payload(out, k, t, vals, a, b):
-    """Encode samples ``a:b`` of ``t``/``vals`` (n_fields, N) at ``out[k]``; return end position.
+def _put_quantized(out, k, v, q, qb):
+    """Encode the samples ``v`` of one field as a ``Quantized`` message body at ``out[k]``
+    (``qb``: the 8 bytes of ``q``); return the end position. Sizes are counted first so the
+    length prefixes can be written in place."""
+    n = v.shape[0]
+    dsize = 0
+    isize = 0
+    nraw = 0
+    prev = 0
+    for i in range(n):
+        kk, ok = _quantize(v[i], q)
+        if ok:
+            dsize += _varint_size(_zigzag(kk - prev))
+            prev = kk
+        else:
+            dsize += 1
+            isize += _varint_size(i)
+            nraw += 1
+    size = 9 + 1 + _varint_size(dsize) + dsize
+    if nraw:
+        size += 1 + _varint_size(isize) + isize + 1 + _varint_size(8 * nraw) + 8 * nraw
+    k = _put_varint(out, k, size)
+    out[k] = (Q_QUANTUM << 3) | 1
+    out[k + 1:k + 9] = qb
+    out[k + 9] = (Q_DELTA << 3) | 2
+    k = _put_varint(out, k + 10, dsize)
+    prev = 0
+    for i in range(n):
+        kk, ok = _quantize(v[i], q)
+        if ok:
+            k = _put_varint(out, k, _zigzag(kk - prev))
+            prev = kk
+        else:
+            out[k] = 0
+            k += 1
+    if nraw:
+        out[k] = (Q_RAW_INDEX << 3) | 2
+        k = _put_varint(out, k + 1, isize)
+        for i in range(n):
+            if not _quantize(v[i], q)[1]:
+                k = _put_varint(out, k, i)
+        out[k] = (Q_RAW_VALUE << 3) | 2
+        k = _put_varint(out, k + 1, 8 * nraw)
+        for i in range(n):
+            if not _quantize(v[i], q)[1]:
+                out[k:k + 8] = v[i:i + 1].copy().view(np.uint8)
+                k += 8
+    return k
 
-    The numba twin of :func:`encode_samples` for bulk writers (same bytes).
-    """
-    n = b - a
-    out[k] = 0x09
+
+@numba.njit(cache=True)
+def put_payload(out, k, t, vals, quanta, a, b):
+    """Encode samples ``a:b`` of ``t``/``vals`` (n_fields, N) at ``out[k]`` with the field
+    quanta ``quanta`` (n_fields,); return the end position. ``out`` must have
+    :func:`payload_bound` bytes free."""
+    out[k] = (FIELD_T0 << 3) | 1
     k += 1
-    t0 = t[a]
-    u = np.uint64(t0)
+    u = np.uint64(t[a])
     for i in range(8):
         out[k + i] = np.uint8((u >> np.uint64(8 * i)) & np.uint64(0xFF))
     k += 8
     period = _regular_period(t[a:b])
     if period > 0:
-        out[k] = 0x10
+        out[k] = FIELD_PERIOD << 3
         k = _put_varint(out, k + 1, period)
     elif period < 0:
-        # the length prefix needs the packed size, so encode the offsets first
-        body = _zigzag_varints(t[a:b])
-        out[k] = 0x1A
-        k = _put_varint(out, k + 1, body.shape[0])
-        out[k:k + body.shape[0]] = body
-        k += body.shape[0]
+        size = 0
+        for i in range(a, b):
+            size += _varint_size(_zigzag(t[i] - t[a]))
+        out[k] = (FIELD_OFFSETS << 3) | 2
+        k = _put_varint(out, k + 1, size)
+        for i in range(a, b):
+            k = _put_varint(out, k, _zigzag(t[i] - t[a]))
+    qb = quanta.view(np.uint8)
     for f in range(vals.shape[0]):
         out[k] = np.uint8(((FIRST_VALUE_FIELD + f) << 3) | 2)
-        k = _put_varint(out, k + 1, 8 * n)
-        raw = vals[f, a:b].copy().view(np.uint8)
-        out[k:k + 8 * n] = raw
-        k += 8 * n
+        k = _put_quantized(out, k + 1, vals[f, a:b], quanta[f], qb[8 * f:8 * f + 8])
     return k
 
 
-@lru_cache(maxsize=4096)
-def _varint(x: int) -> bytes:
-    if x < 0x80:
-        return bytes((x,))
-    out = bytearray()
-    while x >= 0x80:
-        out.append((x & 0x7F) | 0x80)
-        x >>= 7
-    out.append(x)
-    return bytes(out)
+def encode_samples(t_ns: np.ndarray, values: np.ndarray, quanta: np.ndarray) -> bytes:
+    """Payload bytes of one block: ``t_ns`` int64 (n,), ``values`` float64 (n_fields, n) in
+    field order, ``quanta`` float64 (n_fields,) (see :func:`quanta`); ``n`` at least 1."""
+    t = np.ascontiguousarray(t_ns, np.int64)
+    vals = np.ascontiguousarray(values, np.float64)
+    out = np.empty(payload_bound(t.shape[0], vals.shape[0]), np.uint8)
+    end = put_payload(out, 0, t, vals, np.ascontiguousarray(quanta, np.float64), 0, t.shape[0])
+    return out[:end].tobytes()
 
 
-_VALUE_TAGS = tuple(bytes(((FIRST_VALUE_FIELD + i) << 3 | 2,)) for i in range(8))
-
-
-def encode_samples(t_ns: np.ndarray, values: Sequence[np.ndarray]) -> bytes:
-    """Payload bytes of one block: ``t_ns`` int64 (n,), ``values`` float64 arrays in field order.
-
-    The caller guarantees the shapes (``SampleBlock`` does); ``n`` must be at least 1.
-    """
-    n = t_ns.shape[0]
-    parts = [b"\x09", t_ns[:1].astype("<i8", copy=False).tobytes()]
-    period = _regular_period(t_ns)
-    if period > 0:
-        parts += (b"\x10", _varint(period))
-    elif period < 0:
-        packed = _zigzag_varints(t_ns).tobytes()
-        parts += (b"\x1a", _varint(len(packed)), packed)
-    size = _varint(8 * n)
-    for tag, v in zip(_VALUE_TAGS, values):
-        parts += (tag, size, v.astype("<f8", copy=False).tobytes())
-    return b"".join(parts)
-
-
-def encode_block(block: SampleBlock) -> bytes:
-    """Payload bytes of a :class:`SampleBlock` (ValueError if it is empty)."""
+def encode_block(block: SampleBlock, overrides: Mapping[str, float] | None = None) -> bytes:
+    """Payload bytes of a :class:`SampleBlock` (ValueError if it is empty), with the default
+    quanta or ``overrides`` by field name."""
     if len(block) == 0:
         raise ValueError(f"{block.topic}: an empty block has no sensor time and cannot be encoded")
-    return encode_samples(block.t_ns, [block.fields[f] for f in SENSOR_FIELDS[block.sensor]])
+    names = SENSOR_FIELDS[block.sensor]
+    return encode_samples(block.t_ns, np.array([block.fields[f] for f in names]),
+                          quanta(block.sensor, overrides))
 
 
 # ----------------------------------------------------------------------------------- decode
@@ -295,6 +396,11 @@ def _read_varint(buf, p, end):
         if shift >= 70:
             return result, -1
     return result, -1
+
+
+@numba.njit(cache=True, inline="always")
+def _unzigzag(z):
+    return ((z >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(z & 1)
 
 
 @numba.njit(cache=True, inline="always")
@@ -333,34 +439,191 @@ def _skip(buf, p, end, wt):
     return -1
 
 
+@numba.njit(cache=True, inline="always")
+def _varint_run(buf, p, end, wt):
+    """Bounds ``(a, b)`` of the varints of a repeated varint field starting at ``p`` (after
+    its tag): packed (``wt`` 2) or one unpacked value (``wt`` 0); ``b`` -1 if malformed."""
+    if wt == 2:
+        ln, p = _read_varint(buf, p, end)
+        if p < 0 or p + ln > end:
+            return p, -1
+        return p, p + ln
+    _, q = _read_varint(buf, p, end)
+    return p, q
+
+
+@numba.njit(cache=True, inline="always")
+def _count_varints(buf, a, b):
+    """Number of varints in ``buf[a:b]``, -1 if one is cut or longer than 10 bytes (so the
+    decoding loops may trust every run they are given)."""
+    n = 0
+    run = 0
+    for i in range(a, b):
+        if buf[i] < 0x80:
+            n += 1
+            run = 0
+        else:
+            run += 1
+            if run >= 10:
+                return -1
+    if run:
+        return -1
+    return n
+
+
+@numba.njit(cache=True)
+def _read_f64(buf, p, scratch):
+    """The little-endian double at ``buf[p]``, through ``scratch`` (float64 (1,)): no
+    allocation per value in the decoding loops."""
+    scratch.view(np.uint8)[:] = buf[p:p + 8]
+    return scratch[0]
+
+
+@numba.njit(cache=True)
+def _scan_quantized(buf, p, end, sub, scratch):
+    """Validate one ``Quantized`` body ``buf[p:end]``; return ``(samples, status)``."""
+    nd = 0
+    ni = 0
+    nr = 0
+    top = -1
+    q = np.nan
+    while p < end:
+        tag, p = _read_varint(buf, p, end)
+        if p < 0:
+            return 0, BAD_WIRE
+        fnum = tag >> 3
+        wt = tag & 7
+        if fnum == sub[0] and wt == 1 and p + 8 <= end:
+            q = _read_f64(buf, p, scratch)
+            p += 8
+        elif (fnum == sub[1] or fnum == sub[2]) and (wt == 0 or wt == 2):
+            a, p = _varint_run(buf, p, end, wt)
+            if p < 0:
+                return 0, BAD_WIRE
+            if fnum == sub[1]:
+                c = _count_varints(buf, a, p)
+                if c < 0:
+                    return 0, BAD_WIRE
+                nd += c
+            else:
+                while a < p:
+                    v, a = _read_varint(buf, a, p)
+                    if a < 0:
+                        return 0, BAD_WIRE
+                    top = max(top, v) if v >= 0 else np.iinfo(np.int64).max
+                    ni += 1
+        elif fnum == sub[3] and wt == 2:
+            ln, p = _read_varint(buf, p, end)
+            if p < 0 or p + ln > end or ln % 8 != 0:
+                return 0, BAD_WIRE
+            nr += ln // 8
+            p += ln
+        elif fnum == sub[3] and wt == 1:
+            nr += 1
+            p += 8
+        else:
+            p = _skip(buf, p, end, wt)
+        if p < 0 or p > end:
+            return 0, BAD_WIRE
+    if not (q > 0 and q < np.inf):
+        return 0, BAD_QUANTUM
+    if ni != nr or ni > nd or top >= nd:
+        return 0, BAD_COUNTS
+    return nd, OK
+
+
+@numba.njit(cache=True)
+def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
+    """Decode a ``Quantized`` body validated by :func:`_scan_quantized` into
+    ``out[pos:pos + n]`` (``vb``: the same row as bytes, for the raw samples; ``idx``: room
+    for the raw indices, at least ``n``)."""
+    q = 0.0
+    a0 = p
+    while p < end:  # the quantum first: it may follow the deltas
+        tag, p = _read_varint(buf, p, end)
+        if tag >> 3 == sub[0] and tag & 7 == 1:
+            q = _read_f64(buf, p, scratch)
+        p = _skip(buf, p, end, tag & 7)
+    p = a0
+    acc = 0
+    i = pos
+    r = 0
+    while p < end:
+        tag, p = _read_varint(buf, p, end)
+        fnum = tag >> 3
+        wt = tag & 7
+        if fnum == sub[1] and (wt == 0 or wt == 2):
+            a, p = _varint_run(buf, p, end, wt)
+            # the hot loop of a replay: one pass over the bytes of validated varints
+            z = 0
+            shift = 0
+            for s in range(a, p):
+                byte = np.int64(buf[s])
+                z |= (byte & 0x7F) << shift
+                if byte < 0x80:
+                    acc += _unzigzag(z)
+                    out[i] = acc * q
+                    i += 1
+                    z = 0
+                    shift = 0
+                else:
+                    shift += 7
+        elif fnum == sub[2] and (wt == 0 or wt == 2):
+            a, p = _varint_run(buf, p, end, wt)
+            while a < p:
+                idx[r], a = _read_varint(buf, a, p)
+                r += 1
+        else:
+            p = _skip(buf, p, end, wt)
+    p = a0
+    w = 0
+    while p < end and w < r:  # raw samples last: their indices may come after them
+        tag, p = _read_varint(buf, p, end)
+        if tag >> 3 == sub[3] and (tag & 7 == 1 or tag & 7 == 2):
+            ln = 8
+            if tag & 7 == 2:
+                ln, p = _read_varint(buf, p, end)
+            for s in range(p, p + ln, 8):
+                base = (pos + idx[w]) * 8
+                vb[base:base + 8] = buf[s:s + 8]
+                w += 1
+            p += ln
+        else:
+            p = _skip(buf, p, end, tag & 7)
+
+
 @numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread
-def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
+def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
     m = offs.shape[0]
     nf = fn_vals.shape[0]
+    quantized = sub[0] >= 0
     status = np.zeros(m, np.int8)
     nsamp = np.zeros(m, np.int64)
     t0s = np.zeros(m, np.int64)
     periods = np.zeros(m, np.int64)
     cnt = np.zeros(nf, np.int64)
+    seen = np.zeros(nf, np.bool_)
+    scratch = np.empty(1, np.float64)
     # pass 1: validate and count samples per message
     for k in range(m):
         p = offs[k]
         end = p + lens[k]
         cnt[:] = 0
+        seen[:] = False
         noff = 0
         have_t0 = False
         st = 0
         while p < end:
             tag, p = _read_varint(buf, p, end)
             if p < 0:
-                st = 1
+                st = BAD_WIRE
                 break
             fnum = tag >> 3
             wt = tag & 7
             j = _value_slot(fn_vals, fnum)
             if fnum == fn_t0 and wt == 1:
                 if p + 8 > end:
-                    st = 1
+                    st = BAD_WIRE
                     break
                 t0s[k] = _read_i64(buf, p)
                 have_t0 = True
@@ -368,52 +631,56 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
             elif fnum == fn_period and wt == 0:
                 v, p = _read_varint(buf, p, end)
                 periods[k] = v
-            elif fnum == fn_off and wt == 2:
+            elif fnum == fn_off and (wt == 0 or wt == 2):
+                a, p = _varint_run(buf, p, end, wt)
+                c = _count_varints(buf, a, p) if p >= 0 else -1
+                if c < 0:
+                    st = BAD_WIRE
+                    break
+                noff += c
+            elif j >= 0 and quantized and wt == 2:
                 ln, p = _read_varint(buf, p, end)
                 if p < 0 or p + ln > end:
-                    st = 1
+                    st = BAD_WIRE
                     break
-                e2 = p + ln
-                while p < e2:
-                    _, p = _read_varint(buf, p, e2)
-                    if p < 0:
-                        break
-                    noff += 1
-                if p < 0:
-                    st = 1
+                if seen[j]:
+                    st = REPEATED_FIELD
                     break
-            elif fnum == fn_off and wt == 0:
-                _, p = _read_varint(buf, p, end)
-                noff += 1
-            elif j >= 0 and wt == 2:
+                seen[j] = True
+                c, st = _scan_quantized(buf, p, p + ln, sub, scratch)
+                if st != OK:
+                    break
+                cnt[j] = c
+                p += ln
+            elif j >= 0 and not quantized and wt == 2:
                 ln, p = _read_varint(buf, p, end)
                 if p < 0 or p + ln > end or ln % 8 != 0:
-                    st = 1
+                    st = BAD_WIRE
                     break
                 cnt[j] += ln // 8
                 p += ln
-            elif j >= 0 and wt == 1:
+            elif j >= 0 and not quantized and wt == 1:
                 if p + 8 > end:
-                    st = 1
+                    st = BAD_WIRE
                     break
                 cnt[j] += 1
                 p += 8
             else:
                 p = _skip(buf, p, end, wt)
             if p < 0:
-                st = 1
+                st = BAD_WIRE
                 break
         if st == 0:
             n = cnt[0]
             for q in range(1, nf):
                 if cnt[q] != n:
-                    st = 2
+                    st = BAD_COUNTS
             if noff != 0 and noff != n:
-                st = 2
+                st = BAD_COUNTS
             if st == 0 and not have_t0:
-                st = 4
+                st = NO_T0
             if st == 0 and n > 1 and noff == 0 and periods[k] <= 0:
-                st = 3
+                st = NO_TIME_BASE
             if st == 0:
                 nsamp[k] = n
                 if noff != 0:
@@ -423,9 +690,11 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
     for k in range(m):
         total += nsamp[k]
     t = np.empty(total, np.int64)
-    vb = np.empty((nf, total * 8), np.uint8)
+    vals = np.empty((nf, total), np.float64)
+    vb = vals.view(np.uint8)
     fill = np.zeros(nf, np.int64)
-    # pass 2: fill times and value bytes (messages already validated)
+    idx = np.empty(nsamp.max() if m else 0, np.int64)
+    # pass 2: fill times and values (messages already validated)
     pos = 0
     for k in range(m):
         n = nsamp[k]
@@ -441,15 +710,16 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
             wt = tag & 7
             j = _value_slot(fn_vals, fnum)
             if fnum == fn_off and (wt == 2 or wt == 0):
-                e2 = p + 1  # one varint for the unpacked form
-                if wt == 2:
-                    ln, p = _read_varint(buf, p, end)
-                    e2 = p + ln
-                while p < e2:
-                    z, p = _read_varint(buf, p, end)
-                    t[pos + noff] = ((z >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(z & 1)
+                a, p = _varint_run(buf, p, end, wt)
+                while a < p:
+                    z, a = _read_varint(buf, a, p)
+                    t[pos + noff] = _unzigzag(z)
                     noff += 1
-            elif j >= 0 and (wt == 2 or wt == 1):
+            elif j >= 0 and quantized and wt == 2:
+                ln, p = _read_varint(buf, p, end)
+                _fill_quantized(buf, p, p + ln, sub, vals[j], vb[j], pos, scratch, idx)
+                p += ln
+            elif j >= 0 and not quantized and (wt == 2 or wt == 1):
                 ln = 8
                 if wt == 2:
                     ln, p = _read_varint(buf, p, end)
@@ -468,7 +738,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals):
             for i in range(n):
                 t[pos + i] = t0 + i * per
         pos += n
-    return status, nsamp, t0s, t, vb
+    return status, nsamp, t, vals
 
 
 def decode_many(
@@ -480,8 +750,7 @@ def decode_many(
     Args:
         buf: uint8 buffer holding the payloads.
         offs, lens: int64 start and length of each payload in ``buf``.
-        numbers: field numbers ``(t0, period, offsets, values)`` (see
-            :func:`field_numbers_from_schema`).
+        numbers: field numbers and value encoding (see :func:`field_numbers_from_schema`).
 
     Returns:
         ``(status, n_samples, t_ns, values)``: per-message status (:data:`OK` or an error code
@@ -489,11 +758,9 @@ def decode_many(
         good messages concatenated in message order: ``t_ns`` int64 (N,) and ``values``
         float64 (n_fields, N).
     """
-    fn_t0, fn_period, fn_off, fn_vals = numbers
-    status, nsamp, _, t, vb = _decode_kernel(
-        buf, offs, lens, fn_t0, fn_period, fn_off, np.asarray(fn_vals, np.int64)
-    )
-    return status, nsamp, t, vb.view("<f8")
+    fn_t0, fn_period, fn_off, fn_vals, sub = numbers
+    return _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off,
+                          np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64))
 
 
 def decode_block(buoy_id: str, sensor: str, payload: bytes, recv_ns: int = 0,

@@ -114,10 +114,13 @@ class McapRecorder:
             path = os.path.join(self.directory, f"{self._prefix}-{stamp}-{n}.mcap")
         # mcap (with zstd, lz4, importlib.metadata) is loaded by the first file only: the
         # daemon imports this module whether or not it records
-        from mcap.writer import CompressionType, Writer  # noqa: PLC0415
+        from mcap.writer import CompressionType, IndexType, Writer  # noqa: PLC0415
 
         self._file = open(path, "wb")
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD)
+        # no Message Index records: 16 bytes a message plus 15 a channel per chunk, which with
+        # a chunk per flush cost a third of the compact samples (docs/LOG_FORMAT.md)
+        self._writer = Writer(self._file, compression=CompressionType.ZSTD,
+                              index_types=IndexType.ALL & ~IndexType.MESSAGE)
         self._writer.start(profile="", library="buoymon")
         self._channels.clear()
         self._schemas.clear()

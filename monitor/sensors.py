@@ -101,11 +101,12 @@ class SensorPublisher:
 
     @classmethod
     def connect(cls, buoy_id: str, connect: Sequence[str],
-                options: PublisherOptions = PublisherOptions()) -> "SensorPublisher":
+                options: PublisherOptions = PublisherOptions(),
+                codec: zenoh_io.BlockCodec | None = None) -> "SensorPublisher":
         """Open a session of its own (a peer that only connects out) to ``connect``."""
         session = zenoh_io.open_session(ZenohConfig(mode="peer", listen=(),
                                                     connect=tuple(connect)))
-        pub = cls(session, buoy_id, options)
+        pub = cls(session, buoy_id, options, codec)
         pub._own_session = True
         return pub
 

@@ -18,12 +18,12 @@ from __future__ import annotations
 import json
 import queue
 import time
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Mapping, NamedTuple, Protocol
 
 import zenoh
 import zenoh.ext
 
-from monitor.blocks import SampleBlock, parse_sensor_topic, validate_buoy_id
+from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic, validate_buoy_id
 from monitor.daemon_config import ZenohConfig
 from monitor.recorder import ChannelSpec
 from monitor.strict_json import to_json_bytes  # noqa: F401  (callers use zenoh_io.to_json_bytes)
@@ -224,15 +224,23 @@ class BlockCodec(Protocol):
 
 
 class ProtobufCodec:
-    """The log format's protobuf block encoding (``monitor.codec``) as a :class:`BlockCodec`."""
+    """The log format's protobuf block encoding (``monitor.codec``) as a :class:`BlockCodec`.
 
-    def __init__(self) -> None:
+    ``quanta``: quantum per field name for encoding (``monitor.quanta.DEFAULT_QUANTA``
+    otherwise; ValueError for a bad one); decoding takes the quantum carried in each message.
+    """
+
+    def __init__(self, quanta: Mapping[str, float] | None = None) -> None:
         from monitor import codec  # noqa: PLC0415 (lazy: numba compile only when used)
+        from monitor.quanta import quanta as sensor_quanta  # noqa: PLC0415
 
         self._codec = codec
+        self._quanta = dict(quanta or {})
+        for sensor in SENSOR_FIELDS:
+            sensor_quanta(sensor, self._quanta)
 
     def encode(self, block: SampleBlock) -> bytes:
-        return self._codec.encode_block(block)
+        return self._codec.encode_block(block, self._quanta)
 
     def decode(self, topic: str, payload: bytes, recv_ns: int) -> SampleBlock:
         buoy_id, sensor = parse_sensor_topic(topic)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from monitor.blocks import validate_buoy_id
 from monitor.cli_paths import check_output
+from monitor.quanta import add_quantum_option, parse_quanta
 from replay.csv_import import DEFAULT_START, read_csv
 from replay.writer import LogWriter, Series
 
@@ -29,6 +30,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-errors", type=int, default=100, metavar="N",
                    help="bad rows listed one by one (default 100; 0 lists all); the rest are "
                         "counted by reason")
+    add_quantum_option(p)
     p.set_defaults(func=run)
 
 
@@ -38,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
         if not 1e-9 <= args.block_s <= 1e9:
             raise ValueError(f"--block-s {args.block_s}: must be between 1e-9 (1 ns) and 1e9")
         check_output(args.output, [args.csv], "-o")
+        quanta = parse_quanta(args.quantum)
         data = read_csv(args.csv, start=args.start)
     except (ValueError, OSError) as e:
         hint = "" if args.buoy_id is not None else " (or pass --buoy-id)"
@@ -56,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"buoymon import: no valid rows in {args.csv}; nothing written\n{data.summary()}",
               file=sys.stderr)
         return 1
-    with LogWriter(args.output) as w:
+    with LogWriter(args.output, quanta=quanta) as w:
         messages = w.write_series(
             [Series(buoy_id, sensor, t, v) for sensor, (t, v) in data.sensors.items()],
             block_ns=int(round(args.block_s * 1e9)))

@@ -16,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 from monitor.cli_paths import check_output
+from monitor.quanta import add_quantum_option, parse_quanta
 from replay.cmd_replay import MIN_SPEED
 from replay.simulate import LOAD_MODELS, SimConfig, simulate
 
@@ -57,6 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --publish: X times real time (default: as fast as possible)")
     p.add_argument("--allow-remote", action="store_true",
                    help="with --publish: allow an endpoint that is not on the loopback interface")
+    add_quantum_option(p)
     p.set_defaults(func=run)
 
 
@@ -95,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
                         buoy_id=args.buoy_id, start=args.start, dropouts=args.dropouts,
                         spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span,
-                        load_model=args.load_model)
+                        load_model=args.load_model, quanta=parse_quanta(args.quantum))
     except ValueError as e:
         print(f"buoymon simulate: {e}", file=sys.stderr)
         return 2
@@ -113,6 +115,10 @@ def run(args: argparse.Namespace) -> int:
 
             pace = "as fast as possible" if args.speed is None else f"at {args.speed:g}x real time"
             print(f"publishing to {args.publish} {pace} ...", flush=True)
-            sent = publish_logs([str(path)], publisher_config([args.publish]), args.speed)
+            from monitor.zenoh_io import ProtobufCodec
+
+            # on the wire with the log's quanta: its samples are on that grid already
+            sent = publish_logs([str(path)], publisher_config([args.publish]), args.speed,
+                                codec=ProtobufCodec(cfg.quanta))
             print(f"published {sent:,} blocks on buoy/{cfg.buoy_id}/sensor/*")
     return 0

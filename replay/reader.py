@@ -45,7 +45,8 @@ Ordering guarantees (deterministic for the same files in the same order):
    release are ordered by (first publish time, topic). The samples of each topic are exactly
    those of ``coalesce=False`` in the same order; only the interleaving between topics is
    coarser (per release instead of per message). ``recv_ns`` of a coalesced block is the
-   latest receive time of its messages.
+   latest receive time of its messages. A release is cut into spans of
+   :data:`COALESCE_S` of publish time, each giving its own blocks, so no block covers more.
 """
 
 from __future__ import annotations
@@ -314,6 +315,14 @@ def _take(t: np.ndarray, v: np.ndarray, start: np.ndarray, n: np.ndarray
 
 
 _COLS = ("stream", "pub", "log", "start", "n", "seq", "file")
+# Longest stretch of sensor time (by publish time) one coalesced block covers. The replay's
+# ordering passes by a stream lagging the newest data by more than [ordering]
+# replay_horizon_s (1 h) and rejects what then arrives as late: a chunk of compact samples
+# holds more than an hour of the default streams, so a release of a whole chunk must be cut;
+# at half the horizon, as long as the chunks of the float64 format, as few blocks as that
+# allows (the pipeline's cost per block is the fleet benchmark's: 600 s cost 15 % more CPU).
+COALESCE_S = 1800
+COALESCE_NS = COALESCE_S * 1_000_000_000
 
 
 class LogReader:
@@ -587,7 +596,12 @@ class LogReader:
         rel = {k: v[order] for k, v in rel.items()}
         stores = {int(s): self._streams[s].store() for s in np.unique(tab["stream"])}
         rel = self._drop_duplicates(rel, stores)
-        blocks = self._blocks(rel, stores, rank)
+        # a release is as long as a chunk: cut it into spans of at most COALESCE_S of sensor
+        # time, so no coalesced block runs ahead of the other streams by more than that
+        span = (rel["pub"] - rel["pub"][0]) // COALESCE_NS if rel["pub"].shape[0] else rel["pub"]
+        cuts = np.flatnonzero(np.r_[True, span[1:] != span[:-1], True])
+        blocks = [b for a, z in zip(cuts[:-1], cuts[1:])
+                  for b in self._blocks({k: v[a:z] for k, v in rel.items()}, stores, rank)]
         # compact: keep only the held-back samples in the stores
         for s, (t, v) in stores.items():
             stream = self._streams[s]

@@ -43,12 +43,13 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
 
-from monitor.blocks import validate_buoy_id
+from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
+from monitor.quanta import quanta as sensor_quanta
 from replay.csv_import import LAST_NS, parse_iso_ns
 from replay.writer import LogWriter, Series
 
@@ -88,6 +89,8 @@ class SimConfig:
     mean_span_m: float = 31.0  # mean horizontal anchor -> buoy distance (steady drift)
     load_model: str = "catenary"  # "catenary" | "wavfor" (see the module docstring)
     wavfor_min_wavelength_m: float = 17.0  # shorter wave components exert no net force
+    # quantum per field name of the log's samples (monitor.codec.DEFAULT_QUANTA otherwise)
+    quanta: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.load_model not in LOAD_MODELS:
@@ -109,6 +112,8 @@ class SimConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed = {self.seed!r}: must be an integer >= 0")
         validate_buoy_id(self.buoy_id)
+        for sensor in SENSOR_FIELDS:
+            sensor_quanta(sensor, self.quanta)
         if round(self.hours * 3600 * BASE_HZ) < 1:
             raise ValueError(f"hours = {self.hours!r}: shorter than one sample at {BASE_HZ} Hz")
         start_ns = parse_iso_ns(self.start)
@@ -343,7 +348,7 @@ def simulate(cfg: SimConfig, path: str | Path) -> SimSummary:
     wave_n = int(round(cfg.waves_interval_s * BASE_HZ))
     heave_hist = np.empty(0)
     delay_ns = int(round(cfg.link_delay_s * SECOND))
-    with LogWriter(path) as w:
+    with LogWriter(path, quanta=cfg.quanta) as w:
         for hour, i0, motion, tension, mooring in _hours(cfg):
             n = tension.shape[0]
             idx = i0 + np.arange(n, dtype=np.int64)

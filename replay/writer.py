@@ -4,8 +4,11 @@ A small MCAP writer of our own (records per https://mcap.dev/spec) rather than
 ``mcap.writer.Writer``: the latter manages ~175 k messages/s in pure Python, too slow for the
 30-day logs of the benchmark and the simulator. The file layout is a standard indexed MCAP:
 
-    magic, Header, [Schema, Channel]*, (Chunk, MessageIndex*)*, DataEnd,
+    magic, Header, [Schema, Channel]*, Chunk*, DataEnd,
     summary (Schema*, Channel*, Statistics, ChunkIndex*), SummaryOffset*, Footer, magic
+
+(MessageIndex records after each chunk only with ``message_index=True``.) Sensor payloads are
+the compact protobuf blocks of :mod:`monitor.codec`, each field stored to its quantum.
 
 Schemas and channels are written at top level (never inside a chunk) so a damaged chunk can
 never take a channel definition with it; chunks are zstd-compressed with the CRC32 of their
@@ -33,6 +36,7 @@ import zstandard
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, sensor_topic, validate_buoy_id
 from monitor import codec
 from monitor.strict_json import to_json_bytes
+from monitor.quanta import quanta as sensor_quanta
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
@@ -106,7 +110,7 @@ class Series:
 
 
 @numba.njit(cache=True)
-def _encode_records(t, vals, starts, channel, seq0, log_ns):
+def _encode_records(t, vals, quanta, starts, channel, seq0, log_ns):
     """MCAP message records (header + protobuf payload) of blocks ``starts[k]:starts[k+1]``."""
     nb = starts.shape[0] - 1
     nf = vals.shape[0]
@@ -120,7 +124,7 @@ def _encode_records(t, vals, starts, channel, seq0, log_ns):
     p = 0
     for k in range(nb):
         rec_off[k] = p
-        q = codec.put_payload(out, p + 31, t, vals, starts[k], starts[k + 1])
+        q = codec.put_payload(out, p + 31, t, vals, quanta, starts[k], starts[k + 1])
         head[0] = np.uint64(q - p - 9)  # record length
         head[1] = np.uint64(channel)
         head[2] = np.uint64(seq0 + k)
@@ -159,16 +163,26 @@ class LogWriter:
     Args:
         path: output file (created or truncated).
         chunk_size: target uncompressed chunk size in bytes.
-        zstd_level: zstd compression level of the chunks (1: noisy float samples barely
-            compress at any level, and level 1 is the fastest).
+        zstd_level: zstd compression level of the chunks (3: the quantized samples compress
+            by a third more than at level 1, at a cost the writer does not notice).
+        quanta: quantum per field name (see :func:`monitor.codec.quanta`), overriding
+            :data:`monitor.codec.DEFAULT_QUANTA`; every sample is stored to within half of it.
+        message_index: also write MCAP Message Index records after each chunk. Off by default:
+            they cost 16 bytes per message (as much as a second of GNSS samples) and serve only
+            readers that seek by time inside a chunk, which buoymon's reader and ``mcap``'s
+            do not need; their one use here is the message count of a chunk lost to damage
+            (unknown without them).
 
     Use as a context manager or call :meth:`close`; a writer that is never closed leaves a
     file without footer, which :mod:`replay.reader` still reads up to the last closed chunk.
     """
 
-    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 1 << 20, zstd_level: int = 1):
+    def __init__(self, path: str | os.PathLike, *, chunk_size: int = 1 << 20, zstd_level: int = 3,
+                 quanta: Mapping[str, float] | None = None, message_index: bool = False):
         if chunk_size < 1024:
             raise ValueError(f"chunk_size = {chunk_size}: must be at least 1024 bytes")
+        self._quanta = {s: sensor_quanta(s, quanta) for s in SENSOR_FIELDS}
+        self._message_index = message_index
         self.path = Path(path)
         self._f = open(self.path, "wb")
         self._chunk_size = chunk_size
@@ -198,8 +212,8 @@ class LogWriter:
         pub_ns = block.t_first_ns
         self._check_times(block.topic, log_ns, pub_ns)
         ch = self._sensor_channel(block.buoy_id, block.sensor)
-        values = [block.fields[f] for f in SENSOR_FIELDS[block.sensor]]
-        payload = codec.encode_samples(block.t_ns, values)
+        values = np.array([block.fields[f] for f in SENSOR_FIELDS[block.sensor]])
+        payload = codec.encode_samples(block.t_ns, values, self._quanta[block.sensor])
         self._add_message(ch, log_ns, pub_ns, payload)
 
     def write_json(self, topic: str, obj: Mapping[str, Any], log_ns: int, publish_ns: int,
@@ -250,7 +264,8 @@ class LogWriter:
             starts = np.append(starts, t.shape[0]).astype(np.int64)
             log_ns = t[starts[1:] - 1] + recv_delay_ns
             seq0 = self._seq.get(ch, 0)
-            buf, rec_off = _encode_records(t, vals, starts, ch, seq0, log_ns)
+            buf, rec_off = _encode_records(t, vals, self._quanta[s.sensor], starts, ch, seq0,
+                                           log_ns)
             nb = starts.shape[0] - 1
             self._seq[ch] = seq0 + nb
             self._msg_count[ch] = self._msg_count.get(ch, 0) + nb
@@ -426,7 +441,21 @@ class LogWriter:
         self._write(struct.pack("<BQ", OP_CHUNK, len(content) + len(comp)) + content)
         self._write(comp)
         chunk_len = self._pos - chunk_start
-        # one MessageIndex per channel, entries sorted by log time (then offset)
+        index_offsets, mi = (self._message_indexes(ch, log, off) if self._message_index
+                             else ([], b""))
+        self._write(mi)
+        self._chunk_indexes.append(_record(OP_CHUNK_INDEX, struct.pack(
+            "<QQQQI", t_lo, t_hi, chunk_start, chunk_len, 10 * len(index_offsets))
+            + b"".join(index_offsets) + struct.pack("<Q", len(mi)) + _string("zstd")
+            + struct.pack("<QQ", len(comp), len(data))))
+        self._t_min = t_lo if self._t_min is None else min(self._t_min, t_lo)
+        self._t_max = t_hi if self._t_max is None else max(self._t_max, t_hi)
+        self._reset_chunk()
+
+    def _message_indexes(self, ch: np.ndarray, log: np.ndarray, off: np.ndarray
+                         ) -> tuple[list[bytes], bytes]:
+        """One MessageIndex record per channel of the chunk just written (entries sorted by log
+        time, then offset) and the ChunkIndex's offsets of them."""
         index_offsets = []
         order = np.lexsort((off, log, ch))
         ch, log, off = ch[order], log[order], off[order]
@@ -439,14 +468,7 @@ class LogWriter:
             index_offsets.append(struct.pack("<HQ", int(ch[a]), self._pos + len(mi)))
             mi += _record(OP_MESSAGE_INDEX, struct.pack("<HI", int(ch[a]), entries.nbytes)
                           + entries.tobytes())
-        self._write(bytes(mi))
-        self._chunk_indexes.append(_record(OP_CHUNK_INDEX, struct.pack(
-            "<QQQQI", t_lo, t_hi, chunk_start, chunk_len, 10 * len(index_offsets))
-            + b"".join(index_offsets) + struct.pack("<Q", len(mi)) + _string("zstd")
-            + struct.pack("<QQ", len(comp), len(data))))
-        self._t_min = t_lo if self._t_min is None else min(self._t_min, t_lo)
-        self._t_max = t_hi if self._t_max is None else max(self._t_max, t_hi)
-        self._reset_chunk()
+        return index_offsets, bytes(mi)
 
     def _statistics(self) -> bytes:
         counts = b"".join(struct.pack("<HQ", c, n) for c, n in sorted(self._msg_count.items()))

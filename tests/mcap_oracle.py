@@ -14,6 +14,16 @@ from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
 from replay.reader import expand_paths
 
 
+def _generic_values(field) -> np.ndarray:
+    """A value field as decoded by the generic protobuf runtime, as float64 samples: a
+    ``Quantized`` message by the arithmetic of docs/LOG_FORMAT.md, or v1 doubles as they are."""
+    if not hasattr(field, "quantum"):
+        return np.array(field, np.float64)
+    v = np.cumsum(np.array(field.delta, np.int64)).astype(np.float64) * field.quantum
+    v[np.array(field.raw_index, np.int64)] = np.array(field.raw_value, np.float64)
+    return v
+
+
 def reference_blocks(paths: Sequence[str | PathLike] | str | PathLike) -> list[SampleBlock]:
     """Slow reference: ``mcap``'s own reader and the generic protobuf runtime, one block per
     message, sorted by (publish time, topic, read order) with exact duplicates dropped.
@@ -40,13 +50,13 @@ def reference_blocks(paths: Sequence[str | PathLike] | str | PathLike) -> list[S
                         pool.FindMessageTypeByName(schema.name))
                 m = cls.FromString(msg.data)
                 names = list(SENSOR_FIELDS[sensor])
-                n = len(getattr(m, names[0]))
+                n = len(_generic_values(getattr(m, names[0])))
                 if len(m.t_offset_ns):
                     t = m.t0_ns + np.array(m.t_offset_ns, np.int64)
                 else:
                     t = m.t0_ns + m.period_ns * np.arange(n, dtype=np.int64)
                 blk = SampleBlock(buoy, sensor, t.astype(np.int64),
-                                  {k: np.array(getattr(m, k), np.float64) for k in names},
+                                  {k: _generic_values(getattr(m, k)) for k in names},
                                   msg.log_time)
                 rows.append((msg.publish_time, channel.topic, len(rows), msg.data, blk))
     rows.sort(key=lambda r: r[:3])

@@ -23,6 +23,7 @@ import zenoh
 
 from daemon_harness import ENV, DaemonProcess, free_port, wait_until_state
 from monitor import zenoh_io
+from monitor.blocks import SampleBlock
 from monitor.bridge.config import ConfigError, parse_bridge_config
 from monitor.bridge.runner import Bridge
 from monitor.config import load_config
@@ -202,6 +203,25 @@ def test_bad_config_is_refused_naming_key_and_value():
     with pytest.raises(ConfigError, match="gnss stream only"):
         parse_bridge_config({"buoy": {"id": "b"}, "source": [
             {"name": "x", "sensor": "tension", "transport": "stdin", "format": "nmea"}]})
+
+
+def test_bridge_quanta_set_the_resolution_on_the_wire():
+    """[bridge] quanta: the bridge's codec stores a field to that quantum (within half of
+    it), the others to the defaults; a bad quantum is refused naming the key."""
+    src = [{"name": "x", "sensor": "tension", "transport": "stdin",
+            "columns": {"tension_N": 1}}]
+    cfg = parse_bridge_config({"buoy": {"id": "b"}, "bridge": {"quanta": {"tension_N": 2.5}},
+                               "source": src})
+    assert cfg.quanta == {"tension_N": 2.5}
+    zc = zenoh_io.ProtobufCodec(cfg.quanta)
+    v = np.array([1000.0, 1001.2, 1003.8, 998.7])
+    block = SampleBlock("b", "tension", 10**18 + np.arange(4, dtype=np.int64) * 10**8,
+                        {"tension_N": v})
+    back = zc.decode("buoy/b/sensor/tension", zc.encode(block), 0).fields["tension_N"]
+    assert back.tolist() == [1000.0, 1000.0, 1005.0, 997.5]  # nearest multiples of 2.5 N
+    for bad in ({"tension_N": 0}, {"tension": 1.0}, {"tension_N": "x"}, [1]):
+        with pytest.raises(ConfigError, match="bridge.quanta"):
+            parse_bridge_config({"buoy": {"id": "b"}, "bridge": {"quanta": bad}, "source": src})
 
 
 def test_load_cell_on_a_pty_through_bridge_and_daemon_equals_import_and_replay(tmp_path):

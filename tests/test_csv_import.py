@@ -100,10 +100,30 @@ def test_cli_import_round_trip_keeps_irregular_sampling(tmp_path, capsys):
     blocks = [b for b in reader if b.sensor == "tension"]
     expected_t = Y2000 + np.round(t_s * 1e6).astype(np.int64) * 1000
     assert np.array_equal(np.concatenate([b.t_ns for b in blocks]), expected_t)
-    assert np.array_equal(np.concatenate([b.fields["tension_N"] for b in blocks]), tension)
+    # every sample within half a quantum (0.1 N by default) of the CSV's
+    got = np.concatenate([b.fields["tension_N"] for b in blocks])
+    assert np.all(np.abs(got - tension) <= 0.05) and np.any(np.abs(got - tension) > 0.04)
     # ~1 s blocks on the second grid
     assert len(blocks) == len(np.unique(expected_t // 10**9))
     assert {b.buoy_id for b in blocks} == {"vaps-1"} and reader.stats[0].messages == 2 * len(blocks)
+
+
+def test_cli_import_quantum_option(tmp_path, capsys):
+    """--quantum FIELD=Q: that field to Q (within Q/2 of the CSV), the others to the defaults."""
+    rows = ["time_s,tension_N,heave_m,surge_m,sway_m"]
+    rows += [f"{k * 0.1:.1f},{5000 + 7.3 * k!r},{0.0123 * k!r},0,0" for k in range(40)]
+    src = _csv(tmp_path, "\n".join(rows) + "\n")
+    out = tmp_path / "q.mcap"
+    assert main(["import", str(src), "-o", str(out), "--quantum", "tension_N=2",
+                 "--quantum", "heave_m=1e-4"]) == 0
+    got = {b.sensor: b for b in LogReader(out)}
+    tension = got["tension"].fields["tension_N"]
+    assert np.array_equal(tension, np.round(tension / 2) * 2)
+    assert np.all(np.abs(tension - (5000 + 7.3 * np.arange(40))) <= 1.0)
+    assert np.all(np.abs(got["motion"].fields["heave_m"] - 0.0123 * np.arange(40)) <= 0.5e-4)
+    capsys.readouterr()
+    assert main(["import", str(src), "-o", str(out), "--quantum", "tension=2"]) == 2
+    assert "--quantum 'tension=2': expected FIELD=Q" in capsys.readouterr().err
 
 
 def test_cli_exit_codes(tmp_path, capsys):

@@ -12,6 +12,7 @@ from mcap.stream_reader import StreamReader
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from mcap_oracle import reference_blocks
+from monitor.quanta import DEFAULT_QUANTA
 from replay.reader import LogReader, iter_blocks, time_span
 from replay.writer import LogWriter, Series, alert_topic, status_topic
 
@@ -20,9 +21,12 @@ S = 10**9
 
 
 def _blk(sensor, t, seed=0, buoy="b1"):
+    """Random samples on each field's quantum grid (as the decoder computes them), so they
+    come back from a log bit for bit."""
     rng = np.random.default_rng(seed)
     t = np.asarray(t, np.int64)
-    fields = {f: rng.normal(size=t.shape[0]) for f in SENSOR_FIELDS[sensor]}
+    fields = {f: rng.integers(-20_000, 20_000, t.shape[0]).astype(np.float64) * DEFAULT_QUANTA[f]
+              for f in SENSOR_FIELDS[sensor]}
     return SampleBlock(buoy, sensor, t, fields)
 
 
@@ -66,7 +70,7 @@ def test_file_is_standard_indexed_mcap_with_crcs(mixed_log):
     assert summary.statistics.message_count == len(msgs) == 80 + 4 + n_motion + 1
     assert len(summary.chunk_indexes) > 5
     by_topic = {c.topic: (s.encoding, c.message_encoding, s.name) for s, c, _ in msgs}
-    assert by_topic["buoy/b1/sensor/tension"] == ("protobuf", "protobuf", "buoymon.v1.TensionBlock")
+    assert by_topic["buoy/b1/sensor/tension"] == ("protobuf", "protobuf", "buoymon.v2.TensionBlock")
     assert by_topic["buoy/b1/monitor/status"] == ("jsonschema", "json", "buoymon.v1.Status")
     assert "buoy/b1/monitor/alert/damage_rate/conductor_left" in by_topic
     for s, c, m in msgs:
@@ -93,8 +97,11 @@ def test_generic_protobuf_decoding_from_the_stored_descriptor_set(mixed_log):
             cls = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
             m = cls.FromString(msg.data)
             if channel.topic.endswith("tension"):
-                t = m.t0_ns + m.period_ns * np.arange(len(m.tension_N))
-                got.append((msg.publish_time, msg.log_time, t, np.array(m.tension_N)))
+                q = m.tension_N  # docs/LOG_FORMAT.md: value = quantum * running sum of delta
+                t = m.t0_ns + m.period_ns * np.arange(len(q.delta))
+                v = np.cumsum(np.array(q.delta, np.int64)).astype(np.float64) * q.quantum
+                assert q.quantum == 0.1 and not q.raw_index
+                got.append((msg.publish_time, msg.log_time, t, v))
     tension = [b for b in blocks if b.sensor == "tension"]
     assert len(got) == len(tension) == 40
     for k, ((pub, log, t, v), b) in enumerate(zip(got, tension)):
@@ -159,9 +166,10 @@ def test_out_of_order_and_duplicates_within_the_window(tmp_path):
 
 def test_messages_later_than_the_window_are_counted_late_and_delivered(tmp_path):
     path = tmp_path / "late.mcap"
-    with LogWriter(path, chunk_size=1024) as w:
+    with LogWriter(path) as w:
         for k in [*range(10, 200), 3]:
             w.write_block(_blk("tension", _seconds("tension", k, 20)), T0 + 300 * S)
+            w.flush(fsync=False)  # one message per chunk: the reader releases after each
     reader = LogReader(path, coalesce=False, reorder_window_s=2)
     firsts = [(b.t_first_ns - T0) // S for b in reader]
     # 198 and 199 are still held in the window when 3 arrives: 3 joins (and leads) that release
@@ -256,3 +264,34 @@ def test_time_span_from_the_summary_and_first_last_in_stats(mixed_log, tmp_path)
     list(reader)
     assert min(pubs) == T0
     assert (reader.stats[0].first_ns, reader.stats[0].last_ns) == (min(pubs), max(pubs))
+
+
+def test_coalesced_blocks_span_at_most_coalesce_s_so_replay_keeps_every_sample(tmp_path):
+    """80 min of tension and IMU in ONE chunk (compact samples make chunks long): the reader
+    cuts the release into <= 1800 s blocks, so the replay's ordering (1 h horizon) never
+    passes a stream by; every sample is accepted, as with one block per message."""
+    from monitor.config import default_config
+    from replay.reader import COALESCE_NS
+    from replay.runner import run_blocks
+
+    path = tmp_path / "long.mcap"
+    n = 80 * 60
+    t20 = T0 + np.arange(n * 20, dtype=np.int64) * (S // 20)
+    rng = np.random.default_rng(4)
+    series = [Series("vaps", "tension", t20, 5000 + 300 * rng.normal(size=(1, t20.shape[0]))),
+              Series("vaps", "imu", t20[::2], 0.5 * rng.normal(size=(3, n * 10)))]
+    with LogWriter(path, chunk_size=64 << 20) as w:
+        w.write_series(series)
+    reader = LogReader(path)
+    blocks = list(reader)
+    assert reader.stats[0].chunks == 1
+    assert max(int(b.t_ns[-1] - b.t_ns[0]) for b in blocks) < COALESCE_NS + S
+    per_message = list(LogReader(path, coalesce=False))
+    for sensor in ("tension", "imu"):
+        a = np.concatenate([b.t_ns for b in blocks if b.sensor == sensor])
+        b = np.concatenate([b.t_ns for b in per_message if b.sensor == sensor])
+        assert np.array_equal(a, b)
+    samples = run_blocks(default_config(), iter(blocks))[0].report()["samples"]
+    for sensor, count in (("tension", n * 20), ("imu", n * 10)):
+        assert samples[sensor]["accepted"] == count  # not so with 80 min blocks: time_backwards
+        assert not any(samples[sensor]["rejected"].values())

@@ -3,6 +3,7 @@ the command line on real MCAP logs, including damaged ones."""
 
 import io
 import json
+import struct
 from pathlib import Path
 
 from monitor.blocks import SampleBlock
@@ -191,7 +192,9 @@ def test_logs_are_replayed_in_time_order_from_folders_and_sub_folders(tmp_path, 
     write_log(tmp_path / "arch" / "2" / "z.mcap", blocks[:third])
     write_log(tmp_path / "arch" / "b.mcap", blocks[third:2 * third])
     data = (tmp_path / "arch" / "b.mcap").read_bytes()
-    (tmp_path / "arch" / "b.mcap").write_bytes(data[:data.rindex(b"\x0f\x00")])  # no DataEnd on
+    (summary_start,) = struct.unpack_from("<Q", data, len(data) - 37 + 9)  # from the Footer
+    assert data[summary_start - 13] == 0x0F  # the DataEnd record before the summary
+    (tmp_path / "arch" / "b.mcap").write_bytes(data[:summary_start - 13])  # no DataEnd on
     assert main(["replay", str(tmp_path / "one.mcap"), "--report", str(tmp_path / "one.json")]) == 0
     assert main(["replay", str(tmp_path / "arch"), "--report", str(tmp_path / "arch.json")]) == 0
     one = json.loads((tmp_path / "one.json").read_text())

@@ -20,9 +20,10 @@ N_SECONDS = 120
 
 @pytest.fixture()
 def log(tmp_path):
-    """120 one-second tension blocks (sample value = sample index) in ~12 chunks."""
+    """120 one-second tension blocks (sample value = sample index, stored exactly to a 1 N
+    quantum) in ~10 chunks, with Message Index records (they count a lost chunk's messages)."""
     path = tmp_path / "good.mcap"
-    with LogWriter(path, chunk_size=2000) as w:
+    with LogWriter(path, chunk_size=1024, quanta={"tension_N": 1.0}, message_index=True) as w:
         for k in range(N_SECONDS):
             t = T0 + k * S + np.arange(20, dtype=np.int64) * (S // 20)
             w.write_block(SampleBlock("b1", "tension", t, {"tension_N": k * 20 + np.arange(20.0)}),
@@ -83,10 +84,11 @@ def test_cut_inside_the_index_after_the_last_chunk_loses_no_message(log, tmp_pat
 
 
 def test_cut_mid_chunk_recovers_every_complete_message(tmp_path):
-    # noisy values in a 600 kB chunk: several zstd blocks, so a prefix of it decompresses
+    # noisy values (a fine quantum: ~6 bytes each) in 300 kB chunks of several zstd blocks,
+    # so a prefix of a chunk decompresses
     path = tmp_path / "big.mcap"
     rng = np.random.default_rng(0)
-    with LogWriter(path, chunk_size=600_000) as w:
+    with LogWriter(path, chunk_size=300_000, quanta={"tension_N": 1e-12}, message_index=True) as w:
         for k in range(4000):
             t = T0 + k * S + np.arange(20, dtype=np.int64) * (S // 20)
             w.write_block(SampleBlock("b1", "tension", t, {"tension_N": rng.normal(size=20)}),
@@ -325,3 +327,29 @@ def test_channel_defined_only_in_a_damaged_chunk_comes_from_the_summary(tmp_path
     assert values.shape[0] == 0 and sum(st.skipped.values()) == N_SECONDS - n_first
     _, st, values = _read(path)
     assert np.array_equal(values, np.arange(N_SECONDS * 20.0)) and not st.lost
+
+
+def test_without_message_index_a_lost_chunk_has_an_unknown_count(tmp_path):
+    """The default writer leaves Message Index records out (bytes): a chunk lost to a bad CRC
+    is still reported with its time range, its message count as unknown."""
+    path = tmp_path / "plain.mcap"
+    with LogWriter(path, chunk_size=1024, quanta={"tension_N": 1.0}) as w:
+        for k in range(N_SECONDS):
+            t = T0 + k * S + np.arange(20, dtype=np.int64) * (S // 20)
+            w.write_block(SampleBlock("b1", "tension", t, {"tension_N": k * 20 + np.arange(20.0)}),
+                          recv_ns=T0 + (k + 1) * S)
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert all(c.message_index_length == 0 for c in chunks) and len(chunks) >= 10
+    victim = chunks[3]
+    bad = bytearray(path.read_bytes())
+    bad[victim.chunk_start_offset + 9 + 24] ^= 0xFF
+    p = tmp_path / "badcrc.mcap"
+    p.write_bytes(bytes(bad))
+    _, st, values = _read(p)
+    (lost,) = st.lost
+    assert lost.reason == "bad chunk CRC" and lost.messages is None
+    assert (lost.start_ns, lost.end_ns) == (victim.message_start_time, victim.message_end_time)
+    n_lost = (victim.message_end_time - victim.message_start_time) // S + 1  # 1 message / s
+    assert values.shape[0] == (N_SECONDS - n_lost) * 20 and st.complete

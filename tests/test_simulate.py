@@ -133,6 +133,19 @@ def test_cli(tmp_path, capsys):
     blocks = list(LogReader(out))
     assert {b.buoy_id for b in blocks} == {"b9"}
     assert min(b.t_first_ns for b in blocks) == parse_iso_ns("2024-05-01T00:00:00Z")
+    # --quantum: tension stored to 10 N (every value a multiple, within 5 N of the default
+    # run's, which keeps it to 0.1 N); a bad one is named
+    coarse = tmp_path / "coarse.mcap"
+    assert main(["simulate", "-o", str(coarse), "--hours", "0.02", "--hs", "1", "--tp", "6",
+                 "--seed", "3", "--buoy-id", "b9", "--start", "2024-05-01T00:00:00Z",
+                 "--quantum", "tension_N=10"]) == 0
+    fine, rough = (np.concatenate([b.fields["tension_N"] for b in LogReader(p)
+                                   if b.sensor == "tension"]) for p in (out, coarse))
+    assert np.array_equal(np.round(rough / 10) * 10, rough)
+    assert np.all(np.abs(rough - fine) <= 5.05) and np.any(np.abs(rough - fine) > 1)
+    assert main(["simulate", "-o", str(coarse), "--hours", "0.02", "--hs", "1", "--tp", "6",
+                 "--seed", "3", "--quantum", "tension_N=-1"]) == 2
+    assert "--quantum 'tension_N=-1'" in capsys.readouterr().err
     assert main(["simulate", "-o", str(out), "--hours", "1", "--hs", "1", "--tp", "6",
                  "--seed", "3", "--nans", "1.5"]) == 2
     assert "nans = 1.5: must be a probability" in capsys.readouterr().err

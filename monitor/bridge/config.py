@@ -13,6 +13,7 @@ from typing import Any, Mapping
 
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.config import ConfigError
+from monitor.quanta import quanta as sensor_quanta
 
 TRANSPORTS = ("serial", "tcp_client", "tcp_server", "udp", "file", "stdin")
 FORMATS = ("delimited", "nmea", "csv")
@@ -52,6 +53,7 @@ class BridgeConfig:
     sources: tuple[SourceConfig, ...]
     status_interval_s: float = 1.0
     cache_blocks: int = 3600
+    quanta: Mapping[str, float] = field(default_factory=dict)  # field -> quantum on the wire
 
 
 def _err(key: str, value: Any, why: str) -> ConfigError:
@@ -140,11 +142,12 @@ def _source(where: str, d: Any) -> SourceConfig:
     )
 
 
-_BRIDGE_KEYS = ("connect", "status_interval_s", "cache_blocks")
+_BRIDGE_KEYS = ("connect", "status_interval_s", "cache_blocks", "quanta")
 
 
-def parse_bridge_section(b: Any) -> tuple[tuple[str, ...], float, int]:
-    """``[bridge]``: (connect endpoints, status interval, cache blocks per stream)."""
+def parse_bridge_section(b: Any) -> tuple[tuple[str, ...], float, int, dict[str, float]]:
+    """``[bridge]``: (connect endpoints, status interval, cache blocks per stream, quanta of
+    the fields on the wire)."""
     if not isinstance(b, Mapping):
         raise _err("bridge", b, "must be a table")
     for k in b:
@@ -153,8 +156,16 @@ def parse_bridge_section(b: Any) -> tuple[tuple[str, ...], float, int]:
     connect = b.get("connect", ["tcp/127.0.0.1:7447"])
     if not isinstance(connect, list) or not connect or not all(isinstance(e, str) for e in connect):
         raise _err("bridge.connect", connect, "must be a non-empty list of Zenoh endpoints")
+    quanta = b.get("quanta", {})
+    try:
+        if not isinstance(quanta, Mapping):
+            raise ValueError("must be a table of field = quantum")
+        for sensor in SENSOR_FIELDS:
+            sensor_quanta(sensor, quanta)
+    except (ValueError, TypeError) as exc:
+        raise _err("bridge.quanta", quanta, str(exc)) from None
     return (tuple(connect), _num("bridge", b, "status_interval_s", 1.0),
-            _int("bridge", b, "cache_blocks", 3600, 1, 10_000_000))
+            _int("bridge", b, "cache_blocks", 3600, 1, 10_000_000), dict(quanta))
 
 
 def parse_sources(sources: Any) -> tuple[SourceConfig, ...]:
@@ -179,8 +190,9 @@ def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
         buoy_id = validate_buoy_id(buoy["id"])
     except ValueError as exc:
         raise _err("buoy.id", buoy["id"], str(exc)) from None
-    connect, interval, cache = parse_bridge_section(raw.get("bridge", {}))
-    return BridgeConfig(buoy_id, connect, parse_sources(raw.get("source", [])), interval, cache)
+    connect, interval, cache, quanta = parse_bridge_section(raw.get("bridge", {}))
+    return BridgeConfig(buoy_id, connect, parse_sources(raw.get("source", [])), interval, cache,
+                        quanta)
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:

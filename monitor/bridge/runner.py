@@ -285,5 +285,6 @@ class Bridge:
 def open_bridge(cfg: BridgeConfig) -> Bridge:
     """A bridge with a publisher session of its own (the caller closes ``bridge.publisher``)."""
     pub = SensorPublisher.connect(cfg.buoy_id, cfg.connect,
-                                  PublisherOptions(cache_blocks=cfg.cache_blocks))
+                                  PublisherOptions(cache_blocks=cfg.cache_blocks),
+                                  zenoh_io.ProtobufCodec(cfg.quanta))
     return Bridge(cfg, pub)
