@@ -159,7 +159,7 @@ class Client:
     def statuses(self) -> list[tuple[float, dict]]:
         out = []
         while not self.q.empty():
-            _, _, payload, recv_ns = self.q.get()
+            _, _, payload, recv_ns, _ = self.q.get()
             out.append((recv_ns / 1e9, json.loads(payload)))
         return out
 

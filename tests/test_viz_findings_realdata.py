@@ -17,6 +17,7 @@ from monitor.cli import main
 from monitor.viz.human import ratio_text, stress_text, tension_text
 from monitor.viz.report_data import load_report
 from monitor.viz.report_plots import PLOTS
+from replay.reader import iter_blocks
 
 SHARED = next(
     (p / "shared" for p in Path(__file__).resolve().parents if (p / "shared/realdata").is_dir()),
@@ -58,7 +59,11 @@ def replayed(tmp_path_factory):
     assert main(["import", str(d / "in.csv"), "-o", str(d / "in.mcap"), "--buoy-id", "vaps"]) == 0
     assert main(["replay", str(d / "in.mcap"), "--config", str(d / "c.toml"), "--no-progress",
                  "--report", str(d / "r.json"), "--html", str(d / "r.html")]) == 0
-    return d, tension
+    # the hand computation takes the samples as logged: `buoymon import` stores each within
+    # half its quantum (0.1 N for tension, docs/LOG_FORMAT.md)
+    logged = np.concatenate([b.fields["tension_N"] for b in iter_blocks([str(d / "in.mcap")])])
+    assert np.max(np.abs(logged - tension)) <= 0.05 + 1e-9
+    return d, logged
 
 
 def test_findings_on_the_measured_load_cell(replayed, capsys):
