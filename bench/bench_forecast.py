@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from models.sea_state_table import DamageRateTable, project_damage
+from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable, project_damage
 from monitor.config import default_config
-from replay.cmd_forecast import HS_EDGES_M, TP_EDGES_S, fill_model_rates
+from replay.cmd_forecast import fill_model_rates
 from replay.sea_state_damage import physics_damage
 from replay.sea_state_files import SeaStates, read_sea_states
 

@@ -203,3 +203,19 @@ def _check_method(method: str) -> Method:
 
 def _density(method: str):
     return _dirlik_density if _check_method(method) == "dirlik" else _tb_density
+
+
+def segment_psd(segments: ArrayLike, fs_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Mean one-sided PSD (units^2/Hz) of equal-length segments (rows), each with its mean
+    removed and a Hann window: Welch's estimate without overlap (Welch 1967; the same
+    figures as ``scipy.signal.welch(x, fs, nperseg=n, noverlap=0)`` over the segments laid
+    end to end). Returns (frequencies, PSD)."""
+    x = np.atleast_2d(np.asarray(segments, dtype=float))
+    n = x.shape[1]
+    if n < 2 or x.shape[0] == 0 or not (math.isfinite(fs_hz) and fs_hz > 0):
+        raise ValueError("segment_psd: at least one segment of >= 2 samples and fs > 0")
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)  # periodic Hann, as scipy's
+    spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
+    psd = spec.mean(axis=0) / (fs_hz * float(np.sum(w * w)))
+    psd[1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist for even n)
+    return np.fft.rfftfreq(n, 1.0 / fs_hz), psd

@@ -43,6 +43,7 @@ SECTION_PARSERS: dict[str, str] = {
     "health": "monitor.daemon_config:HealthConfig.from_dict",
     "metrics": "monitor.daemon_config:MetricsConfig.from_dict",
     "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
+    "forecast": "monitor.forecast_config:ForecastConfig.from_dict",
 }
 
 CORE_SECTIONS = (

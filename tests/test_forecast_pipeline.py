@@ -1,0 +1,180 @@
+"""The damage-rate table learned inside the pipeline, forecasts applied at sensor time, and the
+per-window spectral cross-check, on measured sea states (NDBC 44007, ../shared/realdata):
+four hours of the 20 January 1996 storm build-up, each hour's tension from the simulator's
+WAVFOR load model of that hour's measured Hs and Tp, the measured Hs and Tp on the waves
+stream."""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from models import fatigue
+from models.spectral_fatigue import damage_rate_from_psd
+from monitor.blocks import SampleBlock
+from monitor.config import ConfigError, config_with, default_config
+from monitor.pipeline import Pipeline
+from monitor.sea_state_learner import SEGMENT
+from replay.sea_state_files import read_sea_states
+from replay.simulate import SimConfig, clean_tension
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = next((p / "shared" for p in REPO.parents if (p / "shared/realdata").is_dir()), None)
+pytestmark = pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
+
+FIRST_HOUR, HOURS = 446, 4  # 1996-01-19 22:00 to 1996-01-20 02:00 UTC: Hs 3.6 m to 5.6 m
+W_NS = 1800 * 10**9
+
+
+@pytest.fixture(scope="module")
+def storm():
+    """(t0_ns, tension per hour, (hs, tp) per hour)."""
+    s = read_sea_states(SHARED / "realdata/ndbc44007_ecbenchmarkA/ec-benchmark_dataset_A.txt")
+    sel = slice(FIRST_HOUR, FIRST_HOUR + HOURS)
+    hs, tp = s.hs_m[sel], s.tp_s[sel]
+    tension = [clean_tension(SimConfig(hours=1.0, hs_m=float(h), tp_s=float(p), seed=k,
+                                       load_model="wavfor"))
+               for k, (h, p) in enumerate(zip(hs, tp))]
+    return int(s.t_s[FIRST_HOUR]) * 10**9, tension, list(zip(hs.tolist(), tp.tolist()))
+
+
+def blocks(storm, block_s: int) -> list[SampleBlock]:
+    """Tension at 20 Hz in ``block_s`` blocks; a waves sample at each half hour's end with
+    the hour's measured sea state."""
+    t0, tension, sea = storm
+    x = np.concatenate(tension)
+    t = t0 + (np.arange(x.size, dtype=np.int64) + 1) * 50_000_000
+    out = []
+    n = block_s * 20
+    for a in range(0, x.size, n):
+        tt = t[a:a + n]
+        out.append(SampleBlock("vaps", "tension", tt, {"tension_N": x[a:a + n]}, int(tt[-1])))
+        for end in range(t0 + W_NS, int(tt[-1]) + 1, W_NS):
+            if tt[0] <= end <= tt[-1]:
+                hs, tp = sea[(end - t0 - 1) // (3600 * 10**9)]
+                out.append(SampleBlock("vaps", "waves", np.array([end], np.int64),
+                                       {"hs_m": np.array([hs]), "tp_s": np.array([tp])},
+                                       end))
+    return out
+
+
+def run(config, bl, state=None, horizon_s: float = 3600.0) -> Pipeline:
+    p = Pipeline(config, state=state, horizon_s=horizon_s)
+    for b in bl:
+        p.process(b)
+    return p
+
+
+def test_table_learned_from_the_stream_matches_the_committed_damage(storm):
+    config = default_config()
+    p = run(config, blocks(storm, 60))
+    p.flush()
+    learner = p.sea_states
+    windows = learner.history
+    # 8 half hours: the first window starts at the first tick (10 s in); the last one
+    # closes at the data's end
+    assert [w["status"] for w in windows] == ["learned"] * 8
+    assert [w["hs_m"] for w in windows] == [h for h, _ in storm[2] for _ in (0, 1)]
+    t = learner.table
+    hours = t.hours[t.hours > 0]
+    assert hours.sum() == pytest.approx(4.0 - 10.0 / 3600.0)
+    i, j = t.bin_of([h for h, _ in storm[2]], [p_ for _, p_ in storm[2]])
+    assert sorted(zip(i.tolist(), j.tolist())) == sorted(zip(*np.nonzero(t.hours)))
+    # each window's damage is the committed damage it added: they sum to the total after
+    # the first tick (the flush commits nothing past the last window's end here)
+    conductor = p.components["conductor"].figures()["damage_committed"]
+    first_tick = conductor - math.fsum(w["rainflow"]["conductor"] for w in windows)
+    assert 0 <= first_tick < 1e-3 * conductor
+    assert t.damage[0].sum() == pytest.approx(conductor - first_tick, rel=1e-12)
+    # and the committed damage (with the residue as half cycles) is rainflow over the four
+    # hours' stress in one piece (models.fatigue.damage, the seed 004 S-N curve)
+    comp = p.components["conductor"]
+    whole = fatigue.damage(comp.stress(np.concatenate(storm[1])), comp.sn_curve)
+    assert comp.figures()["damage"] == pytest.approx(whole, rel=1e-5)
+    assert p.status()["sea_state_table"]["learned"] == 8
+
+
+def test_learning_is_split_invariant_and_restores_exactly(storm):
+    config = default_config()
+    one = run(config, blocks(storm, 3600))
+    fine = blocks(storm, 5)
+    half = len(fine) // 2 + 7  # mid-window, mid-segment
+    # live-sized blocks with the live ordering horizon (the replay one costs here)
+    first = run(config, fine[:half], horizon_s=10.0)
+    saved = json.loads(json.dumps(first.state()))
+    second = run(config, fine[half:], state=saved, horizon_s=10.0)
+    for p in (one, second):
+        p.flush()
+    a, b = one.state()["sea_states"], second.state()["sea_states"]
+    assert json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def test_spectral_cross_check_per_window_against_welch(storm):
+    """A window's Dirlik damage is the Welch PSD (scipy, Hann, no overlap, 1024 samples) of
+    its stress through the Dirlik density, times the hours the window covered; the WAVFOR
+    bound is clipped at zero when the line goes slack, far from Gaussian: flagged."""
+    config = default_config()
+    p = run(config, blocks(storm, 60))
+    w = p.sea_states.history[3]  # the second half of the second hour
+    comp = p.components["conductor"]
+    x = comp.stress(storm[1][1][36000:])  # samples (T0 + 1.5 h, T0 + 2 h]
+    n = x.size // SEGMENT * SEGMENT
+    f, psd = signal.welch(x[:n], fs=20.0, nperseg=SEGMENT, noverlap=0)
+    expect = damage_rate_from_psd(comp.sn_curve, f[1:], psd[1:]) * 1800.0
+    assert w["segments"] == 35
+    assert w["dirlik"]["conductor"] == pytest.approx(expect, rel=1e-9)
+    ratio = w["dirlik"]["conductor"] / w["rainflow"]["conductor"]
+    assert (ratio > 3 or ratio < 1 / 3) == ("conductor" in w["flagged"])
+    report = p.report()
+    assert report["spectral_windows"][3] == w
+    assert report["sea_state_table"]["compared"] == len(report["spectral_windows"]) == 6
+
+
+def test_forecast_applied_at_its_issue_tick_fires_and_clears(storm):
+    """A forecast of the storm's own sea states, issued an hour in: projected from the
+    committed damage at that tick with the table learned so far; a calm forecast clears."""
+    # min_hours 0.5: the first hour's bin holds its two windows (the first from 10 s in)
+    config = config_with(default_config(), forecast={"alert_damage": 1.0, "min_hours": 0.5})
+    bl = blocks(storm, 60)
+    t0, _, sea = storm
+    issued = t0 / 1e9 + 3600.0
+    p = Pipeline(config, horizon_s=3600.0)
+    p.add_forecast({"issued_s": issued, "time_s": [issued + 3600.0 * k for k in range(3)],
+                    "hs_m": [sea[0][0]] * 3, "tp_s": [sea[0][1]] * 3})
+    p.add_forecast({"issued_s": issued + 1800.0, "time_s": [issued + 1800.0],
+                    "hs_m": [0.0], "tp_s": [5.0]})
+    fired = []
+    for b in bl:
+        fired += [r for r in p.process(b).alerts if r.rule == "forecast_damage"]
+    assert [(r.event, r.component, r.at_ns) for r in fired] == [
+        ("fire", "conductor", int(issued * 1e9)),
+        ("clear", "conductor", int(issued * 1e9) + W_NS)]
+    # the first hour cost 0.43: at that rate 1.0 is reached 1.3 h after the issue time
+    d_now = math.fsum(w["rainflow"]["conductor"] for w in p.sea_states.history[:2])
+    rate = d_now / (1.0 - 10.0 / 3600.0)  # the learned bin: its two windows' mean rate
+    hours_to_1 = (1.0 - d_now) / rate
+    expect = datetime.fromtimestamp(issued + 3600.0 * hours_to_1, timezone.utc)
+    assert f"reaches damage 1 by {expect:%Y-%m-%d %H:%M} UTC" in fired[0].summary
+    assert fired[0].value == pytest.approx(d_now + 3.0 * rate, rel=1e-9)
+    last = p.forecasts.last  # the calm one: Hs 0 in a bin with no data and no model rate
+    assert last["components"]["conductor"]["steps_unrated"] == 1
+
+
+def test_forecast_bad_payloads_and_config_are_refused():
+    p = Pipeline(default_config())
+    for bad in ([], {"time_s": [1, 2], "hs_m": [1.0], "tp_s": [5.0, 5.0]},
+                {"time_s": [2, 1], "hs_m": [1, 1], "tp_s": [5, 5]},
+                {"time_s": [1], "hs_m": [-1], "tp_s": [5]},
+                {"time": ["yesterday"], "hs_m": [1], "tp_s": [5]}):
+        with pytest.raises(ValueError, match="forecast"):
+            p.add_forecast(bad)
+    with pytest.raises(ConfigError, match="whole number of alert ticks"):
+        Pipeline(config_with(default_config(), forecast={"window_s": 15.0}))
+    with pytest.raises(ConfigError, match="forecast.alert_damage"):
+        Pipeline(config_with(default_config(), forecast={"alert_damage": -1}))
