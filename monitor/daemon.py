@@ -17,6 +17,7 @@ already queued, publish a last status, checkpoint, close the recorder and the se
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import sqlite3
@@ -178,7 +179,8 @@ class Daemon:
         restored = self._store.load()
         saved = restored.state if restored is not None else {}
         self.counters: dict[str, int] = {"messages": 0, "undecodable": 0, "wrong_buoy": 0,
-                                         "refused": 0, "status_published": 0, "queries": 0}
+                                         "refused": 0, "status_published": 0, "queries": 0,
+                                         "forecasts": 0, "forecasts_refused": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
         self.restored_seq = restored.seq if restored is not None else 0
@@ -246,6 +248,8 @@ class Daemon:
             if self._attach is not None:
                 self._extensions = self._attach(self.session, self.pipeline)
                 declared.extend(_Closing(e) for e in self._extensions)
+            declared.append(zenoh_io.declare_enqueuing_subscriber(
+                self.session, zenoh_io.forecast_key(self.buoy_id), self._q, "forecast"))
             subscriber = zenoh_io.declare_enqueuing_subscriber(
                 self.session, zenoh_io.sensor_key(self.buoy_id), self._q)
             log.info("daemon ready", extra={"fields": {
@@ -344,6 +348,8 @@ class Daemon:
         kind = item[0]
         if kind == "data":
             self._on_data(item[1], item[2], item[3])
+        elif kind == "forecast":
+            self._on_forecast(item[1], item[2], item[3])
         elif kind == "alive":
             self._on_alive(item[1], item[2])
         elif kind == "query":
@@ -374,6 +380,23 @@ class Daemon:
             log.warning("block refused by the pipeline",
                         extra={"fields": {"key": key, "error": str(exc)}})
         self._dirty_status = True
+
+    def _on_forecast(self, key: str, payload: bytes, recv_ns: int) -> None:
+        """A sea-state forecast: recorded as received, handed to the pipeline (applied at
+        sensor time, :mod:`monitor.forecast`); a malformed one is counted and logged."""
+        add = getattr(self.pipeline, "add_forecast", None)
+        try:
+            if add is None:
+                raise ValueError("this pipeline takes no forecasts")
+            add(json.loads(payload))
+        except (ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
+            self.counters["forecasts_refused"] += 1
+            self._faults.warning("forecast", "forecast refused", key=key, error=str(exc)[:300])
+            return
+        self.counters["forecasts"] += 1
+        self._dirty_status = True
+        if self.recorder is not None:
+            self.recorder.write(key, payload, JSON_OBJECT, recv_ns, recv_ns)
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:
@@ -445,7 +468,10 @@ class Daemon:
                 doc.update(fields())
         engine_active = getattr(getattr(self.pipeline, "alerts", None), "active", None)
         sensor_time = engine_active() if engine_active is not None else []
+        forecasts = getattr(self.pipeline, "forecasts", None)
         doc["alerts"] = {"active": [_alert_summary(r, "sensor_time") for r in sensor_time]
+                         + [_alert_summary(r, "forecast") for r in (
+                             forecasts.active() if forecasts is not None else [])]
                          + [_alert_summary(r, "live") for r in self.live.active()]}
         doc["health"] = self.live.health()
         return doc

@@ -8,6 +8,8 @@ Queue items are tuples whose first element says what they are:
 
 * ``("data", key, payload_bytes, recv_ns)``: a sample on ``buoy/<id>/sensor/**`` (or any
   key the subscriber was declared on);
+* ``("forecast", key, payload_bytes, recv_ns)``: a sea-state forecast on
+  ``buoy/<id>/forecast/waves``;
 * ``("alive", key, is_alive, recv_ns)``: a liveliness token appeared or went away;
 * ``("query", zenoh.Query)``: a query to answer, then ``drop()``.
 """
@@ -70,16 +72,22 @@ def state_key(buoy_id: str) -> str:
     return f"buoy/{validate_buoy_id(buoy_id)}/monitor/state"
 
 
+def forecast_key(buoy_id: str) -> str:
+    """Sea-state forecasts for the buoy (JSON, :mod:`monitor.forecast`)."""
+    return f"buoy/{validate_buoy_id(buoy_id)}/forecast/waves"
+
+
 def monitor_token_key(buoy_id: str) -> str:
     return f"buoy/{validate_buoy_id(buoy_id)}/monitor/alive"
 
 
 def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
-                                 q: "queue.SimpleQueue[tuple]") -> zenoh.Subscriber:
-    """Subscribe to ``key``; every sample is put on ``q`` as ``("data", key, bytes, recv_ns)``."""
+                                 q: "queue.SimpleQueue[tuple]", kind: str = "data"
+                                 ) -> zenoh.Subscriber:
+    """Subscribe to ``key``; every sample is put on ``q`` as ``(kind, key, bytes, recv_ns)``."""
 
     def on_sample(sample: zenoh.Sample) -> None:
-        q.put(("data", str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+        q.put((kind, str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
 
     return session.declare_subscriber(key, on_sample)
 

@@ -16,6 +16,7 @@ import argparse
 import json
 import math
 import sys
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
@@ -48,7 +49,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--load-model", choices=("wavfor", "catenary"), default="wavfor",
                    help="simulator load model for bins without data (default wavfor)")
     p.add_argument("--json", type=Path, default=None, help="write the forecast as JSON here")
+    p.add_argument("--publish", metavar="ENDPOINT", action="append", default=None,
+                   help="also send the sea states to the daemon of the configuration's buoy "
+                        "(Zenoh key buoy/<id>/forecast/waves; e.g. tcp/127.0.0.1:7447; "
+                        "repeatable)")
     p.set_defaults(func=run)
+
+
+def publish_forecast(buoy_id: str, states: SeaStates, connect: Sequence[str],
+                     wait_for_subscriber_s: float = 10.0) -> None:
+    """Put the sea states on ``buoy/<id>/forecast/waves`` (the payload of
+    :mod:`monitor.forecast`, issued at the first step's time)."""
+    from monitor import zenoh_io  # noqa: PLC0415 (zenoh only when publishing)
+    from monitor.publisher import publisher_config  # noqa: PLC0415
+
+    doc = {"issued_s": float(states.t_s[0]), "time_s": states.t_s.tolist(),
+           "hs_m": states.hs_m.tolist(), "tp_s": states.tp_s.tolist()}
+    with zenoh_io.open_session(publisher_config(connect)) as session:
+        pub = zenoh_io.declare_json_publisher(session, zenoh_io.forecast_key(buoy_id))
+        deadline = time.monotonic() + wait_for_subscriber_s
+        while not pub.matching_status and time.monotonic() < deadline:
+            time.sleep(0.01)
+        pub.put(zenoh_io.to_json_bytes(doc))
+        pub.undeclare()
 
 
 def damage_thresholds(config: Config) -> list[float]:
@@ -164,6 +187,9 @@ def run(args: argparse.Namespace) -> int:
               f"(band {c['damage_end_low']:.3g} to {c['damage_end_high']:.3g}); {crossings}")
     if args.save_table is not None:
         args.save_table.write_text(json.dumps(table.to_state()))
+    if args.publish:
+        publish_forecast(config.buoy.id, states, args.publish)
+        print(f"sent to buoy/{config.buoy.id}/forecast/waves")
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=1))
     return 0
