@@ -51,6 +51,9 @@ class StepResult:
         components: per-component results, keyed by component name.
         accepted / rejected: samples of this block accepted, and rejected by reason.
         alerts: alert transitions raised by this step (see :mod:`monitor.alerts`).
+        windows: sea-state windows closed by this step (``[forecast]``,
+            :mod:`monitor.sea_state_learner`): end time, sea state, rainflow and Dirlik
+            damage per component, the components flagged.
         qc: QARTOD flag totals of the streams this step processed,
             ``{sensor: {test: {"suspect": n, "fail": n}}}`` (see :mod:`monitor.qartod`); filled
             only when a sink has ``wants_qc = True``.
@@ -68,6 +71,7 @@ class StepResult:
     accepted: int
     rejected: Mapping[str, int]
     alerts: list[Any] = field(default_factory=list)
+    windows: list[dict[str, Any]] = field(default_factory=list)
     qc: Mapping[str, Mapping[str, Mapping[str, int]]] = field(default_factory=dict)
 
 

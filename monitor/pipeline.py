@@ -706,6 +706,7 @@ class Pipeline:
             estimated_tension_N=nan if self.last["estimated_N"] is None else self.last["estimated_N"],
             components=comps, accepted=n_acc, rejected=dict(rejected),
             alerts=list(self.new_alerts), qc=qc,
+            windows=self.sea_states.take_windows() if self.sea_states is not None else [],
         )
 
     # ------------------------------------------------------------------ outputs

@@ -243,7 +243,8 @@ class SeaStateLearner:
     def summary(self) -> dict[str, Any]:
         """Counts and the table's coverage, for the status and the report."""
         learned = self.table.hours >= self.table.min_hours
-        return {"window_s": self.cfg.window_s, **self.counts,
+        return {"window_s": self.cfg.window_s, "flag_factor": self.cfg.spectral_flag_factor,
+                **self.counts,
                 "bins_learned": int(learned.sum()), "hours_learned": float(self.table.hours.sum()),
                 "bins_model": int(np.sum(~learned & np.all(np.isfinite(self.table.model_rate),
                                                              axis=0)))}

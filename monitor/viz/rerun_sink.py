@@ -296,6 +296,8 @@ class RerunSink:
                                                         step.load_source)
         for record in step.alerts:
             self.on_alert(record)
+        for window in step.windows:
+            self._log_window(window)
         t = int(step.now_ns)
         if t >= self._next_slow:
             self._sample_slow(step, comps)
@@ -393,6 +395,25 @@ class RerunSink:
         if (self._pending >= self.opt.flush_samples
                 or time.monotonic() - self._last_flush >= self.opt.flush_interval_s):
             self.flush()
+
+    def _log_window(self, w: Mapping[str, Any]) -> None:
+        """One closed sea-state window: rainflow and Dirlik damage per component (the
+        spectral cross-check), a flag lane, and the window's Hs and Tp."""
+        t, s = int(w["end_ns"]), self._samples
+        for name, rainflow in w["rainflow"].items():
+            part = entity_part(name)
+            self._rows[(f"spectral/{part}/rainflow", "scalar")].add(t, s, float(rainflow))
+            if w["dirlik"][name] is not None:
+                self._rows[(f"spectral/{part}/dirlik", "scalar")].add(t, s, float(w["dirlik"][name]))
+            lane = f"spectral_flags/{part}"
+            state = "flagged" if name in w["flagged"] else "agree"
+            if self._alert_state.get(lane) != state:
+                self._alert_state[lane] = state
+                self._rows[(lane, "state")].add(t, s, state)
+        for key in ("hs_m", "tp_s"):
+            if w[key] is not None:
+                self._rows[(f"sea_state/{key}", "scalar")].add(t, s, float(w[key]))
+        self._pending += 1
 
     def _sample_slow(self, step: StepResult, comps: Mapping[str, Any]) -> None:
         t, s = int(step.now_ns), self._samples
