@@ -153,16 +153,22 @@ class SeaStateLearner:
         if t_ns.shape[0] == 0:
             return
         w = self.window_ns
-        index = -(-t_ns // w)  # window k holds ((k-1) W, k W]
+        first, last = -(-int(t_ns[0]) // w), -(-int(t_ns[-1]) // w)  # window k: ((k-1) W, k W]
+        if first == last:  # the usual case: the slab lies in one window
+            self._feed(first, t_ns, stresses)
+            return
+        index = -(-t_ns // w)
         cuts = np.flatnonzero(np.diff(index)) + 1
-        for a, b in zip(np.append(0, cuts).tolist(), np.append(cuts, t_ns.shape[0]).tolist()):
-            k = int(index[a])
-            if self.spectra.index != k:
-                if self.spectra.index is not None:
-                    self.done_spectra[self.spectra.index] = self.spectra
-                self.spectra = _Spectra(self.names)
-                self.spectra.index = k
-            self.spectra.feed(t_ns[a:b], {n: s[a:b] for n, s in stresses.items()})
+        for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), t_ns.shape[0]]):
+            self._feed(int(index[a]), t_ns[a:b], {n: s[a:b] for n, s in stresses.items()})
+
+    def _feed(self, k: int, t_ns: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
+        if self.spectra.index != k:
+            if self.spectra.index is not None:
+                self.done_spectra[self.spectra.index] = self.spectra
+            self.spectra = _Spectra(self.names)
+            self.spectra.index = k
+        self.spectra.feed(t_ns, stresses)
 
     def tick(self, end_ns: int, committed: Mapping[str, float], n_samples: int) -> None:
         """An alert tick ended at ``end_ns`` with these committed damages."""
