@@ -388,15 +388,15 @@ class Daemon:
         try:
             if add is None:
                 raise ValueError("this pipeline takes no forecasts")
-            add(json.loads(payload))
+            due_ns = add(json.loads(payload))
         except (ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
             self.counters["forecasts_refused"] += 1
             self._faults.warning("forecast", "forecast refused", key=key, error=str(exc)[:300])
             return
         self.counters["forecasts"] += 1
         self._dirty_status = True
-        if self.recorder is not None:
-            self.recorder.write(key, payload, JSON_OBJECT, recv_ns, recv_ns)
+        if self.recorder is not None:  # a replay applies it at the same tick (monitor.forecast)
+            self.recorder.write(key, payload, JSON_OBJECT, recv_ns, due_ns)
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:

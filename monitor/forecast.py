@@ -8,8 +8,10 @@ A forecast arrives as JSON (Zenoh key ``buoy/<id>/forecast/waves``, docs/FORECAS
 
 Each step lasts until the next (:func:`models.sea_state_table.step_hours`). A forecast is
 applied at the first alert tick whose end is at or after its issue time (the first step's
-time if not given): sensor time, so a replay of the same samples and forecasts gives the same
-figures. From that tick's committed damage, the steps still ahead (the part of each step
+time if not given) and that was not yet evaluated when the forecast arrived (its *due* time,
+``due_ns``): sensor time. The daemon records each forecast with its due time as the publish
+time, and a replay of the recording hands it to the pipeline with that time, so the replay
+applies it at the same tick and gives the same forecast alerts. From that tick's committed damage, the steps still ahead (the part of each step
 after the tick) are projected with the learned table (:func:`project_damage`). Per
 component, ``forecast_damage`` fires while the central projection reaches ``[forecast]
 alert_damage`` within the forecast ("at this forecast the conductor reaches damage 0.5 by
@@ -33,24 +35,30 @@ from monitor.forecast_config import ForecastConfig
 
 RULE = "forecast_damage"
 MAX_STEPS = 100_000  # a year of 5-min steps: a larger payload is refused
+MAX_PENDING = 100  # forecasts waiting for sensor time to reach them
 
 
 @dataclass(frozen=True)
 class WaveForecast:
-    """A parsed forecast: step start times (s), Hs (m), Tp (s) and the issue time (s)."""
+    """A parsed forecast: step start times (s), Hs (m), Tp (s), the issue time (s) and the
+    first tick end it may be applied at (``not_before_ns``; None: any)."""
 
     issued_s: float
     t_s: np.ndarray
     hs_m: np.ndarray
     tp_s: np.ndarray
+    not_before_ns: int | None = None
 
     @property
-    def issued_ns(self) -> int:
-        return int(round(self.issued_s * 1e9))
+    def due_ns(self) -> int:
+        """The sensor time from which the forecast is applied (at the next tick end)."""
+        issued = int(round(self.issued_s * 1e9))
+        return issued if self.not_before_ns is None else max(issued, self.not_before_ns)
 
     def to_dict(self) -> dict[str, Any]:
         return {"issued_s": self.issued_s, "time_s": self.t_s.tolist(),
-                "hs_m": self.hs_m.tolist(), "tp_s": self.tp_s.tolist()}
+                "hs_m": self.hs_m.tolist(), "tp_s": self.tp_s.tolist(),
+                "not_before_ns": self.not_before_ns}
 
 
 def _time_s(value: Any) -> float:
@@ -61,7 +69,7 @@ def _time_s(value: Any) -> float:
     return float(value)
 
 
-def parse_forecast(doc: Any) -> WaveForecast:
+def parse_forecast(doc: Any, not_before_ns: int | None = None) -> WaveForecast:
     """A forecast payload (module docstring) as a :class:`WaveForecast`; ValueError says
     what is wrong with it."""
     if not isinstance(doc, Mapping):
@@ -84,7 +92,7 @@ def parse_forecast(doc: Any) -> WaveForecast:
     if not (np.all(np.isfinite(hs)) and np.all(hs >= 0) and np.all(np.isfinite(tp))
             and np.all(tp > 0)):
         raise ValueError("forecast: every step needs Hs >= 0 and Tp > 0 (finite)")
-    return WaveForecast(issued, t, hs, tp)
+    return WaveForecast(issued, t, hs, tp, not_before_ns)
 
 
 def iso(t_s: float | None) -> str | None:
@@ -100,24 +108,31 @@ class ForecastAlerts:
                  state: Mapping[str, Any] | None = None) -> None:
         st = state or {}
         self.cfg, self.buoy_id, self.names = cfg, buoy_id, names
-        self.pending: list[WaveForecast] = [parse_forecast(d) for d in st.get("pending", [])]
+        self.pending: list[WaveForecast] = [parse_forecast(d, d["not_before_ns"])
+                                            for d in st.get("pending", [])]
         self.firing: dict[str, AlertRecord] = {
             n: AlertRecord.from_dict(d) for n, d in st.get("firing", {}).items()}
         self.last: dict[str, Any] | None = st.get("last")
-        self.counts = {"received": 0, "applied": 0, "superseded": 0, **st.get("counts", {})}
+        self.counts = {"received": 0, "applied": 0, "superseded": 0, "dropped": 0,
+                       **st.get("counts", {})}
 
     def add(self, fc: WaveForecast) -> None:
+        """Queue a forecast; beyond ``MAX_PENDING`` (no sensor data to apply them) the
+        oldest is dropped and counted."""
         self.counts["received"] += 1
         self.pending.append(fc)
+        if len(self.pending) > MAX_PENDING:
+            del self.pending[0]
+            self.counts["dropped"] += 1
 
     def due(self, end_ns: int) -> bool:
-        return any(f.issued_ns <= end_ns for f in self.pending)
+        return any(f.due_ns <= end_ns for f in self.pending)
 
     def apply(self, end_ns: int, committed: Mapping[str, float],
               table: DamageRateTable) -> list[AlertRecord]:
         """At a tick end: project the newest due forecast (older due ones are superseded)."""
-        due = [f for f in self.pending if f.issued_ns <= end_ns]
-        self.pending = [f for f in self.pending if f.issued_ns > end_ns]
+        due = [f for f in self.pending if f.due_ns <= end_ns]
+        self.pending = [f for f in self.pending if f.due_ns > end_ns]
         fc = max(due, key=lambda f: f.issued_s)
         self.counts["applied"] += 1
         self.counts["superseded"] += len(due) - 1

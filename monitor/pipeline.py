@@ -442,12 +442,16 @@ class Pipeline:
             out.append("no load could be formed: fatigue damage is not being computed")
         return out
 
-    def add_forecast(self, doc: Any) -> None:
+    def add_forecast(self, doc: Any, not_before_ns: int | None = None) -> int:
         """A sea-state forecast (JSON payload, :mod:`monitor.forecast`), applied at the first
-        tick at or after its issue time; ValueError if it is malformed or forecasting is off."""
+        tick at or after its issue time and ``not_before_ns`` (default: the first tick not
+        yet evaluated); returns that due time. ValueError if it is malformed or forecasting
+        is off."""
         if self.forecasts is None:
             raise ValueError("forecasting is off ([forecast] enabled = false)")
-        self.forecasts.add(parse_forecast(doc))
+        fc = parse_forecast(doc, self.next_tick_ns if not_before_ns is None else not_before_ns)
+        self.forecasts.add(fc)
+        return fc.due_ns
 
     def flush(self) -> StepResult:
         """End of input: process every buffered sample; evaluate ticks the data completes."""

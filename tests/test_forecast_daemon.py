@@ -21,6 +21,7 @@ import pytest
 
 from monitor import zenoh_io
 from monitor.blocks import SampleBlock
+from monitor.checkpoint import CheckpointStore
 from monitor.daemon_config import ZenohConfig
 from replay.sea_state_files import read_sea_states
 from replay.writer import LogWriter
@@ -58,13 +59,15 @@ def _sensor_log(tmp: Path, seconds: int = 120) -> Path:
     return path
 
 
-def _config(tmp: Path, port: int, table: Path) -> Path:
+def _config(tmp: Path, port: int, table: Path, record: bool = False) -> Path:
     text = (REPO / "monitor" / "vaps_seed004.toml").read_text()
     assert '# table = "table.json"' in text
     text = text.replace('# table = "table.json"', f'table = "{table}"')
     text += (f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\nstatus_interval_s = 0.5\n'
              f'[state]\npath = "{tmp / "state.sqlite"}"\ncheckpoint_interval_s = 0.5\n'
              f'[metrics]\nport = {free_port()}\n')
+    if record:
+        text += f'[record]\ndir = "{tmp / "rec"}"\nflush_interval_s = 0.5\n'
     path = tmp / "buoymon.toml"
     path.write_text(text)
     return path
@@ -93,7 +96,7 @@ def test_daemon_raises_forecast_damage_from_a_published_forecast(tmp_path):
     ref = json.loads(offline.read_text())["components"]["conductor"]
     assert ref["thresholds"]["0.5"]["at"] is not None  # the forecast does reach 0.5
     port = free_port()
-    cfg = _config(tmp_path, port, table)
+    cfg = _config(tmp_path, port, table, record=True)
     d = _start(cfg, tmp_path)
     alerts: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     zc = ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",))
@@ -131,6 +134,18 @@ def test_daemon_raises_forecast_damage_from_a_published_forecast(tmp_path):
         assert published[0]["summary"] == active["summary"]
     finally:
         assert d.terminate() == 0
+    # the recording replayed gives the same forecast alert: the forecast is recorded with
+    # the tick it was due at
+    store = CheckpointStore(tmp_path / "state.sqlite")
+    live = [a for a in store.load().state["pipeline"]["alert_history"]
+            if a["rule"] == "forecast_damage"]
+    store.close()
+    p = _buoymon("replay", str(tmp_path / "rec"), "--config", str(cfg), "--report",
+                 str(tmp_path / "replay.json"), "--no-progress", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    replayed = [a for a in json.loads((tmp_path / "replay.json").read_text())["alerts"]
+                if a["rule"] == "forecast_damage"]
+    assert len(live) == 1 and replayed == live
     # the checkpoint holds the table and the firing alert: a restarted daemon shows it
     d = _start(cfg, tmp_path)
     try:

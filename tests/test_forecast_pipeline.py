@@ -248,3 +248,28 @@ def test_replay_report_and_html_carry_the_cross_check(storm, tmp_path):
     assert "id='plot-spectral'" in html_text
     ratios = [w["dirlik"]["conductor"] / w["rainflow"]["conductor"] for w in r["spectral_windows"]]
     assert f"<td>{np.median(ratios):.4g}</td>" in html_text
+
+
+def test_a_late_forecast_is_applied_at_the_next_tick_and_replays_identically(storm):
+    """A forecast arriving after sensor time passed its issue time is due at the first tick
+    not yet evaluated; handed to a fresh pipeline with that due time before all the data
+    (as a replay of the daemon's recording does), it fires at the same tick, the same way."""
+    config = config_with(default_config(), forecast={"alert_damage": 1.0, "min_hours": 0.5})
+    t0, _, sea = storm
+    doc = {"issued_s": t0 / 1e9 + 1800.0, "time_s": [t0 / 1e9 + 1800.0 + 3600.0 * k
+                                                      for k in range(4)],
+           "hs_m": [sea[0][0]] * 4, "tp_s": [sea[0][1]] * 4}
+    bl = blocks(storm, 60)
+    live = Pipeline(config, horizon_s=10.0)
+    fired = []
+    for k, b in enumerate(bl):
+        if k == 70:  # 70 min of data in: well past the issue time
+            due = live.add_forecast(doc)
+            assert due == live.next_tick_ns > doc["issued_s"] * 1e9
+        fired += [r.to_dict() for r in live.process(b).alerts if r.rule == "forecast_damage"]
+    replay = Pipeline(config, horizon_s=3600.0)
+    assert replay.add_forecast(doc, due) == due
+    again = []
+    for b in bl:
+        again += [r.to_dict() for r in replay.process(b).alerts if r.rule == "forecast_damage"]
+    assert [r["at_ns"] for r in fired] == [due] and again == fired
