@@ -644,11 +644,12 @@ class Pipeline:
         for hook in self._tick_hooks:
             hook(obs)
         records = self.alerts.evaluate(obs)
-        if self.sea_states is not None:
+        learner, forecasts = self.sea_states, self.forecasts
+        if learner is not None and forecasts is not None:
             committed = {n: f[1] for n, f in figures.items()}
-            self.sea_states.tick(end, committed, load.n[j])
-            if self.forecasts.due(end):
-                records = [*records, *self.forecasts.apply(end, committed, self.sea_states.table)]
+            learner.tick(end, committed, load.n[j])
+            if forecasts.due(end):
+                records = [*records, *forecasts.apply(end, committed, learner.table)]
         for rec in records:
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
@@ -743,7 +744,7 @@ class Pipeline:
 
     def _forecast_figures(self) -> dict[str, Any]:
         """The learned table's coverage and the last forecast (status and report)."""
-        if self.sea_states is None:
+        if self.sea_states is None or self.forecasts is None:
             return {}
         return {"sea_state_table": self.sea_states.summary(),
                 "forecast": self.forecasts.status()}

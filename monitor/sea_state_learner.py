@@ -80,7 +80,7 @@ class _Spectra:
 
     def dirlik_rate(self, name: str, curve: Any) -> float:
         """Damage per second from the window's mean PSD (NaN without a whole segment)."""
-        if not self.segments or not np.any(self.psd[name][1:] > 0):
+        if not self.segments or self.fs is None or not np.any(self.psd[name][1:] > 0):
             return math.nan
         f = np.fft.rfftfreq(SEGMENT, 1.0 / self.fs)
         return damage_rate_from_psd(curve, f[1:], self.psd[name][1:] / self.segments)

@@ -52,6 +52,9 @@ def pipeline_hindcast(config: Config, states: SeaStates, half: int, sample_s: fl
     prior = {k: v for k, v in config.section("forecast").items() if k != "table"}
     cfg = config_with(config, forecast={**prior, "window_s": sample_s, "min_hours": min_hours})
     p = Pipeline(cfg, horizon_s=cfg.ordering.replay_horizon_s)
+    learner = p.sea_states
+    if learner is None:
+        raise ValueError("hindcast: [forecast] enabled = false in the configuration")
     w_ns = int(round(sample_s * 1e9))
     n = int(round(sample_s * BASE_HZ))
     trained: DamageRateTable | None = None
@@ -65,9 +68,9 @@ def pipeline_hindcast(config: Config, states: SeaStates, half: int, sample_s: fl
         p.process(SampleBlock(cfg.buoy.id, "tension", t, {"tension_N": tension}, end))
         p.process(SampleBlock(cfg.buoy.id, "waves", np.array([end], np.int64),
                               {"hs_m": states.hs_m[k:k + 1], "tp_s": states.tp_s[k:k + 1]}, end))
-        if trained is None and p.sea_states.counts["windows"] >= half:
-            trained = DamageRateTable.from_state(p.sea_states.table.to_state())
-            at_half = p.sea_states.counts["windows"]
+        if trained is None and learner.counts["windows"] >= half:
+            trained = DamageRateTable.from_state(learner.table.to_state())
+            at_half = learner.counts["windows"]
     p.flush()
     assert trained is not None  # half < len(states) windows close before the flush ends
     start = int(at_half)  # windows (= sea states) from here on are forecast
@@ -77,7 +80,7 @@ def pipeline_hindcast(config: Config, states: SeaStates, half: int, sample_s: fl
     rates = trained.rates(rest.hs_m, rest.tp_s)
     proj = project_damage(rest.t_s, np.full(len(rest), sample_s / 3600.0), rates,
                           [0.0] * len(trained.components))
-    actual = p.sea_states.table.damage.sum(axis=(1, 2)) - trained.damage.sum(axis=(1, 2))
+    actual = learner.table.damage.sum(axis=(1, 2)) - trained.damage.sum(axis=(1, 2))
     return Hindcast(trained.components, proj.damage[:, -1], proj.low[:, -1], proj.high[:, -1],
                     actual, (rates.source == "learned").mean(axis=1),
-                    int(p.sea_states.counts["windows"]))
+                    int(learner.counts["windows"]))
