@@ -44,6 +44,8 @@ from monitor.sea_state_learner import SeaStateLearner
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
+# what the sea-state learner takes of each stream (SeaStateLearner.<stream>)
+_SEA_STATE_FIELDS = {"waves": ("hs_m", "tp_s"), "motion": ("heave_m",), "imu": ("accel_z_mps2",)}
 
 STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
@@ -507,9 +509,11 @@ class Pipeline:
         stresses = {name: c.stress(v) for name, c in self.components.items()}
         self.new_alerts = []
         if self.sea_states is not None:  # before the ticks this slab completes
-            if "waves" in streams and streams["waves"].acc_t.shape[0]:
-                w = streams["waves"]
-                self.sea_states.waves(w.acc_t, w.acc_values[0], w.acc_values[1])
+            for name, wanted in _SEA_STATE_FIELDS.items():
+                info = streams.get(name)
+                if info is not None and info.acc_t.shape[0]:
+                    fields = dict(zip(SENSOR_FIELDS[name], info.acc_values))
+                    getattr(self.sea_states, name)(info.acc_t, *(fields[f] for f in wanted))
             self.sea_states.load(t, stresses)
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
         if t.shape[0]:

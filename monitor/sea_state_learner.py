@@ -33,11 +33,13 @@ import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
 from models.spectral_fatigue import damage_rate_from_psd, segment_psd
+from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
 
 SEGMENT = 1024  # load samples per PSD segment: 51 s at 20 Hz (0.02 Hz resolution)
 WINDOW_HISTORY = 2000  # closed windows kept for the report (about 6 weeks of 30 min)
 _RATE_TOLERANCE = 0.02
+_WAVE_F_MAX_HZ = 0.5  # the wave band's top for Hs and Tp from motion (models.waves)
 _COMPARE_FLOOR = 1e-12  # both damages below this: nothing to compare (a calm window)
 
 
@@ -78,18 +80,87 @@ class _Spectra:
         self.t = t[full:]
         self.x = {n: v[full:] for n, v in x.items()}
 
+    def mean_psd(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """(frequencies, mean PSD) of the window, None without a whole segment."""
+        if not self.segments or self.fs is None:
+            return None
+        return np.fft.rfftfreq(SEGMENT, 1.0 / self.fs), self.psd[name] / self.segments
+
     def dirlik_rate(self, name: str, curve: Any) -> float:
         """Damage per second from the window's mean PSD (NaN without a whole segment)."""
-        if not self.segments or self.fs is None or not np.any(self.psd[name][1:] > 0):
+        spec = self.mean_psd(name)
+        if spec is None or not np.any(spec[1][1:] > 0):
             return math.nan
-        f = np.fft.rfftfreq(SEGMENT, 1.0 / self.fs)
-        return damage_rate_from_psd(curve, f[1:], self.psd[name][1:] / self.segments)
+        return damage_rate_from_psd(curve, spec[0][1:], spec[1][1:])
+
+    def sea_state(self, name: str, accel: bool) -> tuple[float, float] | None:
+        """(Hs, Tp) of the window from a heave PSD, or an acceleration PSD divided by
+        (2 pi f)^4 (:func:`models.waves.sea_state_from_psd`); None without one."""
+        spec = self.mean_psd(name)
+        if spec is None:
+            return None
+        f, psd = spec
+        if accel:
+            with np.errstate(divide="ignore"):
+                psd = np.where(f > 0, psd / (2.0 * np.pi * f) ** 4, 0.0)
+        try:
+            ss = sea_state_from_psd(f, psd, f_max=min(_WAVE_F_MAX_HZ, float(f[-1])))
+        except ValueError:  # too short a segment for the band, or no wave energy
+            return None
+        return ss.hs, ss.tp
 
     def state(self) -> dict[str, Any]:
         return {"index": self.index, "fs": self.fs, "segments": self.segments,
                 "dropped": self.dropped, "t": self.t.tolist(),
                 "x": {n: v.tolist() for n, v in self.x.items()},
                 "psd": {n: v.tolist() for n, v in self.psd.items()}}
+
+
+class _WindowSpectra:
+    """:class:`_Spectra` of each learning window for one set of signals fed together."""
+
+    def __init__(self, names: Sequence[str], window_ns: int,
+                 state: Mapping[str, Any] | None = None) -> None:
+        st = state or {}
+        self.names, self.window_ns = tuple(names), window_ns
+        self.current = _Spectra(self.names, st.get("current"))
+        self.done: dict[int, _Spectra] = {
+            int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
+
+    def feed(self, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+        """Samples in time order; cut at window ends (window k: ((k-1) W, k W])."""
+        if t_ns.shape[0] == 0:
+            return
+        w = self.window_ns
+        first, last = -(-int(t_ns[0]) // w), -(-int(t_ns[-1]) // w)
+        if first == last:  # the usual case: the slab lies in one window
+            self._feed(first, t_ns, values)
+            return
+        index = -(-t_ns // w)
+        cuts = np.flatnonzero(np.diff(index)) + 1
+        for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), t_ns.shape[0]]):
+            self._feed(int(index[a]), t_ns[a:b], {n: s[a:b] for n, s in values.items()})
+
+    def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+        if self.current.index != k:
+            if self.current.index is not None:
+                self.done[self.current.index] = self.current
+            self.current = _Spectra(self.names)
+            self.current.index = k
+        self.current.feed(t_ns, values)
+
+    def take(self, k: int) -> _Spectra | None:
+        """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""
+        out = self.done.pop(k, None)
+        if out is None and self.current.index == k:
+            out = self.current
+        for old in [i for i in self.done if i < k]:
+            del self.done[old]
+        return out
+
+    def state(self) -> dict[str, Any]:
+        return {"current": self.current.state(),
+                "done": {str(k): v.state() for k, v in self.done.items()}}
 
 
 class SeaStateLearner:
@@ -135,9 +206,10 @@ class SeaStateLearner:
         self.counts: dict[str, int] = {"windows": 0, "learned": 0, "no_sea_state": 0,
                                        "short": 0, "flagged": 0, "compared": 0,
                                        **st.get("counts", {})}
-        self.spectra = _Spectra(self.names, st.get("spectra"))
-        self.done_spectra: dict[int, _Spectra] = {
-            int(k): _Spectra(self.names, v) for k, v in st.get("done_spectra", {}).items()}
+        self.stress = _WindowSpectra(self.names, self.window_ns, st.get("stress"))
+        # the sea state of a window without waves samples: heave (motion) or accel_z (imu)
+        self.heave = _WindowSpectra(("heave",), self.window_ns, st.get("heave"))
+        self.accel = _WindowSpectra(("accel",), self.window_ns, st.get("accel"))
         self.history: list[dict[str, Any]] = list(st.get("history", []))
         self.new_windows: list[dict[str, Any]] = []  # closed since the last take_windows()
 
@@ -150,25 +222,15 @@ class SeaStateLearner:
 
     def load(self, t_ns: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
         """The slab's load samples (time order) and each component's stress."""
-        if t_ns.shape[0] == 0:
-            return
-        w = self.window_ns
-        first, last = -(-int(t_ns[0]) // w), -(-int(t_ns[-1]) // w)  # window k: ((k-1) W, k W]
-        if first == last:  # the usual case: the slab lies in one window
-            self._feed(first, t_ns, stresses)
-            return
-        index = -(-t_ns // w)
-        cuts = np.flatnonzero(np.diff(index)) + 1
-        for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), t_ns.shape[0]]):
-            self._feed(int(index[a]), t_ns[a:b], {n: s[a:b] for n, s in stresses.items()})
+        self.stress.feed(t_ns, stresses)
 
-    def _feed(self, k: int, t_ns: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
-        if self.spectra.index != k:
-            if self.spectra.index is not None:
-                self.done_spectra[self.spectra.index] = self.spectra
-            self.spectra = _Spectra(self.names)
-            self.spectra.index = k
-        self.spectra.feed(t_ns, stresses)
+    def motion(self, t_ns: np.ndarray, heave_m: np.ndarray) -> None:
+        """Accepted ``motion`` heave samples of a slab."""
+        self.heave.feed(t_ns, {"heave": heave_m})
+
+    def imu(self, t_ns: np.ndarray, accel_z_mps2: np.ndarray) -> None:
+        """Accepted ``imu`` vertical accelerations of a slab."""
+        self.accel.feed(t_ns, {"accel": accel_z_mps2})
 
     def tick(self, end_ns: int, committed: Mapping[str, float], n_samples: int) -> None:
         """An alert tick ended at ``end_ns`` with these committed damages."""
@@ -186,24 +248,27 @@ class SeaStateLearner:
 
     # ---- windows ---------------------------------------------------------------------------
 
-    def _sea_state(self, start: int, end: int) -> tuple[float, float] | None:
+    def _sea_state(self, start: int, end: int) -> tuple[tuple[float, float] | None, str | None]:
+        """The window's (Hs, Tp) and where it came from: ``waves`` samples, else the
+        ``motion`` heave spectrum, else the ``imu`` acceleration spectrum."""
+        k = end // self.window_ns
+        heave, accel = self.heave.take(k), self.accel.take(k)
         inside = [v for t, v in zip(self.waves_t, self.waves_v) if start < t <= end]
         if inside:
             return (math.fsum(v[0] for v in inside) / len(inside),
-                    math.fsum(v[1] for v in inside) / len(inside))
+                    math.fsum(v[1] for v in inside) / len(inside)), "waves"
         before = [(t, v) for t, v in zip(self.waves_t, self.waves_v) if t <= start]
         if before and (end - before[-1][0]) / 1e9 <= self.cfg.waves_max_age_s:
-            return before[-1][1]
-        return None
+            return before[-1][1], "waves"
+        for spectra, name, source in ((heave, "heave", "motion"), (accel, "accel", "imu")):
+            sea = None if spectra is None else spectra.sea_state(name, name == "accel")
+            if sea is not None:
+                return sea, source
+        return None, None
 
     def _close(self, end: int, committed: Mapping[str, float]) -> None:
         start = end - self.window_ns
-        k = end // self.window_ns
-        spectra = self.done_spectra.pop(k, None)
-        if spectra is None and self.spectra.index == k:
-            spectra = self.spectra
-        for old in [i for i in self.done_spectra if i < k]:
-            del self.done_spectra[old]
+        spectra = self.stress.take(end // self.window_ns)
         rainflow = {n: committed[n] - self.start_damage.get(n, committed[n]) for n in self.names}
         dirlik = {n: (spectra.dirlik_rate(n, self.curves[n]) * self.covered_s
                       if spectra is not None else math.nan) for n in self.names}
@@ -215,7 +280,7 @@ class SeaStateLearner:
                 if max(a, b) > self.cfg.spectral_flag_factor * min(a, b):
                     flagged.append(n)
         self.counts["flagged"] += len(flagged)
-        sea = self._sea_state(start, end)
+        sea, sea_source = self._sea_state(start, end)
         hours = self.covered_s / 3600.0
         self.counts["windows"] += 1
         if sea is None:
@@ -227,7 +292,8 @@ class SeaStateLearner:
             self.table.learn(sea[0], sea[1], hours, [max(rainflow[n], 0.0) for n in self.names])
         self.counts[status] += 1
         window = {"end_ns": end, "hours": hours, "hs_m": None if sea is None else sea[0],
-                  "tp_s": None if sea is None else sea[1], "status": status,
+                  "tp_s": None if sea is None else sea[1], "sea_state_from": sea_source,
+                  "status": status,
                   "segments": 0 if spectra is None else spectra.segments,
                   "rainflow": rainflow,
                   "dirlik": {n: (v if math.isfinite(v) else None) for n, v in dirlik.items()},
@@ -259,6 +325,6 @@ class SeaStateLearner:
         return {"table": self.table.to_state(), "window_end": self.window_end,
                 "start_damage": dict(self.start_damage), "covered_s": self.covered_s,
                 "waves_t": list(self.waves_t), "waves_v": [list(v) for v in self.waves_v],
-                "counts": dict(self.counts), "spectra": self.spectra.state(),
-                "done_spectra": {str(k): v.state() for k, v in self.done_spectra.items()},
+                "counts": dict(self.counts), "stress": self.stress.state(),
+                "heave": self.heave.state(), "accel": self.accel.state(),
                 "history": list(self.history)}

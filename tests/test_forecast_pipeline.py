@@ -292,3 +292,59 @@ def test_hindcast_through_the_pipeline_within_20_percent():
     assert h.forecast[0] == pytest.approx(h.actual[0], rel=0.20)
     assert h.low[0] <= h.forecast[0] <= h.high[0]
     assert h.learned_share[0] >= 0.25
+
+
+@pytest.mark.parametrize("drop, source", [((), "waves"), (("waves",), "motion"),
+                                          (("waves", "motion"), "imu")])
+def test_sea_state_from_waves_else_motion_else_imu(drop, source, tmp_path):
+    """`buoymon simulate` of a measured NDBC 44007 sea state (1996-01-19 22:00, Hs 3.59 m,
+    Tp 8.29 s) replayed without some streams: a window takes its sea state from the waves
+    samples, else the heave spectrum of the motion stream, else the vertical acceleration
+    spectrum of the IMU divided by (2 pi f)^4; each within 10 % of the simulated sea."""
+    from replay.reader import iter_blocks
+    from replay.runner import replay_pipeline
+    from replay.simulate import simulate
+
+    s = read_sea_states(SHARED / "realdata/ndbc44007_ecbenchmarkA/ec-benchmark_dataset_A.txt")
+    hs, tp = float(s.hs_m[FIRST_HOUR]), float(s.tp_s[FIRST_HOUR])
+    log = tmp_path / "sim.mcap"
+    simulate(SimConfig(hours=1.0, hs_m=hs, tp_s=tp, seed=3, load_model="wavfor"), log)
+    p = replay_pipeline(default_config())
+    for b in iter_blocks([log]):
+        if b.sensor not in drop:
+            p.process(b)
+    p.flush()
+    [w] = p.sea_states.history  # the window ending at 30 min (the log ends just before 1 h)
+    assert w["sea_state_from"] == source and w["status"] == "learned"
+    assert w["hs_m"] == pytest.approx(hs, rel=0.10)
+    assert w["tp_s"] == pytest.approx(tp, rel=0.10)
+
+
+def test_motion_sea_state_restores_exactly(tmp_path):
+    """The heave and acceleration spectra of the open window are in the state: a replay
+    stopped mid-window and continued from its JSON state ends byte-identical."""
+    from replay.reader import iter_blocks
+    from replay.runner import replay_pipeline
+    from replay.simulate import simulate
+
+    log = tmp_path / "sim.mcap"
+    simulate(SimConfig(hours=2.0, hs_m=2.0, tp_s=7.0, seed=5, load_model="wavfor"), log)
+    bl = [b for b in iter_blocks([log]) if b.sensor != "waves"]  # blocks of about 20 min
+    t0 = bl[0].t_first_ns
+    # stop once the data reaches 1 h 25 min: the replay horizon (1 h) has released 25 min
+    cut = next(i for i, b in enumerate(bl) if b.t_last_ns - t0 > 5100 * 10**9)
+    one = replay_pipeline(default_config())
+    for b in bl:
+        one.process(b)
+    one.flush()
+    first = replay_pipeline(default_config())
+    for b in bl[:cut]:
+        first.process(b)
+    assert first.sea_states.heave.current.segments > 0  # the first window is open
+    second = replay_pipeline(default_config(), state=json.loads(json.dumps(first.state())))
+    for b in bl[cut:]:
+        second.process(b)
+    second.flush()
+    assert [w["sea_state_from"] for w in one.sea_states.history] == ["motion"] * 3
+    assert json.dumps(one.state()["sea_states"], sort_keys=True) == json.dumps(
+        second.state()["sea_states"], sort_keys=True)
