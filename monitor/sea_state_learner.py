@@ -32,7 +32,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
-from models.spectral_fatigue import damage_rate_from_psd, segment_psd
+from models.spectral_fatigue import damage_rate_from_psd, segment_psds
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
 
@@ -61,22 +61,23 @@ class _Spectra:
         t = np.concatenate([self.t, t])
         x = {n: np.concatenate([self.x[n], stresses[n]]) for n in self.names}
         full = t.shape[0] // SEGMENT * SEGMENT
-        for a in range(0, full, SEGMENT):
-            tt = t[a:a + SEGMENT]
-            span = (int(tt[-1]) - int(tt[0])) / 1e9
-            if span <= 0:
-                self.dropped += 1
-                continue
-            fs = (SEGMENT - 1) / span
-            if self.fs is None:
-                self.fs = fs
-            elif abs(fs / self.fs - 1.0) > _RATE_TOLERANCE:
-                self.dropped += 1
-                continue
-            for n in self.names:
-                _, p = segment_psd(x[n][a:a + SEGMENT], self.fs)
-                self.psd[n] = p if n not in self.psd else self.psd[n] + p
-            self.segments += 1
+        if full:
+            starts = np.arange(0, full, SEGMENT)
+            spans = (t[starts + SEGMENT - 1] - t[starts]) / 1e9
+            fs = np.where(spans > 0, (SEGMENT - 1) / np.where(spans > 0, spans, 1.0), np.nan)
+            if self.fs is None and np.isfinite(fs).any():
+                self.fs = float(fs[np.isfinite(fs)][0])
+            good = np.isfinite(fs) & (np.abs(fs / (self.fs or 1.0) - 1.0) <= _RATE_TOLERANCE)
+            self.dropped += int(np.count_nonzero(~good))
+            if good.any():
+                for n in self.names:
+                    _, rows = segment_psds(x[n][:full].reshape(-1, SEGMENT)[good], self.fs)
+                    # segment by segment in time order: the same sum for any block split
+                    acc = self.psd.get(n)
+                    for row in rows:
+                        acc = row if acc is None else acc + row
+                    self.psd[n] = acc
+                self.segments += int(np.count_nonzero(good))
         self.t = t[full:]
         self.x = {n: v[full:] for n, v in x.items()}
 
