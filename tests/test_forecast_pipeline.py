@@ -273,6 +273,11 @@ def test_a_late_forecast_is_applied_at_the_next_tick_and_replays_identically(sto
     for b in bl:
         again += [r.to_dict() for r in replay.process(b).alerts if r.rule == "forecast_damage"]
     assert [r["at_ns"] for r in fired] == [due] and again == fired
+    # forecasting never changes the committed damage (nor anything of the fatigue chain)
+    plain = Pipeline(config, horizon_s=3600.0)
+    for b in bl:
+        plain.process(b)
+    assert replay.state()["components"] == plain.state()["components"]
 
 
 def test_hindcast_through_the_pipeline_within_20_percent():
