@@ -54,6 +54,9 @@ class StepResult:
         windows: sea-state windows closed by this step (``[forecast]``,
             :mod:`monitor.sea_state_learner`): end time, sea state, rainflow and Dirlik
             damage per component, the components flagged.
+        forecasts: forecast projections applied in this step (:mod:`monitor.forecast`):
+            applied time, and per component the damage now and at the forecast's end with
+            its band, and when ``[forecast] alert_damage`` is reached.
         qc: QARTOD flag totals of the streams this step processed,
             ``{sensor: {test: {"suspect": n, "fail": n}}}`` (see :mod:`monitor.qartod`); filled
             only when a sink has ``wants_qc = True``.
@@ -72,6 +75,7 @@ class StepResult:
     rejected: Mapping[str, int]
     alerts: list[Any] = field(default_factory=list)
     windows: list[dict[str, Any]] = field(default_factory=list)
+    forecasts: list[dict[str, Any]] = field(default_factory=list)
     qc: Mapping[str, Mapping[str, Mapping[str, int]]] = field(default_factory=dict)
 
 

@@ -115,6 +115,7 @@ class ForecastAlerts:
         self.last: dict[str, Any] | None = st.get("last")
         self.counts = {"received": 0, "applied": 0, "superseded": 0, "dropped": 0,
                        **st.get("counts", {})}
+        self.new: list[dict[str, Any]] = []  # projections since the last take_new()
 
     def add(self, fc: WaveForecast) -> None:
         """Queue a forecast; beyond ``MAX_PENDING`` (no sensor data to apply them) the
@@ -162,6 +163,12 @@ class ForecastAlerts:
             out.extend(self._transition(n, end_ns, end, at, early, t_end[-1]))
         self.last = {"applied_ns": end_ns, "issued_s": fc.issued_s, "steps": int(h.size),
                      "time_end": iso(float(t_end[-1])), "components": comps}
+        self.new.append(self.last)
+        return out
+
+    def take_new(self) -> list[dict[str, Any]]:
+        """Projections made since the last call (for the sinks)."""
+        out, self.new = self.new, []
         return out
 
     def _transition(self, name: str, at_ns: int, value: float, at: float | None,

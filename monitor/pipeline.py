@@ -716,6 +716,7 @@ class Pipeline:
             components=comps, accepted=n_acc, rejected=dict(rejected),
             alerts=list(self.new_alerts), qc=qc,
             windows=self.sea_states.take_windows() if self.sea_states is not None else [],
+            forecasts=self.forecasts.take_new() if self.forecasts is not None else [],
         )
 
     # ------------------------------------------------------------------ outputs

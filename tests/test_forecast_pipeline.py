@@ -192,11 +192,20 @@ def test_windows_in_rerun(storm, tmp_path):
     opts = RerunOptions()
     sink = RerunSink(open_recording("vaps", opts, rrd=path), opts)
     p = Pipeline(default_config(), [sink], horizon_s=3600.0)
+    issued = storm[0] / 1e9 + 7200.0
+    p.add_forecast({"issued_s": issued, "time_s": [issued, issued + 3600.0],
+                    # the second hour's bin: learned (two whole windows) by the issue time
+                    "hs_m": [storm[2][1][0]] * 2, "tp_s": [storm[2][1][1]] * 2})
     for b in blocks(storm, 60):
         p.process(b)
     p.flush()
     p.close()
     data = read_rrd(path)
+    last = p.forecasts.last["components"]["conductor"]
+    for key in ("damage_end", "damage_end_low", "damage_end_high"):
+        rows = data[f"forecast/conductor/{key}"]
+        assert [t.value for t in rows["sensor_time"]] == [int(issued * 1e9)]
+        assert rows["Scalars:scalars"] == [[last[key]]]
     windows = p.sea_states.history
     rows = data["spectral/conductor/rainflow"]
     assert [t.value for t in rows["sensor_time"]] == [w["end_ns"] for w in windows]

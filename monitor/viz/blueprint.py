@@ -32,6 +32,8 @@ def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
     )
     spectral = rrb.Horizontal(
         rrb.TimeSeriesView(origin="/spectral", name="Damage per window: rainflow / Dirlik"),
+        rrb.TimeSeriesView(origin="/forecast",
+                           name="Forecast: damage at the forecast's end (band)"),
         rrb.Vertical(
             rrb.StateTimelineView(origin="/spectral_flags", name="Dirlik vs rainflow"),
             rrb.TimeSeriesView(origin="/sea_state", name="Sea state (Hs m, Tp s)"),

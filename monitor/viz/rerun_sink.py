@@ -298,6 +298,8 @@ class RerunSink:
             self.on_alert(record)
         for window in step.windows:
             self._log_window(window)
+        for projection in step.forecasts:
+            self._log_forecast(projection)
         t = int(step.now_ns)
         if t >= self._next_slow:
             self._sample_slow(step, comps)
@@ -413,6 +415,17 @@ class RerunSink:
         for key in ("hs_m", "tp_s"):
             if w[key] is not None:
                 self._rows[(f"sea_state/{key}", "scalar")].add(t, s, float(w[key]))
+        self._pending += 1
+
+    def _log_forecast(self, p: Mapping[str, Any]) -> None:
+        """A forecast applied: per component the projected damage at the forecast's end
+        with its band, at the sensor time it was applied."""
+        t, s = int(p["applied_ns"]), self._samples
+        for name, c in p["components"].items():
+            for key in ("damage_end", "damage_end_low", "damage_end_high"):
+                if c[key] is not None and math.isfinite(c[key]):
+                    self._rows[(f"forecast/{entity_part(name)}/{key}", "scalar")].add(
+                        t, s, float(c[key]))
         self._pending += 1
 
     def _sample_slow(self, step: StepResult, comps: Mapping[str, Any]) -> None:
