@@ -196,6 +196,7 @@ class SeaStateLearner:
                                  f"{list(prior.components)} != the configuration's "
                                  f"{list(self.names)}")
             self.table = prior
+            self.table.min_hours = cfg.min_hours  # the configuration decides, not the file
         else:
             self.table = DamageRateTable(self.names, HS_EDGES_M, TP_EDGES_S,
                                          min_hours=cfg.min_hours)
