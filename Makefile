@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 PIP := $(PY) -m pip
 
-.PHONY: demo test bench clean chromium alertmanager
+.PHONY: demo test test-fast bench clean chromium alertmanager
 
 $(VENV)/.created:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) on PATH"; exit 1; }
@@ -41,7 +41,12 @@ alertmanager:
 
 test: $(VENV)/.installed-test chromium alertmanager
 	cd $(CURDIR) && $(VENV)/bin/lint-imports --no-cache
+	$(PY) -m mypy
 	$(PY) -m pytest -q
+
+# the unit tests alone (no daemons, servers, browsers or whole records): under a minute
+test-fast: $(VENV)/.installed-test
+	$(PY) -m pytest -q -m "not integration and not slow"
 
 # every benchmark script prints its figures (the 30-day replay takes a few minutes)
 bench: $(VENV)/.installed-test

@@ -5,9 +5,8 @@ sensor noise; about 2.9 million closed cycles). Prints samples per second for la
 and for 20-sample blocks (one second of data per call, as the service feeds it), for
 
 - ``separate``: ``conductor_stress`` + ``StreamingRainflow.feed`` + ``MinerAccumulator.add_cycles``
-  (what the monitor calls per alert tick), per backend;
-- ``fused``: ``FatigueStream.feed_tension``, the same steps in one compiled pass per
-  chunk (the same committed damage to the last bit);
+  (the monitor's per-tick fallback; its compiled path is ``models.fatigue.commit_ticks``), per
+  backend;
 
 then the CPU time of each separate stage on the whole series in one block. Targets
 (issue 3): >= 50 M samples/s in large blocks (1e6, 1e7), >= 1 M samples/s in 20-sample
@@ -33,8 +32,10 @@ The numba and numpy backends now give the same committed damage to the last bit 
 2e-16 apart). The numpy fallback is slower on tiny blocks because its log/exp are some
 30 numpy operations per call (the price of matching the compiled bits). With hysteresis
 > 0 the turning-point pass has a longer dependency chain: fused about 70 M samples/s.
-The compiled fused loop shows packed vdivpd/vsqrtpd on ymm registers (LLVM prefers
-256-bit vectors on this CPU): the stress and log/exp loops vectorise.
+The compiled fused loop showed packed vdivpd/vsqrtpd on ymm registers (LLVM prefers
+256-bit vectors on this CPU): the stress and log/exp loops vectorise. The fused path
+(``FatigueStream``) ran only here and in tests and was deleted (issue 18, 2026-11-25); the
+vector check now inspects the Miner commit loop.
 
 Run: PYTHONPATH=. python bench/bench_fatigue.py [n_samples]
 """
@@ -50,8 +51,8 @@ import numba
 import numpy as np
 
 from models import _fatigue_loops
-from models.fatigue import FatigueStream, MinerAccumulator, SNCurve, StreamingRainflow
-from models.helix import HelixCable, axial_kernel_args, conductor_stress
+from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow
+from models.helix import HelixCable, conductor_stress
 
 
 def wave_tension(n: int, seed: int = 0) -> np.ndarray:
@@ -61,22 +62,16 @@ def wave_tension(n: int, seed: int = 0) -> np.ndarray:
             + 150.0 * rng.normal(size=n))
 
 
-def run(tension: np.ndarray, block: int, backend: str, path: str) -> tuple[float, float, float]:
+def run(tension: np.ndarray, block: int, backend: str) -> tuple[float, float, float]:
     """(wall s, CPU s, final damage) for the whole path over ``tension`` in ``block``s."""
     cable = HelixCable.vaps_biw()
     rf = StreamingRainflow(backend=backend)
     miner = MinerAccumulator(SNCurve.vaps_copper(), backend=backend)
-    stream = FatigueStream(cable, "left", rf, miner)
     blocks = [tension[i:i + block] for i in range(0, tension.size, block)]
     t0, c0 = time.perf_counter(), time.process_time()
-    if path == "fused":
-        for k, b in enumerate(blocks):
-            stream.feed_tension(b, time_s=k * block / 20.0)
-    else:
-        for k, b in enumerate(blocks):
-            stress = conductor_stress(b, cable, "left", backend=backend)
-            r, m, c = rf.feed(stress)
-            miner.add_cycles(r, c, m, time_s=k * block / 20.0)
+    for k, b in enumerate(blocks):
+        stress = conductor_stress(b, cable, "left", backend=backend)
+        miner.add_cycles(*rf.feed(stress), time_s=k * block / 20.0)
     return time.perf_counter() - t0, time.process_time() - c0, miner.damage_committed
 
 
@@ -95,7 +90,7 @@ def stage_split(tension: np.ndarray) -> None:
     cable = HelixCable.vaps_biw()
     t_stress, stress = best_cpu(lambda: conductor_stress(tension, cable, "left"))
     t_feed, (ranges, means, counts) = best_cpu(lambda: StreamingRainflow().feed(stress))
-    t_add, _ = best_cpu(lambda: MinerAccumulator(SNCurve.vaps_copper()).add_cycles(ranges, counts, means))
+    t_add, _ = best_cpu(lambda: MinerAccumulator(SNCurve.vaps_copper()).add_cycles(ranges, means, counts))
     n = tension.size
     print(f"stages (one block, CPU): conductor_stress {n / t_stress / 1e6:.0f} M samples/s, "
           f"StreamingRainflow.feed {n / t_feed / 1e6:.0f} M samples/s, MinerAccumulator.add_cycles "
@@ -105,12 +100,11 @@ def stage_split(tension: np.ndarray) -> None:
 
 def vector_instructions() -> str:
     """Packed divide/sqrt instructions in a fresh (uncached, so inspectable) compilation of
-    the fused loop: the damage pass's log/exp and the stress loop vectorise when these
-    show ymm/zmm registers."""
-    loop = numba.njit(error_model="numpy")(_fatigue_loops.tension_loop)
+    the Miner commit loop: the damage pass's log/exp vectorise when these show ymm/zmm
+    registers."""
+    loop = numba.njit(error_model="numpy")(_fatigue_loops.commit_loop)
     miner = MinerAccumulator(SNCurve.vaps_copper())
-    loop(wave_tension(100), *axial_kernel_args(HelixCable.vaps_biw(), "left"), StreamingRainflow()._st,
-         miner._params, miner._table, miner._inv_width, 0.0)
+    loop(np.linspace(1e6, 60e6, 100), np.ones(100), miner._params, miner._table, miner._inv_width, 0.0)
     asm = loop.inspect_asm(loop.signatures[0])
     found = sorted(set(re.findall(r"\b(v(?:div|sqrt)p[sd])\s+%([xyz])mm", asm)))
     return ", ".join(f"{op} {reg}mm" for op, reg in found) or "none"
@@ -119,31 +113,28 @@ def vector_instructions() -> str:
 def main() -> None:
     n = int(float(sys.argv[1])) if len(sys.argv) > 1 else 10_000_000
     tension = wave_tension(n)
-    for path in ("separate", "fused"):  # compile / load the numba cache outside the timing
-        run(tension[:1000], 20, "numba", path)
+    run(tension[:1000], 20, "numba")  # compile / load the numba cache outside the timing
     print(f"samples: {n:.3g} (20 Hz, 6 s waves + noise); best of 3 runs; CPU time excludes")
     print(f"waiting for a core on a shared machine (load average now "
           f"{' '.join(f'{v:.1f}' for v in os.getloadavg())})")
     damages = {}
-    cases = [("separate", "numba", n), ("separate", "numba", 1_000_000), ("separate", "numba", 100_000),
-             ("separate", "numba", 20), ("fused", "numba", n), ("fused", "numba", 1_000_000),
-             ("fused", "numba", 100_000), ("fused", "numba", 20), ("separate", "numpy", 100_000),
-             ("separate", "numpy", 20)]
-    for path, backend, block in cases:
+    cases = [("numba", n), ("numba", 1_000_000), ("numba", 100_000), ("numba", 20),
+             ("numpy", 100_000), ("numpy", 20)]
+    for backend, block in cases:
         # the numpy fallback is slow per call: a shorter run for its 20-sample case
         sub = tension[: min(n, 200_000)] if (backend, block) == ("numpy", 20) else tension
-        runs = [run(sub, block, backend, path) for _ in range(3)]
+        runs = [run(sub, block, backend) for _ in range(3)]
         wall = min(r[0] for r in runs)
         cpu = min(r[1] for r in runs)
         if sub.size == n:
-            damages[(path, backend, block)] = runs[0][2]
+            damages[(backend, block)] = runs[0][2]
         calls = -(-sub.size // block)
-        print(f"{path:8s} {backend:6s} block {block:>9d}: {sub.size / wall / 1e6:7.2f} M samples/s wall, "
+        print(f"{backend:6s} block {block:>9d}: {sub.size / wall / 1e6:7.2f} M samples/s wall, "
               f"{sub.size / cpu / 1e6:7.2f} M samples/s CPU ({wall / calls * 1e6:10.2f} us/call)")
-    print(f"committed damage {damages[('separate', 'numba', n)]:.9e}; identical for all paths, "
-          f"backends and block sizes over the whole series: {len(set(damages.values())) == 1}")
+    print(f"committed damage {damages[('numba', n)]:.9e}; identical for all backends and "
+          f"block sizes over the whole series: {len(set(damages.values())) == 1}")
     stage_split(tension)
-    print(f"packed divide/sqrt in the compiled fused loop: {vector_instructions()}")
+    print(f"packed divide/sqrt in the compiled commit loop: {vector_instructions()}")
 
 
 if __name__ == "__main__":

@@ -287,6 +287,18 @@ def _cycle_damage(ranges, counts, params, ln_s, d):
         d[i] = select(ranges[i] * scale >= cutoff, counts[i] * exp_det(d[i]), 0.0)
 
 
+def damage_loop(ranges, counts, params):
+    """Damage of each cycle (``_cycle_damage``, chunk by chunk): the one S-N evaluation
+    behind ``SNCurve.damage_per_cycle`` as behind the committing loops, hence their bits."""
+    n = ranges.shape[0]
+    d = np.empty(n)
+    ln_s = np.empty(min(CHUNK, n))
+    for i in range(0, n, CHUNK):
+        end = min(i + CHUNK, n)
+        _cycle_damage(ranges[i:end], counts[i:end], params, ln_s, d[i:end])
+    return d
+
+
 @jitable
 def _commit_damage(ranges, counts, d, table, inv_width, committed):
     """Add d[:n] to ``committed`` one by one in order and bin the ranges; returns
@@ -356,11 +368,12 @@ def _commit_chunks(ranges, counts, params, table, inv_width, committed, ln_s, d)
 
 # ------------------------------------------------------------------ residue
 @jitable
-def _residue_cycles(st, pts, r, c):
+def _residue_cycles(st, pts, r, mn, c):
     """The counter's open residue (stack, then the running extreme once the direction is
-    known) counted as ASTM E1049 counts the end of a series, in its order (as
-    ``rainflow_stream._astm_cycles``): ranges into ``r``, counts (0.5 or 1.0) into ``c``;
-    ``pts`` is scratch. All three hold at least the residue's length. Returns the count."""
+    known) counted as ASTM E1049 counts the end of a series (three-point rule, the start
+    point moving on with each half cycle), in its order: ranges into ``r``, means into
+    ``mn``, counts (0.5 or 1.0) into ``c``; ``pts`` is scratch. All four hold at least the
+    residue's length. Returns the count."""
     ns = int(st[NS])
     n = ns + (1 if st[DIR] != 0.0 else 0)
     top = 0
@@ -375,6 +388,7 @@ def _residue_cycles(st, pts, r, c):
             if x < y:
                 break
             r[k] = y
+            mn[k] = 0.5 * (pts[top - 3] + pts[top - 2])
             if top - start == 3:  # Y holds the starting point: a half cycle
                 c[k] = 0.5
                 start += 1
@@ -385,16 +399,25 @@ def _residue_cycles(st, pts, r, c):
             k += 1
     for i in range(start, top - 1):
         r[k] = abs(pts[i] - pts[i + 1])
+        mn[k] = 0.5 * (pts[i] + pts[i + 1])
         c[k] = 0.5
         k += 1
     return k
 
 
+def residue_cycles_loop(st):
+    """``_residue_cycles`` of the counter state ``st``: (3, k) ranges, means, counts."""
+    n = int(st[NS]) + 1
+    out = np.empty((3, n))
+    k = _residue_cycles(st, np.empty(n), out[0], out[1], out[2])
+    return out[:, :k]
+
+
 @jitable
-def _residue_damage(st, params, pts, r, c, ln_s, d):
+def _residue_damage(st, params, pts, r, mn, c, ln_s, d):
     """Miner damage of the residue cycles (``_residue_cycles``), each as ``_cycle_damage``
     computes it, summed in counting order; the arrays are scratch of the residue's length."""
-    k = _residue_cycles(st, pts, r, c)
+    k = _residue_cycles(st, pts, r, mn, c)
     _cycle_damage(r[:k], c[:k], params, ln_s, d)
     total = 0.0
     for i in range(k):
@@ -406,7 +429,7 @@ def residue_loop(st, params):
     """``_residue_damage`` of the counter state ``st`` (one compiled call)."""
     n = int(st[NS]) + 1
     return _residue_damage(st, params, np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                           np.empty(n))
+                           np.empty(n), np.empty(n))
 
 
 # -------------------------------------------------------------------- ticks
@@ -432,7 +455,7 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     ln_s = np.empty(CHUNK)
     d = np.empty(CHUNK)
     ones = np.ones(out_r.shape[0])
-    scratch = np.empty((5, 64))  # the residue's scratch, grown when the residue is longer
+    scratch = np.empty((6, 64))  # the residue's scratch, grown when the residue is longer
     start = stops[k - 1] if k > 0 else 0
     while k < n_ticks:
         stop = stops[k]
@@ -451,68 +474,18 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
         if residue:
             ns = int(st[NS])
             if ns + 1 > scratch.shape[1]:
-                scratch = np.empty((5, 2 * (ns + 1)))
+                scratch = np.empty((6, 2 * (ns + 1)))
             t_residue[k] = _residue_damage(st, params, scratch[0], scratch[1], scratch[2],
-                                           scratch[3], scratch[4])
+                                           scratch[3], scratch[4], scratch[5])
         start = stop
         k += 1
     return k, nc, committed
 
 
-# --------------------------------------------------------------------- fused
-def tension_loop(t, k, tan_a, cos_a, rg_signed, e_mod, st, params, table, inv_width, committed):
-    """Tension -> axial stress -> rainflow -> Miner, chunk by chunk.
-
-    The same computations, in the same order, as ``axial_loop``, ``feed_loop`` and
-    ``commit_loop`` one after the other (hence the same bits), without the block-sized
-    intermediate arrays. Returns (committed, cycles, samples consumed); consumed <
-    len(t) when the stack storage may overflow (grow it and call again with the rest).
-    Each chunk's stresses are checked before the chunk is counted (one pass over the
-    tensions, not two): consumed = -(i + 1) if the stress of t[i] is not finite. Then
-    ``st[:HEADER + ns]`` and ``table[1]`` may hold the earlier chunks' changes, which the
-    caller undoes from a copy when ``t`` was longer than one chunk.
-    """
-    n = t.shape[0]
-    ns = int(st[NS])
-    cand = st[CAND]
-    dirn = st[DIR]
-    hyst = st[HYST]
-    limit = st.shape[0] - HEADER
-    w = min(CHUNK, n)
-    stress = np.empty(w)
-    tp = np.empty(w)
-    kmax = min(limit, ns + n) // 2 + 2  # cycles one chunk can close
-    ranges = np.empty(kmax)
-    means = np.empty(kmax)
-    ln_s = np.empty(kmax)
-    d = np.empty(kmax)
-    ones = np.ones(kmax)
-    cycles = 0.0
-    i = 0
-    while i < n and ns + CHUNK <= limit:
-        end = min(i + CHUNK, n)
-        for j in range(end - i):
-            stress[j] = axial_stress(t[i + j], k, tan_a, cos_a, rg_signed, e_mod)
-        if not _all_finite(stress[:end - i]):
-            for j in range(end - i):
-                if not math.isfinite(stress[j]):
-                    return committed, cycles, -(i + j + 1)
-        j, ns, cand, dirn = _begin(st, stress, 0, end - i, ns, cand, dirn, hyst)
-        m, cand, dirn = _turning_points(stress[j:end - i], cand, dirn, hyst, tp)
-        ns, nc = _close_cycles(st, ns, tp, m, ranges, means, 0)
-        _cycle_damage(ranges[:nc], ones[:nc], params, ln_s, d)
-        committed, more = _commit_damage(ranges[:nc], ones[:nc], d, table, inv_width, committed)
-        cycles += more
-        i = end
-    st[NS] = ns
-    st[CAND] = cand
-    st[DIR] = dirn
-    return committed, cycles, i
-
-
 axial_compiled = compile_loop(axial_loop)
 feed_compiled = compile_loop(feed_loop)
 commit_compiled = compile_loop(commit_loop)
+damage_compiled = compile_loop(damage_loop)
 residue_compiled = compile_loop(residue_loop)
+residue_cycles_compiled = compile_loop(residue_cycles_loop)
 ticks_compiled = compile_loop(ticks_loop)
-tension_compiled = compile_loop(tension_loop)

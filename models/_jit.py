@@ -23,7 +23,7 @@ import numpy as np
 try:
     import numba
 except ImportError:  # pragma: no cover - exercised only where numba is missing
-    numba = None
+    numba = None  # type: ignore[assignment]  # the compiled loops are then None
 
 
 def compile_loop(func):

@@ -65,7 +65,7 @@ def _integrate(line: Line, drag_d: tuple[float, ...], drag: Drag, current: Calla
                ha: float, va: float, steps: int) -> np.ndarray:
     """RK4 from the anchor; rows of (s, x, z, Tx, Tz)."""
     seg_l, seg_w, seg_c, joint_p = line._arrays
-    rows = [(0.0, 0.0, 0.0, ha, va)]
+    rows: list[tuple[float, ...]] = [(0.0, 0.0, 0.0, ha, va)]
     s0 = 0.0
     state = [0.0, 0.0, ha, va]
     total = float(seg_l.sum())

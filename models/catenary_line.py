@@ -302,8 +302,9 @@ def _solve_scalar(line: Line, x: float, z: float) -> LineSolution:
     if o[6] != _k.OK:
         raise ValueError(_failure(line, o[6], x, z))
     f = np.float64
-    return LineSolution(line, f(x), f(z), f(o[0]), f(o[1]), f(o[2]), f(o[3]), f(o[4]),
-                        np.int8(o[5]), o[7:11].reshape(2, 2), jh, jv)
+    scalars = (f(x), f(z), f(o[0]), f(o[1]), f(o[2]), f(o[3]), f(o[4]), np.int8(o[5]))
+    # a scalar solve: numpy scalars stand for the fields' 0-d arrays
+    return LineSolution(line, *scalars, o[7:11].reshape(2, 2), jh, jv)  # type: ignore[arg-type]
 
 
 _SCALARS = (float, int, np.floating, np.integer)

@@ -165,7 +165,7 @@ class LoadCycles:
         if e.ndim != 1 or e.size < 2 or np.any(np.diff(e) <= 0):
             raise ValueError("edges must be strictly increasing")
         idx = np.clip(np.searchsorted(e, self.ranges, side="right") - 1, 0, e.size - 2)
-        return np.bincount(idx, weights=self.counts, minlength=e.size - 1)
+        return np.bincount(idx, weights=self.counts, minlength=e.size - 1).astype(np.float64, copy=False)
 
 
 def wavfor_load_range(buoy: WavforBuoy = WavforBuoy()) -> LoadRange:
@@ -294,7 +294,7 @@ def damage_per_row(
     cycles: LoadCycles, per_cycle_damage: NDArray[np.float64], n_rows: int
 ) -> NDArray[np.float64]:
     """Damage per sea-state row (e.g. per storm) from :func:`damage`'s per-entry values."""
-    return np.bincount(cycles.row, weights=per_cycle_damage, minlength=n_rows)
+    return np.bincount(cycles.row, weights=per_cycle_damage, minlength=n_rows).astype(np.float64, copy=False)
 
 
 def annual_damage(table: SeaStateTable, total_damage: float) -> float:

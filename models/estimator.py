@@ -30,7 +30,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numba
 import numpy as np
@@ -541,8 +541,8 @@ def seed004_estimator(
     bare 31 mm cable, C_D = 1.2, fresh water; in-air mass 1.10 kg/m (as the catenary
     module assumes); anchor uplift capacity 1000 N (the floated line lifts the anchor by
     ~575 N at rest, by design). ``options`` override :func:`catenary_estimator` arguments."""
-    kw = dict(mass_per_length=1.10, drag_cd=1.2, drag_diameter=0.031, rho=1000.0,
-              anchor_uplift_limit_N=1000.0)
+    kw: dict[str, Any] = dict(mass_per_length=1.10, drag_cd=1.2, drag_diameter=0.031, rho=1000.0,
+                              anchor_uplift_limit_N=1000.0)
     kw.update(options)
     return catenary_estimator(vaps_mooring(), span, VAPS_DEPTH, dt, **kw)
 

@@ -2,10 +2,10 @@
 
 ``MinerAccumulator(sn_curve, histogram_edges_Pa=None, rate_window_s=86400.0,
 rate_buckets=24, reference_cycles=1e7, backend="auto")``
-  ``add_cycles(ranges_Pa, counts, means_Pa=None, time_s=None) -> float``
+  ``add_cycles(ranges_Pa, means_Pa, counts, time_s=None) -> float``
       commit closed cycles (never revised); returns the damage they added. ``time_s``
       (seconds, any epoch, non-decreasing) dates them for the damage rate.
-  ``set_provisional(ranges_Pa, counts, means_Pa=None) -> float``
+  ``set_provisional(ranges_Pa, means_Pa, counts) -> float``
       replace the provisional damage (the rainflow residue's half cycles).
   ``set_provisional_from(rainflow) -> float``  the same from a ``StreamingRainflow``.
   ``residue_damage(rainflow) -> float``  that figure without storing it (one compiled pass,
@@ -39,8 +39,6 @@ import numpy as np
 
 from models._fatigue_loops import commit_compiled as _commit_compiled
 from models._fatigue_loops import residue_compiled as _residue_compiled
-from models._fatigue_loops import exp_det, log_det
-from models._jit import select
 from models.sn_curve import SNCurve
 
 _DAY_S = 86400.0
@@ -96,17 +94,8 @@ class MinerAccumulator:
         self._setup_kernel()
 
     def _setup_kernel(self) -> None:
-        c = self.sn_curve
-        m, log_a, bounds = c._segments
-        self._seg_m = m
-        self._seg_coef = c.dff * 10.0 ** -log_a
-        self._bounds = bounds
-        self._cutoff = float(c.endurance_MPa) if c.low_stress == "cutoff" else 0.0
-        # mean-free curves scale the raw ranges straight to the curve's MPa
-        self._scale = c.scf * c.derating / 1e6
-        self._needs_means = c.mean_correction != "none"
-        with np.errstate(divide="ignore"):
-            self._params = np.concatenate(([self._scale, self._cutoff, m.size], m, np.log(self._seg_coef), bounds))
+        self._params = self.sn_curve.kernel_params
+        self._needs_means = self.sn_curve.mean_correction != "none"
         edges = self._table[0]
         width = (edges[-1] - edges[0]) / (edges.size - 1)
         uniform = np.allclose(np.diff(edges), width, rtol=1e-9, atol=0.0)
@@ -121,8 +110,11 @@ class MinerAccumulator:
         return self._table[1]
 
     # ------------------------------------------------------------------ updating
-    def add_cycles(self, ranges_Pa, counts, means_Pa=None, time_s: float | None = None) -> float:
-        """Commit closed cycles; return the damage they add (see module docstring)."""
+    def add_cycles(self, ranges_Pa, means_Pa, counts, time_s: float | None = None) -> float:
+        """Commit closed cycles; return the damage they add (see module docstring).
+
+        The order of ``StreamingRainflow.feed``'s result: ``add_cycles(*rainflow.feed(x))``;
+        ``means_Pa`` may be None for a curve without mean-stress correction."""
         r = np.asarray(ranges_Pa, dtype=np.float64)
         n = np.asarray(counts, dtype=np.float64)
         if n.shape != r.shape:
@@ -134,7 +126,7 @@ class MinerAccumulator:
             if means_Pa is None:
                 raise ValueError(f"the S-N curve's mean_correction={self.sn_curve.mean_correction!r} needs means_Pa")
             # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
-            added = self._commit_numpy(r, n, self.sn_curve.effective_range_MPa(r, means_Pa))
+            added = self._commit_numpy(r, n, means_Pa)
         elif self.backend == "numba":
             committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._inv_width,
                                                              self._committed)
@@ -143,7 +135,7 @@ class MinerAccumulator:
             self._committed = committed
             self._cycles += cycles
         else:
-            added = self._commit_numpy(r, n, r * self._scale)
+            added = self._commit_numpy(r, n, None)
         if time_s is not None:
             self._date(added, time_s)
         return added
@@ -165,12 +157,13 @@ class MinerAccumulator:
             self._date(added, time_s)
         return added
 
-    def _commit_numpy(self, raw: np.ndarray, n: np.ndarray, s: np.ndarray) -> float:
-        """numpy twin of the compiled loop; ``s`` are the curve's ranges in MPa."""
+    def _commit_numpy(self, raw: np.ndarray, n: np.ndarray, means) -> float:
+        """The compiled loop's sum and histogram in numpy (mean-corrected curves, or the
+        numpy backend); each cycle's damage from ``SNCurve.damage_per_cycle``."""
         bad = np.flatnonzero(~((raw >= 0) & np.isfinite(raw) & (n >= 0) & np.isfinite(n)))
         if bad.size:
             raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
-        d = self._cycle_damage_numpy(n, s)
+        d = self.sn_curve.damage_per_cycle(raw, n, means)
         start = self._committed
         # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
         self._committed = float(np.cumsum(np.concatenate(([start], d)))[-1])
@@ -180,16 +173,7 @@ class MinerAccumulator:
         np.add.at(self._hist, idx[inside], n[inside])
         return self._committed - start
 
-    def _cycle_damage_numpy(self, n: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Damage of ``n`` cycles of curve ranges ``s`` (MPa) each, as the compiled loop."""
-        seg = self._seg_m.size - 1 - np.searchsorted(self._bounds, s, side="right")
-        lncoef = self._params[3 + self._seg_m.size: 3 + 2 * self._seg_m.size]
-        # the compiled loop's log and exp on arrays (the same bits); ln 0 = -inf gives
-        # exp(-inf) = 0 damage; both sides of the selects are evaluated
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            return select(s >= self._cutoff, n * exp_det(self._seg_m[seg] * log_det(s) + lncoef[seg]), 0.0)
-
-    def set_provisional(self, ranges_Pa, counts, means_Pa=None) -> float:
+    def set_provisional(self, ranges_Pa, means_Pa, counts) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""
         d = self.sn_curve.damage_per_cycle(np.asarray(ranges_Pa, dtype=np.float64),
                                            np.asarray(counts, dtype=np.float64), means_Pa)
@@ -204,11 +188,7 @@ class MinerAccumulator:
         if not self._needs_means and _residue_compiled is not None:
             return _residue_compiled(rainflow._st, self._params)
         ranges, means, counts = rainflow.residue_half_cycles()
-        if self._needs_means:
-            s = self.sn_curve.effective_range_MPa(ranges, means)
-        else:
-            s = ranges * self._scale
-        d = self._cycle_damage_numpy(counts, s)
+        d = self.sn_curve.damage_per_cycle(ranges, counts, means)
         return float(np.cumsum(d)[-1]) if d.shape[0] else 0.0
 
     def set_provisional_from(self, rainflow) -> float:
@@ -253,7 +233,7 @@ class MinerAccumulator:
         return self._rate
 
     def _rate_per_day(self) -> float:
-        if self._t_last is None or self._t_last <= self._t_first:
+        if self._t_last is None or self._t_first is None or self._t_last <= self._t_first:
             return 0.0
         width = self.rate_window_s / self.rate_buckets
         newest = math.floor(self._t_last / width)

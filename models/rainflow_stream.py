@@ -41,6 +41,8 @@ from typing import Literal
 
 import numpy as np
 
+from models import _fatigue_loops as _loops
+
 # the compiled loop and the layout of the state vector it shares with the numpy backend
 from models._fatigue_loops import CAND as _CAND
 from models._fatigue_loops import CHUNK as _CHUNK
@@ -158,7 +160,9 @@ class StreamingRainflow:
         may still pair two residue ranges into a full cycle (1.0) that the four-point rule
         keeps open, which is what makes closed + residue cycles total the ASTM counts.
         """
-        return _astm_cycles(self.residue.tolist())
+        loop = _loops.residue_cycles_compiled or _loops.residue_cycles_loop
+        cycles = loop(self._st)
+        return cycles[0], cycles[1], cycles[2]
 
     def state(self) -> dict:
         """Everything needed to resume, as a small JSON-serialisable dict."""
@@ -189,30 +193,6 @@ class StreamingRainflow:
         rf._st[_HEADER:_HEADER + len(stack)] = stack
         rf._samples = int(state["samples"])
         return rf
-
-
-def _astm_cycles(points: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ASTM E1049 three-point counting of a (short) turning-point sequence."""
-    out: list[tuple[float, float, float]] = []
-    stack: list[float] = []
-    start = 0  # index in stack of the series' current starting point
-    for p in points:
-        stack.append(p)
-        while len(stack) - start >= 3:
-            x_rng = abs(stack[-1] - stack[-2])
-            y_rng = abs(stack[-2] - stack[-3])
-            if x_rng < y_rng:
-                break
-            if len(stack) - start == 3:  # Y contains the starting point: half cycle
-                out.append((y_rng, 0.5 * (stack[start] + stack[start + 1]), 0.5))
-                start += 1
-            else:
-                out.append((y_rng, 0.5 * (stack[-3] + stack[-2]), 1.0))
-                del stack[-3:-1]
-    for a, b in zip(stack[start:], stack[start + 1:]):
-        out.append((abs(a - b), 0.5 * (a + b), 0.5))
-    arr = np.array(out, dtype=np.float64).reshape(-1, 3)
-    return arr[:, 0].copy(), arr[:, 1].copy(), arr[:, 2].copy()
 
 
 def _reject_shape(x: np.ndarray):

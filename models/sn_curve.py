@@ -27,7 +27,8 @@ compressive mean; a mean at or above the ultimate strength ``ultimate_Pa`` gives
 damage (the part has failed statically); SWT/Walker give no damage when S_max <= 0.
 
 Presets: ``vaps_copper()`` (seed 004, Marks annealed copper x 0.42),
-``dnv_rp_c203(detail, environment)`` (DNV-RP-C203 Edition April 2016, Tables 2-1 air and
+``vaps_lab_calibrated()`` (the same shape fitted to seed 004's lab failures, models.lab_fatigue),
+``dnv_rp_c203(detail, environment, knee)`` (DNV-RP-C203 Edition April 2016, Tables 2-1 air and
 2-2 seawater with cathodic protection; the 2024 edition changed B1 to C2 and is not
 tabulated here), ``dnv_chain_studless()`` (DNV-OS-E301 studless chain, m = 3,
 a_D = 6.0e10, stress range in MPa on the nominal area).
@@ -44,6 +45,8 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
+
+from models import _fatigue_loops as _loops
 
 
 LowStress = Literal["miner", "cutoff", "haibach"]
@@ -186,13 +189,32 @@ class SNCurve:
                              low_stress=low_stress, **options)
 
     @classmethod
+    def vaps_lab_calibrated(cls, low_stress: LowStress = "haibach", **options) -> "SNCurve":
+        """``vaps_copper`` shifted in life to seed 004's lab failures (App. 2), x 3.74 in life.
+
+        Fitted by ``models.lab_fatigue.vaps_lab_calibration`` (method, mean-stress convention
+        and uncertainty documented there): the test-calibrated alternative to the
+        handbook-conservative ``vaps_copper``.
+        """
+        from models.lab_fatigue import vaps_lab_calibration  # it builds on this module
+
+        return vaps_lab_calibration(cls.vaps_copper(low_stress=low_stress)).curve(**options)
+
+    @classmethod
     def dnv_rp_c203(cls, detail: str, environment: Literal["air", "seawater_cp"] = "air",
+                    knee: Literal["intersection", "cycles"] = "intersection",
                     **options) -> "SNCurve":
         """DNV-RP-C203 Edition April 2016 curve ``detail`` (B1 ... W3).
 
         ``environment="air"``: Table 2-1; ``"seawater_cp"``: Table 2-2 (seawater with
         cathodic protection). Bilinear, m2 = 5 continues below the knee (no cut-off, as
         the RP prescribes for variable amplitude). Thickness effects are left to ``scf``.
+
+        ``knee``: ``"intersection"`` (default, the RP's tables as printed) uses the printed
+        log a2, so the knee is where the two lines cross (its N is 1e7 / 1e6 to the printed
+        digits); ``"cycles"`` forces the knee to exactly N = 1e7 (air) / 1e6 (seawater_cp)
+        and recomputes log a2 = log N_knee + m2 log S_knee with S_knee from the first
+        segment, as qats and fatpack do (lives below the knee differ by about 0.15 %).
         """
         if detail not in _DNV_2016_AIR:
             raise ValueError(f"unknown DNV-RP-C203 (2016) detail {detail!r}; one of {sorted(_DNV_2016_AIR)}")
@@ -201,6 +223,11 @@ class SNCurve:
             log_a1 = _DNV_2016_SEAWATER_CP_LOG_A1[detail]
         elif environment != "air":
             raise ValueError(f"environment must be 'air' or 'seawater_cp', got {environment!r}")
+        if knee == "cycles":
+            log_n_knee = 7.0 if environment == "air" else 6.0
+            log_a2 = log_n_knee + m2 * (log_a1 - log_n_knee) / m1
+        elif knee != "intersection":
+            raise ValueError(f"knee must be 'intersection' or 'cycles', got {knee!r}")
         return cls.multi_slope((m1, m2), (log_a1, log_a2), name=f"DNV-RP-C203:2016 {detail} {environment}",
                                **options)
 
@@ -210,12 +237,19 @@ class SNCurve:
         return cls.basquin(3.0, float(np.log10(6.0e10)), name="DNV-OS-E301 studless chain", **options)
 
     # -------------------------------------------------------------------- evaluation
+    @property
+    def _endurance(self) -> float:
+        """``endurance_MPa``, which ``__post_init__`` requires for a cut-off or Haibach tail."""
+        if self.endurance_MPa is None:
+            raise ValueError(f"SNCurve {self.name!r} has no endurance_MPa")
+        return float(self.endurance_MPa)
+
     @cached_property
     def _segments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(m, log_a, ascending lower bounds in MPa) including a Haibach tail."""
         m, log_a, knees = list(self.m), list(self.log_a), list(self.knees_MPa)
         if self.low_stress == "haibach":
-            e = float(self.endurance_MPa)
+            e = self._endurance
             m_tail = 2.0 * m[-1] - 1.0
             log_n_e = log_a[-1] - m[-1] * np.log10(e)
             m.append(m_tail)
@@ -223,42 +257,52 @@ class SNCurve:
             knees.append(e)
         return np.asarray(m), np.asarray(log_a), np.asarray(knees[::-1])
 
-    def effective_range_MPa(self, range_Pa, mean_Pa=None) -> np.ndarray:
-        """Stress range in MPa entering the curve: mean-corrected, times scf and derating."""
-        s = np.asarray(range_Pa, dtype=np.float64) * self.scf
-        if not np.all(s >= 0) or not np.all(np.isfinite(s)):
-            raise ValueError("stress ranges must be finite and >= 0")
-        if self.mean_correction != "none":
-            if mean_Pa is None:
-                raise ValueError(f"mean_correction={self.mean_correction!r} needs mean stresses")
-            sm = np.asarray(mean_Pa, dtype=np.float64) * self.scf
-            s = _mean_corrected(s, sm, self.mean_correction, self.ultimate_Pa, self.walker_gamma)
-        return s * (self.derating / _MPA)
+    @cached_property
+    def kernel_params(self) -> np.ndarray:
+        """The curve as the compiled loops read it (``models._fatigue_loops``): [scale from
+        nominal Pa ranges to the curve's MPa (scf x derating / 1e6), cut-off MPa (0 if
+        none), n_seg, m_i..., ln(dff / a_i)..., ascending segment bounds MPa...]."""
+        m, log_a, bounds = self._segments
+        cutoff = self._endurance if self.low_stress == "cutoff" else 0.0
+        with np.errstate(divide="ignore"):
+            return np.concatenate(([self.scf * self.derating / _MPA, cutoff, m.size], m,
+                                   np.log(self.dff * 10.0 ** -log_a), bounds))
 
     @cached_property
-    def _power_law(self) -> tuple[np.ndarray, np.ndarray | float, np.ndarray]:
-        """(m, dff / a per segment, ascending bounds in MPa): the per-cycle damage factors,
-        computed once. A single segment keeps a scalar coefficient (numpy's scalar power,
-        as evaluated before this cache existed: the values stay bit-identical)."""
-        m, log_a, bounds = self._segments
-        coef = self.dff * 10.0 ** -log_a[0] if m.size == 1 else self.dff * 10.0 ** -log_a
-        return m, coef, bounds
+    def _mpa_params(self) -> np.ndarray:
+        """``kernel_params`` for ranges already in the curve's MPa (scale 1: exact)."""
+        params = self.kernel_params.copy()
+        params[0] = 1.0
+        return params
+
+    def effective_range_MPa(self, range_Pa, mean_Pa=None) -> np.ndarray:
+        """Stress range in MPa entering the curve: mean-corrected, times scf and derating."""
+        r = np.asarray(range_Pa, dtype=np.float64)
+        if not np.all(r >= 0) or not np.all(np.isfinite(r)):
+            raise ValueError("stress ranges must be finite and >= 0")
+        if self.mean_correction == "none":
+            return r * self.kernel_params[0]  # one product, as the compiled loops scale
+        if mean_Pa is None:
+            raise ValueError(f"mean_correction={self.mean_correction!r} needs mean stresses")
+        sm = np.asarray(mean_Pa, dtype=np.float64) * self.scf
+        s = _mean_corrected(r * self.scf, sm, self.mean_correction, self.ultimate_Pa, self.walker_gamma)
+        return s * (self.derating / _MPA)
 
     def damage_per_cycle(self, range_Pa, counts=1.0, mean_Pa=None) -> np.ndarray:
-        """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa."""
-        return self._damage_of(self.effective_range_MPa(range_Pa, mean_Pa), counts)
+        """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa.
 
-    def _damage_of(self, s: np.ndarray, counts) -> np.ndarray:
-        """Damage of effective ranges ``s`` (MPa, see ``effective_range_MPa``) times counts."""
-        m, coef, bounds = self._power_law
-        if m.size == 1:
-            d = np.power(s, m[0]) * coef
-        else:
-            seg = m.size - 1 - np.searchsorted(bounds, s, side="right")
-            d = np.power(s, m[seg]) * coef[seg]
-        if self.low_stress == "cutoff":
-            d = np.where(s < self.endurance_MPa, 0.0, d)
-        return d * np.asarray(counts, dtype=np.float64)
+        Evaluated by the compiled loops' own per-cycle function (``_fatigue_loops.damage_loop``,
+        exp(m ln S + ln(dff / a)) with their log and exp), so a cycle's damage has the same
+        bits here as in the committed Miner sum."""
+        s = self.effective_range_MPa(range_Pa, mean_Pa)
+        n = np.asarray(counts, dtype=np.float64)
+        if n.shape != s.shape:
+            s, n = np.broadcast_arrays(s, n)
+        # looked up per call: the compiled loop is loaded (numba imported) only when used
+        loop = _loops.damage_compiled or _loops.damage_loop
+        d = loop(np.ascontiguousarray(s).reshape(-1), np.ascontiguousarray(n).reshape(-1),
+                 self._mpa_params)
+        return d.reshape(s.shape)[()]
 
     def cycles_to_failure(self, range_Pa, mean_Pa=None) -> np.ndarray:
         """N(S) for stress ranges in Pa (inf below a cut-off or for zero range); excludes dff."""
@@ -281,7 +325,7 @@ class SNCurve:
         seg = np.searchsorted(n_knees, n, side="left")
         s = 10.0 ** ((log_a[seg] - np.log10(n)) / m[seg])
         if self.low_stress == "cutoff":
-            s = np.maximum(s, self.endurance_MPa)
+            s = np.maximum(s, self._endurance)
         return s * _MPA / (self.scf * self.derating)
 
     # ------------------------------------------------------------------ persistence

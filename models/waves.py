@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -205,7 +205,8 @@ class WaveComponents:
     dt: float
     n: int
 
-    def synthesize(self, transfer: NDArray[np.complex128] | None = None) -> NDArray[np.float64]:
+    def synthesize(self, transfer: NDArray[np.complexfloating] | NDArray[np.floating] | None = None
+                   ) -> NDArray[np.float64]:
         """The time series sum |H a| cos(2 pi f t + phase + arg H) at t = 0, dt, ..., (n-1) dt.
 
         ``transfer`` is a complex response per component (e.g. a heave RAO); None = 1.
@@ -236,8 +237,8 @@ def random_phase_components(
         raise ValueError(f"duration/dt must give at least 4 samples, got {n}")
     n += n % 2
     df = 1.0 / (n * dt)
-    f = np.arange(n // 2 + 1) * df
-    s = np.asarray(spectrum(f), dtype=float)
+    f = np.arange(n // 2 + 1, dtype=np.float64) * df
+    s = np.asarray(spectrum(f), dtype=np.float64)
     if s.shape != f.shape or not np.all(np.isfinite(s)) or np.any(s < 0.0):
         raise ValueError("spectrum must return finite values >= 0, one per frequency")
     amp = np.sqrt(2.0 * s * df)
@@ -252,7 +253,7 @@ def random_phase_series(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(t, eta): a surface-elevation record from ``spectrum``, deterministic for ``seed``."""
     comp = random_phase_components(spectrum, duration, dt, seed)
-    return np.arange(comp.n) * comp.dt, comp.synthesize()
+    return np.arange(comp.n, dtype=np.float64) * comp.dt, comp.synthesize()
 
 
 @dataclass(frozen=True)
@@ -342,7 +343,7 @@ class BuoyMotion:
 
 def heave_rao(
     omega: ArrayLike, natural_period: float | None, damping_ratio: float = 0.3
-) -> NDArray[np.complex128]:
+) -> NDArray[np.complexfloating]:
     """Second-order heave response to surface elevation, 1 at low frequency.
 
     H = 1 / (1 - r^2 + 2 i zeta r), r = omega T_n / (2 pi). ``natural_period`` None = a perfect
@@ -350,12 +351,12 @@ def heave_rao(
     """
     w = np.asarray(omega, dtype=float)
     if natural_period is None:
-        return np.ones_like(w, dtype=complex)
+        return np.ones_like(w, dtype=np.complex128)
     _positive_array("natural_period", natural_period)
     if not 0.0 < damping_ratio:
         raise ValueError(f"damping_ratio must be > 0, got {damping_ratio!r}")
     r = w * natural_period / (2.0 * np.pi)
-    return 1.0 / (1.0 - r * r + 2j * damping_ratio * r)
+    return cast(NDArray[np.complexfloating], 1.0 / (1.0 - r * r + 2j * damping_ratio * r))
 
 
 def buoy_motion(
@@ -394,7 +395,7 @@ def buoy_motion(
     acc = -(omega**2)
     vel = 1j * omega
     return BuoyMotion(
-        t=np.arange(comp.n) * comp.dt,
+        t=np.arange(comp.n, dtype=np.float64) * comp.dt,
         heave=comp.synthesize(rao),
         surge=comp.synthesize(horiz * math.cos(b)),
         sway=comp.synthesize(horiz * math.sin(b)),

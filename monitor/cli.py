@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "replay": "replay.cmd_replay",
     "demo": "replay.cmd_demo",
     "design": "replay.cmd_design",
+    "lab-test": "replay.cmd_lab_test",
     "forecast": "replay.cmd_forecast",
     "run": "monitor.cmd_run",
     "bridge": "monitor.cmd_bridge",

@@ -14,16 +14,21 @@ import logging
 import queue
 import signal
 import threading
+import time
 import tomllib
 from dataclasses import replace
+from typing import Any
 
 from monitor.blocks import parse_sensor_topic, validate_buoy_id
 from monitor.cmd_run import load_daemon_config
 from monitor.daemon_config import ZenohConfig
 from monitor.recorder import JSON_OBJECT, McapRecorder
+from monitor.sequence import SequenceTracker
 from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.record")
+
+_FETCH_TIMEOUT_S = 5.0  # longest wait for a sensor publisher's cache
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
@@ -49,28 +54,68 @@ def recorder_token_key(buoy_id: str) -> str:
 
 def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
            stop: threading.Event, codec: zenoh_io.BlockCodec) -> int:
-    """Record until ``stop`` is set; returns the number of messages written."""
+    """Record until ``stop`` is set; returns the number of messages written.
+
+    Sensor messages are taken by their publishers' sequence numbers
+    (:class:`monitor.sequence.SequenceTracker`, in memory): when a sensor publisher appears
+    (at start too) its whole cache is recorded, and a gap in the numbers is filled from the
+    cache first, so a recorder restarted within the cache window loses nothing (what it
+    recorded before is recorded again; readers drop exact duplicates)."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+    seqs = SequenceTracker()
     with zenoh_io.open_session(zc) as session:
         sub = zenoh_io.declare_enqueuing_subscriber(session, f"buoy/{buoy_id}/**", q)
+        watch = zenoh_io.declare_publisher_watch(session, buoy_id, q)
         # tells the shore (and tests) that this buoy's traffic is being recorded
         token = session.liveliness().declare_token(recorder_token_key(buoy_id))
+
+        def take(item: tuple) -> None:
+            if item[0] == "publisher":
+                _fill(session, recorder, codec, seqs, item[1], item[2], None)
+                return
+            _, key, payload, recv_ns, origin = item
+            if origin is not None:
+                _, sensor = parse_sensor_topic(key)
+                if seqs.gap(sensor, origin.source, origin.sn) is not None:
+                    _fill(session, recorder, codec, seqs, key, origin.source, origin.sn)
+                if seqs.observe(sensor, origin.source, origin.sn).redelivered:
+                    return
+            _write(recorder, codec, key, payload, recv_ns)
+
         try:
             while not stop.is_set():
                 try:
-                    _, key, payload, recv_ns = q.get(timeout=0.2)
+                    item = q.get(timeout=0.2)
                 except queue.Empty:
                     recorder.maybe_flush()
                     continue
-                _write(recorder, codec, key, payload, recv_ns)
+                take(item)
         finally:
             token.undeclare()
+            watch.undeclare()
             sub.undeclare()
             while not q.empty():
-                _, key, payload, recv_ns = q.get_nowait()
-                _write(recorder, codec, key, payload, recv_ns)
+                take(q.get_nowait())
             recorder.close()
     return recorder.messages
+
+
+def _fill(session: Any, recorder: McapRecorder, codec: zenoh_io.BlockCodec,
+          seqs: SequenceTracker, key: str, source: str, before_sn: int | None) -> None:
+    """Record what publisher ``source`` of ``key`` still caches after the last message taken
+    from it (and before ``before_sn``, if given)."""
+    _, sensor = parse_sensor_topic(key)
+    first = seqs.gap(sensor, source, None)[0]
+    last = None if before_sn is None else before_sn - 1
+    try:
+        replies = zenoh_io.fetch_cached(session, key, source, (first, last), _FETCH_TIMEOUT_S)
+    except zenoh_io.zenoh.ZError as exc:
+        log.warning("could not ask a sensor publisher's cache",
+                    extra={"fields": {"key": key, "error": repr(exc)}})
+        return
+    for payload, origin in replies:
+        if not seqs.observe(sensor, origin.source, origin.sn).redelivered:
+            _write(recorder, codec, key, payload, time.time_ns())
 
 
 def _document_time(payload: bytes, recv_ns: int) -> int:

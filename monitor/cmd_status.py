@@ -165,12 +165,18 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
                      _n(s.get("rate_hz"), "{:.1f}", " Hz"), str(s.get("accepted", 0)), rejected,
                      str(s.get("samples_missed", "-")), ", ".join(clock) or "-"))
     out += ["streams:", *_table(rows)]
-    rows = [("COMPONENT", "DAMAGE", "COMMITTED", "RATE/DAY", "REMAINING LIFE")]
+    rows = [("COMPONENT", "DAMAGE", "COMMITTED", "RATE/DAY", "REMAINING LIFE", "BEYOND YIELD")]
+    beyond = []
     for name, c in sorted((doc.get("components") or {}).items()):
+        n_yield = c.get("samples_beyond_yield")
         rows.append((str(name), _n(c.get("damage")), _n(c.get("damage_committed")),
                      _n(c.get("damage_rate_per_day")),
-                     _n(c.get("remaining_life_days"), "{:.4g}", " d")))
+                     _n(c.get("remaining_life_days"), "{:.4g}", " d"), _n(n_yield, "{:.0f}")))
+        if n_yield:
+            beyond.append(str(name))
     out += ["components:", *_table(rows)]
+    if beyond:  # the elastic helix model and the S-N curve do not hold there (docs/CONDUCTOR.md)
+        out.append(f"elastic model beyond yield: damage underestimated ({', '.join(beyond)})")
     active = (doc.get("alerts") or {}).get("active", [])
     out.append(f"active alerts: {len(active)}")
     if active:

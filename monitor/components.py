@@ -2,7 +2,13 @@
 
 A thin adapter over ``models.helix`` and ``models.fatigue`` so the pipeline sees one small
 interface per ``[[component]]``: conductors get the helix stress of their lay
-(``models.helix.conductor_stress``), axial members ``tension / area_m2``.
+(``models.helix.conductor_stress``; at ``location = "termination"`` the stress where the
+moulding fixes them, ``models.termination``), axial members ``tension / area_m2``.
+
+Yield: a conductor whose hot-spot stress (``scf`` x stress) exceeds the copper's tensile yield
+(``HelixCable.conductor_yield_Pa``) is outside the elastic helix model and the S-N curve, so
+its damage is underestimated; such samples are counted (``samples_beyond_yield``) for the
+report, the status and the ``conductor_yield`` alert rule.
 
 Damage bookkeeping is independent of block sizes: cycles closed by the rainflow are held as
 *pending* until the alert tick that contains their closing sample ends, and then committed to
@@ -20,7 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from models import fatigue, helix
+from models import fatigue, helix, termination
 from monitor.config import ComponentConfig, Config, ConfigError, FatigueConfig
 
 
@@ -65,6 +71,22 @@ def endurance_stress_Pa(cfg: ComponentConfig, curve: Any) -> float | None:
     return float(curve.endurance_MPa * 1e6 / (curve.scf * curve.derating))
 
 
+def yield_stress_Pa(cfg: ComponentConfig, cable: Any) -> float | None:
+    """Nominal conductor stress at which the hot spot (``scf`` x stress) reaches the conductor's
+    yield; None for non-conductors and conductors with no yield stress (inf)."""
+    if cfg.kind != "conductor" or not math.isfinite(cable.conductor_yield_Pa):
+        return None
+    return float(cable.conductor_yield_Pa / cfg.scf)
+
+
+def build_bend(cfg: ComponentConfig) -> Any:
+    """The termination bend of a ``location = "termination"`` component, else None."""
+    if cfg.location != "termination":
+        return None
+    return termination.TerminationBend(cfg.bend_radius_m, math.radians(cfg.bend_angle_deg),
+                                       cfg.bend_gauge_length_m)
+
+
 def build_cable(config: Config) -> Any:
     factory = getattr(helix.HelixCable, config.cable.preset, None)
     if factory is None:
@@ -99,6 +121,9 @@ class Component:
         self._cable = cable
         self._fcfg = fcfg
         self.sn_curve = build_sn_curve(cfg)
+        self._bend = build_bend(cfg)
+        self.yield_stress_Pa = yield_stress_Pa(cfg, cable)
+        self.samples_beyond_yield = 0 if state is None else int(state.get("samples_beyond_yield", 0))
         if state is None:
             self.rainflow = fatigue.StreamingRainflow(hysteresis=cfg.hysteresis_Pa)
             self.miner = fatigue.MinerAccumulator(
@@ -114,14 +139,21 @@ class Component:
             peak = state["max_stress_Pa"]
             self.max_stress_Pa = -math.inf if peak is None else float(peak)
 
-    def stress(self, tension_N: np.ndarray) -> np.ndarray:
-        """Stress of the component under the load samples; records the peak."""
-        if self.cfg.kind == "conductor":
+    def stress(self, tension_N: np.ndarray, record: bool = True) -> np.ndarray:
+        """Stress of the component under the load samples; records the peak and counts the
+        samples beyond yield (``record=False``: samples seen before, record nothing)."""
+        if self._bend is not None:
+            stress = termination.termination_stress(tension_N, self._cable, self.cfg.lay, self._bend)
+        elif self.cfg.kind == "conductor":
             stress = helix.conductor_stress(tension_N, self._cable, lay=self.cfg.lay)
         else:
             stress = tension_N / self.cfg.area_m2
-        if stress.shape[0]:
-            self.max_stress_Pa = max(self.max_stress_Pa, float(stress.max()))
+        if stress.shape[0] and record:
+            peak = float(stress.max())
+            self.max_stress_Pa = max(self.max_stress_Pa, peak)
+            limit = self.yield_stress_Pa
+            if limit is not None and peak > limit:  # the peak is known: count only when needed
+                self.samples_beyond_yield += int(np.count_nonzero(stress > limit))
         return stress
 
     def feed(self, stress_Pa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -140,7 +172,7 @@ class Component:
     def commit(self, tick_end_ns: int) -> None:
         """End of an alert tick: add the pending cycles to the Miner sum in one step."""
         ranges, means, counts = self._pending
-        self.miner.add_cycles(ranges, counts, means, time_s=tick_end_ns / 1e9)
+        self.miner.add_cycles(ranges, means, counts, time_s=tick_end_ns / 1e9)
         self._pending = [_EMPTY, _EMPTY, _EMPTY]
 
     def run_ticks(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],
@@ -178,6 +210,7 @@ class Component:
         return TickRun(cycles, out)
 
     def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
+        """Damage of the pending cycles, each as the committed ones' (``damage_per_cycle``)."""
         if ranges.shape[0] == 0:
             return 0.0
         return float(np.sum(self.sn_curve.damage_per_cycle(ranges, counts, means)))
@@ -199,6 +232,7 @@ class Component:
             "cycles": float(self.miner.total_cycles) + (
                 float(self._pending[2].sum()) if self._pending[2].shape[0] else 0.0),
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
+            "samples_beyond_yield": float(self.samples_beyond_yield),
         }
 
     def warm_up(self) -> None:
@@ -217,4 +251,5 @@ class Component:
             "miner": self.miner.state(),
             "pending": [p.tolist() for p in self._pending],
             "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else None,
+            "samples_beyond_yield": self.samples_beyond_yield,
         }

@@ -214,10 +214,11 @@ MOORING_PRESETS: Mapping[str, Mapping[str, float]] = {
 
 @dataclass(frozen=True)
 class CableConfig:
-    """``preset`` names a ``models.helix.HelixCable`` constructor; ``overrides`` replace fields."""
+    """``preset`` names a ``models.helix.HelixCable`` constructor; ``overrides`` replace fields
+    (numbers, and ``twist_restraint`` from the ``twist`` key)."""
 
     preset: str
-    overrides: Mapping[str, float]
+    overrides: Mapping[str, Any]
 
 
 @dataclass(frozen=True)
@@ -242,6 +243,12 @@ class ComponentConfig:
     scf: float
     dff: float
     hysteresis_Pa: float
+    # where along a conductor: "free_span" (the helix far from the ends) or "termination"
+    # (where a moulding fixes the conductors: models.termination, with this bend geometry)
+    location: str = "free_span"
+    bend_radius_m: float | None = None
+    bend_angle_deg: float | None = None
+    bend_gauge_length_m: float | None = None  # None: conductors locked at the bend
 
 
 @dataclass(frozen=True)
@@ -382,12 +389,27 @@ def _parse_mooring(r: SectionReader) -> MooringConfig:
     return out
 
 
+_TWIST_KEYS = ("twist", "twist_limit_deg", "twist_length_m")
+
+
 def _parse_cable(r: SectionReader) -> CableConfig:
     preset = r.str("preset", "vaps_biw")
-    overrides = {}
+    overrides: dict[str, Any] = {}
     for key in list(r.table):
-        if key != "preset":
+        if key != "preset" and key not in _TWIST_KEYS:
             overrides[key] = r.float(key, gt=0)
+    # the twist boundary condition (models.helix): free | restrained | limited (to an angle
+    # twist_limit_deg over twist_length_m)
+    twist = r.str("twist", "free", choices=("free", "restrained", "limited"))
+    if twist == "limited":
+        overrides["twist_limit_rad"] = math.radians(r.float("twist_limit_deg", ge=0, le=36000.0))
+        overrides["twist_length_m"] = r.float("twist_length_m", gt=0)
+    else:
+        for key in _TWIST_KEYS[1:]:
+            if r.has(key):
+                raise r.error(key, r.raw(key), 'only with twist = "limited"')
+    if twist != "free":
+        overrides["twist_restraint"] = twist
     r.done()
     return CableConfig(preset, overrides)
 
@@ -425,11 +447,33 @@ def _parse_component(r: SectionReader) -> ComponentConfig:
         scf=r.float("scf", 1.0, gt=0),
         dff=r.float("dff", 1.0, gt=0),
         hysteresis_Pa=r.float("hysteresis_Pa", 0.0, ge=0),
+        **_parse_location(r, kind),
     )
     if out.mean_stress != "none" and out.ultimate_Pa is None:
         raise r.error("mean_stress", out.mean_stress, "needs ultimate_Pa")
     r.done()
     return out
+
+
+_BEND_KEYS = ("bend_radius_m", "bend_angle_deg", "bend_gauge_length_m")
+
+
+def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
+    """``location`` and, at a termination, its bend (models.termination.TerminationBend)."""
+    choices = ("free_span", "termination") if kind == "conductor" else ("free_span",)
+    location = r.str("location", "free_span", choices=choices)
+    if location == "free_span":
+        for key in _BEND_KEYS:
+            if r.has(key):
+                raise r.error(key, r.raw(key), 'only with location = "termination"')
+        return {"location": location}
+    return {
+        "location": location,
+        "bend_radius_m": r.float("bend_radius_m", gt=0),
+        "bend_angle_deg": r.float("bend_angle_deg", ge=0, le=180.0),
+        "bend_gauge_length_m": (r.float("bend_gauge_length_m", gt=0)
+                                if r.has("bend_gauge_length_m") else None),
+    }
 
 
 def _parse_fatigue(r: SectionReader) -> FatigueConfig:

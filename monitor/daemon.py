@@ -7,9 +7,12 @@ status (after new data, and at least every ``status_interval_s``) -> checkpoint 
 they always see a consistent state.
 
 Crash safety: the checkpoint holds the pipeline's state (damage, residue, per-stream last
-sample times, alert states) plus the daemon's counters, written atomically. After a crash the
-pipeline restarts from it and skips samples at or before each stream's last time, so a
-publisher may re-deliver from a bit before the crash without double counting.
+sample times, alert states) plus the daemon's counters and, per stream, the sequence number of
+the last message of each sensor publisher taken in (:mod:`monitor.sequence`), written
+atomically. After a crash the daemon restarts from it and asks the publishers' caches for what
+they hold (Zenoh's advanced subscriber): messages at or before the checkpoint are recognised
+by their numbers and skipped (``redelivered``), the rest are processed once, and a gap in the
+numbers (the cache no longer had them) is counted as ``samples_missed`` and alerted on.
 
 Shutdown (``stop()``, e.g. from SIGTERM/SIGINT): ``STOPPING=1``, stop intake, process what is
 already queued, publish a last status, checkpoint, close the recorder and the session.
@@ -36,6 +39,7 @@ from monitor.events import Sink, StepResult
 from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
+from monitor.sequence import SequenceTracker
 from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.daemon")
@@ -45,6 +49,8 @@ _MIN_STATUS_GAP_S = 0.02
 _IDLE_WAIT_S = 0.2
 _MAX_TURN_S = 0.25  # longest stretch of queued work between periodic duties
 _RELEASE_EVERY_S = 600.0  # hand back the JIT compiler's pages (monitor.memory) this often
+_RECOVERY_TIMEOUT_S = 5.0  # longest wait for a publisher's cache to give back missed messages
+_RECONNECT_WAIT_S = 3.0  # at start: how long the checkpoint's sensor publishers may take to return
 _LOG_EVERY_S = 60.0  # a repeating fault (clock, checkpoint) is logged at most this often
 
 
@@ -183,6 +189,15 @@ class Daemon:
                                          "forecasts": 0, "forecasts_refused": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
+        self.sequences = SequenceTracker(saved.get("daemon", {}).get("sequences"))
+        # per (stream, publisher): the last sequence number written to the recording, and the
+        # one the recording held at its last flush (kept in the checkpoint): a redelivered
+        # message beyond it may have been lost with an unflushed chunk, so it is recorded again
+        self._recorded: dict[str, dict[str, int]] = {}
+        self._flushed: dict[str, dict[str, int]] = {
+            s: dict(d) for s, d in saved.get("daemon", {}).get("recorded", {}).items()}
+        self._flushes_seen = 0
+        self._first_catch_up = True
         self.restored_seq = restored.seq if restored is not None else 0
         hc = config.health
         self.clocks = ClockFaults(hc.clock_skew_max_s, hc.time_restart_min_s)
@@ -248,10 +263,12 @@ class Daemon:
             if self._attach is not None:
                 self._extensions = self._attach(self.session, self.pipeline)
                 declared.extend(_Closing(e) for e in self._extensions)
-            declared.append(zenoh_io.declare_enqueuing_subscriber(
-                self.session, zenoh_io.forecast_key(self.buoy_id), self._q, "forecast"))
+            declared.append(zenoh_io.declare_forecast_subscriber(
+                self.session, self.buoy_id, self._q))
             subscriber = zenoh_io.declare_enqueuing_subscriber(
                 self.session, zenoh_io.sensor_key(self.buoy_id), self._q)
+            declared.append(zenoh_io.declare_publisher_watch(self.session, self.buoy_id,
+                                                             self._q))
             log.info("daemon ready", extra={"fields": {
                 "buoy_id": self.buoy_id, "listen": list(zc.listen), "connect": list(zc.connect),
                 "restored_checkpoint": self.restored_seq,
@@ -296,19 +313,26 @@ class Daemon:
                 # a backlog is worked off in slices so status, checkpoints and the watchdog
                 # keep their pace
                 self._drain(time.monotonic() + _MAX_TURN_S)
-            now = time.monotonic()
-            if (now - self._last_status_mono >= zc.status_interval_s
-                    or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
-                self._publish_status()
-            for ext in self._extensions:
-                ext.poll()
-            self._checkpoint(self._checkpointer.maybe_save)
-            if self.recorder is not None:
-                self.recorder.maybe_flush()
-            if now >= self._next_release_mono:  # at once, then now and then: a steady daemon
-                release_compiler_pages()        # never runs the compiler (monitor.memory)
-                self._next_release_mono = now + _RELEASE_EVERY_S
-            self._pet_watchdog(now)
+            self._duties()
+
+    def _duties(self) -> None:
+        """Status, extensions, checkpoint, recorder flush, compiler pages, watchdog: each
+        when due (called between slices of work, never inside a block)."""
+        zc = self.config.zenoh
+        now = time.monotonic()
+        if (now - self._last_status_mono >= zc.status_interval_s
+                or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
+            self._publish_status()
+        for ext in self._extensions:
+            ext.poll()
+        self._checkpoint(self._checkpointer.maybe_save)
+        if self.recorder is not None:
+            self.recorder.maybe_flush()
+            self._note_flush()
+        if now >= self._next_release_mono:  # at once, then now and then: a steady daemon
+            release_compiler_pages()        # never runs the compiler (monitor.memory)
+            self._next_release_mono = now + _RELEASE_EVERY_S
+        self._pet_watchdog(now)
 
     def _checkpoint(self, save: Callable[[], Any]) -> None:
         """Save via ``save``; a failure (disk full, database gone) is counted, logged, shown
@@ -347,9 +371,11 @@ class Daemon:
     def _handle(self, item: tuple) -> None:
         kind = item[0]
         if kind == "data":
-            self._on_data(item[1], item[2], item[3])
+            self._on_data(item[1], item[2], item[3], item[4])
         elif kind == "forecast":
             self._on_forecast(item[1], item[2], item[3])
+        elif kind == "publisher":
+            self._catch_up()
         elif kind == "alive":
             self._on_alive(item[1], item[2])
         elif kind == "query":
@@ -358,19 +384,100 @@ class Daemon:
     def _stream(self, sensor: str) -> StreamHealth:
         return self.streams.setdefault(sensor, StreamHealth())
 
-    def _on_data(self, key: str, payload: bytes, recv_ns: int) -> None:
-        block = zenoh_io.decode_counted(self.codec, key, payload, recv_ns, self.counters, log)
+    def _on_data(self, key: str, payload: bytes, recv_ns: int,
+                 origin: zenoh_io.Origin | None) -> None:
+        block = self._decode(key, payload, recv_ns)
         if block is None:
             return
-        if block.buoy_id != self.buoy_id:
+        if origin is not None and self.sequences.gap(block.sensor, origin.source,
+                                                     origin.sn) is not None:
+            self._catch_up()  # takes this message too, as long as its publisher's cache has it
+        self._take(key, payload, block, recv_ns, origin)
+
+    def _decode(self, key: str, payload: bytes, recv_ns: int) -> SampleBlock | None:
+        block = zenoh_io.decode_counted(self.codec, key, payload, recv_ns, self.counters, log,
+                                        count_decoded=False)
+        if block is not None and block.buoy_id != self.buoy_id:
+            self.counters["messages"] += 1
             self.counters["wrong_buoy"] += 1
+            return None
+        return block
+
+    def _catch_up(self) -> None:
+        """Take what the sensor publishers' caches hold beyond the last message taken from
+        each (everything, for a publisher not seen before): at start, when a publisher
+        appears, and when a message's number shows a gap (live messages overtook what a
+        restarting daemon missed). All publishers are asked at once and the messages taken in
+        sensor-time order across streams, as a replay would see them (one stream's backlog
+        taken alone would push the others' behind the ordering horizon)."""
+        fetched = []
+        try:
+            publishers = self._publishers_to_catch_up()
+            caches = []
+            for key, source in publishers:
+                _, sensor = parse_sensor_topic(key)
+                first = self.sequences.gap(sensor, source, None)[0]
+                if self.recorder is not None:  # what the recording may have lost unflushed
+                    first = min(first, self._flushed.get(sensor, {}).get(source, -1) + 1)
+                caches.append((key, zenoh_io.fetch_cached(self.session, key, source,
+                                                          (first, None), _RECOVERY_TIMEOUT_S)))
+        except (zenoh_io.zenoh.ZError, ValueError) as exc:  # what is not fetched is counted
+            self._faults.warning("catch-up", "could not ask the sensor publishers' caches; "
+                                 "a gap will count as missed", error=repr(exc))
             return
-        if self.recorder is not None:
-            self.recorder.write(key, payload, self.codec.channel_spec(block.sensor),
-                                recv_ns, block.t_first_ns)
+        for key, replies in caches:
+            for payload, origin in replies:
+                block = self._decode(key, payload, time.time_ns())
+                if block is not None:
+                    fetched.append((block, key, payload, origin))
+        fetched.sort(key=lambda f: f[0].t_last_ns)  # stable: a stream's own order is kept
+        taken: dict[str, int] = {}
+        turn_ends = time.monotonic() + _MAX_TURN_S
+        for block, key, payload, origin in fetched:
+            if time.monotonic() > turn_ends:  # an hour's backlog: keep status and watchdog going
+                self._duties()
+                turn_ends = time.monotonic() + _MAX_TURN_S
+            if self._take(key, payload, block, block.recv_ns, origin):
+                self.sequences.recovered_from_cache(block.sensor, 1)
+                taken[block.sensor] = taken.get(block.sensor, 0) + 1
+        log.info("caught up from the sensor publishers' caches", extra={"fields": {
+            "publishers": [k for k, _ in publishers], "taken": taken}})
+
+    def _publishers_to_catch_up(self) -> list[tuple[str, str]]:
+        """The sensor publishers alive now. The first time in a daemon life, wait (up to
+        ``_RECONNECT_WAIT_S``) for the publishers the checkpoint knows to reconnect: their
+        backlogs must be taken together, in time order."""
+        deadline = time.monotonic() + (_RECONNECT_WAIT_S if self._first_catch_up else 0.0)
+        self._first_catch_up = False
+        expected = self.sequences.latest_sources()
+        while True:
+            found = zenoh_io.sensor_publishers(self.session, self.buoy_id, _RECOVERY_TIMEOUT_S)
+            streams = {(parse_sensor_topic(k)[1], src) for k, src in found}
+            if expected <= streams or time.monotonic() >= deadline:
+                return found
+            time.sleep(0.05)
+
+    def _take(self, key: str, payload: bytes, block: SampleBlock, recv_ns: int,
+              origin: zenoh_io.Origin | None) -> bool:
+        """Record and process one decoded message; False if it was a redelivery (skipped)."""
+        verdict = (self.sequences.observe(block.sensor, origin.source, origin.sn)
+                   if origin is not None else None)
+        if verdict is not None and verdict.missed:
+            self._faults.warning(f"missed {block.sensor}", "sensor messages missed: the "
+                                 "publisher's cache no longer held them", sensor=block.sensor,
+                                 missed=verdict.missed, sn=origin.sn,
+                                 **self.sequences.fields(block.sensor))
+        redelivered = verdict is not None and verdict.redelivered
+        self._record(key, payload, block, recv_ns, origin, redelivered)
+        if redelivered:
+            return False  # already in the restored state (taken before the checkpoint)
+        self.counters["messages"] += 1
         self._stream(block.sensor).arrived(time.monotonic(), len(block))
         if len(block):
-            for msg in self.clocks.observe(block.sensor, block.t_last_ns, recv_ns):
+            # skew against the time it was published: a message from a publisher's cache
+            # arrives late by design
+            sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else recv_ns
+            for msg in self.clocks.observe(block.sensor, block.t_last_ns, sent_ns):
                 self._faults.warning(f"clock {block.sensor}", "sensor clock fault: " + msg,
                                      sensor=block.sensor, **self.clocks.fields(block.sensor))
         try:
@@ -380,6 +487,29 @@ class Daemon:
             log.warning("block refused by the pipeline",
                         extra={"fields": {"key": key, "error": str(exc)}})
         self._dirty_status = True
+        return True
+
+    def _record(self, key: str, payload: bytes, block: SampleBlock, recv_ns: int,
+                origin: zenoh_io.Origin | None, redelivered: bool) -> None:
+        """Record a received sensor message; a redelivered one only if the recording may not
+        hold it yet (numbered after what the recording held at its last flush)."""
+        rec = self.recorder
+        if rec is None:
+            return
+        if origin is not None:
+            if redelivered and origin.sn <= self._flushed.get(block.sensor, {}).get(
+                    origin.source, -1):
+                return
+            self._recorded.setdefault(block.sensor, {})[origin.source] = origin.sn
+        rec.write(key, payload, self.codec.channel_spec(block.sensor), recv_ns,
+                  block.t_first_ns)
+        self._note_flush()
+
+    def _note_flush(self) -> None:
+        if self.recorder is not None and self.recorder.flushes != self._flushes_seen:
+            self._flushes_seen = self.recorder.flushes
+            for stream, d in self._recorded.items():
+                self._flushed.setdefault(stream, {}).update(d)
 
     def _on_forecast(self, key: str, payload: bytes, recv_ns: int) -> None:
         """A sea-state forecast: recorded as received, handed to the pipeline (applied at
@@ -441,6 +571,7 @@ class Daemon:
             s = streams.setdefault(name, {})
             s.update(health.to_dict(now, ages[name]))
             s.update(self.clocks.fields(name))
+            s.update(self.sequences.fields(name))
             # wall-clock age of the last accepted sample: blocks that keep arriving but are
             # all rejected (a clock that went back) look alive by data age alone
             accepted, rejected = s.get("accepted", 0), sum((s.get("rejected") or {}).values())
@@ -486,6 +617,8 @@ class Daemon:
         return {
             "pipeline": self.pipeline.state(),
             "daemon": {"counters": dict(self.counters), "live": self.live.state(),
+                       "sequences": self.sequences.state(),
+                       "recorded": {s: dict(d) for s, d in self._flushed.items()},
                        "last_status": self._last_doc},
         }
 

@@ -63,8 +63,14 @@ def _stream_metrics(buoy: str, streams: Mapping[str, Any]) -> Iterator[Metric]:
                               labels=["buoy", "stream"])
     rej = CounterMetricFamily("buoymon_samples_rejected", "Samples rejected, by reason",
                               labels=["buoy", "stream", "reason"])
-    miss = CounterMetricFamily("buoymon_samples_missed", "Samples published but never received",
+    miss = CounterMetricFamily("buoymon_samples_missed", "Sensor messages published but never "
+                               "received (beyond the publisher's cache)",
                                labels=["buoy", "stream"])
+    redo = CounterMetricFamily("buoymon_messages_redelivered", "Sensor messages received again "
+                               "after being taken (skipped)", labels=["buoy", "stream"])
+    rec = CounterMetricFamily("buoymon_messages_recovered", "Sensor messages fetched from a "
+                              "publisher's cache (restart catch-up, gaps)",
+                              labels=["buoy", "stream"])
     age = _gauge("buoymon_data_age_seconds", "Logger-clock seconds since the stream's last "
                  "block arrived (NaN if none in this daemon life)", ["buoy", "stream"])
     timeout = _gauge("buoymon_data_age_timeout_seconds", "Data-age alert timeout",
@@ -84,8 +90,10 @@ def _stream_metrics(buoy: str, streams: Mapping[str, Any]) -> Iterator[Metric]:
         acc.add_metric(lab, _f(s.get("accepted", 0)))
         for reason, n in sorted((s.get("rejected") or {}).items()):
             rej.add_metric([buoy, name, reason], _f(n))
-        if "samples_missed" in s:
-            miss.add_metric(lab, _f(s["samples_missed"]))
+        for family, field in ((miss, "samples_missed"), (redo, "redelivered"),
+                              (rec, "recovered")):
+            if field in s:
+                family.add_metric(lab, _f(s[field]))
         age.add_metric(lab, _f(s.get("data_age_s")))
         timeout.add_metric(lab, _f(s.get("data_age_timeout_s")))
         stale.add_metric(lab, 1.0 if s.get("data_stale") else 0.0)
@@ -93,7 +101,7 @@ def _stream_metrics(buoy: str, streams: Mapping[str, Any]) -> Iterator[Metric]:
         skew.add_metric(lab, _f(s.get("clock_skew_s")))
         skewed.add_metric(lab, _f(s.get("clock_skewed_blocks", 0)))
         restarts.add_metric(lab, _f(s.get("time_restarts", 0)))
-    yield from (acc, rej, miss, age, timeout, stale, last, skew, skewed, restarts)
+    yield from (acc, rej, miss, redo, rec, age, timeout, stale, last, skew, skewed, restarts)
 
 
 # status component field -> (metric name, help, scale)

@@ -61,14 +61,17 @@ class AlertEngineLike(Protocol):
 
 
 def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, float | None],
-                       state: Mapping[str, Any] | None) -> AlertEngineLike:
+                       state: Mapping[str, Any] | None,
+                       yield_Pa: Mapping[str, float | None] | None = None) -> AlertEngineLike:
     """The ``[alerts]`` rules engine, restored from ``state`` if given.
 
-    ``endurance_Pa`` maps each component to its derated endurance stress (None if it has none).
+    ``endurance_Pa`` maps each component to its derated endurance stress (None if it has none),
+    ``yield_Pa`` to the nominal stress at which its hot spot yields (None if it has none).
     """
     from monitor.alerts.engine import AlertEngine
 
-    components = {name: {"endurance_stress_Pa": e} for name, e in endurance_Pa.items()}
+    components = {name: {"endurance_stress_Pa": e, "yield_stress_Pa": (yield_Pa or {}).get(name)}
+                  for name, e in endurance_Pa.items()}
     if state:
         return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
     try:
@@ -340,7 +343,7 @@ class Pipeline:
         self.alerts = build_alert_engine(
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
-            st.get("alerts"))
+            st.get("alerts"), {n: c.yield_stress_Pa for n, c in self.components.items()})
         # without rules there is nothing to evaluate: skip building the per-tick observations
         rule_keys = getattr(self.alerts, "rule_keys", None)
         self._has_rules = rule_keys is None or bool(rule_keys())
@@ -581,7 +584,7 @@ class Pipeline:
                 tick, j = load, k
                 if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
                     tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
-                    tick = _TickLoad(tv, ts, {n: c.stress(tv) for n, c in self.components.items()},
+                    tick = _TickLoad(tv, ts, {n: c.stress(tv, record=False) for n, c in self.components.items()},
                                      np.zeros(1, np.int64), np.full(1, tv.shape[0]))
                     j = 0
                 est_mean = est_means[k] if self._full_estimate else tick.est[j]

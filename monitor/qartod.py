@@ -41,11 +41,12 @@ last one seen enter the tests (re-delivered and out-of-order samples are the val
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numba
 import numpy as np
+
+from monitor.config import FieldLimits
 
 PASS, NOT_EVALUATED, SUSPECT, FAIL, MISSING = 1, 2, 3, 4, 9
 TESTS: tuple[str, ...] = ("gross_range", "spike", "rate_of_change", "flat_line", "location")
@@ -54,26 +55,11 @@ FLAT_MEMORY = 4096
 _EARTH_RADIUS_M = 6_371_008.8  # mean radius (IUGG): haversine distance between fixes
 
 
-@dataclass(frozen=True)
-class FieldQC:
-    """QARTOD thresholds of one field (see the module docstring; inf / 0 = test off)."""
-
-    fail_min: float
-    fail_max: float
-    suspect_min: float
-    suspect_max: float
-    spike_suspect: float = np.inf
-    spike_fail: float = np.inf
-    rate_suspect_per_s: float = np.inf
-    rate_fail_per_s: float = np.inf
-    flat_tolerance: float = 0.0
-    flat_suspect_s: float = np.inf
-    flat_fail_s: float = np.inf
-
-
-def _params(fields: tuple[FieldQC, ...]) -> np.ndarray:
-    return np.array([[f.fail_min, f.fail_max, f.suspect_min, f.suspect_max, f.spike_suspect,
-                      f.spike_fail, f.rate_suspect_per_s, f.rate_fail_per_s, f.flat_tolerance,
+def _params(fields: tuple[FieldLimits, ...]) -> np.ndarray:
+    """The kernels' thresholds per field: the sensor span and the fastest physical change of
+    a field's limits are its gross-range and rate-of-change fail thresholds."""
+    return np.array([[f.min, f.max, f.suspect_min, f.suspect_max, f.spike_suspect,
+                      f.spike_fail, f.rate_suspect_per_s, f.max_rate_per_s, f.flat_tolerance,
                       f.flat_suspect_s, f.flat_fail_s] for f in fields], dtype=np.float64)
 
 
@@ -89,6 +75,19 @@ _RANK = np.array([0, 1, 0, 3, 4, 0, 0, 0, 0, 5], np.int64)
 @numba.njit(cache=True, nogil=True, inline="always")
 def _worst(a, b):  # pragma: no cover - compiled
     return a if _RANK[a] >= _RANK[b] else b
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f):  # pragma: no cover - compiled
+    """One older value ``w`` (NaN skipped) of the flat-line scan widens [lo, hi]; once that
+    spans ``tol`` the line is not flat in the windows (suspect ``sw``, fail ``fw``) reaching
+    back ``age``, and the scan is done. Returns (lo, hi, flat_s, flat_f, done)."""
+    if np.isfinite(w):
+        lo = min(lo, w)
+        hi = max(hi, w)
+        if hi - lo >= tol:
+            return lo, hi, flat_s and age > sw, flat_f and age > fw, True
+    return lo, hi, flat_s, flat_f, False
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -184,16 +183,10 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
                         age = ti - ring_t[j]
                         if age > sw and age > fw:
                             break
-                        w = ring_x[f, j]
-                        if np.isfinite(w):
-                            lo = min(lo, w)
-                            hi = max(hi, w)
-                            if hi - lo >= tol:
-                                if age <= sw:
-                                    flat_s = False
-                                if age <= fw:
-                                    flat_f = False
-                                break
+                        lo, hi, flat_s, flat_f, done = _flat_widen(ring_x[f, j], age, lo, hi, tol, sw,
+                                                                   fw, flat_s, flat_f)
+                        if done:
+                            break
                         k += 1
                     span = (ti - first_t) + (ti - prev_t if n_seen else 0)
                     fl = 1
@@ -355,15 +348,9 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
                     age = ti - tj
                     if age > sw and age > fw:
                         break
-                    if np.isfinite(w):
-                        lo = min(lo, w)
-                        hi = max(hi, w)
-                        if hi - lo >= tol:
-                            if age <= sw:
-                                flat_s = False
-                            if age <= fw:
-                                flat_f = False
-                            break
+                    lo, hi, flat_s, flat_f, done = _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f)
+                    if done:
+                        break
                 span = (ti - first_t) + (ti - (t[i - 1] if i else prev_t))
                 fl = np.uint8(1)
                 if flat_s and span > sw:
@@ -399,7 +386,7 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
 class StreamQC:
     """The QARTOD tests of one stream, with counts per test and the memory across blocks."""
 
-    def __init__(self, fields: tuple[FieldQC, ...], location_range_max_m: float = 0.0,
+    def __init__(self, fields: tuple[FieldLimits, ...], location_range_max_m: float = 0.0,
                  state: Mapping[str, Any] | None = None) -> None:
         self.fields = fields
         self._p = _params(fields)

@@ -57,6 +57,7 @@ class McapRecorder:
         self._dirty = False
         self.files: list[str] = []
         self.messages = 0
+        self.flushes = 0  # flushes and closes: everything written before one is on disk
 
     def write(self, topic: str, payload: bytes, spec: ChannelSpec, log_time_ns: int,
               publish_time_ns: int) -> None:
@@ -90,6 +91,7 @@ class McapRecorder:
             os.fsync(self._file.fileno())
         self._last_flush_ns = time.time_ns() if now_ns is None else now_ns
         self._dirty = False
+        self.flushes += 1
 
     def close(self) -> None:
         """Finish the current file (footer + index) and fsync it."""
@@ -98,6 +100,7 @@ class McapRecorder:
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()
+            self.flushes += 1
         self._writer, self._file = None, None
         self._window = -1
 

@@ -44,7 +44,7 @@ import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
-from monitor.qartod import FAIL, FLAT, FieldQC, StreamQC
+from monitor.qartod import FAIL, FLAT, StreamQC
 
 ACCEPTED = 0
 REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
@@ -116,10 +116,7 @@ class StreamValidator:
         self.accepted = 0
         self.rejected = {r: 0 for r in REASONS}
         self.qc = StreamQC(
-            tuple(FieldQC(x.min, x.max, x.suspect_min, x.suspect_max, x.spike_suspect,
-                          x.spike_fail, x.rate_suspect_per_s, x.max_rate_per_s,
-                          x.flat_tolerance, x.flat_suspect_s, x.flat_fail_s)
-                  for x in (limits.fields[f] for f in self.fields)),
+            tuple(limits.fields[f] for f in self.fields),
             limits.location_range_max_m, None if state is None else state.get("qc"))
         if state is not None:
             self.has_last = bool(state["has_last"])

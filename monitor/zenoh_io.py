@@ -6,8 +6,9 @@ thread-safe queue and return (never block, never call zenoh). The single consume
 
 Queue items are tuples whose first element says what they are:
 
-* ``("data", key, payload_bytes, recv_ns)``: a sample on ``buoy/<id>/sensor/**`` (or any
-  key the subscriber was declared on);
+* ``("data", key, payload_bytes, recv_ns, origin)``: a sample on ``buoy/<id>/sensor/**`` (or
+  any key the subscriber was declared on); ``origin`` is an :class:`Origin` for messages of
+  advanced publishers (sensor streams), None for others;
 * ``("forecast", key, payload_bytes, recv_ns)``: a sea-state forecast on
   ``buoy/<id>/forecast/waves``;
 * ``("alive", key, is_alive, recv_ns)``: a liveliness token appeared or went away;
@@ -19,14 +20,15 @@ from __future__ import annotations
 import json
 import queue
 import time
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
-import numpy as np
 import zenoh
+import zenoh.ext
 
 from monitor.blocks import SampleBlock, parse_sensor_topic, validate_buoy_id
 from monitor.daemon_config import ZenohConfig
 from monitor.recorder import ChannelSpec
+from monitor.strict_json import to_json_bytes  # noqa: F401  (callers use zenoh_io.to_json_bytes)
 
 
 def session_config_dict(zc: ZenohConfig) -> dict[str, Any]:
@@ -34,7 +36,12 @@ def session_config_dict(zc: ZenohConfig) -> dict[str, Any]:
     conf: dict[str, Any] = {
         "mode": zc.mode,
         "listen": {"endpoints": list(zc.listen)},
-        "connect": {"endpoints": list(zc.connect)},
+        # a lost connection (the daemon restarting) is retried within a second, not after
+        # zenoh's default back-off of up to 4 s: a sensor reconnects while the daemon's new
+        # life catches up from its cache
+        "connect": {"endpoints": list(zc.connect),
+                    "retry": {"period_init_ms": 250, "period_max_ms": 1000,
+                              "period_increase_factor": 2}},
         "scouting": {
             "multicast": {"enabled": zc.multicast_scouting},
             "gossip": {"enabled": False},
@@ -82,14 +89,113 @@ def monitor_token_key(buoy_id: str) -> str:
 
 
 def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
-                                 q: "queue.SimpleQueue[tuple]", kind: str = "data"
-                                 ) -> zenoh.Subscriber:
-    """Subscribe to ``key``; every sample is put on ``q`` as ``(kind, key, bytes, recv_ns)``."""
+                                 q: "queue.SimpleQueue[tuple]") -> Any:
+    """Subscribe to ``key`` with Zenoh's advanced subscriber; every sample is put on ``q`` as
+    ``("data", key, bytes, recv_ns, Origin | None)``.
+
+    Recovery: a message lost in transit is fetched again from its publisher's cache
+    (heartbeat-driven), and delivery stays in order per publisher. No history: what a
+    (re)starting process missed is fetched by number (:func:`declare_publisher_watch`,
+    :func:`fetch_cached`), since Zenoh's history can be overtaken, and then dropped, by live
+    messages of a publisher that reconnects at the same moment.
+    """
 
     def on_sample(sample: zenoh.Sample) -> None:
-        q.put((kind, str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+        info, ts = sample.source_info, sample.timestamp
+        origin = None if info is None else Origin(
+            f"{info.source_id.zid}/{info.source_id.eid}", info.source_sn,
+            None if ts is None else ts.get_time_as_ntp64().as_nanos())
+        q.put(("data", str(sample.key_expr), sample.payload.to_bytes(), time.time_ns(), origin))
 
-    return session.declare_subscriber(key, on_sample)
+    return zenoh.ext.declare_advanced_subscriber(
+        session, key, on_sample,
+        recovery=zenoh.ext.RecoveryConfig(heartbeat=True))
+
+
+def declare_forecast_subscriber(session: zenoh.Session, buoy_id: str,
+                                q: "queue.SimpleQueue[tuple]") -> zenoh.Subscriber:
+    """Subscribe to the buoy's forecasts; each is put on ``q`` as ``("forecast", key, bytes,
+    recv_ns)`` (a plain subscriber: a forecast is a single message that its sender repeats)."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        q.put(("forecast", str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    return session.declare_subscriber(forecast_key(buoy_id), on_sample)
+
+
+class Origin(NamedTuple):
+    """Where a message came from: its advanced publisher (``"<zenoh id>/<entity id>"``), that
+    publisher's sequence number of the message, and when it was published (the publisher's
+    clock, ns since the epoch; None without timestamps)."""
+
+    source: str
+    sn: int
+    sent_ns: int | None
+
+
+def _publisher_of(token_key: str) -> tuple[str, str] | None:
+    """(stream key, "<zid>/<eid>") of an advanced publisher's liveliness token
+    ``<key>/@adv/pub/<zid>/<eid>/...``; None for any other key."""
+    key, _, rest = token_key.partition("/@adv/pub/")
+    zid, _, tail = rest.partition("/")
+    eid = tail.split("/", 1)[0]
+    return (key, f"{zid}/{eid}") if zid and eid else None
+
+
+def _publishers_key(buoy_id: str) -> str:
+    return f"buoy/{validate_buoy_id(buoy_id)}/sensor/*/@adv/pub/**"
+
+
+def declare_publisher_watch(session: zenoh.Session, buoy_id: str,
+                            q: "queue.SimpleQueue[tuple]") -> zenoh.Subscriber:
+    """Watch the advanced sensor publishers of ``buoy_id`` (existing ones included): each
+    one's appearance is put on ``q`` as ``("publisher", key, source)``."""
+
+    def on_change(sample: zenoh.Sample) -> None:
+        pub = _publisher_of(str(sample.key_expr))
+        if sample.kind == zenoh.SampleKind.PUT and pub is not None:
+            q.put(("publisher", *pub))
+
+    return session.liveliness().declare_subscriber(_publishers_key(buoy_id), on_change,
+                                                   history=True)
+
+
+def sensor_publishers(session: zenoh.Session, buoy_id: str,
+                      timeout_s: float) -> list[tuple[str, str]]:
+    """The advanced sensor publishers of ``buoy_id`` alive now: (stream key, source), source
+    being ``"<zid>/<eid>"`` as in :class:`Origin`."""
+    found = set()
+    for reply in session.liveliness().get(_publishers_key(buoy_id), timeout=timeout_s):
+        pub = None if reply.ok is None else _publisher_of(str(reply.ok.key_expr))
+        if pub is not None:
+            found.add(pub)
+    return sorted(found)
+
+
+def fetch_cached(session: zenoh.Session, key: str, source: str,
+                 sns: tuple[int, int | None], timeout_s: float) -> list[tuple[bytes, Origin]]:
+    """Ask the advanced publisher ``source`` of ``key`` for the messages numbered
+    ``sns[0]..sns[1]`` (inclusive; ``sns[1]`` None: up to the newest) still in its cache;
+    returns (payload, origin) in number order (empty if the publisher is gone or no longer
+    holds them).
+
+    The selector is the advanced publisher's cache queryable
+    (``<key>/@adv/pub/<zid>/<eid>/*?_sn=a..b``), the one its subscribers' history and
+    recovery use; replies carry the original key, hence ``accept_replies=ANY``."""
+    lo, hi = sns[0], (sns[1] if sns[1] is not None else 2**63)
+    selector = f"{key}/@adv/pub/{source}/*?_sn={lo}..{'' if sns[1] is None else hi}"
+    out: dict[int, tuple[bytes, Origin]] = {}
+    for reply in session.get(selector, timeout=timeout_s,
+                             consolidation=zenoh.ConsolidationMode.NONE,
+                             accept_replies=zenoh.ReplyKeyExpr.ANY):
+        sample = reply.ok
+        info = None if sample is None else sample.source_info
+        if info is None or not lo <= info.source_sn <= hi:
+            continue
+        ts = sample.timestamp
+        out[info.source_sn] = (sample.payload.to_bytes(), Origin(
+            source, info.source_sn, None if ts is None else ts.get_time_as_ntp64().as_nanos()))
+    return [out[sn] for sn in sorted(out)]
 
 
 def declare_liveliness_watch(session: zenoh.Session, key: str,
@@ -123,23 +229,6 @@ def declare_data_publisher(session: zenoh.Session, key: str,
 def declare_json_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     """A reliable, blocking publisher for JSON documents (status, alerts)."""
     return declare_data_publisher(session, key, "application/json")
-
-
-def to_json_bytes(doc: Any) -> bytes:
-    """Strict JSON (non-finite floats become null) encoded as UTF-8."""
-    return json.dumps(_finite(doc), separators=(",", ":"), allow_nan=False).encode()
-
-
-def _finite(x: Any) -> Any:
-    if isinstance(x, (np.generic, np.ndarray)):
-        return _finite(x.tolist())
-    if isinstance(x, float):
-        return x if x == x and x not in (float("inf"), float("-inf")) else None
-    if isinstance(x, dict):
-        return {str(k): _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    return x
 
 
 class BlockCodec(Protocol):
@@ -178,13 +267,18 @@ def default_codec() -> BlockCodec:
 
 
 def decode_counted(codec: BlockCodec, key: str, payload: bytes, recv_ns: int,
-                   counters: dict[str, int], log: Any) -> SampleBlock | None:
+                   counters: dict[str, int], log: Any,
+                   count_decoded: bool = True) -> SampleBlock | None:
     """Decode a received sensor message, counting it in ``counters["messages"]``; a payload
-    that does not decode is counted as ``"undecodable"``, logged, and gives None."""
-    counters["messages"] += 1
+    that does not decode is counted as ``"undecodable"``, logged, and gives None.
+    ``count_decoded=False``: a message that decodes is left for the caller to count (the
+    daemon counts a redelivered message once)."""
     try:
-        return codec.decode(key, payload, recv_ns)
+        block = codec.decode(key, payload, recv_ns)
     except ValueError as exc:
+        counters["messages"] += 1
         counters["undecodable"] += 1
         log.warning("undecodable message", extra={"fields": {"key": key, "error": str(exc)}})
         return None
+    counters["messages"] += count_decoded
+    return block

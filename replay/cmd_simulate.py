@@ -1,8 +1,9 @@
 """``buoymon simulate -o LOG.mcap --hours H --hs M --tp S --seed N``: a synthetic buoy log.
 
 ``--publish [ENDPOINT] [--speed X]`` also plays the simulated buoy over Zenoh to a daemon
-(``replay.publish.publish_logs``: one message per 1 s block, liveliness tokens, paced by
-sensor time), as a peer that only connects out. The endpoint must be on the loopback
+(``replay.publish.publish_logs``: one message per 1 s block, paced by sensor time, through
+advanced publishers that keep the last hour per stream for a daemon that starts or restarts
+later), as a peer that only connects out. The endpoint must be on the loopback
 interface unless ``--allow-remote`` is given.
 """
 

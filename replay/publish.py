@@ -1,7 +1,8 @@
 """Play MCAP logs over Zenoh as a live buoy: ``python -m replay.publish LOG.mcap --connect EP``.
 
 What ``buoymon simulate --publish`` calls; the blocks go out through
-:func:`monitor.publisher.play`, message by message as recorded (not coalesced).
+:func:`monitor.publisher.play`, message by message as recorded (not coalesced), through
+advanced publishers with a cache, as a sensor driver publishes (``monitor.sensors``).
 """
 
 from __future__ import annotations
@@ -13,15 +14,15 @@ from typing import Sequence
 from monitor import zenoh_io
 from monitor.daemon_config import ZenohConfig
 from monitor.publisher import play, publisher_config
+from monitor.sensors import DEFAULT_CACHE_BLOCKS, PublisherOptions
 from replay.reader import iter_blocks
 
 
 def publish_logs(paths: Sequence[str], zc: ZenohConfig, speed: float | None = None,
-                 start_after_ns: int | None = None, codec: zenoh_io.BlockCodec | None = None,
-                 wait_for_subscriber_s: float = 10.0) -> int:
+                 codec: zenoh_io.BlockCodec | None = None,
+                 options: PublisherOptions = PublisherOptions(), linger_s: float = 0.0) -> int:
     """Play MCAP logs message by message (as recorded: not coalesced) over Zenoh."""
-    return play(iter_blocks(list(paths), coalesce=False), zc, speed, start_after_ns, codec,
-                wait_for_subscriber_s)
+    return play(iter_blocks(list(paths), coalesce=False), zc, speed, codec, options, linger_s)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -32,12 +33,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="zenoh endpoint of the daemon, e.g. tcp/127.0.0.1:7447 (repeatable)")
     p.add_argument("--speed", type=float, default=None,
                    help="times real time (default: as fast as possible)")
-    p.add_argument("--start-after-ns", type=int, default=None,
-                   help="skip blocks ending at or before this sensor time (ns)")
+    p.add_argument("--cache-blocks", type=int, default=DEFAULT_CACHE_BLOCKS,
+                   help="blocks kept per stream for a daemon that (re)starts later "
+                        f"(default {DEFAULT_CACHE_BLOCKS})")
+    p.add_argument("--linger-s", type=float, default=0.0,
+                   help="keep the caches up this long after the last block (default 0)")
     args = p.parse_args(argv)
     if not args.connect:
         p.error("--connect is required (the daemon's listen endpoint)")
-    n = publish_logs(args.logs, publisher_config(args.connect), args.speed, args.start_after_ns)
+    try:
+        options = PublisherOptions(cache_blocks=args.cache_blocks)
+    except ValueError as exc:
+        p.error(f"--cache-blocks: {exc}")
+    n = publish_logs(args.logs, publisher_config(args.connect), args.speed, None, options,
+                     args.linger_s)
     print(n, flush=True)
     return 0
 

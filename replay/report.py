@@ -20,7 +20,10 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      ``damage_committed`` (Miner sum of closed cycles),
                                      ``cycles``, ``max_stress_Pa``, ``damage_rate_per_day``,
                                      ``remaining_life_days`` (null = nothing accrues),
-                                     ``kind``, ``lay``}
+                                     ``kind``, ``lay``, ``location`` (free_span | termination),
+                                     ``samples_beyond_yield``: load samples whose hot-spot
+                                     stress exceeded the conductor's yield (the elastic model
+                                     and the S-N curve do not hold: damage underestimated)}
 ``alerts``                           alert transitions (monitor.alerts records as dicts), the
                                      newest 10,000; ``alerts_dropped`` counts older ones
 ``inputs``                           files read and the reader's statistics (lost data)
@@ -36,13 +39,13 @@ plain ``--report``, whose components stay equal between split and one-pass repla
 from __future__ import annotations
 
 import json
-import math
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from monitor.atomic_file import atomic_write_text
 from monitor.config import Config
+from monitor.strict_json import json_ready
 
 REPORT_VERSION = 1
 
@@ -52,18 +55,6 @@ def iso_utc(t_ns: int | None) -> str | None:
         return None
     dt = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=timezone.utc)
     return dt.strftime("%Y-%m-%dT%H:%M:%S") + f".{(t_ns % 1_000_000_000) // 1_000_000:03d}Z"
-
-
-def _strict(obj: Any) -> Any:
-    """Strict JSON: NaN and infinities become the strings "nan", "inf", "-inf" (the form
-    docs/REPORT_FORMAT.md lets readers expect; strict JSON has no literal for them)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else str(obj)
-    if isinstance(obj, Mapping):
-        return {str(k): _strict(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_strict(v) for v in obj]
-    return obj
 
 
 def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Sequence[str],
@@ -82,10 +73,12 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
             "remaining_life_days": figures["remaining_life_days"],
             "kind": c.kind,
             "lay": c.lay,
+            "location": c.location,
+            "samples_beyond_yield": int(figures.get("samples_beyond_yield") or 0),
         }
         if "damage_by_source" in figures:
             comps[name]["damage_by_source"] = figures["damage_by_source"]
-    return _strict({
+    return json_ready({
         "report_version": REPORT_VERSION,
         "buoy_id": pipeline_report["buoy_id"],
         "design_life_years": config.buoy.design_life_years,
@@ -115,10 +108,10 @@ def add_plot_fields(report: dict[str, Any], fields: Mapping[str, Any]) -> None:
     in place; components the report does not list are ignored."""
     for key, value in fields.items():
         if key != "components":
-            report[key] = _strict(value)
+            report[key] = json_ready(value, "text")
     for name, extra in fields.get("components", {}).items():
         if name in report["components"]:
-            report["components"][name].update(_strict(extra))
+            report["components"][name].update(json_ready(extra, "text"))
 
 
 def write_report(path: str | Path, report: Mapping[str, Any]) -> None:
@@ -162,6 +155,10 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
             f"{life if life == '-' else life + ' d':>11s}"
         )
+    for name, c in report["components"].items():
+        if c.get("samples_beyond_yield"):
+            lines.append(f"  {name}: {c['samples_beyond_yield']:,d} samples beyond the conductor's "
+                         "yield: elastic model beyond yield, damage underestimated")
     for name, c in report["components"].items():
         split = c.get("damage_by_source")
         if split and split["estimated"]:

@@ -19,7 +19,6 @@ both must be > 0.
 from __future__ import annotations
 
 import json
-import math
 import os
 import struct
 import zlib
@@ -33,6 +32,7 @@ import zstandard
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, sensor_topic, validate_buoy_id
 from monitor import codec
+from monitor.strict_json import to_json_bytes
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
@@ -81,19 +81,6 @@ def _json_schema_for(topic: str) -> Mapping[str, Any]:
     if len(parts) == 6 and parts[2:4] == ["monitor", "alert"]:
         return ALERT_SCHEMA
     return {"title": "buoymon.v1.Json", "type": "object"}
-
-
-def _finite(obj: Any) -> Any:
-    """JSON-ready copy: numpy scalars/arrays to Python, non-finite floats to None (null)."""
-    if isinstance(obj, Mapping):
-        return {str(k): _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [_finite(v) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _string(s: str) -> bytes:
@@ -228,7 +215,7 @@ class LogWriter:
         schema = _json_schema_for(topic) if schema is None else schema
         ch = self._channel(topic, str(schema.get("title", "buoymon.v1.Json")), "jsonschema",
                            json.dumps(schema, sort_keys=True).encode(), "json")
-        payload = json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False).encode()
+        payload = to_json_bytes(obj)
         self._add_message(ch, int(log_ns), int(publish_ns), payload)
 
     def write_series(self, series: Sequence[Series], *, block_ns: int = 1_000_000_000,

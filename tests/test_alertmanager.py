@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import queue
 import shutil
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -26,11 +27,12 @@ import pytest
 
 from daemon_harness import BUOY, ENV, DaemonProcess, free_port, write_config
 from test_daemon_live import HARNESS, Client, _block
+from waiting import wait_until
 
 AM_BIN = shutil.which("prometheus-alertmanager") or shutil.which("alertmanager")
-pytestmark = pytest.mark.skipif(
+pytestmark = [pytest.mark.integration, pytest.mark.skipif(
     AM_BIN is None, reason="prometheus-alertmanager is not installed (make test installs the "
-                           "Debian package prometheus-alertmanager when it can)")
+                           "Debian package prometheus-alertmanager when it can)")]
 RESOLVE_TIMEOUT_S = 5
 
 
@@ -115,14 +117,15 @@ class Alertmanager:
                 and a["status"]["state"] == "active"]
 
 
-def _wait(predicate, timeout: float = 30.0, what: str = "condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.2)
-    raise AssertionError(f"timed out waiting for {what}")
+def _attempts(outbox: Path, channel: str) -> int:
+    """Delivery attempts of the channel's oldest message, read from the outbox database."""
+    db = sqlite3.connect(f"file:{outbox}?mode=ro", uri=True, timeout=10)
+    try:
+        row = db.execute("SELECT attempts FROM outbox WHERE channel = ? ORDER BY id LIMIT 1",
+                         (channel,)).fetchone()
+    finally:
+        db.close()
+    return 0 if row is None else int(row[0])
 
 
 def _feed(client: Client, stop: threading.Event, first_s: int) -> None:
@@ -162,7 +165,7 @@ def test_alerts_reach_alertmanager_stay_active_and_resolve(tmp_path, am):
         for k in range(2):
             c.put(_block((now_s + k) * 10**9, k))
         # the data stops: data_age fires and reaches Alertmanager with our labels
-        fired = _wait(lambda: manager.active("data_age"), what="data_age active in AM")
+        fired = wait_until(lambda: manager.active("data_age"), what="data_age active in AM", interval=0.2)
         a = fired[0]
         assert a["labels"] == {"alertname": "data_age", "severity": "warning", "buoy": BUOY,
                                "component": "tension", "instance": "logger-1",
@@ -177,8 +180,8 @@ def test_alerts_reach_alertmanager_stay_active_and_resolve(tmp_path, am):
             time.sleep(0.5)
         # the receiver body sent to Alertmanager's API is refused (HTTP 400): a dead letter,
         # alerted on its own (and that alert reaches Alertmanager), while the rest flows
-        refused = _wait(lambda: manager.active("alert_delivery_refused"),
-                        what="alert_delivery_refused active in AM")
+        refused = wait_until(lambda: manager.active("alert_delivery_refused"),
+                        what="alert_delivery_refused active in AM", interval=0.2)
         assert refused[0]["labels"]["component"] == "webhook"
         out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "outbox",
                               "--outbox", str(tmp_path / "outbox.sqlite"), "--json"],
@@ -192,7 +195,7 @@ def test_alerts_reach_alertmanager_stay_active_and_resolve(tmp_path, am):
         # data flows again: the alert is resolved in Alertmanager
         feeder = threading.Thread(target=_feed, args=(c, stop, now_s + 2), daemon=True)
         feeder.start()
-        _wait(lambda: not manager.active("data_age"), what="data_age resolved in AM")
+        wait_until(lambda: not manager.active("data_age"), what="data_age resolved in AM", interval=0.2)
         # one firing and one resolved notification for the data_age group
         time.sleep(2.5)  # two group intervals: a repeat or a flap would have been sent by now
         notes = [n for n in rx.drain() if n["groupLabels"].get("alertname") == "data_age"]
@@ -220,12 +223,14 @@ def test_an_alertmanager_outage_delays_but_loses_nothing(tmp_path, am):
         now_s = time.time_ns() // 10**9
         c.put(_block(now_s * 10**9, 0))
         c.wait_alert("data_age", "put")
-        time.sleep(3)  # several failed attempts against the stopped Alertmanager
+        # several failed attempts against the stopped Alertmanager (the outbox counts them)
+        wait_until(lambda: _attempts(tmp_path / "outbox.sqlite", "alertmanager") >= 3,
+                   what="3 failed attempts", interval=0.2)
         manager.start()
-        _wait(lambda: manager.active("data_age"), what="data_age active after the outage")
+        wait_until(lambda: manager.active("data_age"), what="data_age active after the outage", interval=0.2)
         feeder = threading.Thread(target=_feed, args=(c, stop, now_s + 1), daemon=True)
         feeder.start()
-        _wait(lambda: not manager.active("data_age"), what="data_age resolved")
+        wait_until(lambda: not manager.active("data_age"), what="data_age resolved", interval=0.2)
         time.sleep(2.5)
         notes = [n for n in rx.drain() if n["groupLabels"].get("alertname") == "data_age"]
         assert [n["status"] for n in notes] == ["firing", "resolved"]

@@ -9,6 +9,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 import zenoh
 
 from monitor.alerts.delivery import ZenohAlertSink, peer_config
@@ -16,6 +17,8 @@ from monitor.alerts.engine import AlertEngine
 from monitor.cli import main
 from monitor.events import ComponentObs, Observation
 from waiting import wait_for
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
@@ -105,7 +108,10 @@ def test_daemon_over_zenoh_put_delete_list_ack_reset(capsys):
         loop = threading.Thread(target=daemon_loop)
         loop.start()
         try:
-            time.sleep(0.5)  # let the subscriber's declaration reach the daemon session
+            # until the subscriber's declaration has reached the daemon session
+            probe = daemon.declare_publisher("buoy/b1/monitor/alert/damage_rate/left")
+            assert wait_for(lambda: probe.matching_status.matching)
+            probe.undeclare()
             sink.publish(eng.evaluate(tick(1, 0.05, 2.0)))       # damage_rate fires x2
             sink.publish(eng.evaluate(tick(2, 0.05, 0.5)))       # ... and clears x2
             sink.publish(eng.evaluate(tick(3, 0.2, 0.5)))        # damage_warning fires x2

@@ -35,7 +35,7 @@ SHARED = REPO.parent / "shared" / "realdata"
 MAINE = SHARED / "maine_endline_loadcell" / "17348481-2018.11.30-09.58.27-15.csv"
 LOC = SHARED / "spotter_clallam_1945" / "0026_LOC.CSV"
 LBF = 4.4482216
-pytestmark = pytest.mark.skipif(not MAINE.exists(), reason="shared/realdata not beside the project")
+pytestmark = [pytest.mark.integration, pytest.mark.skipif(not MAINE.exists(), reason="shared/realdata not beside the project")]
 
 
 def maine_lines(n: int) -> list[str]:

@@ -96,6 +96,7 @@ while True:
 """
 
 
+@pytest.mark.integration  # kills writer processes
 def test_kill_9_during_saves_leaves_a_whole_checkpoint(tmp_path):
     path = tmp_path / "state.sqlite"
     rng = random.Random(6)

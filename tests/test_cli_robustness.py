@@ -12,6 +12,8 @@ import pytest
 from monitor.cli import main
 from replay.writer import LogWriter, Series
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 T0 = 946_684_800 * 10**9  # 2000-01-01T00:00:00Z
 
 
@@ -196,7 +198,7 @@ def test_state_file_of_other_components_is_refused(tmp_path, capsys):
     renamed.write_text(text.replace('name = "conductor"', 'name = "wire"', 1))
     capsys.readouterr()
     assert main(["replay", str(log), "--state", str(state), "--config", str(renamed)]) == 1
-    assert "holds components ['conductor'], the config ['wire']" in capsys.readouterr().err
+    assert "holds components ['conductor', 'conductor_termination'], the config ['conductor_termination', 'wire']" in capsys.readouterr().err
     assert state.read_text() == saved
 
 
@@ -286,7 +288,7 @@ def test_pace_speed_has_a_floor(tmp_path, capsys, speed):
 
 @pytest.mark.parametrize("extra, message", [
     ('[[alerts.rule]]\nkind = "damage_rate"\nthreshold = 1.0\ncomponent = "mid"\n',
-     'config error: alerts.rule[7].component = "mid": unknown component'),
+     'config error: alerts.rule[8].component = "mid": unknown component'),
     ('[cable]\npreset = "vaps_biw"\nno_such_field = 1.0\n', "config error: cable"),
 ])
 def test_replay_exits_2_for_config_errors_found_when_the_pipeline_is_built(tmp_path, capsys,

@@ -24,8 +24,12 @@ def test_default_is_the_seed_004_mooring():
     assert c.mooring.preset == "vaps_seed004" and c.mooring.segments == ()
     assert c.mooring.span_m == 29.0 and c.load.motion_rate_hz == 10.0
     assert c.cable.preset == "vaps_biw" and not c.cable.overrides
-    (comp,) = c.components
+    comp, term = c.components  # the free span and the termination moulding (issue 20)
     assert (comp.kind, comp.lay, comp.sn_curve.preset) == ("conductor", "left", "vaps_copper")
+    assert comp.location == "free_span" and comp.bend_radius_m is None
+    assert (term.kind, term.lay, term.location) == ("conductor", "left", "termination")
+    assert (term.bend_radius_m, term.bend_angle_deg, term.bend_gauge_length_m, term.scf) == (
+        0.6, 30.0, None, 1.0)
     assert c.load.source == "auto" and c.load.stale_after_s == 5.0
     assert c.alerts.eval_interval_s == 10.0
     # QC defaults derived from the line (monitor.config.qc_defaults): the 45 kN break load
@@ -56,7 +60,7 @@ def test_default_is_the_seed_004_mooring():
     (lambda d: d["component"][0].update(mean_stress="goodman"),
      "config error: component[0].mean_stress = 'goodman': needs ultimate_Pa"),
     (lambda d: d["component"].append(dict(d["component"][0])),
-     "config error: component[1].name = 'conductor': duplicate name"),
+     "config error: component[2].name = 'conductor': duplicate name"),
     (lambda d: d.update(component=[]),
      "config error: component: at least one [[component]] is required"),
     (lambda d: d["load"].update(source="guess"),
@@ -113,7 +117,8 @@ def test_config_with_adds_a_component_and_revalidates():
     c = default_config()
     both = config_with(c, component=[*c.raw["component"], {**c.raw["component"][0],
                                                             "name": "right", "lay": "right"}])
-    assert [(x.name, x.lay) for x in both.components] == [("conductor", "left"), ("right", "right")]
+    assert [(x.name, x.lay) for x in both.components] == [
+        ("conductor", "left"), ("conductor_termination", "left"), ("right", "right")]
     with pytest.raises(ConfigError, match="component\\[0\\].lay"):
         config_with(c, component=[{**c.raw["component"][0], "lay": 3}])
 

@@ -14,6 +14,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from monitor import zenoh_io
@@ -25,6 +26,8 @@ from daemon_harness import (
     BUOY, ENV, T0_NS, DaemonProcess, FakeCodec, expected_total, free_port, tension_blocks,
     wait_until_state, write_config,
 )
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 HARNESS = os.path.join(os.path.dirname(__file__), "daemon_harness.py")
 

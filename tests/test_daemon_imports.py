@@ -12,6 +12,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 REPO = Path(__file__).resolve().parents[1]
 
 _DAEMON_PATH = r"""
@@ -51,6 +55,7 @@ _NUMBA_ALONE = r"""
 import json, sys
 import numba
 from numba.core.registry import cpu_target
+
 cpu_target.target_context.refresh()  # what loading the first cached kernel does
 print(json.dumps(sorted(m for m in sys.modules if m.split(".")[0] == "scipy")))
 """

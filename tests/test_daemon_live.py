@@ -19,6 +19,7 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
+import pytest
 import zenoh
 from mcap.reader import make_reader
 from prometheus_client.parser import text_string_to_metric_families
@@ -30,6 +31,8 @@ from monitor.daemon_config import ZenohConfig
 from daemon_harness import (
     BUOY, ENV, RATE_HZ, DaemonProcess, FakeCodec, free_port, wait_until_state, write_config,
 )
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 HARNESS = os.path.join(os.path.dirname(__file__), "daemon_harness.py")
 REPO = Path(__file__).resolve().parents[1]

@@ -2,8 +2,12 @@
 
 import json
 
+import pytest
+
 from monitor.cli import main
-from replay.cmd_demo import AS_BUILT, OPPOSITE, comparison, demo_config
+from replay.cmd_demo import AS_BUILT, OPPOSITE, TERMINATION, comparison, demo_config
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 
 def test_demo_config_has_both_lays_of_the_same_cable():
@@ -36,4 +40,10 @@ def test_demo_end_to_end(tmp_path, capsys):
     assert left["max_stress_Pa"] > 1.5 * right["max_stress_Pa"]
     assert report["samples"]["tension"]["accepted"] >= 3600 * 20 * 0.99
     assert "left lay (as built)" in out and f"Outputs in {tmp_path}/" in out
+    # the termination (issue 20): the same tension ranges, the locked bend beyond yield throughout
+    term = report["components"][TERMINATION]
+    assert term["location"] == "termination" and left["location"] == "free_span"
+    assert term["samples_beyond_yield"] == report["samples"]["tension"]["accepted"]
+    assert term["max_stress_Pa"] > 299e6 and "left, termination" in out
+    assert "elastic model beyond yield, damage underestimated" in out
     assert "report.json" in out and "storm_1980.mcap" in out

@@ -16,7 +16,7 @@ def test_cached_damage_rate_equals_a_fresh_computation():
     t = 0.0
     for _ in range(2000):
         t += float(rng.choice([0.0, 10.0, 700.0]))
-        acc.add_cycles(rng.uniform(0.0, 60e6, int(rng.integers(0, 4))), 1.0, time_s=t)
+        acc.add_cycles(rng.uniform(0.0, 60e6, int(rng.integers(0, 4))), None, 1.0, time_s=t)
         rate = acc.damage_rate_per_day
         assert rate == acc.damage_rate_per_day  # a second read is the cached value
         assert rate == MinerAccumulator.from_state(acc.state()).damage_rate_per_day

@@ -110,6 +110,7 @@ def _buoymon(*args: str, cwd: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=600)
 
 
+@pytest.mark.integration  # the CLI end to end
 def test_forecast_command_of_the_seed_storm(tmp_path):
     """Ten hours of the seed 004 storm as a forecast: the projection reaches the demo's
     figure (about 0.6 in 10 h, docs/README) and dates the 0.1 and 0.5 alert thresholds."""
@@ -133,6 +134,7 @@ def test_forecast_command_of_the_seed_storm(tmp_path):
     assert json.loads((tmp_path / "g.json").read_text())["components"]["conductor"] == c
 
 
+@pytest.mark.integration  # the CLI end to end
 def test_forecast_refuses_bad_input(tmp_path):
     bad = tmp_path / "x.csv"
     bad.write_text("time,hs_m,tp_s\n2026-01-01T00:00:00Z,-1,5\n")
@@ -140,6 +142,7 @@ def test_forecast_refuses_bad_input(tmp_path):
     assert p.returncode == 2 and "no usable sea state" in p.stderr
 
 
+@pytest.mark.integration  # the CLI end to end
 @pytest.mark.skipif(not NDBC.exists(), reason="shared/realdata not beside the project")
 def test_design_command_on_a_measured_month(tmp_path):
     month = tmp_path / "jan1996.txt"

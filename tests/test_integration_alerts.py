@@ -10,6 +10,8 @@ from replay.cmd_demo import AS_BUILT, OPPOSITE, STORM, demo_config
 from replay.runner import replay_logs
 from replay.simulate import SimConfig, simulate
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 HOURS = 2.0  # the as-built lay passes 0.1 after about 1.5 h of the storm (seed 4)
 
 

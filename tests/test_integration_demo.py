@@ -2,9 +2,13 @@
 
 import json
 
+import pytest
+
 from monitor.cli import main
 from replay.cmd_demo import AS_BUILT, FIELD, OPPOSITE
 from viz_helpers import read_rrd
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 
 def test_demo_writes_and_names_its_outputs(tmp_path, capsys):

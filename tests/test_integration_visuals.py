@@ -13,6 +13,8 @@ from monitor.viz.report_data import load_report
 from replay.simulate import SimConfig, simulate
 from viz_helpers import ns, read_rrd
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 HOURS = 0.25
 
 

@@ -11,7 +11,8 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
-from replay.reader import LogReader, iter_blocks, reference_blocks, time_span
+from mcap_oracle import reference_blocks
+from replay.reader import LogReader, iter_blocks, time_span
 from replay.writer import LogWriter, Series, alert_topic, status_topic
 
 T0 = 1_750_000_000 * 10**9

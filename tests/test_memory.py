@@ -24,6 +24,7 @@ def test_compiler_mappings_parses_proc_maps(tmp_path):
     assert compiler_mappings(str(tmp_path / "absent")) == []
 
 
+@pytest.mark.integration  # a fresh interpreter
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux only")
 def test_release_drops_the_compiler_pages_and_kernels_still_run():
     code = textwrap.dedent("""
@@ -49,12 +50,12 @@ def test_release_drops_the_compiler_pages_and_kernels_still_run():
         x = 1e6 * np.sin(np.arange(2000) / 5.0)
         rf, miner = StreamingRainflow(), MinerAccumulator(SNCurve.vaps_copper())
         r, m, c = rf.feed(x[:1000])
-        miner.add_cycles(r, c, m)
+        miner.add_cycles(r, m, c)
         before = llvm_kb()
         advised = release_compiler_pages()
         after = llvm_kb()
         r, m, c = rf.feed(x[1000:])  # the compiled kernels need no compiler
-        miner.add_cycles(r, c, m)
+        miner.add_cycles(r, m, c)
         print(json.dumps({"before": before, "after": after, "advised": advised,
                           "cycles": miner.total_cycles, "damage": miner.damage_committed}))
     """)
@@ -75,6 +76,6 @@ def test_release_drops_the_compiler_pages_and_kernels_still_run():
     rf, miner = StreamingRainflow(), MinerAccumulator(SNCurve.vaps_copper())
     for part in (x[:1000], x[1000:]):
         r, m, c = rf.feed(part)
-        miner.add_cycles(r, c, m)
+        miner.add_cycles(r, m, c)
     assert res["cycles"] == miner.total_cycles == 60
     assert res["damage"] == miner.damage_committed > 0

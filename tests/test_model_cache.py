@@ -10,8 +10,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from monitor import model_cache
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -6,14 +6,15 @@ import numpy as np
 import pytest
 from hypothesis import example, given, settings, strategies as st
 
-from monitor.qartod import FLAT_MEMORY, SPIKE, TESTS, FieldQC, StreamQC
+from monitor.config import FieldLimits
+from monitor.qartod import FLAT_MEMORY, SPIKE, TESTS, StreamQC
 
 qartod = pytest.importorskip("ioos_qc.qartod")
 
 S = 1_000_000_000
-FIELD = FieldQC(fail_min=-8.0, fail_max=8.0, suspect_min=-5.0, suspect_max=5.0,
-                spike_suspect=1.5, spike_fail=4.0, rate_suspect_per_s=0.8,
-                rate_fail_per_s=3.0, flat_tolerance=0.01, flat_suspect_s=5.0, flat_fail_s=9.0)
+FIELD = FieldLimits(min=-8.0, max=8.0, max_rate_per_s=3.0, suspect_min=-5.0, suspect_max=5.0,
+                    spike_suspect=1.5, spike_fail=4.0, rate_suspect_per_s=0.8,
+                    flat_tolerance=0.01, flat_suspect_s=5.0, flat_fail_s=9.0)
 
 
 def record(n: int, seed: int, step_s: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -36,14 +37,14 @@ def record(n: int, seed: int, step_s: int = 1) -> tuple[np.ndarray, np.ndarray]:
     return t, x
 
 
-def oracle(t: np.ndarray, x: np.ndarray, f: FieldQC = FIELD) -> dict[str, np.ndarray]:
+def oracle(t: np.ndarray, x: np.ndarray, f: FieldLimits = FIELD) -> dict[str, np.ndarray]:
     times = t.astype("datetime64[ns]")
     return {
-        "gross_range": qartod.gross_range_test(x, (f.fail_min, f.fail_max),
+        "gross_range": qartod.gross_range_test(x, (f.min, f.max),
                                                (f.suspect_min, f.suspect_max)),
         "spike": qartod.spike_test(x, f.spike_suspect, f.spike_fail),
         "rate_of_change": qartod.rate_of_change_test(x, times, f.rate_suspect_per_s,
-                                                     f.rate_fail_per_s),
+                                                     f.max_rate_per_s),
         "flat_line": qartod.flat_line_test(x, times, f.flat_suspect_s, f.flat_fail_s,
                                            f.flat_tolerance),
     }
@@ -102,7 +103,7 @@ def test_location_equals_ioos_qc():
     lat[5], lon[9], lat[20], lon[20] = np.nan, np.nan, np.nan, np.nan
     lat[30] = 95.0
     t = (1_700_000_000 + 60 * np.arange(n)).astype(np.int64) * S
-    off = FieldQC(-math.inf, math.inf, -math.inf, math.inf)
+    off = FieldLimits(-math.inf, math.inf, math.inf)
     qc_args = ((off, off), 300.0)
     flags, qc = streamed(t, np.stack([lat, lon]), [], qc_args)
     want = np.asarray(qartod.location_test(lon, lat, range_max=300.0, range_method="wgs84"))
@@ -128,7 +129,7 @@ def test_flat_line_memory_is_bounded_and_saved():
     n = FLAT_MEMORY + 500
     t = (np.arange(n) * S // 10).astype(np.int64)
     x = np.zeros((1, n))
-    f = FieldQC(-1, 1, -1, 1, flat_tolerance=0.01, flat_suspect_s=1.0, flat_fail_s=1e6)
+    f = FieldLimits(-1, 1, math.inf, flat_tolerance=0.01, flat_suspect_s=1.0, flat_fail_s=1e6)
     qc = StreamQC((f,))
     flags, _ = qc.check(t, x)
     # suspect once 1 s of flat data is there; fail never (the window is cut to the memory)

@@ -22,6 +22,31 @@ def _astm_totals(series) -> dict:
     return dict(out)
 
 
+def astm_residue_oracle(points: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ASTM E1049 three-point counting of a (short) turning-point sequence, in plain Python:
+    the oracle of the compiled residue count (``_fatigue_loops._residue_cycles``)."""
+    out: list[tuple[float, float, float]] = []
+    stack: list[float] = []
+    start = 0  # index in stack of the series' current starting point
+    for p in points:
+        stack.append(p)
+        while len(stack) - start >= 3:
+            x_rng = abs(stack[-1] - stack[-2])
+            y_rng = abs(stack[-2] - stack[-3])
+            if x_rng < y_rng:
+                break
+            if len(stack) - start == 3:  # Y contains the starting point: half cycle
+                out.append((y_rng, 0.5 * (stack[start] + stack[start + 1]), 0.5))
+                start += 1
+            else:
+                out.append((y_rng, 0.5 * (stack[-3] + stack[-2]), 1.0))
+                del stack[-3:-1]
+    for a, b in zip(stack[start:], stack[start + 1:]):
+        out.append((abs(a - b), 0.5 * (a + b), 0.5))
+    arr = np.array(out, dtype=np.float64).reshape(-1, 3)
+    return arr[:, 0].copy(), arr[:, 1].copy(), arr[:, 2].copy()
+
+
 def _stream(series, cuts, backend="numba", hysteresis=0.0, roundtrip_at=None):
     """Feed ``series`` cut at ``cuts``; return (closed cycles (3, n), residue, counter)."""
     rf = StreamingRainflow(hysteresis=hysteresis, backend=backend)
@@ -72,6 +97,26 @@ def test_any_split_equals_batch_astm(series, cut_seeds, backend):
     np.testing.assert_array_equal(closed, whole)
     np.testing.assert_array_equal(residue, whole_residue)
     assert _totals(closed, rf) == _astm_totals(x)
+    oracle = astm_residue_oracle(rf.residue.tolist())
+    np.testing.assert_array_equal(np.array(rf.residue_half_cycles()), np.array(oracle))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_residue_cycles_equal_the_three_point_oracle_bit_for_bit(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    amp = np.abs(np.cumsum(rng.normal(0.0, 1.0, 400))) + 0.1  # long wandering residues
+    x = amp * 1e6 * (-1.0) ** np.arange(amp.size) + rng.normal(0.0, 1e5, amp.size)
+    rf, full = StreamingRainflow(), 0
+    for block in np.array_split(x, 7):
+        rf.feed(block)
+        want = np.array(astm_residue_oracle(rf.residue.tolist()))
+        assert want.shape[1] >= 7
+        np.testing.assert_array_equal(np.array(rf.residue_half_cycles()), want)
+        monkeypatch.setattr("models._fatigue_loops.residue_cycles_compiled", None)
+        np.testing.assert_array_equal(np.array(rf.residue_half_cycles()), want)  # uncompiled
+        monkeypatch.undo()
+        full += int(np.count_nonzero(want[2] == 1.0))
+    assert full > 0  # the three-point rule paired residue ranges into full cycles
 
 
 def test_long_random_series_matches_astm():

@@ -24,7 +24,7 @@ SHARED = next(
     (p / "shared" for p in Path(__file__).resolve().parents if (p / "shared/realdata").is_dir()),
     None,
 )
-pytestmark = pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
+pytestmark = [pytest.mark.integration, pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")]
 LBF = 4.4482216152605  # N
 NEVER = np.iinfo(np.int64).min
 

@@ -7,7 +7,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,9 @@ from monitor.shore import BuoyTracker, ShoreConfig, ShoreMonitor, buoy_of_key, c
 from replay.reader import iter_blocks
 from replay.runner import run_blocks
 from replay.writer import LogWriter
+from waiting import wait_until
+
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
 
 ROOT = Path(__file__).resolve().parents[1]
 T0_NS = 1_750_000_000 * 10**9
@@ -54,15 +56,6 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def wait_for(cond, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def committed(report: dict) -> dict:
@@ -101,16 +94,16 @@ def test_three_buoys_publishing_at_once_over_loopback(tmp_path):
                                  env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 for log in logs.values()]
         # all three are followed at the same time while they publish
-        wait_for(lambda: {b for b, s in shore.snapshot()["buoys"].items()
-                          if s["state"] == "online"} == set(AMPLITUDES), 60, "3 buoys online")
+        wait_until(lambda: {b for b, s in shore.snapshot()["buoys"].items()
+                            if s["state"] == "online"} == set(AMPLITUDES), 60, "3 buoys online")
         for p in pubs:
             out, err = p.communicate(timeout=120)
             assert p.returncode == 0 and out.strip() == str(2 * SECONDS), err
-        wait_for(lambda: all(s["counters"]["messages"] == 2 * SECONDS
-                             for s in shore.snapshot()["buoys"].values()), 30, "all messages")
+        wait_until(lambda: all(s["counters"]["messages"] == 2 * SECONDS
+                               for s in shore.snapshot()["buoys"].values()), 30, "all messages")
         # publishers gone: tokens withdrawn and data old -> offline, history kept
-        wait_for(lambda: all(s["state"] == "offline" and not s["alive_sensors"]
-                             for s in shore.snapshot()["buoys"].values()), 30, "3 buoys offline")
+        wait_until(lambda: all(s["state"] == "offline" and not s["alive_sensors"]
+                               for s in shore.snapshot()["buoys"].values()), 30, "3 buoys offline")
     finally:
         shore.stop()
         server.join(timeout=30)

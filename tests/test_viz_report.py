@@ -18,6 +18,8 @@ from monitor.viz.html_report import write_report
 from monitor.viz.report_data import parse_report
 from monitor.viz.report_plots import SEVERITY_COLOURS
 
+pytestmark = pytest.mark.integration  # processes, servers or whole records: not in `make test-fast`
+
 CHROMIUM = Path("/usr/bin/chromium")
 T0_S = 1_700_000_000.0
 DAY_S = 86400.0

@@ -69,7 +69,8 @@ _DELAYS = {"on_delay_s": _p(0.0, 0.0, True, unit="s"), "off_delay_s": _p(0.0, 0.
 # kind -> (what the component names: "component" | "stream" | "cable", numeric parameters).
 # threshold units: damage_fraction Miner sum; damage_rate Miner sum per day; remaining_life
 # days; tension_high fraction of breaking strength; conductor_stress multiple of the component's
-# (derated) endurance stress; slack_snap jump in N above floor_N; rejected_rate fraction of
+# (derated) endurance stress; conductor_yield multiple of the stress at which the conductor's
+# hot spot (scf x stress) reaches its tensile yield; slack_snap jump in N above floor_N; rejected_rate fraction of
 # received samples over window_s; model_residual |measured - estimated| in N (tick means; with
 # this rule the pipeline estimates every motion sample, not only where the estimate feeds
 # fatigue, which costs replay a tenth to a fifth more CPU).
@@ -82,6 +83,7 @@ KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, ParamSpec]]] = {
         "deadband": _p(0.0, 0.0, True), **_DELAYS,
     }),
     "conductor_stress": ("component", {"threshold": _p(1.0, 0.0), **_DELAYS}),
+    "conductor_yield": ("component", {"threshold": _p(1.0, 0.0), **_DELAYS}),
     "slack_snap": ("cable", {
         "threshold": _p(None, 0.0, unit="N"), "floor_N": _p(None, 0.0, True, unit="N"),
         "window_s": _p(2.0, 0.0, unit="s"), "off_delay_s": _p(60.0, 0.0, True, unit="s"),

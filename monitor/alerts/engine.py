@@ -23,31 +23,32 @@ from typing import Any, Iterable, Mapping
 
 from monitor.alerts.config import CABLE_COMPONENT, KIND_PARAMS, AlertsConfig, RuleConfig
 from monitor.alerts.records import AlertRecord
-from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, Rule, TickStats
+from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, ConductorYield, Rule, TickStats
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.events import Observation
 
 STATE_VERSION = 1
 
 
-def _endurance(name: str, info: Any) -> float | None:
+def _endurance(name: str, info: Any, key: str = "endurance_stress_Pa") -> float | None:
     """Endurance stress (Pa) of a component description, None if it has none.
 
     Accepts a number, None, a mapping with ``endurance_stress_Pa``, or any object with an
-    ``endurance_stress_Pa`` attribute (e.g. the pipeline's component info).
+    ``endurance_stress_Pa`` attribute (e.g. the pipeline's component info). With
+    ``key="yield_stress_Pa"`` the same for the yield stress (a bare number has none).
     """
     if info is None or isinstance(info, (int, float)) and not isinstance(info, bool):
-        value = info
+        value = info if key == "endurance_stress_Pa" else None
     elif isinstance(info, Mapping):
-        value = info.get("endurance_stress_Pa")
+        value = info.get(key)
     else:
-        value = getattr(info, "endurance_stress_Pa", None)
+        value = getattr(info, key, None)
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"component {name!r}: endurance_stress_Pa = {value!r}: must be a number")
+        raise ValueError(f"component {name!r}: {key} = {value!r}: must be a number")
     if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"component {name!r}: endurance_stress_Pa = {value!r}: must be > 0")
+        raise ValueError(f"component {name!r}: {key} = {value!r}: must be > 0")
     return float(value)
 
 
@@ -55,10 +56,12 @@ class AlertEngine:
     """Rule instances for one buoy, their firing state, and the alert history."""
 
     def __init__(self, config: AlertsConfig, buoy_id: str,
-                 endurance_Pa: Mapping[str, float | None]) -> None:
+                 endurance_Pa: Mapping[str, float | None],
+                 yield_Pa: Mapping[str, float | None] | None = None) -> None:
         self.config = config
         self.buoy_id = validate_buoy_id(buoy_id)
         self.endurance_Pa = dict(endurance_Pa)
+        self.yield_Pa = {n: (yield_Pa or {}).get(n) for n in self.endurance_Pa}
         self._resend_ns = int(round(config.resend_interval_s * NS))
         self._rules: list[Rule] = []
         for rc in config.rules:
@@ -85,10 +88,12 @@ class AlertEngine:
 
         ``components`` maps each fatigue component name to its description: anything with an
         ``endurance_stress_Pa`` (attribute or key; the derated endurance stress, None for
-        non-conductor components), or that number itself.
+        non-conductor components), or that number itself; and optionally a
+        ``yield_stress_Pa`` (the nominal stress at yield, for ``conductor_yield`` rules).
         """
         cfg = alerts_cfg if isinstance(alerts_cfg, AlertsConfig) else AlertsConfig.from_dict(alerts_cfg)
-        return cls(cfg, buoy_id, {str(n): _endurance(str(n), c) for n, c in components.items()})
+        return cls(cfg, buoy_id, {str(n): _endurance(str(n), c) for n, c in components.items()},
+                   {str(n): _endurance(str(n), c, "yield_stress_Pa") for n, c in components.items()})
 
     def _instances(self, rc: RuleConfig) -> Iterable[Rule]:
         target_kind, _ = KIND_PARAMS[rc.kind]
@@ -104,13 +109,14 @@ class AlertEngine:
             raise ValueError(f"{rc.where}.component = \"{rc.component}\": unknown component; "
                              f"expected one of {sorted(self.endurance_Pa)}")
         names = [rc.component] if rc.component else list(self.endurance_Pa)
-        if cls is not ConductorStress:
+        if cls not in (ConductorStress, ConductorYield):
             return [cls(rc, n) for n in names]
-        if rc.component is not None and self.endurance_Pa[rc.component] is None:
+        levels, what = ((self.endurance_Pa, "endurance") if cls is ConductorStress
+                        else (self.yield_Pa, "yield"))
+        if rc.component is not None and levels[rc.component] is None:
             raise ValueError(f"{rc.where}.component = \"{rc.component}\": component has no "
-                             "endurance stress (not a conductor)")
-        return [cls(rc, n, self.endurance_Pa[n]) for n in names
-                if self.endurance_Pa[n] is not None]
+                             f"{what} stress (not a conductor)")
+        return [cls(rc, n, levels[n]) for n in names if levels[n] is not None]
 
     # --- evaluation ------------------------------------------------------------------------
     @property
@@ -240,6 +246,7 @@ class AlertEngine:
             "buoy_id": self.buoy_id,
             "config": self.config.to_dict(),
             "components": {n: e for n, e in self.endurance_Pa.items()},
+            "yield_Pa": dict(self.yield_Pa),
             "last_t_ns": self.last_t_ns,
             "rules": {fp: {"kind": r.kind, **r.get_state()} for fp, r in self._by_fp.items()},
             "history": list(self._history),
@@ -260,7 +267,9 @@ class AlertEngine:
             eng = cls.from_config(
                 alerts_cfg if alerts_cfg is not None else state["config"],
                 buoy_id if buoy_id is not None else state["buoy_id"],
-                components if components is not None else state["components"],
+                components if components is not None else {
+                    n: {"endurance_stress_Pa": e, "yield_stress_Pa": state.get("yield_Pa", {}).get(n)}
+                    for n, e in state["components"].items()},
             )
             eng.last_t_ns = int(state["last_t_ns"])
             for fp, rs in state["rules"].items():

@@ -330,6 +330,35 @@ class ConductorStress(Rule):
                 f"endurance stress ({self.endurance_Pa / 1e6:.4g} MPa)")
 
 
+class ConductorYield(Rule):
+    """Peak conductor stress in a tick above ``threshold`` x the stress at which the hot spot
+    (scf x stress) reaches the conductor's tensile yield: the elastic helix model and the S-N
+    curve do not hold there, so the damage figures are underestimates."""
+
+    kind = "conductor_yield"
+    unit = "Pa"
+
+    def __init__(self, cfg: RuleConfig, target: str, yield_Pa: float) -> None:
+        super().__init__(cfg, target)
+        self.yield_Pa = yield_Pa
+        self.level = self.threshold * yield_Pa
+
+    def observe(self, obs: Observation, tick: TickStats) -> float | None:
+        comp = obs.components.get(self.target)
+        return None if comp is None else _finite_or_none(comp.max_stress_Pa)
+
+    def holds(self, value: float) -> bool:
+        return value > self.level
+
+    @property
+    def threshold_value(self) -> float:
+        return self.level
+
+    def summary(self) -> str:
+        return (f"elastic model beyond yield: damage underestimated ({self.target} above "
+                f"{self.threshold:g} x its yield stress, {self.yield_Pa / 1e6:.4g} MPa nominal)")
+
+
 class SlackSnap(Rule):
     """A snatch load: tension below ``floor_N`` (slack) followed, within ``window_s`` of the
     last slack sample, by a sample at least ``threshold`` N above the floor.
@@ -474,5 +503,5 @@ class ModelResidual(Rule):
 RULE_CLASSES: Mapping[str, type[Rule]] = {
     cls.kind: cls
     for cls in (DamageFraction, DamageRate, RemainingLife, TensionHigh, ConductorStress,
-                SlackSnap, Stale, RejectedRate, ModelResidual)
+                ConductorYield, SlackSnap, Stale, RejectedRate, ModelResidual)
 }

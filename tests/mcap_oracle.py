@@ -1,0 +1,59 @@
+"""Test oracle of ``replay.reader.LogReader``: ``mcap``'s own reader and the generic
+protobuf runtime (moved out of the production reader, issue 18)."""
+
+from __future__ import annotations
+
+from os import PathLike
+from typing import Sequence
+
+import numpy as np
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from mcap.reader import make_reader
+
+from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
+from replay.reader import expand_paths
+
+
+def reference_blocks(paths: Sequence[str | PathLike] | str | PathLike) -> list[SampleBlock]:
+    """Slow reference: ``mcap``'s own reader and the generic protobuf runtime, one block per
+    message, sorted by (publish time, topic, read order) with exact duplicates dropped.
+
+    Independent of :mod:`monitor.codec`'s decoder and of this module's record parsing; used by
+    tests to check the fast path. Undamaged files only.
+    """
+    if isinstance(paths, (str, PathLike)):
+        paths = [paths]
+    rows = []
+    for path in expand_paths(paths):
+        with open(path, "rb") as f:
+            classes: dict[int, type] = {}
+            for schema, channel, msg in make_reader(f).iter_messages(log_time_order=False):
+                if schema is None or schema.encoding != "protobuf":
+                    continue
+                buoy, sensor = parse_sensor_topic(channel.topic)
+                cls = classes.get(schema.id)
+                if cls is None:
+                    pool = descriptor_pool.DescriptorPool()
+                    for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+                        pool.Add(fd)
+                    cls = classes[schema.id] = message_factory.GetMessageClass(
+                        pool.FindMessageTypeByName(schema.name))
+                m = cls.FromString(msg.data)
+                names = list(SENSOR_FIELDS[sensor])
+                n = len(getattr(m, names[0]))
+                if len(m.t_offset_ns):
+                    t = m.t0_ns + np.array(m.t_offset_ns, np.int64)
+                else:
+                    t = m.t0_ns + m.period_ns * np.arange(n, dtype=np.int64)
+                blk = SampleBlock(buoy, sensor, t.astype(np.int64),
+                                  {k: np.array(getattr(m, k), np.float64) for k in names},
+                                  msg.log_time)
+                rows.append((msg.publish_time, channel.topic, len(rows), msg.data, blk))
+    rows.sort(key=lambda r: r[:3])
+    out, seen = [], set()
+    for pub, topic, _, data, blk in rows:
+        if (pub, topic, data) in seen:
+            continue
+        seen.add((pub, topic, data))
+        out.append(blk)
+    return out

@@ -1,0 +1,129 @@
+"""One S-N damage per cycle on every path: ``SNCurve.damage_per_cycle``, the Miner
+accumulator's compiled and numpy commits, its mean-corrected commit, the residue damage
+and a component's figures give the same bits for the same cycle (issue 18: two of three
+former formulas differed in the last bits for 98.5 % of 200,000 random ranges).
+
+The oracle is the formula evaluated independently with numpy: segment by
+``searchsorted``, then exp(m ln S + ln(dff / a)) with the compiled loops' log and exp
+applied to arrays (``models._fatigue_loops.log_det``/``exp_det`` are plain numpy there).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from models._fatigue_loops import damage_loop, exp_det, log_det
+from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow
+from monitor.components import Component, build_cable
+from monitor.config import default_config
+
+N = 200_000
+
+
+def oracle(curve: SNCurve, ranges: np.ndarray, counts: np.ndarray, means=None) -> np.ndarray:
+    """Damage of each cycle, computed without the package's evaluation code."""
+    m, log_a, bounds = curve._segments
+    s = curve.effective_range_MPa(ranges, means)
+    seg = m.size - 1 - np.searchsorted(bounds, s, side="right")
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        ln_coef = np.log(curve.dff * 10.0 ** -log_a)
+        d = counts * exp_det(m[seg] * log_det(s) + ln_coef[seg])
+    cutoff = curve.endurance_MPa if curve.low_stress == "cutoff" else 0.0
+    return np.where(s >= cutoff, d, 0.0)
+
+
+CURVES = {
+    "copper_haibach": SNCurve.vaps_copper(),
+    "copper_cutoff": SNCurve.vaps_copper("cutoff", derating=2.0, scf=1.3),
+    "dnv_d_seawater": SNCurve.dnv_rp_c203("D", "seawater_cp", dff=3.0, scf=1.1),
+    "chain": SNCurve.dnv_chain_studless(),
+}
+
+
+@pytest.fixture(scope="module")
+def cycles():
+    rng = np.random.default_rng(18)
+    ranges = rng.uniform(0.0, 120e6, N)
+    ranges[:50] = 0.0  # zero range: no damage on every path
+    counts = np.where(rng.random(N) < 0.1, 0.5, 1.0)
+    means = rng.uniform(-30e6, 60e6, N)
+    return ranges, counts, means
+
+
+def _seq_sum(start: float, d: np.ndarray) -> float:
+    return float(np.cumsum(np.concatenate(([start], d)))[-1])
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_every_path_gives_the_same_bits(name, cycles):
+    curve = CURVES[name]
+    ranges, counts, means = cycles
+    d = curve.damage_per_cycle(ranges, counts)
+    # the formula, evaluated independently: every one of 200,000 cycles to the last bit
+    np.testing.assert_array_equal(d, oracle(curve, ranges, counts))
+    assert np.count_nonzero(d) > N // 2 and np.all(d[:50] == 0.0)
+    # the uncompiled loop (numba is optional) is the same code, hence the same bits
+    np.testing.assert_array_equal(damage_loop(ranges[:3000] * curve.kernel_params[0], counts[:3000],
+                                              curve._mpa_params), d[:3000])
+    # committed Miner sums, compiled and numpy: each cycle's damage added in order
+    for backend in ("numba", "numpy"):
+        miner = MinerAccumulator(curve, backend=backend)
+        assert miner.add_cycles(ranges, None, counts) == _seq_sum(0.0, d)
+        assert miner.damage_committed == _seq_sum(0.0, d)
+    # one cycle per accumulator: the committed figure is the cycle's damage itself
+    for i in range(0, N, 997):
+        miner = MinerAccumulator(curve)
+        miner.add_cycles(ranges[i:i + 1], None, counts[i:i + 1])
+        assert miner.damage_committed == d[i]
+
+
+def test_mean_corrected_paths_give_the_same_bits(cycles):
+    curve = SNCurve.vaps_copper(mean_correction="goodman", ultimate_Pa=220e6)
+    ranges, counts, means = cycles
+    d = curve.damage_per_cycle(ranges, counts, means)
+    np.testing.assert_array_equal(d, oracle(curve, ranges, counts, means))
+    assert d.max() > 0 and np.count_nonzero(d) > N // 2
+    miner = MinerAccumulator(curve)
+    miner.add_cycles(ranges, means, counts)
+    assert miner.damage_committed == _seq_sum(0.0, d)
+
+
+@pytest.mark.parametrize("name", sorted(CURVES) + ["goodman"])
+def test_residue_damage_is_the_per_cycle_damage_summed(name):
+    """The compiled residue pass (mean-free curves) and the counted residue through
+    ``damage_per_cycle`` (mean-corrected ones) both give the per-cycle damage summed."""
+    curve = CURVES.get(name) or SNCurve.vaps_copper(mean_correction="goodman", ultimate_Pa=220e6)
+    rf = StreamingRainflow()
+    rng = np.random.default_rng(5)
+    # a growing then decaying swing stays open: a long residue
+    amp = np.concatenate((np.linspace(1.0, 60.0, 60), np.linspace(60.0, 1.0, 60))) * 1e6
+    rf.feed(amp * (-1.0) ** np.arange(amp.size) + rng.uniform(0.0, 0.4e6, amp.size))
+    r, m, c = rf.residue_half_cycles()
+    assert r.size > 100
+    want = float(np.cumsum(curve.damage_per_cycle(r, c, m))[-1])
+    assert want > 0
+    assert MinerAccumulator(curve).residue_damage(rf) == want
+
+
+def test_component_figures_price_pending_cycles_as_the_commit_does():
+    """Figures read between ticks add the pending cycles, each cycle's damage the bits the
+    commit at the tick end gives it (one S-N function; before issue 18 a second formula)."""
+    config = default_config()
+    comp = Component(dataclasses.replace(config.components[0]), build_cable(config), config.fatigue)
+    rng = np.random.default_rng(9)
+    tension = 6e3 + np.cumsum(rng.normal(0.0, 300.0, 40_000))
+    stress = comp.stress(np.abs(tension))
+    comp.feed(stress[:20_000])
+    comp.commit(10**9)
+    comp.feed(stress[20_000:])
+    ranges, means, counts = comp._pending
+    assert ranges.size > 100
+    d = oracle(comp.sn_curve, ranges, counts)
+    assert comp.figures()["damage_committed"] == comp.miner.damage_committed + float(np.sum(d))
+    for i in range(0, ranges.size, 7):  # each pending cycle, committed on its own
+        miner = MinerAccumulator(comp.sn_curve)
+        miner.add_cycles(ranges[i:i + 1], means[i:i + 1], counts[i:i + 1])
+        assert miner.damage_committed == d[i]
