@@ -20,7 +20,9 @@ $(VENV)/.installed-test: $(VENV)/.created pyproject.toml
 	$(PIP) install -q -e '.[test]'
 	touch $@ $(VENV)/.installed
 
+# numba compiles the kernels once into its cache here, never inside a user's first command
 demo: $(VENV)/.installed
+	$(VENV)/bin/buoymon warmup
 	$(VENV)/bin/buoymon demo --out out/demo
 
 # the HTML report test renders in headless Chromium (Debian package); install it when missing
@@ -41,11 +43,13 @@ alertmanager:
 
 test: $(VENV)/.installed-test chromium alertmanager
 	cd $(CURDIR) && $(VENV)/bin/lint-imports --no-cache
+	$(VENV)/bin/buoymon warmup
 	$(PY) -m mypy
 	$(PY) -m pytest -q
 
 # the unit tests alone (no daemons, servers, browsers or whole records): under a minute
 test-fast: $(VENV)/.installed-test
+	$(VENV)/bin/buoymon warmup
 	$(PY) -m pytest -q -m "not integration and not slow"
 
 # every benchmark script prints its figures (the 30-day replay takes a few minutes)

@@ -18,8 +18,8 @@ from typing import Sequence
 
 import numpy as np
 
+from models import _fatigue_loops as _loops
 from models._fatigue_loops import NS as _NS
-from models._fatigue_loops import ticks_compiled
 from models.miner import MinerAccumulator
 from models.rainflow_stream import StreamingRainflow
 
@@ -41,6 +41,7 @@ def commit_ticks(rainflow: StreamingRainflow, miner: MinerAccumulator, stress_Pa
                  residue: bool = True) -> TickCommits | None:
     """Stress samples through the counter and the accumulator tick by tick in one compiled
     pass (see the module docstring); None when that pass is unavailable."""
+    ticks_compiled = _loops.ticks_compiled
     if (ticks_compiled is None or rainflow.backend != "numba" or miner.backend != "numba"
             or miner._needs_means):
         return None

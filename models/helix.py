@@ -67,7 +67,8 @@ from typing import Literal
 
 import numpy as np
 
-from models._fatigue_loops import axial_compiled as _axial_compiled
+from models import _fatigue_loops as _loops
+from models._jit import HAVE_NUMBA
 
 Lay = Literal["left", "right"]
 TwistRestraint = Literal["free", "restrained", "limited"]
@@ -259,10 +260,10 @@ def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay 
     if args is None:
         return _stress_general(_check_finite(t), cable, _lay_sign(lay, cable), cable.pitch_m,
                                cable.helix_radius_m, combined)
-    if backend != "numpy" and _axial_compiled is not None:
+    if backend != "numpy" and HAVE_NUMBA:
         flat = t.reshape(-1)
         out = np.empty(flat.size)
-        bad = _axial_compiled(flat, *args, out)
+        bad = _loops.axial_compiled(flat, *args, out)
     elif backend in ("auto", "numpy"):
         # E |cos a * sqrt((1 + e_c)^2 + (C'/P)^2) - 1|; both terms are O(1): no overflow
         k, tan_a, cos_a, rg_signed, e_mod = args

@@ -37,8 +37,8 @@ from typing import Literal
 
 import numpy as np
 
-from models._fatigue_loops import commit_compiled as _commit_compiled
-from models._fatigue_loops import residue_compiled as _residue_compiled
+from models import _fatigue_loops as _loops
+from models._jit import HAVE_NUMBA
 from models.sn_curve import SNCurve
 
 _DAY_S = 86400.0
@@ -72,8 +72,8 @@ class MinerAccumulator:
         if not (math.isfinite(reference_cycles) and reference_cycles > 0):
             raise ValueError(f"reference_cycles must be positive, got {reference_cycles!r}")
         if backend == "auto":
-            backend = "numba" if _commit_compiled is not None else "numpy"
-        if backend not in ("numba", "numpy") or (backend == "numba" and _commit_compiled is None):
+            backend = "numba" if HAVE_NUMBA else "numpy"
+        if backend not in ("numba", "numpy") or (backend == "numba" and not HAVE_NUMBA):
             raise ValueError(f"backend {backend!r} is not available")
         self.sn_curve = sn_curve
         self.backend = backend
@@ -128,8 +128,8 @@ class MinerAccumulator:
             # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
             added = self._commit_numpy(r, n, means_Pa)
         elif self.backend == "numba":
-            committed, added, cycles, bad = _commit_compiled(r, n, self._params, self._table, self._inv_width,
-                                                             self._committed)
+            committed, added, cycles, bad = _loops.commit_compiled(r, n, self._params, self._table,
+                                                                   self._inv_width, self._committed)
             if bad >= 0:
                 raise ValueError(f"cycle {bad} has an invalid range or count ({r[bad]!r}, {n[bad]!r})")
             self._committed = committed
@@ -185,8 +185,8 @@ class MinerAccumulator:
         end of a series (``rainflow.residue_half_cycles()``), each cycle's damage as the
         committed ones', summed in counting order; nothing is stored. Cheap enough for
         every alert tick: one compiled pass over the residue without mean correction."""
-        if not self._needs_means and _residue_compiled is not None:
-            return _residue_compiled(rainflow._st, self._params)
+        if not self._needs_means and HAVE_NUMBA:
+            return _loops.residue_compiled(rainflow._st, self._params)
         ranges, means, counts = rainflow.residue_half_cycles()
         d = self.sn_curve.damage_per_cycle(ranges, counts, means)
         return float(np.cumsum(d)[-1]) if d.shape[0] else 0.0

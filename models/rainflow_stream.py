@@ -44,6 +44,7 @@ import numpy as np
 from models import _fatigue_loops as _loops
 
 # the compiled loop and the layout of the state vector it shares with the numpy backend
+from models import _fatigue_loops as _loops
 from models._fatigue_loops import CAND as _CAND
 from models._fatigue_loops import CHUNK as _CHUNK
 from models._fatigue_loops import DIR as _DIR
@@ -51,8 +52,9 @@ from models._fatigue_loops import HEADER as _HEADER
 from models._fatigue_loops import HYST as _HYST
 from models._fatigue_loops import NS as _NS
 from models._fatigue_loops import STARTED as _STARTED
-from models._fatigue_loops import feed_compiled as _feed_compiled
+from models._fatigue_loops import cycle_room as _cycle_room
 from models._fatigue_loops import feed_loop as _feed_loop
+from models._jit import HAVE_NUMBA
 
 Backend = Literal["auto", "numba", "numpy"]
 
@@ -77,6 +79,13 @@ def _run_ends(x: np.ndarray, st: np.ndarray) -> np.ndarray:
     return ends if st[_STARTED] != 0.0 else np.concatenate((z[:1], ends))
 
 
+def _feed_compiled(st: np.ndarray, x: np.ndarray):
+    """The compiled loop, into an output allocated here (``_fatigue_loops.feed_loop``)."""
+    out = np.empty((3, _cycle_room(st, x.size)))
+    k, used = _loops.feed_compiled(st, x, out)
+    return out[:, :k], used
+
+
 def _feed_numpy(st: np.ndarray, x: np.ndarray):
     """Pure numpy/Python twin of the compiled loop: same state machine on run ends only."""
     bad = np.flatnonzero(~np.isfinite(x))
@@ -87,8 +96,9 @@ def _feed_numpy(st: np.ndarray, x: np.ndarray):
         return np.empty((3, 0)), x.size
     # the state machine gives the same result on any subsequence that keeps every run
     # end; feed() has grown the stack storage so that the whole block fits
-    cycles, _ = _feed_loop(st, ends)
-    return cycles, x.size
+    out = np.empty((3, _cycle_room(st, ends.size)))
+    k, _ = _feed_loop(st, ends, out)
+    return out[:, :k], x.size
 
 
 class StreamingRainflow:
@@ -98,10 +108,10 @@ class StreamingRainflow:
         if not (isinstance(hysteresis, (int, float)) and math.isfinite(hysteresis) and hysteresis >= 0):
             raise ValueError(f"hysteresis must be a finite number >= 0, got {hysteresis!r}")
         if backend == "auto":
-            backend = "numba" if _feed_compiled is not None else "numpy"
+            backend = "numba" if HAVE_NUMBA else "numpy"
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'auto', 'numba' or 'numpy', got {backend!r}")
-        if backend == "numba" and _feed_compiled is None:
+        if backend == "numba" and not HAVE_NUMBA:
             raise ValueError("backend='numba' requested but numba is not importable")
         self.backend = backend
         self._feed = _feed_compiled if backend == "numba" else _feed_numpy

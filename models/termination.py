@@ -39,9 +39,10 @@ Public API
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Callable, Literal
 
 import numpy as np
 
@@ -108,9 +109,11 @@ def termination_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: La
         return np.sqrt((sigma_a + sigma_b + sigma_bend) ** 2 + 3.0 * tau ** 2)
     t = np.asarray(tension_N, dtype=np.float64)
     coefs = _coefficients(cable, args, sigma_bend)
-    if backend != "numpy" and _loop_compiled is not None:
+    loop = _loop_compiled() if backend != "numpy" else None
+    out: np.ndarray
+    if loop is not None:
         out = np.empty(t.size)
-        bad = _loop_compiled(t.reshape(-1), *coefs, out)
+        bad = loop(t.reshape(-1), *coefs, out)
         out = out.reshape(t.shape)
     else:  # the same expression on arrays
         out = _stress(t, *coefs)
@@ -158,4 +161,8 @@ def _loop(t, k, tan_a, cos_a, rg, e_mod, c_bend, sin_a, c_shear, sigma_bend, out
     return -1
 
 
-_loop_compiled = compile_loop(_loop)
+@functools.cache
+def _loop_compiled() -> Callable | None:
+    """``_loop`` compiled on its first use, not at import: that would import numba
+    (models._jit says what that costs) in commands that never run it."""
+    return compile_loop(_loop)

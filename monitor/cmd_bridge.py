@@ -11,8 +11,7 @@ log = logging.getLogger("buoymon.bridge")
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
-    p = sub.add_parser("bridge", help="read instruments (serial, TCP, UDP, files, stdin) and "
-                                      "publish their samples to the monitor",
+    p = sub.add_parser("bridge",
                        description="Read the [[source]] instruments of the configuration and "
                                    "publish their samples as blocks on buoy/<id>/sensor/<stream> "
                                    "(docs/SENSORS.md).")

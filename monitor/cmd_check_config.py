@@ -9,7 +9,7 @@ from monitor.config import load_config, run_section_parsers
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("check-config", help="validate a configuration file")
+    p = sub.add_parser("check-config")
     p.add_argument("config", help="TOML configuration file")
     p.set_defaults(func=run)
 

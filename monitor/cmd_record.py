@@ -32,8 +32,7 @@ _FETCH_TIMEOUT_S = 5.0  # longest wait for a sensor publisher's cache
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
-    p = sub.add_parser("record", help="record a buoy's Zenoh traffic to MCAP files",
-                       description=__doc__.split("\n\n")[1])
+    p = sub.add_parser("record", description=__doc__.split("\n\n")[1])
     p.add_argument("--config", required=True, metavar="CFG.toml", help="configuration file")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory")
     p.set_defaults(func=run)

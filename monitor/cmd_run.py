@@ -16,7 +16,7 @@ log = logging.getLogger("buoymon.run")
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
-    p = sub.add_parser("run", help="run the live monitoring daemon (Zenoh in, status out)",
+    p = sub.add_parser("run",
                        description="Subscribe to buoy/<id>/sensor/**, run the pipeline core, "
                        "publish buoy/<id>/monitor/status, checkpoint state crash-safely.")
     p.add_argument("--config", required=True, metavar="CFG.toml", help="configuration file")

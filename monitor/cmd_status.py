@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, load_target
+from monitor.viz.human import remaining_life_text
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
-    p = sub.add_parser("status", help="show a running daemon's status (or its last checkpoint)",
+    p = sub.add_parser("status",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", default=DEFAULT_CONFIG, metavar="CFG.toml",
                    help=f"the daemon's configuration (default {DEFAULT_CONFIG})")
@@ -171,7 +172,10 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
         n_yield = c.get("samples_beyond_yield")
         rows.append((str(name), _n(c.get("damage")), _n(c.get("damage_committed")),
                      _n(c.get("damage_rate_per_day")),
-                     _n(c.get("remaining_life_days"), "{:.4g}", " d"), _n(n_yield, "{:.0f}")))
+                     # in words, as the report: "6.5 h", "more than 1,000 years"
+                     "-" if c.get("remaining_life_days") is None
+                     else remaining_life_text(float(c["remaining_life_days"])),
+                     _n(n_yield, "{:.0f}")))
         if n_yield:
             beyond.append(str(name))
     out += ["components:", *_table(rows)]

@@ -317,7 +317,7 @@ def _live_pipeline(config: Config) -> Any:
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("shore", help="follow every buoy on the Zenoh network (shore side)",
+    p = sub.add_parser("shore",
                        description="Subscribe to buoy/*/sensor/**, run one pipeline per buoy, "
                        "publish shore/<name>/status with a status per buoy.")
     p.add_argument("--config", metavar="CFG.toml",

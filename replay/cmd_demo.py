@@ -29,7 +29,7 @@ FIELD_DERATING = 2.0  # seed 004: "a further factor of at least 2" for field con
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="simulate and replay the seed 004 storm (1980, VAPS)")
+    p = sub.add_parser("demo")
     p.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
     p.add_argument("--hours", type=float, default=STORM["hours"], help=argparse.SUPPRESS)
     p.set_defaults(func=run)

@@ -25,7 +25,7 @@ from replay.sea_state_files import read_sea_states
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "design", help="annual damage and design life per component from a sea-state record",
+        "design",
         description="Bin hourly sea states into a scatter table, simulate each occupied bin "
                     "with the simulator's load model, and give each component's annual "
                     "fatigue damage (rainflow, and Dirlik as a cross-check) and design life.")

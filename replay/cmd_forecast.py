@@ -32,7 +32,7 @@ from replay.sea_state_files import SeaStates, read_sea_states
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "forecast", help="projected fatigue damage over a sea-state forecast",
+        "forecast",
         description="Project each component's damage over a sea-state forecast: damage at "
                     "the end with a band, when each damage alert threshold is crossed, and "
                     "the remaining life at the end.")

@@ -15,7 +15,7 @@ from replay.writer import LogWriter, Series
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "import", help="convert a measurement CSV into an MCAP log",
+        "import",
         description="Convert a CSV (time_s or time column, <channel>_<unit> columns) into an "
                     "MCAP log with ~1 s blocks. Bad rows are reported with line numbers and "
                     "skipped. See docs/LOG_FORMAT.md.")

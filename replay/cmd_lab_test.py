@@ -19,7 +19,7 @@ from monitor.config import ConfigError, default_config, load_config
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "lab-test", help="seed 004's lab fatigue test through the monitor: predicted vs observed",
+        "lab-test",
         description="Feed the seed 004 lab fatigue test (0 to F kN at 13.6 cycles/min) through "
                     "the pipeline and compare each component's predicted cycles to failure "
                     "with the observed failures.")

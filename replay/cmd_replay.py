@@ -19,7 +19,7 @@ MIN_SPEED = 1e-6
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("replay", help="replay MCAP logs through the fatigue pipeline")
+    p = sub.add_parser("replay")
     p.add_argument("logs", nargs="+", help="MCAP files or directories of them (replayed in time order)")
     p.add_argument("--config", help="TOML configuration (default: the seed 004 VAPS mooring)")
     p.add_argument("--report", help="write the JSON report here")

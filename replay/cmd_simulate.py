@@ -22,7 +22,7 @@ from replay.simulate import LOAD_MODELS, SimConfig, simulate
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "simulate", help="write a synthetic buoy log (sea -> motion -> tension -> sensors)",
+        "simulate",
         description="Simulate an irregular sea, the buoy's motion and the line tension through "
                     "the physics models, with sensor noise and optional faults; write an MCAP "
                     "log (20 Hz tension, 10 Hz IMU and motion, 1 Hz GNSS, 30 min waves). "

@@ -33,6 +33,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 from monitor.blocks import SampleBlock, parse_sensor_topic
 from monitor.config import Config, parse_config
 from monitor.shore import config_for_buoy
+from monitor.viz.human import remaining_life_text
 
 FLEET_REPORT_VERSION = 1
 # forkserver: workers fork from a clean server process, never from a parent that already runs
@@ -310,7 +311,8 @@ def fleet_summary_text(fleet: Mapping[str, Any]) -> str:
             lines.append(
                 f"  {b['rank'] if j == 0 else '':>4} {b['buoy_id'] if j == 0 else '':16s} "
                 f"{name:20s} {c['damage']:11.3e} {'-' if rate is None else format(rate, '11.3e'):>11s} "
-                f"{'-' if life is None else format(life, '.3g') + ' d':>11s}  "
+                # null: nothing accrues (docs/REPORT_FORMAT.md); in words, as the report's page
+                f"{remaining_life_text(math.inf if life is None else life):>11s}  "
                 f"{', '.join(c['active_alerts']) or '-'}")
     return "\n".join(lines)
 

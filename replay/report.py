@@ -14,7 +14,8 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      (p99 on a fixed histogram, ~3 N bins), and how many samples
                                      were ``samples_measured`` / ``samples_estimated``, and
                                      ``samples_estimate_clamped``: estimates of motion outside
-                                     the estimator's table, held at its edge
+                                     the estimator's table, held at its edge;
+                                     ``breaking_load_N`` the configured breaking load
 ``components``                       {name: ``damage`` (committed + open residue as half cycles),
                                      ``damage_by_source`` (monitor.damage_split),
                                      ``damage_committed`` (Miner sum of closed cycles),
@@ -23,15 +24,16 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      ``kind``, ``lay``, ``location`` (free_span | termination),
                                      ``samples_beyond_yield``: load samples whose hot-spot
                                      stress exceeded the conductor's yield (the elastic model
-                                     and the S-N curve do not hold: damage underestimated)}
+                                     and the S-N curve do not hold: damage underestimated),
+                                     ``derating``}
 ``alerts``                           alert transitions (monitor.alerts records as dicts), the
                                      newest 10,000; ``alerts_dropped`` counts older ones
 ``inputs``                           files read and the reader's statistics (lost data)
 ``design_life_years``                the configured design life
 
 Optional plot fields (with ``buoymon replay --html``, also in the ``--report`` JSON then, so
-``buoymon report`` can draw it again; docs/REPORT_FORMAT.md): ``tension_history`` and per
-component ``damage_history``, ``histogram``, ``sn_curve``. They describe this replay only (a
+``buoymon report`` can draw it again; docs/REPORT_FORMAT.md): ``tension_history``,
+``sea_state`` and per component ``damage_history``, ``histogram``, ``sn_curve``. They describe this replay only (a
 log replayed in parts with ``--state`` has each part's history), so they are left out of a
 plain ``--report``, whose components stay equal between split and one-pass replays.
 """
@@ -39,6 +41,7 @@ plain ``--report``, whose components stay equal between split and one-pass repla
 from __future__ import annotations
 
 import json
+import math
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -46,8 +49,13 @@ from typing import Any, Mapping, Sequence
 from monitor.atomic_file import atomic_write_text
 from monitor.config import Config
 from monitor.strict_json import json_ready
+from monitor.viz.alert_view import alert_episodes
+from monitor.viz.findings import findings, findings_text
+from monitor.viz.human import remaining_life_text, tension_text
+from monitor.viz.report_data import parse_report
 
 REPORT_VERSION = 1
+MAX_EPISODE_LINES = 20  # alert episodes listed in the terminal summary; the page lists all
 
 
 def iso_utc(t_ns: int | None) -> str | None:
@@ -75,6 +83,7 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
             "lay": c.lay,
             "location": c.location,
             "samples_beyond_yield": int(figures.get("samples_beyond_yield") or 0),
+            "derating": c.derating,
         }
         if "damage_by_source" in figures:
             comps[name]["damage_by_source"] = figures["damage_by_source"]
@@ -87,7 +96,8 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
         "time_start_ns": pipeline_report["time_start_ns"],
         "time_end_ns": pipeline_report["time_end_ns"],
         "samples": pipeline_report["samples"],
-        "tension_N": pipeline_report["tension_N"],
+        "tension_N": {**pipeline_report["tension_N"],
+                      "breaking_load_N": config.load.breaking_load_N},
         "load_source_at_end": pipeline_report["load_source"],
         "motion_sensor": pipeline_report.get("motion_sensor"),
         "load_problems": list(pipeline_report.get("load_problems", [])),
@@ -126,8 +136,15 @@ def _num(x: float | str | None, fmt: str) -> str:
 
 
 def summary_text(report: Mapping[str, Any]) -> str:
-    """A few lines for a person: what was read, the load, the damage per component, alerts."""
-    lines = [f"buoy {report['buoy_id']}: {report['time_start'] or '-'} .. {report['time_end'] or '-'}"]
+    """For a person: the findings (as on the HTML page; monitor.viz.findings), then the
+    details: what was read, the load, the damage per component, alerts."""
+    lines = []
+    parsed = None
+    if report["time_start"] is not None:  # without samples there is no finding to state
+        parsed = parse_report(report)
+        lines += [findings_text(findings(parsed)), "", "Details:"]
+    lines.append(f"buoy {report['buoy_id']}: {report['time_start'] or '-'} .. "
+                 f"{report['time_end'] or '-'}")
     for sensor, s in report["samples"].items():
         rej = {k: v for k, v in s["rejected"].items() if v}
         rej_text = ", ".join(f"{k} {v}" for k, v in rej.items()) or "none"
@@ -138,22 +155,26 @@ def summary_text(report: Mapping[str, Any]) -> str:
             if flagged:
                 lines.append(f"  {'':8s} QC {flag}: {flagged}")
     t = report["tension_N"]
-    lines.append(f"  tension  min {_num(t['min'], '.0f')} N, mean {_num(t['mean'], '.0f')} N, "
-                 f"max {_num(t['max'], '.0f')} N, p99 {_num(t['p99'], '.0f')} N "
+    kn = {k: tension_text(math.nan if t[k] is None else float(t[k]))
+          for k in ("min", "mean", "max", "p99")}
+    lines.append(f"  tension  min {kn['min']}, mean {kn['mean']}, max {kn['max']}, "
+                 f"p99 {kn['p99']} "
                  f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated"
                  + (f", {t['samples_estimate_clamped']:,d} of them outside the estimator's range"
                     if t.get("samples_estimate_clamped") else "") + ")")
     for problem in report.get("load_problems") or []:
         lines.append(f"  LOAD: {problem}")
     lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
-                 f"{'max stress':>11s} {'life left':>11s}")
+                 f"{'max stress':>11s}  life left")
     for name, c in report["components"].items():
-        life = _num(c["remaining_life_days"], ".3g")
+        life = c["remaining_life_days"]
+        # null: nothing accrues (the writer's form of an infinite life)
+        life = math.inf if life is None else float(life)
         peak = c["max_stress_Pa"]
         lines.append(
             f"  {name:24s} {c['damage']:11.3e} {c['damage_committed']:11.3e} "
             f"{c['cycles']:10.0f} {_num(peak if peak is None or isinstance(peak, str) else peak / 1e6, '8.1f')} MPa "
-            f"{life if life == '-' else life + ' d':>11s}"
+            f" {remaining_life_text(life)}"
         )
     for name, c in report["components"].items():
         if c.get("samples_beyond_yield"):
@@ -181,8 +202,17 @@ def summary_text(report: Mapping[str, Any]) -> str:
             f"(Hs, Tp) bins); spectral cross-check: {sea['flagged']} of {sea['compared']} "
             f"window damages flagged (Dirlik vs rainflow beyond x{sea['flag_factor']:g})")
     dropped = report.get("alerts_dropped") or 0
+    episodes = alert_episodes(parsed.alerts) if parsed is not None else []
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)"
+                 + (f" in {len(episodes)} episode(s), re-sends collapsed" if episodes else "")
                  + (f" (and {dropped:,d} older ones not kept)" if dropped else ""))
+    for ep in episodes[:MAX_EPISODE_LINES]:
+        lines.append(f"    {ep.severity:8s} {ep.rule} / {ep.component}: fired {iso_utc(ep.first_fired_ns)}"
+                     + (f", re-sent {ep.resends}x" if ep.resends else "")
+                     + (f", cleared {iso_utc(ep.cleared_ns)}" if ep.cleared_ns
+                        else ", still firing at the end"))
+    if len(episodes) > MAX_EPISODE_LINES:
+        lines.append(f"    ... and {len(episodes) - MAX_EPISODE_LINES} more (see the report)")
     read = report["inputs"]["read"]
     damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
                                        "bad_payloads", "late", "duplicates")}

@@ -179,6 +179,7 @@ if __name__ == "__main__":
 
 # ---- helpers for tests that drive daemon processes --------------------------------------------
 
+import atexit  # noqa: E402
 import os  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
@@ -221,6 +222,8 @@ class DaemonProcess:
             cmd, env={**ENV, **(env or {}), "NOTIFY_SOCKET": self.notify_path,
                       "WATCHDOG_USEC": "2000000"},
             stdout=subprocess.DEVNULL, stderr=self._stderr_file)
+        # a test that fails before stopping its daemon must not leave it running
+        atexit.register(self._kill_if_alive)
         self.messages: list[str] = []
         # read notifications all the time, as systemd does
         self._reader = threading.Thread(target=self._read_notify, daemon=True)
@@ -250,6 +253,11 @@ class DaemonProcess:
         rc = self.proc.wait(timeout)
         self.close()
         return rc
+
+    def _kill_if_alive(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
 
     def kill9(self) -> None:
         self.proc.kill()

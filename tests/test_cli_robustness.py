@@ -28,13 +28,13 @@ def tiny_log(path: Path, buoy: str = "qa", n: int = 40, t0_ns: int = T0) -> Path
 
 def test_replay_html_of_a_log_without_damage_rate(tmp_path, capsys):
     # a 2 s log accrues no damage rate: its report holds null for remaining life ("nothing
-    # accrues"), which the HTML renderer must show as infinite instead of failing
+    # accrues"), which the HTML renderer must show as unlimited instead of failing
     log = tiny_log(tmp_path / "a.mcap")
     assert main(["replay", str(log), "--report", str(tmp_path / "r.json"),
                  "--html", str(tmp_path / "r.html")]) == 0
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["components"]["conductor"]["remaining_life_days"] is None
-    assert "&infin;" in (tmp_path / "r.html").read_text()
+    assert "<td>unlimited (no damage accrues)</td>" in (tmp_path / "r.html").read_text()
     capsys.readouterr()
     # and `buoymon report` renders the same JSON again
     assert main(["report", str(tmp_path / "r.json"), "-o", str(tmp_path / "again.html")]) == 0

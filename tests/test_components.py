@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-import models.fatigue_stream as fatigue_stream
+import models._fatigue_loops as fatigue_loops
 from monitor.components import Component, build_cable
 from monitor.config import default_config
 
@@ -22,7 +22,7 @@ def make(hysteresis_Pa: float = 0.0, state=None) -> Component:
 def drive(comp: Component, stress: np.ndarray, rng, reference: bool, monkeypatch):
     """Slabs of random size with whole ticks and a partial tail (pending cycles)."""
     if reference:
-        monkeypatch.setattr(fatigue_stream, "ticks_compiled", None)
+        monkeypatch.setattr(fatigue_loops, "ticks_compiled", None)
     else:
         monkeypatch.undo()
     runs, tick_end, a = [], 10**9, 0
@@ -104,7 +104,7 @@ def test_tick_figures_give_zero_life_once_the_damage_passes_one(monkeypatch):
     figures = []
     for reference in (False, True):
         if reference:
-            monkeypatch.setattr(fatigue_stream, "ticks_compiled", None)
+            monkeypatch.setattr(fatigue_loops, "ticks_compiled", None)
         comp = make()
         run = comp.run_ticks(swing, [1000, 2000, 4000], [10**9, 2 * 10**9, 3 * 10**9])
         figures.append(run.figures)

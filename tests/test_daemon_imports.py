@@ -44,7 +44,7 @@ for k in range(25):  # 25 s of sensor time: alert rules run every 10 s
         vals = {{f: np.full(hz, 3000.0 if f == "tension_N" else 0.1) for f in fields}}
         block = SampleBlock("vaps", sensor, t, vals)
         key = f"buoy/vaps/sensor/{{sensor}}"
-        daemon._on_data(key, codec.encode(block), 0)
+        daemon._on_data(key, codec.encode(block), 0, None)
 json.dumps(daemon.full_state())
 print(json.dumps({{"counters": daemon.counters,
                   "scipy": sorted(m for m, v in sys.modules.items()

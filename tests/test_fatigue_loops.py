@@ -14,12 +14,14 @@ import numpy as np
 import pytest
 
 from models import _fatigue_loops as loops
-from models._jit import numba
+from models._jit import HAVE_NUMBA, numba_module
 
-needs_numba = pytest.mark.skipif(numba is None, reason="numba not installed")
+needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed")
 
 
 def _compiled_map(func):
+    numba = numba_module()  # registers the jitable building blocks
+
     @numba.njit(error_model="numpy")
     def apply(x, out):
         for i in range(x.shape[0]):
@@ -117,9 +119,9 @@ def test_turning_points_match_the_per_sample_definition(hyst):
     x = np.round(rng.normal(size=3000) * 3.0) * rng.choice([1.0, 1.0, 0.0], 3000)
     x[x == 0.0] = rng.choice([0.0, -0.0], int(np.sum(x == 0.0)))
     for compiled in (False, True):
-        if compiled and numba is None:
+        if compiled and not HAVE_NUMBA:
             continue
-        tp_func = (numba.njit(loops._turning_points) if compiled else loops._turning_points)
+        tp_func = (numba_module().njit(loops._turning_points) if compiled else loops._turning_points)
         for start, dirn in ((0.0, 1.0), (-0.0, -1.0), (4.0, -1.0)):
             tp = np.empty(x.size)
             m, cand, d = tp_func(x, start, dirn, hyst, tp)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -92,3 +94,33 @@ def test_sn_curve_field_from_the_fatigue_model():
     assert "endurance_Pa" not in g
     with pytest.raises(ValueError, match="max_range_Pa"):
         sn_curve_field(b, 0.0)
+
+
+def test_sea_state_histogram_span_and_damage_times():
+    from monitor.blocks import SampleBlock
+
+    hist = ReportHistory()
+    t = T0_NS + np.arange(4, dtype=np.int64) * 1_800_000_000_000
+    # raw wave reports: one NaN and one negative height are not physical and are left out
+    hist.on_block(SampleBlock("B1", "waves", t, {"hs_m": np.array([1.4, np.nan, 1.6, -1.0]),
+                                                "tp_s": np.array([5.0, 5.2, 5.6, 5.1])}))
+    hist.on_block(SampleBlock("B1", "tension", t[:1], {"tension_N": np.array([900.0])}))
+    steps = make_steps(3)
+    # a step before any load (the replay's horizon lags the data): no damage point for it
+    hist.on_step(dataclasses.replace(steps[0], now_ns=T0_NS - 10**12, t_ns=steps[0].t_ns[:0],
+                                     tension_N=steps[0].tension_N[:0]))
+    for s in steps:
+        hist.on_step(dataclasses.replace(s, now_ns=s.now_ns - 3 * 10**9))  # horizon lags
+    f = hist.fields()
+    assert f["sea_state"] == {"reports": 2, "hs_m": {"min": 1.4, "mean": 1.5, "max": 1.6},
+                              "tp_s": {"min": 5.0, "mean": 5.3, "max": 5.6}}
+    dh = f["components"]["left"]["damage_history"]
+    # timed at each step's newest load sample, not at the lagging horizon
+    assert dh["t_s"] == [int(s.t_ns[-1]) / 1e9 for s in steps]
+    h = f["components"]["left"]["histogram"]
+    r = np.concatenate([s.components["left"].ranges_Pa for s in steps])
+    assert h["max_range_Pa"] == r.max()
+    # 2 MPa bins up to the one holding the largest range, none beyond
+    assert h["edges_Pa"][-2] <= r.max() < h["edges_Pa"][-1]
+    assert len(h["counts"]) == int(r.max() // 2e6) + 1 and h["counts"][-1] > 0
+    assert sum(h["counts"]) == sum(float(s.components["left"].counts.sum()) for s in steps)

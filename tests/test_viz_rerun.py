@@ -52,13 +52,14 @@ def test_envelope_matches_per_second_min_max(tmp_path):
     sec = (t - T0_NS) // 1_000_000_000
     want = np.array([[tension[sec == k].min(), tension[sec == k].max()] for k in range(N_STEPS)])
     got = scalars(data["tension/load"])
-    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(got, want / 1e3)  # kN, as the report shows it
     times = [ns(x) for x in data["tension/load"]["sensor_time"]]
     assert times == [T0_NS + k * 1_000_000_000 for k in range(N_STEPS)]
     assert data["tension/load"]["sample"] == [k * RATE_HZ for k in range(N_STEPS)]
     stress = scalars(data["stress/left"])
-    np.testing.assert_allclose(stress, want * 2000.0, rtol=1e-15)
-    assert data["tension/load"]["SeriesLines:names"][0] == ["load min [N]", "load max [N]"]
+    np.testing.assert_allclose(stress, want * 2000.0 / 1e6, rtol=1e-14)  # MPa
+    assert data["tension/load"]["SeriesLines:names"][0] == ["load min [kN]", "load max [kN]"]
+    assert data["stress/left"]["SeriesLines:names"][0] == ["left min [MPa]", "left max [MPa]"]
 
 
 def test_full_rate_logs_every_sample(tmp_path):
@@ -66,7 +67,7 @@ def test_full_rate_logs_every_sample(tmp_path):
     t = np.concatenate([s.t_ns for s in steps])
     tension = np.concatenate([s.tension_N for s in steps])
     got = scalars(data["tension/load"])
-    np.testing.assert_array_equal(got, tension)
+    np.testing.assert_array_equal(got, tension / 1e3)
     assert [ns(x) for x in data["tension/load"]["sensor_time"]] == t.tolist()
     assert data["tension/load"]["sample"] == list(range(len(t)))
 
@@ -80,7 +81,7 @@ def test_nan_samples_are_left_out(tmp_path):
     assert [ns(x) for x in data["tension/load"]["sensor_time"]] == [
         T0_NS + k * 1_000_000_000 for k in (0, 2, 3)]
     good = np.delete(steps[2].tension_N, 3)
-    np.testing.assert_array_equal(env[1], [good.min(), good.max()])
+    np.testing.assert_array_equal(env[1], [good.min() / 1e3, good.max() / 1e3])
     assert len(scalars(data["stress/left"])) == 4  # the stress series has all four bins
     data, _ = record(tmp_path, RerunOptions(envelope_s=0.0), steps=steps)
     assert len(scalars(data["tension/load"])) == 4 * RATE_HZ - RATE_HZ - 1
@@ -101,7 +102,7 @@ def test_damage_life_health_and_slow_sampling(tmp_path):
         np.testing.assert_array_equal(scalars(data[entity]), want)
     # measured tension sampled likewise; estimated is all-NaN and so has no rows at all
     np.testing.assert_array_equal(scalars(data["tension/measured"]),
-                                  [steps[k].measured_tension_N for k in picked])
+                                  [steps[k].measured_tension_N / 1e3 for k in picked])
     assert "tension/estimated" not in data
     accepted = scalars(data["health/tension/accepted"])
     rejected = scalars(data["health/tension/rejected"])
@@ -295,3 +296,30 @@ def test_qartod_flag_totals_are_logged_per_stream_and_test(tmp_path):
     np.testing.assert_array_equal(scalars(data["health/tension/qc/spike/suspect"]), picked)
     np.testing.assert_array_equal(scalars(data["health/tension/qc/spike/fail"]),
                                   [2 * k for k in picked])
+
+
+def test_histogram_bars_carry_their_stress_axis_in_mpa(tmp_path):
+    data, _ = record(tmp_path, RerunOptions())
+    bars = data["rainflow/left/histogram"]
+    # static: the default bins, 2 MPa wide to 100 MPa (centres 1, 3, ..., 99), then 10 MPa
+    # wide to 300 MPa (centres 105, 115, ..., 295)
+    centres = np.array(bars["BarChart:abscissa"][0][0]["buffer"])
+    widths = np.array(bars["BarChart:widths"][0])
+    np.testing.assert_allclose(centres, np.concatenate((np.arange(1.0, 100.0, 2.0),
+                                                        np.arange(105.0, 300.0, 10.0))),
+                               rtol=1e-12)
+    np.testing.assert_allclose(widths, [2.0] * 50 + [10.0] * 20, rtol=1e-6)
+
+
+def test_extreme_remaining_lives_are_drawn_at_the_1000_year_cap(tmp_path):
+    import dataclasses
+
+    steps = make_steps(3)
+    for step, life in zip(steps, (4.1e107, math.inf, 20.0)):
+        c = step.components["left"]
+        step.components["left"] = dataclasses.replace(c, remaining_life_days=life)
+    data, _ = record(tmp_path, RerunOptions(slow_interval_s=0.5), steps=steps)
+    # 1000 years = 365,250 days; a finite life below the cap is kept as is
+    np.testing.assert_array_equal(scalars(data["remaining_life/left"]), [365250.0, 365250.0, 20.0])
+    assert data["remaining_life/left"]["SeriesLines:names"][0] == [
+        "left [d] (more than 1,000 years at the cap)"]

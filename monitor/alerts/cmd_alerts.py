@@ -39,7 +39,7 @@ from monitor.daemon_target import DEFAULT_CONFIG, DEFAULT_CONNECT, load_target
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("alerts", help="list, acknowledge or reset alerts",
+    p = subparsers.add_parser("alerts",
                               description=__doc__,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="alerts_command", metavar="ACTION", required=True)

@@ -8,17 +8,26 @@ from typing import Sequence
 
 import rerun.blueprint as rrb
 
+# series with many components: a legend in the plot would cover the lines, and the view's
+# own hover and selection name each line
+_LEGEND = rrb.PlotLegend(visible=False)
+
 
 def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
     """The dashboard for a buoy whose fatigue components are ``components``."""
     loads = rrb.Horizontal(
-        rrb.TimeSeriesView(origin="/tension", name="Tension (N)"),
-        rrb.TimeSeriesView(origin="/stress", name="Conductor stress (Pa)"),
+        rrb.TimeSeriesView(origin="/tension", name="Tension (kN)", plot_legend=_LEGEND),
+        rrb.TimeSeriesView(origin="/stress", name="Conductor stress (MPa)",
+                           plot_legend=_LEGEND),
     )
     fatigue = rrb.Horizontal(
-        rrb.TimeSeriesView(origin="/damage", name="Miner damage (committed / provisional)"),
-        rrb.TimeSeriesView(origin="/damage_rate", name="Damage rate (1/day)"),
-        rrb.TimeSeriesView(origin="/remaining_life", name="Remaining life (days)"),
+        # damage only grows: its upper left corner stays free for the legend
+        rrb.TimeSeriesView(origin="/damage", name="Miner damage (committed / provisional)",
+                           plot_legend=rrb.PlotLegend(corner="LeftTop")),
+        rrb.TimeSeriesView(origin="/damage_rate", name="Damage rate (1/day)",
+                           plot_legend=_LEGEND),
+        rrb.TimeSeriesView(origin="/remaining_life", name="Remaining life (days)",
+                           plot_legend=_LEGEND),
     )
     histograms = [rrb.BarChartView(origin=f"/rainflow/{c}/histogram",
                                    name=f"Rainflow ranges: {c}") for c in components]
@@ -49,6 +58,8 @@ def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
     )
     return rrb.Blueprint(
         rrb.Vertical(loads, fatigue, geometry, spectral, status, row_shares=[3, 3, 3, 2, 2]),
-        rrb.TimePanel(timeline="sensor_time"),
+        # following: the time cursor on the newest data, so histograms, the range-mean
+        # matrix and the position open complete (live: they keep up)
+        rrb.TimePanel(timeline="sensor_time", play_state="following"),
         collapse_panels=True,
     )

@@ -12,7 +12,7 @@ log = logging.getLogger(__name__)
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "report", help="render a replay report (JSON) as self-contained HTML with PNG plots",
+        "report",
         description="Render the JSON report written by `buoymon replay --report` as one "
                     "self-contained HTML page; the plots are also written beside it as PNG files.")
     p.add_argument("report", type=Path, help="report JSON from `buoymon replay --report`")

@@ -2,18 +2,46 @@
 
 By default a web viewer is served on 127.0.0.1 (works on a headless server; open the printed
 URL, or tunnel the two ports with ssh -L); ``--native`` starts the desktop viewer instead.
+SIGTERM, SIGINT and SIGHUP stop the viewer with the command (the viewer runs in its own
+session, so nothing else would); ports held by another process are refused, naming it.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Iterator
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+
+
+class Stopped(Exception):
+    """A stop signal arrived (raised from the signal handler, so ``finally`` blocks run)."""
+
+
+@contextlib.contextmanager
+def stop_signals_raise() -> Iterator[None]:
+    """Within the block, SIGTERM / SIGINT / SIGHUP raise :class:`Stopped`."""
+
+    def handler(signum: int, frame: object) -> None:
+        for s in STOP_SIGNALS:  # a second signal must not cut the viewer's shutdown short
+            signal.signal(s, signal.SIG_IGN)
+        raise Stopped(signal.Signals(signum).name)
+
+    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="open .rrd recordings in a Rerun viewer (analytics off)")
+    p = sub.add_parser("view")
     p.add_argument("recordings", type=Path, nargs="+", help=".rrd files")
     p.add_argument("--native", action="store_true", help="desktop viewer instead of web")
     p.add_argument("--web-port", type=int, default=9090)
@@ -27,9 +55,6 @@ def _head(path: Path) -> bytes:
 
 
 def run(args: argparse.Namespace) -> int:
-    from monitor.viz.rerun_options import RerunOptions
-    from monitor.viz.rerun_outputs import analytics_disabled_env, rerun_command, serve_web_viewer
-
     missing = [str(p) for p in args.recordings if not p.is_file()]
     if missing:
         print(f"buoymon view: no such recording: {', '.join(missing)}", file=sys.stderr)
@@ -40,8 +65,27 @@ def run(args: argparse.Namespace) -> int:
     if other:
         print(f"buoymon view: not a Rerun recording (.rrd): {', '.join(other)}", file=sys.stderr)
         return 2
+    with stop_signals_raise():
+        try:
+            return _serve(args)
+        except Stopped as sig:
+            print(f"buoymon view: {sig}: viewer stopped", file=sys.stderr)
+            return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from monitor.viz.rerun_options import RerunOptions
+    from monitor.viz.rerun_outputs import (analytics_disabled_env, check_ports_free,
+                                           rerun_command, serve_web_viewer)
+
     if args.native:
-        # the desktop viewer also hosts a gRPC server, on all interfaces unless told otherwise
+        try:
+            check_ports_free({"gRPC": args.grpc_port})
+        except RuntimeError as exc:
+            print(f"buoymon view: {exc}", file=sys.stderr)
+            return 2
+        # the desktop viewer also hosts a gRPC server, on all interfaces unless told otherwise;
+        # subprocess.call kills it when a stop signal raises here
         cmd = rerun_command() + ["--bind", "127.0.0.1", "--port", str(args.grpc_port),
                                  *[str(p) for p in args.recordings]]
         return subprocess.call(cmd, env=analytics_disabled_env())
@@ -51,11 +95,9 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, RuntimeError) as exc:
         print(f"buoymon view: {exc}", file=sys.stderr)
         return 2
-    print(f"Rerun web viewer (127.0.0.1 only): {viewer.web_url}\nCtrl-C to stop.")
+    print(f"Rerun web viewer (127.0.0.1 only): {viewer.web_url}\nCtrl-C to stop.", flush=True)
     try:
         viewer.process.wait()
-    except KeyboardInterrupt:
-        pass
     finally:
         viewer.stop()
     return 0

@@ -6,6 +6,7 @@ are absent become None so the renderer can leave their plots out.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -92,9 +93,13 @@ class Component:
     damage_history: Series | None = None
     hist_edges_Pa: np.ndarray | None = None
     hist_counts: np.ndarray | None = None
+    hist_max_range_Pa: float | None = None
     sn_ranges_Pa: np.ndarray | None = None
     sn_cycles: np.ndarray | None = None
     sn_endurance_Pa: float | None = None
+    kind: str = ""
+    lay: str | None = None
+    derating: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,6 +113,16 @@ class Alert:
     starts_at_ns: int
     ends_at_ns: int
     summary: str
+
+
+@dataclass(frozen=True)
+class SeaState:
+    """The buoy's own wave reports over the replay: how many, and min / mean / max of the
+    significant wave height (m) and the peak period (s)."""
+
+    reports: int
+    hs_m: Mapping[str, float]
+    tp_s: Mapping[str, float]
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,6 +149,15 @@ class Report:
     tension_history: Series | None = None
     spectral: Mapping[str, SpectralCheck] | None = None
     spectral_flag_factor: float = math.nan
+    # optional context for the findings (absent from older reports: empty / None)
+    tension_counts: Mapping[str, int] = dataclasses.field(default_factory=dict)
+    breaking_load_N: float | None = None
+    load_source_at_end: str = ""
+    motion_sensor: str | None = None
+    load_problems: tuple[str, ...] = ()
+    sea_state: SeaState | None = None
+    input_files: tuple[str, ...] = ()
+    alerts_dropped: int = 0
 
 
 def _spectral(value: Any) -> dict[str, SpectralCheck]:
@@ -175,7 +199,7 @@ def _component(name: str, c: Any) -> Component:
     where = f"components.{name}"
     c = _mapping(c, where)
     try:
-        base = {k: _num(c[k], f"{where}.{k}") for k in (
+        base: dict[str, Any] = {k: _num(c[k], f"{where}.{k}") for k in (
             "damage", "damage_committed", "cycles", "max_stress_Pa", "damage_rate_per_day",
             "remaining_life_days")}
     except KeyError as exc:
@@ -193,6 +217,8 @@ def _component(name: str, c: Any) -> Component:
             raise ValueError(f"report: {where}.histogram.edges_Pa: need >= 2 increasing edges")
         opt["hist_edges_Pa"] = edges
         opt["hist_counts"] = _array(h.get("counts"), f"{where}.histogram.counts", len(edges) - 1)
+        if h.get("max_range_Pa") is not None:
+            opt["hist_max_range_Pa"] = _num(h["max_range_Pa"], f"{where}.histogram.max_range_Pa")
     if "sn_curve" in c:
         s = _mapping(c["sn_curve"], f"{where}.sn_curve")
         ranges = _array(s.get("ranges_Pa"), f"{where}.sn_curve.ranges_Pa")
@@ -200,7 +226,43 @@ def _component(name: str, c: Any) -> Component:
         opt["sn_cycles"] = _array(s.get("cycles"), f"{where}.sn_curve.cycles", len(ranges))
         if s.get("endurance_Pa") is not None:
             opt["sn_endurance_Pa"] = _num(s["endurance_Pa"], f"{where}.sn_curve.endurance_Pa")
+    if c.get("kind") is not None:
+        opt["kind"] = str(c["kind"])
+    if c.get("lay") is not None:
+        opt["lay"] = str(c["lay"])
+    if c.get("derating") is not None:
+        opt["derating"] = _num(c["derating"], f"{where}.derating")
     return Component(name=name, **base, **opt)
+
+
+def _sea_state(value: Any) -> SeaState:
+    m = _mapping(value, "sea_state")
+    stats = {}
+    for key in ("hs_m", "tp_s"):
+        s = _mapping(m.get(key), f"sea_state.{key}")
+        stats[key] = {k: _num(s.get(k), f"sea_state.{key}.{k}") for k in ("min", "mean", "max")}
+    return SeaState(reports=_count(m.get("reports"), "sea_state.reports"), **stats)
+
+
+def _context(d: Mapping[str, Any], t: Mapping[str, Any]) -> dict[str, Any]:
+    """The optional fields the findings read (docs/REPORT_FORMAT.md)."""
+    out: dict[str, Any] = {
+        "tension_counts": {k: _count(t[k], f"tension_N.{k}") for k in (
+            "samples_measured", "samples_estimated", "samples_estimate_clamped",
+            "samples_above_break", "samples_estimate_above_break") if t.get(k) is not None},
+        "load_source_at_end": str(d.get("load_source_at_end") or ""),
+        "motion_sensor": None if d.get("motion_sensor") is None else str(d["motion_sensor"]),
+        "load_problems": tuple(str(p) for p in d.get("load_problems") or ()),
+        "alerts_dropped": _count(d.get("alerts_dropped") or 0, "alerts_dropped"),
+    }
+    if t.get("breaking_load_N") is not None:
+        out["breaking_load_N"] = _num(t["breaking_load_N"], "tension_N.breaking_load_N")
+    if d.get("sea_state") is not None:
+        out["sea_state"] = _sea_state(d["sea_state"])
+    inputs = d.get("inputs")
+    if isinstance(inputs, Mapping) and isinstance(inputs.get("files"), list):
+        out["input_files"] = tuple(str(f) for f in inputs["files"])
+    return out
 
 
 def _alert(i: int, a: Any) -> Alert:
@@ -248,6 +310,7 @@ def parse_report(data: Any) -> Report:
         spectral=_spectral(d["spectral_windows"]) if d.get("spectral_windows") else None,
         spectral_flag_factor=_num((d.get("sea_state_table") or {}).get("flag_factor"),
                                   "sea_state_table.flag_factor"),
+        **_context(d, t),
     )
 
 

@@ -1,5 +1,6 @@
 """A sink that gathers the report's optional plot fields (docs/REPORT_FORMAT.md) in bounded
-memory: ``tension_history``, and per component ``damage_history`` and ``histogram``.
+memory: ``tension_history``, ``sea_state`` (from the buoy's wave reports), and per component
+``damage_history`` and ``histogram``.
 
 Time bins start at ``bin_s`` and double in width whenever there would be more than
 ``max_points`` of them, so any log length ends with between ``max_points / 2`` and
@@ -15,8 +16,14 @@ from typing import Any, Mapping
 import numpy as np
 
 from models.sn_curve import SNCurve
+from monitor.blocks import SampleBlock
 from monitor.events import StepResult
-from monitor.viz.cycle_histogram import DEFAULT_RANGE_EDGES_Pa, CycleHistogram, check_edges
+from monitor.viz.cycle_histogram import CycleHistogram, check_edges
+
+# the report's stress-range bins: 2 MPa wide up to 1 GPa (far above any conductor's or
+# chain's strength, so the last bin, which also holds anything larger, stays empty for real
+# loads); fields() trims the empty bins above the largest counted range
+REPORT_RANGE_EDGES_Pa: tuple[float, ...] = tuple(np.linspace(0.0, 1000e6, 501).tolist())
 
 def sn_curve_field(curve: SNCurve, max_range_Pa: float, n: int = 60) -> dict[str, Any]:
     """The report's ``components[name].sn_curve`` for a ``models.sn_curve.SNCurve``: cycles to
@@ -78,6 +85,22 @@ class _Binned:
         return self.idx * (self.bin_ns / 1e9)
 
 
+class _Stats:
+    """Running min / sum / max / count of a series."""
+
+    def __init__(self) -> None:
+        self.min, self.max, self.sum, self.n = np.inf, -np.inf, 0.0, 0
+
+    def add(self, x: np.ndarray) -> None:
+        if len(x):
+            self.min, self.max = min(self.min, float(x.min())), max(self.max, float(x.max()))
+            self.sum += float(x.sum())
+            self.n += len(x)
+
+    def fields(self) -> dict[str, float]:
+        return {"min": self.min, "mean": self.sum / self.n, "max": self.max}
+
+
 class ReportHistory:
     """Sink collecting tension, damage and cycle histories for the report's plots.
 
@@ -85,11 +108,11 @@ class ReportHistory:
         max_points: most time bins per series (the format asks for <= 1000).
         bin_s: initial bin width.
         range_edges_Pa: stress-range bins of the histogram (ranges above the last edge are
-            counted in the last bin).
+            counted in the last bin; the field keeps the bins up to the largest range).
     """
 
     def __init__(self, max_points: int = 1000, bin_s: float = 1.0,
-                 range_edges_Pa: tuple[float, ...] = DEFAULT_RANGE_EDGES_Pa) -> None:
+                 range_edges_Pa: tuple[float, ...] = REPORT_RANGE_EDGES_Pa) -> None:
         if not isinstance(max_points, int) or max_points < 2:
             raise ValueError(f"max_points = {max_points!r}: must be an integer >= 2")
         if not np.isfinite(bin_s) or bin_s <= 0:
@@ -101,12 +124,32 @@ class ReportHistory:
                                 self._bin_ns, max_points)
         self._damage: dict[str, _Binned] = {}
         self._hist: dict[str, CycleHistogram] = {}
+        self._max_range: dict[str, float] = {}
+        self._last_load_ns: int | None = None
+        self._waves = {"reports": 0, "hs_m": _Stats(), "tp_s": _Stats()}
+
+    def on_block(self, block: SampleBlock) -> None:
+        """Wave reports (``waves`` blocks) for the report's ``sea_state``. Raw blocks arrive
+        before validation, so only physical values count: finite, Hs >= 0, Tp > 0."""
+        if block.sensor != "waves" or not len(block.t_ns):
+            return
+        hs, tp = (np.asarray(block.fields[k], float) for k in ("hs_m", "tp_s"))
+        ok = np.isfinite(hs) & np.isfinite(tp) & (hs >= 0) & (tp > 0)
+        self._waves["reports"] += int(ok.sum())
+        self._waves["hs_m"].add(hs[ok])
+        self._waves["tp_s"].add(tp[ok])
 
     def on_step(self, step: StepResult) -> None:
         ok = np.isfinite(step.tension_N)
         t, v = step.t_ns[ok], step.tension_N[ok]
         self._tension.add(t, {"min": v, "max": v, "sum": v, "count": np.ones(len(v))})
-        now = np.array([step.now_ns], np.int64)
+        if len(t):
+            self._last_load_ns = max(self._last_load_ns or 0, int(t.max()))
+        if self._last_load_ns is None:
+            return  # no load yet: nothing has accrued, and step.now_ns lies before the data
+        # a step's damage covers the load up to its newest sample; step.now_ns (the replay's
+        # processing horizon) can lag the data by the reorder window
+        now = np.array([self._last_load_ns], np.int64)
         for name, c in step.components.items():
             if name not in self._damage:
                 self._damage[name] = _Binned(
@@ -117,6 +160,9 @@ class ReportHistory:
                                          "damage_committed": [c.damage_committed],
                                          "damage": [c.damage]})
             self._hist[name].add(c.ranges_Pa, c.means_Pa, c.counts)
+            if len(c.ranges_Pa):
+                self._max_range[name] = max(self._max_range.get(name, 0.0),
+                                            float(np.max(c.ranges_Pa)))
 
     def close(self) -> None:
         """Nothing to release; the fields stay readable."""
@@ -139,8 +185,23 @@ class ReportHistory:
                 "damage_history": {"t_s": (d.cols["t_ns"] / 1e9).tolist(),
                                    "damage_committed": d.cols["damage_committed"].tolist(),
                                    "damage": d.cols["damage"].tolist()},
-                "histogram": {"edges_Pa": self._edges.tolist(), "counts": hist.counts.tolist()},
+                "histogram": self._histogram_field(name),
             }
         if comps:
             out["components"] = comps
+        if self._waves["reports"]:
+            out["sea_state"] = {"reports": self._waves["reports"],
+                                "hs_m": self._waves["hs_m"].fields(),
+                                "tp_s": self._waves["tp_s"].fields()}
+        return out
+
+    def _histogram_field(self, name: str) -> dict[str, Any]:
+        """Edges and counts up to the bin of the largest counted range, and that range."""
+        counts = self._hist[name].counts
+        used = np.flatnonzero(counts)
+        n = int(used[-1]) + 1 if len(used) else 1
+        out: dict[str, Any] = {"edges_Pa": self._edges[:n + 1].tolist(),
+                               "counts": counts[:n].tolist()}
+        if name in self._max_range:
+            out["max_range_Pa"] = self._max_range[name]
         return out

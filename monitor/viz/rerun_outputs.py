@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 
 import rerun as rr
 
+from monitor.viz.port_owner import port_listeners
 from monitor.viz.rerun_options import RerunOptions
 
 if TYPE_CHECKING:
@@ -105,10 +106,38 @@ def _wait_listening(port: int, proc: subprocess.Popen, timeout_s: float) -> None
     raise RuntimeError(f"rerun web viewer did not listen on 127.0.0.1:{port} within {timeout_s} s")
 
 
+def check_ports_free(ports: dict[str, int]) -> None:
+    """RuntimeError naming the process that holds a port a viewer needs ({what: port}):
+    started anyway, the new viewer could not bind, and the URL would show the old viewer's
+    recording."""
+    for what, port in ports.items():
+        holders = port_listeners(port)
+        if holders:
+            raise RuntimeError(
+                f"{what} port {port} is already in use by {', '.join(map(str, holders))}; "
+                "stop it (an earlier `buoymon view`?) or choose other ports "
+                "(--web-port, --grpc-port)")
+
+
+def _check_ours(options: RerunOptions, proc: subprocess.Popen) -> None:
+    """RuntimeError unless every listener on the viewer's ports is in its process group."""
+    for port in (options.web_port, options.grpc_port):
+        for holder in port_listeners(port):
+            try:
+                ours = holder.pid and os.getpgid(holder.pid) == proc.pid
+            except ProcessLookupError:
+                ours = False
+            if not ours:
+                raise RuntimeError(f"port {port} was taken by {holder} while the viewer "
+                                   "started")
+
+
 def serve_web_viewer(options: RerunOptions, config_home: Path | None = None,
                      timeout_s: float = 30.0, recordings: tuple[Path, ...] = ()) -> WebViewer:
     """Start a web viewer bound to 127.0.0.1 with a capped buffer (oldest data dropped),
-    serving live data sent to its gRPC proxy or the given ``.rrd`` files."""
+    serving live data sent to its gRPC proxy or the given ``.rrd`` files. RuntimeError when
+    a port is held by another process (named in the message)."""
+    check_ports_free({"web": options.web_port, "gRPC": options.grpc_port})
     cmd = rerun_command() + [
         "--serve-web", "--bind", "127.0.0.1",
         "--port", str(options.grpc_port), "--web-viewer-port", str(options.web_port),
@@ -122,7 +151,8 @@ def serve_web_viewer(options: RerunOptions, config_home: Path | None = None,
     try:
         _wait_listening(options.grpc_port, proc, timeout_s)
         _wait_listening(options.web_port, proc, timeout_s)
-    except RuntimeError:
+        _check_ours(options, proc)
+    except BaseException:  # also a signal turned exception (buoymon view): never leak it
         WebViewer(proc, "", "").stop()
         raise
     grpc = f"rerun+http://127.0.0.1:{options.grpc_port}/proxy"

@@ -7,23 +7,25 @@ have accumulated, so logging costs a few numpy operations per step and one Rerun
 per flush; memory is bounded by the flush thresholds.
 
 Timelines: ``sensor_time`` (timestamp, ns since the epoch) and ``sample`` (index of the load
-sample since the sink started). Entities (SI units; the unit is in each series' display name):
+sample since the sink started). Entities (display units as the report's page and terminal:
+kN for tension, MPa for stress; the unit is in each series' display name):
 
 ==================================  ==========================  =============================
 entity                              archetype                   content
 ==================================  ==========================  =============================
-``tension/load``                    Scalars [min, max]          load used for fatigue (N),
+``tension/load``                    Scalars [min, max]          load used for fatigue (kN),
                                                                 envelope per ``envelope_s``
-``tension/measured``                Scalars                     measured tension (N)
-``tension/estimated``               Scalars                     motion estimate (N)
+``tension/measured``                Scalars                     measured tension (kN)
+``tension/estimated``               Scalars                     motion estimate (kN)
 ``tension/source``                  StateChange                 measured / estimated / none
-``stress/<component>``              Scalars [min, max]          conductor stress (Pa)
+``stress/<component>``              Scalars [min, max]          conductor stress (MPa)
 ``damage/<component>/committed``    Scalars                     Miner sum of closed cycles
 ``damage/<component>/provisional``  Scalars                     committed + open residue
 ``damage_rate/<component>``         Scalars                     damage per day (1/d)
-``remaining_life/<component>``      Scalars                     remaining life (d)
+``remaining_life/<component>``      Scalars                     remaining life (d), capped at
+                                                                1,000 years (infinite too)
 ``rainflow/<component>/histogram``  BarChart                    cumulative cycle counts per
-                                                                stress-range bin
+                                                                stress-range bin (x: MPa)
 ``rainflow/<component>/range_mean`` Tensor (range x mean)       cumulative range-mean counts
 ``alerts/state/<rule>/<component>`` StateChange                 ok / info / warning / critical
 ``alerts/log``                      TextLog (levels)            one line per alert transition
@@ -36,6 +38,10 @@ entity                              archetype                   content
 ``position/anchor``, ``position/watch_circle``  Points2D / LineStrips2D (static)
 ``mooring/line``                    LineStrips3D                cable shape (m, z up)
 ==================================  ==========================  =============================
+
+Rows are logged at sensor times of the data: the slow rows (damage, health, histograms, shape)
+at the step's newest load sample, none before the first sample any block carried, so the
+``sensor_time`` timeline spans the replayed data and no panel opens empty.
 
 With ``envelope_s = 0`` the ``tension/load`` and ``stress/*`` entities hold every sample as a
 single scalar instead of a [min, max] pair.
@@ -65,6 +71,7 @@ from monitor.blocks import SampleBlock
 from monitor.events import Observation, StepResult
 from monitor.viz.alert_view import alert_fields
 from monitor.viz.cycle_histogram import CycleHistogram
+from monitor.viz.human import DAYS_PER_YEAR, LONG_LIFE_YEARS
 from monitor.viz.rerun_options import RerunOptions
 
 log = logging.getLogger(__name__)
@@ -76,6 +83,7 @@ SAMPLE = "sample"
 # anchor towards the buoy, z up from the anchor (see monitor.viz.cable_shape).
 ShapeProvider = Callable[[float], tuple[np.ndarray, np.ndarray]]
 
+LONG_LIFE_DAYS = LONG_LIFE_YEARS * DAYS_PER_YEAR  # remaining lives are drawn up to this
 _TEXT_LEVEL = {"critical": "CRITICAL", "warning": "WARN", "info": "INFO"}
 _EARTH_RADIUS_M = 6_371_008.8  # mean Earth radius (IUGG); local tangent-plane approximation
 
@@ -242,12 +250,14 @@ class RerunSink:
         self._rows: dict[tuple[str, str], _Rows] = defaultdict(_Rows)  # (entity, kind) -> rows
         self._hist: dict[str, CycleHistogram] = {}
         self._styled: set[str] = set()
+        self._life_named: set[str] = set()
         self._health: dict[str, list[int]] = {}  # sensor -> [accepted, rejected]
         self._qc: dict[str, Any] = {}  # sensor -> {test: {"suspect": n, "fail": n}} totals
         self._alert_state: dict[str, str] = {}  # state lane -> last state logged
         self._source = ""
         self._samples = 0
-        self._now_ns = 0
+        self._now_ns = 0  # sensor time the sink's slow rows are logged at (see _row_time)
+        self._first_data_ns: int | None = None  # first sample of any raw block
         self._next_slow = self._next_snap = self._next_shape = self._last_snap = 0
         self._last_fix: tuple[int, float, float] | None = None
         self._origin: tuple[float, float] | None = None
@@ -276,31 +286,38 @@ class RerunSink:
             self._want_blueprint = False
         n0, n = self._samples, len(step.t_ns)
         self._samples += n
-        self._now_ns = max(self._now_ns, int(step.now_ns))
-        high = {"tension/load": step.tension_N}
-        high.update({f"stress/{name}": c.stress_Pa for name, c in comps.items()})
+        t = self._row_time(step)
+        if t is not None:
+            self._now_ns = max(self._now_ns, t)
+        # display units, as the report's page and terminal: kN, MPa
+        high = {"tension/load": step.tension_N / 1e3}
+        high.update({f"stress/{name}": c.stress_Pa / 1e6 for name, c in comps.items()})
         self._high.add(step.t_ns, n0, high)
         for name, comp in comps.items():
             hist = self._hist.get(name)
             if hist is None:
                 hist = self._hist[name] = CycleHistogram(self._range_edges, self._mean_edges)
+                self._log_bar_axis(name)
             hist.add(comp.ranges_Pa, comp.means_Pa, comp.counts)
         health = self._health.setdefault(entity_part(step.sensor), [0, 0])
         health[0] += int(step.accepted)
         health[1] += int(sum(step.rejected.values()))
         for sensor, counts in step.qc.items():
             self._qc[entity_part(sensor)] = counts
-        if step.load_source != self._source:
-            self._source = step.load_source
-            self._rows[("tension/source", "state")].add(step.now_ns, self._samples,
-                                                        step.load_source)
         for record in step.alerts:
             self.on_alert(record)
         for window in step.windows:
             self._log_window(window)
         for projection in step.forecasts:
             self._log_forecast(projection)
-        t = int(step.now_ns)
+        if t is None:  # before the first sample: nothing to show yet
+            self._pending += n + 1
+            self._maybe_flush()
+            return
+        t = self._now_ns
+        if step.load_source != self._source:
+            self._source = step.load_source
+            self._rows[("tension/source", "state")].add(t, self._samples, step.load_source)
         if t >= self._next_slow:
             self._sample_slow(step, comps)
             self._next_slow = self._next_after(t, self._slow_ns)
@@ -308,7 +325,7 @@ class RerunSink:
             self._snapshot_histograms(t)
             self._next_snap = self._next_after(t, self._snap_ns)
         if self._shape is not None and t >= self._next_shape:
-            if self._log_shape(step):
+            if self._log_shape(step, t):
                 self._next_shape = self._next_after(t, self._shape_ns)
         self._pending += n + 1
         self._maybe_flush()
@@ -316,6 +333,10 @@ class RerunSink:
     @_locked
     def on_block(self, block: SampleBlock) -> None:
         """Raw sensor blocks the pipeline does not summarise in a step: GNSS positions."""
+        if len(block):
+            first = int(block.t_ns.min())
+            if self._first_data_ns is None or first < self._first_data_ns:
+                self._first_data_ns = first
         if block.sensor != "gnss" or not len(block):
             return
         lat, lon = block.fields["lat_deg"], block.fields["lon_deg"]
@@ -389,6 +410,18 @@ class RerunSink:
 
     # ---- internals --------------------------------------------------------------------------
 
+    def _row_time(self, step: StepResult) -> int | None:
+        """Sensor time for the step's slow rows (damage, health, histograms, shape): its
+        newest load sample, or ``step.now_ns`` when later (live). The replay's ``now_ns`` is
+        its processing horizon, which lags the data by the reorder window: rows there would
+        start the timeline before the first sample. None while that time precedes the data."""
+        t = int(step.now_ns)
+        if len(step.t_ns):
+            t = max(t, int(step.t_ns.max()))
+        if self._first_data_ns is not None and t < self._first_data_ns:
+            return None
+        return t
+
     @staticmethod
     def _next_after(t_ns: int, interval_ns: int) -> int:
         return (t_ns // interval_ns + 1) * interval_ns if interval_ns > 0 else t_ns + 1
@@ -429,16 +462,24 @@ class RerunSink:
         self._pending += 1
 
     def _sample_slow(self, step: StepResult, comps: Mapping[str, Any]) -> None:
-        t, s = int(step.now_ns), self._samples
+        t, s = self._now_ns, self._samples
         for entity, value in (("tension/measured", step.measured_tension_N),
                               ("tension/estimated", step.estimated_tension_N)):
             if math.isfinite(value):
-                self._rows[(entity, "scalar")].add(t, s, float(value))
+                self._rows[(entity, "scalar")].add(t, s, float(value) / 1e3)  # kN
         for name, c in comps.items():
+            if name not in self._life_named:
+                self._life_named.add(name)
+                self.rec.log(f"remaining_life/{name}", rr.SeriesLines(
+                    names=[f"{name} [d] (more than {LONG_LIFE_YEARS:,.0f} years at the cap)"]),
+                    static=True)
+            # as the report says "more than 1,000 years", a 4e107-day life (a curve's tail)
+            # is drawn at that cap, where it would otherwise flatten every other line
+            life = min(c.remaining_life_days, LONG_LIFE_DAYS)
             for entity, value in ((f"damage/{name}/committed", c.damage_committed),
                                   (f"damage/{name}/provisional", c.damage),
                                   (f"damage_rate/{name}", c.damage_rate_per_day),
-                                  (f"remaining_life/{name}", c.remaining_life_days)):
+                                  (f"remaining_life/{name}", life)):
                 if math.isfinite(value):
                     self._rows[(entity, "scalar")].add(t, s, float(value))
         for sensor, (acc, rej) in self._health.items():
@@ -469,6 +510,16 @@ class RerunSink:
         e, n = local_east_north(np.array([lat]), np.array([lon]), *self._origin)
         self._rows[("position/buoy", "point2d")].add(t, self._samples, (float(e[0]), float(n[0])))
 
+    def _log_bar_axis(self, name: str) -> None:
+        """The histogram bars' x axis in MPa, as the report's: static bin centres and widths
+        (as component batches: ``BarChart.from_fields`` cannot leave the values out)."""
+        edges = self._range_edges / 1e6
+        self.rec.log(f"rainflow/{name}/histogram", [
+            rr.components.TensorDataBatch(rr.TensorData(array=(edges[:-1] + edges[1:]) / 2))
+            .described(rr.BarChart.descriptor_abscissa()),
+            rr.components.LengthBatch(np.diff(edges)).described(rr.BarChart.descriptor_widths()),
+        ], static=True)
+
     def _snapshot_histograms(self, t_ns: int) -> None:
         self._last_snap = t_ns
         for name, hist in self._hist.items():
@@ -478,7 +529,7 @@ class RerunSink:
             self._rows[(f"rainflow/{name}/range_mean", "tensor")].add(t_ns, self._samples,
                                                                       hist.matrix.copy())
 
-    def _log_shape(self, step: StepResult) -> bool:
+    def _log_shape(self, step: StepResult, t_ns: int) -> bool:
         tension = float(step.tension_N[-1]) if len(step.tension_N) else math.nan
         if not math.isfinite(tension):
             tension = next((v for v in (step.measured_tension_N, step.estimated_tension_N)
@@ -494,14 +545,14 @@ class RerunSink:
         b = math.radians(self.opt.bearing_deg)
         pts = np.column_stack((np.asarray(x) * math.sin(b), np.asarray(x) * math.cos(b),
                                np.asarray(z))).astype(np.float32)
-        self._rows[("mooring/line", "strip3d")].add(int(step.now_ns), self._samples, pts)
+        self._rows[("mooring/line", "strip3d")].add(t_ns, self._samples, pts)
         return True
 
     def _style(self, entity: str, envelope: bool) -> None:
         if entity in self._styled:
             return
         self._styled.add(entity)
-        unit = "N" if entity.startswith("tension") else "Pa"
+        unit = "kN" if entity.startswith("tension") else "MPa"
         label = entity.split("/", 1)[-1]
         names = [f"{label} min [{unit}]", f"{label} max [{unit}]"] if envelope else [
             f"{label} [{unit}]"]
