@@ -37,6 +37,12 @@ entity                              archetype                   content
 ``position/buoy``                   Points2D                    buoy east/north of anchor (m)
 ``position/anchor``, ``position/watch_circle``  Points2D / LineStrips2D (static)
 ``mooring/line``                    LineStrips3D                cable shape (m, z up)
+``spectral/<component>/rainflow``   Scalars                     damage of each closed sea-state
+``spectral/<component>/dirlik``     Scalars                     window: rainflow, Dirlik
+``spectral_flags/<component>``      StateChange                 agree / flagged (the factor)
+``sea_state/hs_m``, ``/tp_s``       Scalars                     each window's Hs (m), Tp (s)
+``forecast/<component>/damage_end`` Scalars                     projected damage at a forecast's
+(``_low``, ``_high``)                                           end, at the time it was applied
 ==================================  ==========================  =============================
 
 Rows are logged at sensor times of the data: the slow rows (damage, health, histograms, shape)
