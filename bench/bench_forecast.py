@@ -8,7 +8,13 @@ Measured on the 2-core development machine (Xeon, 24 GiB), 2026-11-24:
   simulated for 5 minutes with the simulator's WAVFOR load model through the shipped
   configuration's conductor component ("what the monitor measures"); the table learned on
   the first half, the second half forecast from its sea states alone; printed: forecast and
-  actual damage of the second half and their ratio (target within 20 %).
+  actual damage of the second half and their ratio (target within 20 %);
+- hindcast through the pipeline (replay/hindcast.py): the first 90 days of 1996, five
+  simulated minutes per hourly sea state laid end to end, the table learned by the pipeline
+  from the tension and waves streams on the first half, the second half forecast and
+  compared with the damage the pipeline committed (target within 20 %).
+
+Measured 2026-11-25, same machine: pipeline hindcast see docs/FORECAST.md.
 
 Run: ``python bench/bench_forecast.py``.
 """
@@ -20,14 +26,18 @@ from pathlib import Path
 
 import numpy as np
 
-from models.sea_state_table import DamageRateTable, project_damage
+from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable, project_damage
 from monitor.config import default_config
-from replay.cmd_forecast import HS_EDGES_M, TP_EDGES_S, fill_model_rates
+from replay.cmd_forecast import fill_model_rates
+from replay.hindcast import pipeline_hindcast
 from replay.sea_state_damage import physics_damage
 from replay.sea_state_files import SeaStates, read_sea_states
 
-NDBC = (Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
-        / "ndbc44007_ecbenchmarkA" / "ec-benchmark_dataset_A.txt")
+REPO = Path(__file__).resolve().parents[1]
+SHARED = next((p / "shared" for p in REPO.parents if (p / "shared/realdata").is_dir()),
+              REPO.parent / "shared")
+NDBC = SHARED / "realdata" / "ndbc44007_ecbenchmarkA" / "ec-benchmark_dataset_A.txt"
+PIPELINE_DAYS = 90  # the hindcast through the pipeline: the first 90 days of 1996
 
 
 def main() -> None:
@@ -63,6 +73,16 @@ def main() -> None:
         project_damage(year_states.t_s, year_states.step_hours(), r, [0.0], [0.1, 0.5])
         best = min(best, time.perf_counter() - t0)
     print(f"  a year of hourly forecast steps ({n:,}) evaluated in {best * 1e3:.1f} ms")
+    # the same through the pipeline: the table learned from the data stream
+    m = 24 * PIPELINE_DAYS
+    t0 = time.perf_counter()
+    h = pipeline_hindcast(config, SeaStates(t[:m], hs[:m], tp[:m], np.full(m, np.nan)),
+                          half=m // 2, seed=7)
+    print(f"hindcast through the pipeline, first {PIPELINE_DAYS} days ({m:,} sea states, "
+          f"{time.perf_counter() - t0:.1f} s): second half forecast {h.forecast[0]:.4g} (band "
+          f"{h.low[0]:.4g} to {h.high[0]:.4g}), committed {h.actual[0]:.4g}, ratio "
+          f"{h.forecast[0] / h.actual[0]:.3f}; {h.learned_share[0]:.0%} of the steps from "
+          "learned bins")
 
 
 if __name__ == "__main__":

@@ -292,11 +292,21 @@ def sea_state_from_heave(
 
     nper = min(x.size, int(round(segment_s / dt)))
     f, s = signal.welch(x, fs=1.0 / dt, nperseg=nper, detrend="linear")
-    band = (f >= f_min) & (f <= min(f_max, 0.5 / dt))
+    return sea_state_from_psd(f, s, f_min, min(f_max, 0.5 / dt))
+
+
+def sea_state_from_psd(f_hz: ArrayLike, psd: ArrayLike, f_min: float = 0.04,
+                       f_max: float = 0.5) -> SeaState:
+    """Hs, Tp, Tz of a one-sided heave PSD (m^2/Hz at evenly spaced ``f_hz``), its moments
+    integrated over [f_min, f_max] Hz; Tp refined by a parabola through the spectral peak
+    and its neighbours. ValueError if the band holds fewer than 3 bins or no energy."""
+    f = np.asarray(f_hz, dtype=float)
+    s = np.asarray(psd, dtype=float)
+    band = (f >= f_min) & (f <= f_max)
     if band.sum() < 3:
         raise ValueError("record too short for the requested frequency band")
     m = spectral_moments(f[band], s[band], (0, 2))
-    if m[0] <= 0.0:
+    if not m[0] > 0.0:
         raise ValueError("heave record has no energy in the wave band")
     fb, sb = f[band], s[band]
     i = int(np.argmax(sb))

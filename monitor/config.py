@@ -45,6 +45,7 @@ SECTION_PARSERS: dict[str, str] = {
     "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
     "bridge": "monitor.bridge.config:parse_bridge_section",
     "source": "monitor.bridge.config:parse_sources",
+    "forecast": "monitor.forecast_config:ForecastConfig.from_dict",
 }
 # external sections that are arrays of tables ([[source]]), not tables
 LIST_SECTIONS = ("source",)

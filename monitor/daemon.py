@@ -20,6 +20,7 @@ already queued, publish a last status, checkpoint, close the recorder and the se
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import sqlite3
@@ -185,7 +186,8 @@ class Daemon:
         restored = self._store.load()
         saved = restored.state if restored is not None else {}
         self.counters: dict[str, int] = {"messages": 0, "undecodable": 0, "wrong_buoy": 0,
-                                         "refused": 0, "status_published": 0, "queries": 0}
+                                         "refused": 0, "status_published": 0, "queries": 0,
+                                         "forecasts": 0, "forecasts_refused": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
         self.sequences = SequenceTracker(saved.get("daemon", {}).get("sequences"))
@@ -262,6 +264,8 @@ class Daemon:
             if self._attach is not None:
                 self._extensions = self._attach(self.session, self.pipeline)
                 declared.extend(_Closing(e) for e in self._extensions)
+            declared.append(zenoh_io.declare_forecast_subscriber(
+                self.session, self.buoy_id, self._q))
             subscriber = zenoh_io.declare_enqueuing_subscriber(
                 self.session, zenoh_io.sensor_key(self.buoy_id), self._q)
             declared.append(zenoh_io.declare_publisher_watch(self.session, self.buoy_id,
@@ -373,6 +377,8 @@ class Daemon:
         kind = item[0]
         if kind == "data":
             self._on_data(item[1], item[2], item[3], item[4])
+        elif kind == "forecast":
+            self._on_forecast(item[1], item[2], item[3])
         elif kind == "publisher":
             self._catch_up()
         elif kind == "alive":
@@ -510,6 +516,23 @@ class Daemon:
             for stream, d in self._recorded.items():
                 self._flushed.setdefault(stream, {}).update(d)
 
+    def _on_forecast(self, key: str, payload: bytes, recv_ns: int) -> None:
+        """A sea-state forecast: recorded as received, handed to the pipeline (applied at
+        sensor time, :mod:`monitor.forecast`); a malformed one is counted and logged."""
+        add = getattr(self.pipeline, "add_forecast", None)
+        try:
+            if add is None:
+                raise ValueError("this pipeline takes no forecasts")
+            due_ns = add(json.loads(payload))
+        except (ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
+            self.counters["forecasts_refused"] += 1
+            self._faults.warning("forecast", "forecast refused", key=key, error=str(exc)[:300])
+            return
+        self.counters["forecasts"] += 1
+        self._dirty_status = True
+        if self.recorder is not None:  # a replay applies it at the same tick (monitor.forecast)
+            self.recorder.write(key, payload, JSON_OBJECT, recv_ns, due_ns)
+
     def _on_alive(self, key: str, alive: bool) -> None:
         try:
             _, sensor = parse_sensor_topic(key)
@@ -581,7 +604,10 @@ class Daemon:
                 doc.update(fields())
         engine_active = getattr(getattr(self.pipeline, "alerts", None), "active", None)
         sensor_time = engine_active() if engine_active is not None else []
+        forecasts = getattr(self.pipeline, "forecasts", None)
         doc["alerts"] = {"active": [_alert_summary(r, "sensor_time") for r in sensor_time]
+                         + [_alert_summary(r, "forecast") for r in (
+                             forecasts.active() if forecasts is not None else [])]
                          + [_alert_summary(r, "live") for r in self.live.active()]}
         doc["health"] = self.live.health()
         return doc

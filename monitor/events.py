@@ -51,6 +51,12 @@ class StepResult:
         components: per-component results, keyed by component name.
         accepted / rejected: samples of this block accepted, and rejected by reason.
         alerts: alert transitions raised by this step (see :mod:`monitor.alerts`).
+        windows: sea-state windows closed by this step (``[forecast]``,
+            :mod:`monitor.sea_state_learner`): end time, sea state, rainflow and Dirlik
+            damage per component, the components flagged.
+        forecasts: forecast projections applied in this step (:mod:`monitor.forecast`):
+            applied time, and per component the damage now and at the forecast's end with
+            its band, and when ``[forecast] alert_damage`` is reached.
         qc: QARTOD flag totals of the streams this step processed,
             ``{sensor: {test: {"suspect": n, "fail": n}}}`` (see :mod:`monitor.qartod`); filled
             only when a sink has ``wants_qc = True``.
@@ -68,6 +74,8 @@ class StepResult:
     accepted: int
     rejected: Mapping[str, int]
     alerts: list[Any] = field(default_factory=list)
+    windows: list[dict[str, Any]] = field(default_factory=list)
+    forecasts: list[dict[str, Any]] = field(default_factory=list)
     qc: Mapping[str, Mapping[str, Mapping[str, int]]] = field(default_factory=dict)
 
 

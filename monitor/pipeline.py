@@ -22,22 +22,30 @@ data that would complete it, so a log replayed in parts gives the same history a
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+from pathlib import Path
 from typing import Any, Iterable, Mapping, Protocol
 
 import numpy as np
 
+from models.sea_state_table import DamageRateTable
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.components import Component, build_cable, endurance_stress_Pa
 from monitor.config import Config, ConfigError
 from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
+from monitor.forecast import ForecastAlerts, parse_forecast
+from monitor.forecast_config import ForecastConfig
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
+from monitor.sea_state_learner import SeaStateLearner
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
+# what the sea-state learner takes of each stream (SeaStateLearner.<stream>)
+_SEA_STATE_FIELDS = {"waves": ("hs_m", "tp_s"), "motion": ("heave_m",), "imu": ("accel_z_mps2",)}
 
 STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
@@ -367,6 +375,8 @@ class Pipeline:
                                         st.get("damage_split"))
         self.alert_history: list[dict[str, Any]] = list(st.get("alert_history", []))
         self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
+        self.sea_states, self.forecasts = _build_forecasting(config, self.components,
+                                                             self.tick_ns / 1e9, st)
         self._warm_up()
 
     def _warm_up(self) -> None:
@@ -437,6 +447,17 @@ class Pipeline:
             out.append("no load could be formed: fatigue damage is not being computed")
         return out
 
+    def add_forecast(self, doc: Any, not_before_ns: int | None = None) -> int:
+        """A sea-state forecast (JSON payload, :mod:`monitor.forecast`), applied at the first
+        tick at or after its issue time and ``not_before_ns`` (default: the first tick not
+        yet evaluated); returns that due time. ValueError if it is malformed or forecasting
+        is off."""
+        if self.forecasts is None:
+            raise ValueError("forecasting is off ([forecast] enabled = false)")
+        fc = parse_forecast(doc, self.next_tick_ns if not_before_ns is None else not_before_ns)
+        self.forecasts.add(fc)
+        return fc.due_ns
+
     def flush(self) -> StepResult:
         """End of input: process every buffered sample; evaluate ticks the data completes."""
         return self._advance("flush", None, self.reorder.end_of_data())
@@ -490,6 +511,13 @@ class Pipeline:
             self.last["estimated_N"] = float(e_v[-1])
         stresses = {name: c.stress(v) for name, c in self.components.items()}
         self.new_alerts = []
+        if self.sea_states is not None:  # before the ticks this slab completes
+            for name, wanted in _SEA_STATE_FIELDS.items():
+                info = streams.get(name)
+                if info is not None and info.acc_t.shape[0]:
+                    fields = dict(zip(SENSOR_FIELDS[name], info.acc_values))
+                    getattr(self.sea_states, name)(info.acc_t, *(fields[f] for f in wanted))
+            self.sea_states.load(t, stresses)
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
         if t.shape[0]:
             self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
@@ -529,7 +557,8 @@ class Pipeline:
             k = (tick_limit - self.next_tick_ns) // self.tick_ns
             ends = self.next_tick_ns + self.tick_ns * np.arange(k + 1, dtype=np.int64)
         cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
-        evaluate = (self._has_rules or bool(self._tick_hooks)) and ends.shape[0] > 0
+        evaluate = (self._has_rules or bool(self._tick_hooks) or self.sea_states is not None
+                    ) and ends.shape[0] > 0
         if evaluate:
             for info in streams.values():
                 info.prepare(ends)
@@ -621,7 +650,14 @@ class Pipeline:
         )
         for hook in self._tick_hooks:
             hook(obs)
-        for rec in self.alerts.evaluate(obs):
+        records = self.alerts.evaluate(obs)
+        learner, forecasts = self.sea_states, self.forecasts
+        if learner is not None and forecasts is not None:
+            committed = {n: f[1] for n, f in figures.items()}
+            learner.tick(end, committed, load.n[j])
+            if forecasts.due(end):
+                records = [*records, *forecasts.apply(end, committed, learner.table)]
+        for rec in records:
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
         if len(self.alert_history) > ALERT_HISTORY_LIMIT:
@@ -682,6 +718,8 @@ class Pipeline:
             estimated_tension_N=nan if self.last["estimated_N"] is None else self.last["estimated_N"],
             components=comps, accepted=n_acc, rejected=dict(rejected),
             alerts=list(self.new_alerts), qc=qc,
+            windows=self.sea_states.take_windows() if self.sea_states is not None else [],
+            forecasts=self.forecasts.take_new() if self.forecasts is not None else [],
         )
 
     # ------------------------------------------------------------------ outputs
@@ -709,7 +747,15 @@ class Pipeline:
                         for s, o in self._stream_obs(now).items()},
             "buffered_samples": self.reorder.buffered(),
             "next_tick_ns": self.next_tick_ns,
+            **self._forecast_figures(),
         }
+
+    def _forecast_figures(self) -> dict[str, Any]:
+        """The learned table's coverage and the last forecast (status and report)."""
+        if self.sea_states is None or self.forecasts is None:
+            return {}
+        return {"sea_state_table": self.sea_states.summary(),
+                "forecast": self.forecasts.status()}
 
     def report(self) -> dict[str, Any]:
         """The replay report's pipeline part (see replay.report for the full contract)."""
@@ -734,6 +780,9 @@ class Pipeline:
                            for n, c in self.components.items()},
             "alerts": list(self.alert_history),
             "alerts_dropped": self.alerts_dropped,
+            **self._forecast_figures(),
+            **({"spectral_windows": list(self.sea_states.history)}
+               if self.sea_states is not None else {}),
         }
 
     def state(self) -> dict[str, Any]:
@@ -759,4 +808,38 @@ class Pipeline:
             "last": dict(self.last),
             "alert_history": list(self.alert_history),
             "alerts_dropped": self.alerts_dropped,
+            "sea_states": self.sea_states.state() if self.sea_states is not None else None,
+            "forecasts": self.forecasts.state() if self.forecasts is not None else None,
         }
+
+
+def _build_forecasting(config: Config, components: Mapping[str, Component], tick_s: float,
+                       st: Mapping[str, Any]) -> tuple[SeaStateLearner | None,
+                                                       ForecastAlerts | None]:
+    """The ``[forecast]`` learner and forecast alerts (None, None when switched off)."""
+    try:
+        cfg = ForecastConfig.from_dict(config.section("forecast"))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    if not cfg.enabled:
+        return None, None
+    prior = None
+    if cfg.table is not None and not st.get("sea_states"):
+        prior = _load_table(config, cfg.table)
+    curves = {n: c.sn_curve for n, c in components.items()}
+    try:
+        learner = SeaStateLearner(cfg, curves, tick_s, prior, st.get("sea_states"))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    return learner, ForecastAlerts(cfg, config.buoy.id, tuple(curves), st.get("forecasts"))
+
+
+def _load_table(config: Config, path: str) -> DamageRateTable:
+    """A saved table, its path relative to the configuration file's directory."""
+    p = Path(path)
+    if not p.is_absolute() and config.source and not config.source.startswith("<"):
+        p = Path(config.source).resolve().parent / p
+    try:
+        return DamageRateTable.from_state(json.loads(p.read_text()))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"config error: forecast.table = {path!r}: {exc}") from None

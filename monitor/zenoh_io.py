@@ -9,6 +9,8 @@ Queue items are tuples whose first element says what they are:
 * ``("data", key, payload_bytes, recv_ns, origin)``: a sample on ``buoy/<id>/sensor/**`` (or
   any key the subscriber was declared on); ``origin`` is an :class:`Origin` for messages of
   advanced publishers (sensor streams), None for others;
+* ``("forecast", key, payload_bytes, recv_ns)``: a sea-state forecast on
+  ``buoy/<id>/forecast/waves``;
 * ``("alive", key, is_alive, recv_ns)``: a liveliness token appeared or went away;
 * ``("query", zenoh.Query)``: a query to answer, then ``drop()``.
 """
@@ -77,6 +79,11 @@ def state_key(buoy_id: str) -> str:
     return f"buoy/{validate_buoy_id(buoy_id)}/monitor/state"
 
 
+def forecast_key(buoy_id: str) -> str:
+    """Sea-state forecasts for the buoy (JSON, :mod:`monitor.forecast`)."""
+    return f"buoy/{validate_buoy_id(buoy_id)}/forecast/waves"
+
+
 def monitor_token_key(buoy_id: str) -> str:
     return f"buoy/{validate_buoy_id(buoy_id)}/monitor/alive"
 
@@ -103,6 +110,17 @@ def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
     return zenoh.ext.declare_advanced_subscriber(
         session, key, on_sample,
         recovery=zenoh.ext.RecoveryConfig(heartbeat=True))
+
+
+def declare_forecast_subscriber(session: zenoh.Session, buoy_id: str,
+                                q: "queue.SimpleQueue[tuple]") -> zenoh.Subscriber:
+    """Subscribe to the buoy's forecasts; each is put on ``q`` as ``("forecast", key, bytes,
+    recv_ns)`` (a plain subscriber: a forecast is a single message that its sender repeats)."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        q.put(("forecast", str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    return session.declare_subscriber(forecast_key(buoy_id), on_sample)
 
 
 class Origin(NamedTuple):

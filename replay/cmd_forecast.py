@@ -16,6 +16,7 @@ import argparse
 import json
 import math
 import sys
+import time
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Sequence
@@ -23,17 +24,11 @@ from typing import Any, Sequence
 import numpy as np
 
 from models.miner import remaining_life_days
-from models.sea_state_table import DamageRateTable, Projection, project_damage
+from models.sea_state_table import (HS_EDGES_M, TP_EDGES_S, DamageRateTable, Projection,
+                                    project_damage)
 from monitor.alerts.config import AlertsConfig
 from monitor.config import Config, ConfigError, default_config, load_config
 from replay.sea_state_files import SeaStates, read_sea_states
-
-# default bins: 0.1 m of Hs up to 10 m, 1 s of Tp from 1 to 25 s (a hindcast of NDBC 44007,
-# bench/bench_forecast.py, forecast the second half of 1996 12 % high with these, 22 % with
-# 0.25 m bins: the damage rate is steep in Hs, so narrow Hs bins matter most)
-HS_EDGES_M = np.arange(0.0, 10.0 + 1e-9, 0.1)
-TP_EDGES_S = np.arange(1.0, 25.0 + 1e-9, 1.0)
-
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -54,7 +49,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--load-model", choices=("wavfor", "catenary"), default="wavfor",
                    help="simulator load model for bins without data (default wavfor)")
     p.add_argument("--json", type=Path, default=None, help="write the forecast as JSON here")
+    p.add_argument("--publish", metavar="ENDPOINT", action="append", default=None,
+                   help="also send the sea states to the daemon of the configuration's buoy "
+                        "(Zenoh key buoy/<id>/forecast/waves; e.g. tcp/127.0.0.1:7447; "
+                        "repeatable)")
     p.set_defaults(func=run)
+
+
+def publish_forecast(buoy_id: str, states: SeaStates, connect: Sequence[str],
+                     wait_for_subscriber_s: float = 10.0) -> None:
+    """Put the sea states on ``buoy/<id>/forecast/waves`` (the payload of
+    :mod:`monitor.forecast`, issued at the first step's time)."""
+    from monitor import zenoh_io  # noqa: PLC0415 (zenoh only when publishing)
+    from monitor.publisher import publisher_config  # noqa: PLC0415
+
+    doc = {"issued_s": float(states.t_s[0]), "time_s": states.t_s.tolist(),
+           "hs_m": states.hs_m.tolist(), "tp_s": states.tp_s.tolist()}
+    with zenoh_io.open_session(publisher_config(connect)) as session:
+        pub = zenoh_io.declare_json_publisher(session, zenoh_io.forecast_key(buoy_id))
+        deadline = time.monotonic() + wait_for_subscriber_s
+        while not pub.matching_status and time.monotonic() < deadline:
+            time.sleep(0.01)
+        pub.put(zenoh_io.to_json_bytes(doc))
+        pub.undeclare()
 
 
 def damage_thresholds(config: Config) -> list[float]:
@@ -170,6 +187,9 @@ def run(args: argparse.Namespace) -> int:
               f"(band {c['damage_end_low']:.3g} to {c['damage_end_high']:.3g}); {crossings}")
     if args.save_table is not None:
         args.save_table.write_text(json.dumps(table.to_state()))
+    if args.publish:
+        publish_forecast(config.buoy.id, states, args.publish)
+        print(f"sent to buoy/{config.buoy.id}/forecast/waves")
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=1))
     return 0

@@ -104,6 +104,10 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
         "components": comps,
         "alerts": pipeline_report["alerts"],
         "alerts_dropped": pipeline_report["alerts_dropped"],
+        # [forecast]: the learned table's coverage, the last forecast, the per-window
+        # spectral cross-check (docs/FORECAST.md)
+        **{k: pipeline_report[k] for k in ("sea_state_table", "forecast", "spectral_windows")
+           if k in pipeline_report},
         "inputs": {"files": list(inputs), "read": dict(read_stats or {})},
         "config": config.source,
     })
@@ -190,6 +194,13 @@ def summary_text(report: Mapping[str, Any]) -> str:
         if t.get(k)]
     if t_flags:
         lines.append("  tension: " + ", ".join(t_flags) + " (see the alerts)")
+    sea = report.get("sea_state_table")
+    if sea:
+        lines.append(
+            f"  sea states: {sea['windows']} window(s) of {sea['window_s'] / 60:g} min, "
+            f"{sea['learned']} learned ({sea['hours_learned']:.3g} h in {sea['bins_learned']} "
+            f"(Hs, Tp) bins); spectral cross-check: {sea['flagged']} of {sea['compared']} "
+            f"window damages flagged (Dirlik vs rainflow beyond x{sea['flag_factor']:g})")
     dropped = report.get("alerts_dropped") or 0
     episodes = alert_episodes(parsed.alerts) if parsed is not None else []
     lines.append(f"  alerts: {len(report['alerts'])} transition(s)"

@@ -140,11 +140,14 @@ def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | No
 
 def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | None = None,
                sinks: Sequence[Sink] = (), speed: float | None = None,
-               progress: Progress | None = None) -> tuple[Pipeline, ReplayResult]:
+               progress: Progress | None = None,
+               forecasts: Sequence[tuple[str, Any, int]] = ()) -> tuple[Pipeline, ReplayResult]:
     """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
     block, whose buoy id replaces the config's (with a warning); a continued state keeps its
     own buoy id, and a ValueError says so if the first block is of another buoy. Later blocks
-    of other buoys are counted and skipped."""
+    of other buoys are counted and skipped. ``forecasts`` (buoy id, JSON, due time ns), as
+    recorded by the daemon (:mod:`replay.forecast_log`), are given to the pipeline before
+    the blocks: each is applied at its due tick, as it was live."""
     pipeline: Pipeline | None = None
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
@@ -164,6 +167,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
                             block.buoy_id, config.buoy.id, block.buoy_id)
                 config = config_with(config, buoy={**config.section("buoy"), "id": block.buoy_id})
             pipeline = replay_pipeline(config, sinks, state)
+            _add_forecasts(pipeline, forecasts)
         if block.buoy_id != pipeline.buoy_id:
             ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
             continue
@@ -182,6 +186,19 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         progress.close()
     result = ReplayResult({}, n_blocks, n_samples, time.perf_counter() - start, ignored)
     return pipeline, result
+
+
+def _add_forecasts(pipeline: Pipeline, forecasts: Sequence[tuple[str, Any, int]]) -> None:
+    refused = 0
+    for buoy, doc, due_ns in forecasts:
+        if buoy != pipeline.buoy_id or pipeline.forecasts is None:
+            continue
+        try:
+            pipeline.add_forecast(doc, due_ns)
+        except ValueError:  # the daemon refused it too: it was never recorded as accepted
+            refused += 1
+    if refused:
+        log.warning("%d recorded forecast(s) refused", refused)
 
 
 def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
@@ -212,6 +229,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     damage histories, rainflow histograms, S-N curves) for ``buoymon report`` / ``--html``.
     """
     from monitor.viz.report_history import ReportHistory
+    from replay.forecast_log import read_forecasts
     from replay.reader import LogReader, time_span
     from replay.report import add_plot_fields
 
@@ -228,7 +246,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     history = ReportHistory() if plot_fields else None
     all_sinks = [*sinks, history] if history is not None else list(sinks)
     pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,
-                                  progress=progress)
+                                  progress=progress, forecasts=read_forecasts(files))
     result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
                                  read_summary(source.stats))
     if history is not None:

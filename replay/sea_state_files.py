@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from models.environment import TZ_OVER_TP_JONSWAP
+from models.sea_state_table import step_hours
 
 
 @dataclass(frozen=True)
@@ -44,14 +45,8 @@ class SeaStates:
         return int(self.t_s.size)
 
     def step_hours(self) -> NDArray[np.float64]:
-        """How long each row lasts: until the next row, at most 3 times the median step (a
-        longer gap is missing data, not a long sea state); the last row lasts one median
-        step (a single row, one hour)."""
-        if self.t_s.size < 2:
-            return np.ones(self.t_s.size)
-        gaps = np.diff(self.t_s) / 3600.0
-        step = float(np.median(gaps))
-        return np.append(np.minimum(gaps, 3.0 * step), step)
+        """How long each row lasts (:func:`models.sea_state_table.step_hours`)."""
+        return step_hours(self.t_s)
 
 
 def read_sea_states(path: str | Path) -> SeaStates:

@@ -154,7 +154,7 @@ def test_check_config_command(tmp_path, capsys):
 def test_external_sections_are_checked_by_their_owner_or_reported_unchecked():
     c = config_with(default_config(), zenoh={"mode": "peer"})
     results = run_section_parsers(c)
-    assert set(results) == {"alerts", "zenoh"}
+    assert set(results) == {"alerts", "zenoh", "forecast"}
     for name, status in results.items():
         assert status == "ok" or status.startswith("not checked:"), (name, status)
 

@@ -17,7 +17,9 @@ from monitor.config import default_config
 from replay.sea_state_files import read_sea_states
 
 REPO = Path(__file__).resolve().parents[1]
-NDBC = REPO.parent / "shared" / "realdata" / "ndbc44007_ecbenchmarkA" / "ec-benchmark_dataset_A.txt"
+SHARED = next(  # ../shared beside the repository root, or beside a worktree's parents
+    (p / "shared" for p in REPO.parents if (p / "shared/realdata").is_dir()), REPO.parent / "shared")
+NDBC = SHARED / "realdata" / "ndbc44007_ecbenchmarkA" / "ec-benchmark_dataset_A.txt"
 
 
 def _table() -> DamageRateTable:
@@ -161,7 +163,8 @@ def test_hindcast_forecast_of_the_second_half_within_20_percent():
     simulator's load model through the configured component), forecast the next 15 days
     from their sea states alone (learned bins, model-filled elsewhere), and compare with
     what those 15 days then cost."""
-    from replay.cmd_forecast import HS_EDGES_M, TP_EDGES_S, fill_model_rates
+    from models.sea_state_table import HS_EDGES_M, TP_EDGES_S
+    from replay.cmd_forecast import fill_model_rates
     from replay.sea_state_damage import physics_damage
 
     s = read_sea_states(NDBC)

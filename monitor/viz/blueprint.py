@@ -39,6 +39,15 @@ def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
         rrb.Spatial3DView(origin="/mooring", name="Mooring line (m)"),
         rrb.Spatial2DView(origin="/position", name="Position and watch circle (m E/N)"),
     )
+    spectral = rrb.Horizontal(
+        rrb.TimeSeriesView(origin="/spectral", name="Damage per window: rainflow / Dirlik"),
+        rrb.TimeSeriesView(origin="/forecast",
+                           name="Forecast: damage at the forecast's end (band)"),
+        rrb.Vertical(
+            rrb.StateTimelineView(origin="/spectral_flags", name="Dirlik vs rainflow"),
+            rrb.TimeSeriesView(origin="/sea_state", name="Sea state (Hs m, Tp s)"),
+        ),
+    )
     status = rrb.Horizontal(
         rrb.StateTimelineView(origin="/alerts/state", name="Alert states"),
         rrb.TextLogView(origin="/alerts/log", name="Alert log"),
@@ -48,7 +57,7 @@ def default_blueprint(components: Sequence[str]) -> rrb.Blueprint:
         ),
     )
     return rrb.Blueprint(
-        rrb.Vertical(loads, fatigue, geometry, status, row_shares=[3, 3, 3, 2]),
+        rrb.Vertical(loads, fatigue, geometry, spectral, status, row_shares=[3, 3, 3, 2, 2]),
         # following: the time cursor on the newest data, so histograms, the range-mean
         # matrix and the position open complete (live: they keep up)
         rrb.TimePanel(timeline="sensor_time", play_state="following"),

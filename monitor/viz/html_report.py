@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
+import numpy as np
+
 from monitor.viz.alert_view import alert_episodes
 from monitor.viz.findings import findings
 from monitor.viz.human import number_text, remaining_life_text, stress_text
@@ -27,12 +29,14 @@ _TITLES = {
     "sn": "S-N curve with the counted cycles",
     "life": "Remaining life",
     "alerts": "Alert timeline",
+    "spectral": "Spectral cross-check: Dirlik vs rainflow damage per window",
 }
 _MISSING = {
     "damage": "no fatigue components in the report",
     "histogram": "the report has no components[...].histogram (see docs/REPORT_FORMAT.md)",
     "sn": "the report has no components[...].sn_curve (see docs/REPORT_FORMAT.md)",
     "life": "no fatigue components in the report",
+    "spectral": "the report has no spectral_windows ([forecast], docs/FORECAST.md)",
 }
 _CSS = """
 body{font-family:system-ui,sans-serif;margin:2em;color:#222;max-width:1100px}
@@ -130,6 +134,18 @@ def _alert_table(r: Report) -> str:
                    "re-sends", "cleared", "summary"], rows, "alerts") + note
 
 
+def _spectral_table(r: Report) -> str:
+    """Per component: windows compared, flagged, and the median Dirlik / rainflow ratio."""
+    rows = []
+    for name, s in sorted((r.spectral or {}).items()):
+        ok = (s.rainflow > 0) & np.isfinite(s.dirlik)
+        ratio = float(np.median(s.dirlik[ok] / s.rainflow[ok])) if ok.any() else math.nan
+        rows.append([html.escape(name), str(int(ok.sum())), str(int(s.flagged.sum())),
+                     _fmt(ratio)])
+    return _table(["component", "windows compared", "flagged",
+                   "median Dirlik / rainflow"], rows)
+
+
 def render_png(fig) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -158,6 +174,8 @@ def write_report(report: Report, html_path: str | Path) -> RenderedReport:
                         "</figcaption></figure>")
         if key == "alerts":
             sections.append(_alert_table(report))
+        if key == "spectral":
+            sections.append(_spectral_table(report))
     title = f"Fatigue report: buoy {html.escape(report.buoy_id)}"
     page = (
         "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"

@@ -126,6 +126,17 @@ class SeaState:
 
 
 @dataclass(frozen=True, eq=False)
+class SpectralCheck:
+    """The per-window spectral cross-check of one component: window end times (s), rainflow
+    and Dirlik damage per window (NaN where Dirlik had no whole segment), flagged windows."""
+
+    end_s: np.ndarray
+    rainflow: np.ndarray
+    dirlik: np.ndarray
+    flagged: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class Report:
     buoy_id: str
     time_start_ns: int
@@ -136,6 +147,8 @@ class Report:
     alerts: list[Alert]
     design_life_years: float | None = None
     tension_history: Series | None = None
+    spectral: Mapping[str, SpectralCheck] | None = None
+    spectral_flag_factor: float = math.nan
     # optional context for the findings (absent from older reports: empty / None)
     tension_counts: Mapping[str, int] = dataclasses.field(default_factory=dict)
     breaking_load_N: float | None = None
@@ -145,6 +158,27 @@ class Report:
     sea_state: SeaState | None = None
     input_files: tuple[str, ...] = ()
     alerts_dropped: int = 0
+
+
+def _spectral(value: Any) -> dict[str, SpectralCheck]:
+    """``spectral_windows`` (a list of closed windows) per component."""
+    if not isinstance(value, list):
+        raise ValueError("report: spectral_windows: expected a list")
+    rows: dict[str, list[tuple[float, float, float, bool]]] = {}
+    for i, w in enumerate(value):
+        where = f"spectral_windows[{i}]"
+        w = _mapping(w, where)
+        end = _count(w.get("end_ns"), f"{where}.end_ns") / 1e9
+        rainflow = _mapping(w.get("rainflow"), f"{where}.rainflow")
+        dirlik = _mapping(w.get("dirlik"), f"{where}.dirlik")
+        flagged = w.get("flagged", [])
+        if not isinstance(flagged, list):
+            raise ValueError(f"report: {where}.flagged: expected a list")
+        for name, d in rainflow.items():
+            rows.setdefault(str(name), []).append((
+                end, _num(d, f"{where}.rainflow.{name}"),
+                _num(dirlik.get(name), f"{where}.dirlik.{name}"), name in flagged))
+    return {name: SpectralCheck(*(np.array(col) for col in zip(*r))) for name, r in rows.items()}
 
 
 def _series(value: Any, where: str, names: tuple[str, ...], required: tuple[str, ...]) -> Series:
@@ -273,6 +307,9 @@ def parse_report(data: Any) -> Report:
         tension_history=(_series(d["tension_history"], "tension_history",
                                  ("min", "mean", "max"), ("min", "mean", "max"))
                          if "tension_history" in d else None),
+        spectral=_spectral(d["spectral_windows"]) if d.get("spectral_windows") else None,
+        spectral_flag_factor=_num((d.get("sea_state_table") or {}).get("flag_factor"),
+                                  "sea_state_table.flag_factor"),
         **_context(d, t),
     )
 

@@ -313,6 +313,40 @@ def _span(ax, y: int, start_ns: int, end_ns: int, severity: str) -> None:
             color=SEVERITY_COLOURS.get(severity, "#969696"))
 
 
+def plot_spectral(r: Report) -> Figure | None:
+    """Dirlik against rainflow damage per window (log-log), the agreement band, flags."""
+    if not r.spectral:
+        return None
+    fig = _figure()
+    ax = fig.add_subplot()
+    lo, hi = math.inf, 0.0
+    for name, s in sorted(r.spectral.items()):
+        ok = (s.rainflow > 0) & (s.dirlik > 0)
+        if not ok.any():
+            continue
+        ax.scatter(s.rainflow[ok & ~s.flagged], s.dirlik[ok & ~s.flagged], s=12, label=name)
+        lo = min(lo, float(s.rainflow[ok].min()), float(s.dirlik[ok].min()))
+        hi = max(hi, float(s.rainflow[ok].max()), float(s.dirlik[ok].max()))
+        if (ok & s.flagged).any():
+            ax.scatter(s.rainflow[ok & s.flagged], s.dirlik[ok & s.flagged], s=24,
+                       marker="x", color=SEVERITY_COLOURS["critical"],
+                       label=f"{name}: flagged")
+    if not hi > 0:
+        return None
+    line = np.array([lo / 2, hi * 2])
+    ax.plot(line, line, color="#555", lw=0.8, label="Dirlik = rainflow")
+    f = r.spectral_flag_factor
+    if math.isfinite(f):
+        for k in (f, 1 / f):
+            ax.plot(line, k * line, color="#999", lw=0.8, ls="--")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("rainflow damage per window")
+    ax.set_ylabel("Dirlik damage per window")
+    ax.legend(fontsize="small")
+    return fig
+
+
 def caption(fig: Figure) -> str:
     """What the figure's first axes show, read back from them: the x and y labels and
     ranges (dates for a time axis), the y scale, and the legend's entries. The page prints
@@ -343,4 +377,5 @@ PLOTS = {
     "sn": plot_sn,
     "life": plot_life,
     "alerts": plot_alerts,
+    "spectral": plot_spectral,
 }

@@ -37,6 +37,12 @@ entity                              archetype                   content
 ``position/buoy``                   Points2D                    buoy east/north of anchor (m)
 ``position/anchor``, ``position/watch_circle``  Points2D / LineStrips2D (static)
 ``mooring/line``                    LineStrips3D                cable shape (m, z up)
+``spectral/<component>/rainflow``   Scalars                     damage of each closed sea-state
+``spectral/<component>/dirlik``     Scalars                     window: rainflow, Dirlik
+``spectral_flags/<component>``      StateChange                 agree / flagged (the factor)
+``sea_state/hs_m``, ``/tp_s``       Scalars                     each window's Hs (m), Tp (s)
+``forecast/<component>/damage_end`` Scalars                     projected damage at a forecast's
+(``_low``, ``_high``)                                           end, at the time it was applied
 ==================================  ==========================  =============================
 
 Rows are logged at sensor times of the data: the slow rows (damage, health, histograms, shape)
@@ -306,6 +312,10 @@ class RerunSink:
             self._qc[entity_part(sensor)] = counts
         for record in step.alerts:
             self.on_alert(record)
+        for window in step.windows:
+            self._log_window(window)
+        for projection in step.forecasts:
+            self._log_forecast(projection)
         if t is None:  # before the first sample: nothing to show yet
             self._pending += n + 1
             self._maybe_flush()
@@ -426,6 +436,36 @@ class RerunSink:
         if (self._pending >= self.opt.flush_samples
                 or time.monotonic() - self._last_flush >= self.opt.flush_interval_s):
             self.flush()
+
+    def _log_window(self, w: Mapping[str, Any]) -> None:
+        """One closed sea-state window: rainflow and Dirlik damage per component (the
+        spectral cross-check), a flag lane, and the window's Hs and Tp."""
+        t, s = int(w["end_ns"]), self._samples
+        for name, rainflow in w["rainflow"].items():
+            part = entity_part(name)
+            self._rows[(f"spectral/{part}/rainflow", "scalar")].add(t, s, float(rainflow))
+            if w["dirlik"][name] is not None:
+                self._rows[(f"spectral/{part}/dirlik", "scalar")].add(t, s, float(w["dirlik"][name]))
+            lane = f"spectral_flags/{part}"
+            state = "flagged" if name in w["flagged"] else "agree"
+            if self._alert_state.get(lane) != state:
+                self._alert_state[lane] = state
+                self._rows[(lane, "state")].add(t, s, state)
+        for key in ("hs_m", "tp_s"):
+            if w[key] is not None:
+                self._rows[(f"sea_state/{key}", "scalar")].add(t, s, float(w[key]))
+        self._pending += 1
+
+    def _log_forecast(self, p: Mapping[str, Any]) -> None:
+        """A forecast applied: per component the projected damage at the forecast's end
+        with its band, at the sensor time it was applied."""
+        t, s = int(p["applied_ns"]), self._samples
+        for name, c in p["components"].items():
+            for key in ("damage_end", "damage_end_low", "damage_end_high"):
+                if c[key] is not None and math.isfinite(c[key]):
+                    self._rows[(f"forecast/{entity_part(name)}/{key}", "scalar")].add(
+                        t, s, float(c[key]))
+        self._pending += 1
 
     def _sample_slow(self, step: StepResult, comps: Mapping[str, Any]) -> None:
         t, s = self._now_ns, self._samples

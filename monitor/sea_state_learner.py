@@ -1,0 +1,332 @@
+"""The damage-rate table learned inside the pipeline, with the per-window spectral cross-check.
+
+Sensor time is cut into windows of ``[forecast] window_s`` on a fixed grid (window ``k``
+covers ``((k-1) W, k W]``, like the alert ticks, of which it is a whole number). At the end
+of each window, per component:
+
+* the **rainflow damage** of the window is the committed damage at its end minus that at its
+  start (the pipeline's own Miner sum: the same cycles, the same S-N curve);
+* its **sea state** is the mean Hs and Tp of the accepted ``waves`` samples inside it, else
+  the newest earlier sample if at most ``waves_max_age_s`` old at the window's end;
+* with at least ``min_coverage`` of the window covered by load samples (alert ticks holding
+  one), the window is added to :class:`models.sea_state_table.DamageRateTable` with the
+  covered hours;
+* the **Dirlik damage** of the window's stress (Welch PSD of Hann-windowed, non-overlapping
+  segments of ``SEGMENT`` load samples, :func:`models.spectral_fatigue.segment_psd`; a
+  segment's rate is taken from its samples' times, and a segment whose rate differs from the
+  window's first by more than 2 % spans a gap and is left out) times the covered seconds is
+  set beside the rainflow damage; a window where they differ by more than
+  ``spectral_flag_factor`` either way is flagged (non-Gaussian or non-stationary load).
+
+Everything is a function of the samples in sensor-time order: the pipeline feeds the
+accepted waves samples and the load samples of each slab before the ticks the slab
+completes, and a window closes at a tick end, when every sample up to it has been seen; so
+the table is the same for any block split, and :meth:`state` restores it exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
+from models.spectral_fatigue import damage_rate_from_psd, segment_psds
+from models.waves import sea_state_from_psd
+from monitor.forecast_config import ForecastConfig
+
+SEGMENT = 1024  # load samples per PSD segment: 51 s at 20 Hz (0.02 Hz resolution)
+WINDOW_HISTORY = 2000  # closed windows kept for the report (about 6 weeks of 30 min)
+_RATE_TOLERANCE = 0.02
+_WAVE_F_MAX_HZ = 0.5  # the wave band's top for Hs and Tp from motion (models.waves)
+_COMPARE_FLOOR = 1e-12  # both damages below this: nothing to compare (a calm window)
+
+
+class _Spectra:
+    """Welch PSD sums of one window's stress, per component, segment by segment."""
+
+    def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None) -> None:
+        st = state or {}
+        self.names = tuple(names)
+        self.index: int | None = st.get("index")
+        self.fs: float | None = st.get("fs")
+        self.segments = int(st.get("segments", 0))
+        self.dropped = int(st.get("dropped", 0))
+        self.t = np.array(st.get("t", []), np.int64)  # the open segment's samples
+        self.x = {n: np.array(st.get("x", {}).get(n, []), float) for n in self.names}
+        self.psd = {n: np.array(v, float) for n, v in st.get("psd", {}).items()}
+
+    def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
+        t = np.concatenate([self.t, t])
+        x = {n: np.concatenate([self.x[n], stresses[n]]) for n in self.names}
+        full = t.shape[0] // SEGMENT * SEGMENT
+        if full:
+            starts = np.arange(0, full, SEGMENT)
+            spans = (t[starts + SEGMENT - 1] - t[starts]) / 1e9
+            fs = np.where(spans > 0, (SEGMENT - 1) / np.where(spans > 0, spans, 1.0), np.nan)
+            if self.fs is None and np.isfinite(fs).any():
+                self.fs = float(fs[np.isfinite(fs)][0])
+            good = np.isfinite(fs) & (np.abs(fs / (self.fs or 1.0) - 1.0) <= _RATE_TOLERANCE)
+            self.dropped += int(np.count_nonzero(~good))
+            if good.any():
+                for n in self.names:
+                    _, rows = segment_psds(x[n][:full].reshape(-1, SEGMENT)[good], self.fs)
+                    # segment by segment in time order: the same sum for any block split
+                    acc = self.psd.get(n)
+                    for row in rows:
+                        acc = row if acc is None else acc + row
+                    self.psd[n] = acc
+                self.segments += int(np.count_nonzero(good))
+        self.t = t[full:]
+        self.x = {n: v[full:] for n, v in x.items()}
+
+    def mean_psd(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """(frequencies, mean PSD) of the window, None without a whole segment."""
+        if not self.segments or self.fs is None:
+            return None
+        return np.fft.rfftfreq(SEGMENT, 1.0 / self.fs), self.psd[name] / self.segments
+
+    def dirlik_rate(self, name: str, curve: Any) -> float:
+        """Damage per second from the window's mean PSD (NaN without a whole segment)."""
+        spec = self.mean_psd(name)
+        if spec is None or not np.any(spec[1][1:] > 0):
+            return math.nan
+        return damage_rate_from_psd(curve, spec[0][1:], spec[1][1:])
+
+    def sea_state(self, name: str, accel: bool) -> tuple[float, float] | None:
+        """(Hs, Tp) of the window from a heave PSD, or an acceleration PSD divided by
+        (2 pi f)^4 (:func:`models.waves.sea_state_from_psd`); None without one."""
+        spec = self.mean_psd(name)
+        if spec is None:
+            return None
+        f, psd = spec
+        if accel:
+            with np.errstate(divide="ignore"):
+                psd = np.where(f > 0, psd / (2.0 * np.pi * f) ** 4, 0.0)
+        try:
+            ss = sea_state_from_psd(f, psd, f_max=min(_WAVE_F_MAX_HZ, float(f[-1])))
+        except ValueError:  # too short a segment for the band, or no wave energy
+            return None
+        return ss.hs, ss.tp
+
+    def state(self) -> dict[str, Any]:
+        return {"index": self.index, "fs": self.fs, "segments": self.segments,
+                "dropped": self.dropped, "t": self.t.tolist(),
+                "x": {n: v.tolist() for n, v in self.x.items()},
+                "psd": {n: v.tolist() for n, v in self.psd.items()}}
+
+
+class _WindowSpectra:
+    """:class:`_Spectra` of each learning window for one set of signals fed together."""
+
+    def __init__(self, names: Sequence[str], window_ns: int,
+                 state: Mapping[str, Any] | None = None) -> None:
+        st = state or {}
+        self.names, self.window_ns = tuple(names), window_ns
+        self.current = _Spectra(self.names, st.get("current"))
+        self.done: dict[int, _Spectra] = {
+            int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
+
+    def feed(self, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+        """Samples in time order; cut at window ends (window k: ((k-1) W, k W])."""
+        if t_ns.shape[0] == 0:
+            return
+        w = self.window_ns
+        first, last = -(-int(t_ns[0]) // w), -(-int(t_ns[-1]) // w)
+        if first == last:  # the usual case: the slab lies in one window
+            self._feed(first, t_ns, values)
+            return
+        index = -(-t_ns // w)
+        cuts = np.flatnonzero(np.diff(index)) + 1
+        for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), t_ns.shape[0]]):
+            self._feed(int(index[a]), t_ns[a:b], {n: s[a:b] for n, s in values.items()})
+
+    def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
+        if self.current.index != k:
+            if self.current.index is not None:
+                self.done[self.current.index] = self.current
+            self.current = _Spectra(self.names)
+            self.current.index = k
+        self.current.feed(t_ns, values)
+
+    def take(self, k: int) -> _Spectra | None:
+        """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""
+        out = self.done.pop(k, None)
+        if out is None and self.current.index == k:
+            out = self.current
+        for old in [i for i in self.done if i < k]:
+            del self.done[old]
+        return out
+
+    def state(self) -> dict[str, Any]:
+        return {"current": self.current.state(),
+                "done": {str(k): v.state() for k, v in self.done.items()}}
+
+
+class SeaStateLearner:
+    """Learns the damage-rate table and cross-checks each window (module docstring).
+
+    Args:
+        cfg: the ``[forecast]`` section.
+        curves: S-N curve (``damage_per_cycle``) per component, in table order.
+        tick_s: the alert tick; ``cfg.window_s`` must be a whole number of ticks.
+        prior: the table to start from (a saved one), else empty default bins.
+        state: :meth:`state` of an earlier learner.
+    """
+
+    def __init__(self, cfg: ForecastConfig, curves: Mapping[str, Any], tick_s: float,
+                 prior: DamageRateTable | None = None,
+                 state: Mapping[str, Any] | None = None) -> None:
+        ticks = cfg.window_s / tick_s
+        if abs(ticks - round(ticks)) > 1e-9 or round(ticks) < 1:
+            raise ValueError(f"config error: forecast.window_s = {cfg.window_s:g}: must be a "
+                             f"whole number of alert ticks (alerts.eval_interval_s = {tick_s:g})")
+        self.cfg = cfg
+        self.curves = dict(curves)
+        self.names = tuple(curves)
+        self.window_ns = int(round(cfg.window_s * 1e9))
+        self.tick_s = tick_s
+        st = state or {}
+        if "table" in st:
+            self.table = DamageRateTable.from_state(st["table"])
+        elif prior is not None:
+            if list(prior.components) != list(self.names):
+                raise ValueError(f"config error: forecast.table: components "
+                                 f"{list(prior.components)} != the configuration's "
+                                 f"{list(self.names)}")
+            self.table = prior
+            self.table.min_hours = cfg.min_hours  # the configuration decides, not the file
+        else:
+            self.table = DamageRateTable(self.names, HS_EDGES_M, TP_EDGES_S,
+                                         min_hours=cfg.min_hours)
+        self.window_end: int | None = st.get("window_end")
+        self.start_damage: dict[str, float] = dict(st.get("start_damage", {}))
+        self.covered_s = float(st.get("covered_s", 0.0))
+        self.waves_t: list[int] = list(st.get("waves_t", []))
+        self.waves_v: list[tuple[float, float]] = [tuple(v) for v in st.get("waves_v", [])]
+        self.counts: dict[str, int] = {"windows": 0, "learned": 0, "no_sea_state": 0,
+                                       "short": 0, "flagged": 0, "compared": 0,
+                                       **st.get("counts", {})}
+        self.stress = _WindowSpectra(self.names, self.window_ns, st.get("stress"))
+        # the sea state of a window without waves samples: heave (motion) or accel_z (imu)
+        self.heave = _WindowSpectra(("heave",), self.window_ns, st.get("heave"))
+        self.accel = _WindowSpectra(("accel",), self.window_ns, st.get("accel"))
+        self.history: list[dict[str, Any]] = list(st.get("history", []))
+        self.new_windows: list[dict[str, Any]] = []  # closed since the last take_windows()
+
+    # ---- inputs, in sensor-time order ------------------------------------------------------
+
+    def waves(self, t_ns: np.ndarray, hs_m: np.ndarray, tp_s: np.ndarray) -> None:
+        """Accepted ``waves`` samples of a slab."""
+        self.waves_t.extend(int(x) for x in t_ns.tolist())
+        self.waves_v.extend(zip(hs_m.tolist(), tp_s.tolist()))
+
+    def load(self, t_ns: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
+        """The slab's load samples (time order) and each component's stress."""
+        self.stress.feed(t_ns, stresses)
+
+    def motion(self, t_ns: np.ndarray, heave_m: np.ndarray) -> None:
+        """Accepted ``motion`` heave samples of a slab."""
+        self.heave.feed(t_ns, {"heave": heave_m})
+
+    def imu(self, t_ns: np.ndarray, accel_z_mps2: np.ndarray) -> None:
+        """Accepted ``imu`` vertical accelerations of a slab."""
+        self.accel.feed(t_ns, {"accel": accel_z_mps2})
+
+    def tick(self, end_ns: int, committed: Mapping[str, float], n_samples: int) -> None:
+        """An alert tick ended at ``end_ns`` with these committed damages."""
+        if self.window_end is None:  # the first tick seen: a window starts here
+            self.window_end = (end_ns // self.window_ns + 1) * self.window_ns
+            self.start_damage = dict(committed)
+            return
+        if n_samples:
+            self.covered_s += self.tick_s
+        if end_ns >= self.window_end:
+            self._close(self.window_end, committed)
+            self.window_end = (end_ns // self.window_ns + 1) * self.window_ns
+            self.start_damage = dict(committed)
+            self.covered_s = 0.0
+
+    # ---- windows ---------------------------------------------------------------------------
+
+    def _sea_state(self, start: int, end: int) -> tuple[tuple[float, float] | None, str | None]:
+        """The window's (Hs, Tp) and where it came from: ``waves`` samples, else the
+        ``motion`` heave spectrum, else the ``imu`` acceleration spectrum."""
+        k = end // self.window_ns
+        heave, accel = self.heave.take(k), self.accel.take(k)
+        inside = [v for t, v in zip(self.waves_t, self.waves_v) if start < t <= end]
+        if inside:
+            return (math.fsum(v[0] for v in inside) / len(inside),
+                    math.fsum(v[1] for v in inside) / len(inside)), "waves"
+        before = [(t, v) for t, v in zip(self.waves_t, self.waves_v) if t <= start]
+        if before and (end - before[-1][0]) / 1e9 <= self.cfg.waves_max_age_s:
+            return before[-1][1], "waves"
+        for spectra, name, source in ((heave, "heave", "motion"), (accel, "accel", "imu")):
+            sea = None if spectra is None else spectra.sea_state(name, name == "accel")
+            if sea is not None:
+                return sea, source
+        return None, None
+
+    def _close(self, end: int, committed: Mapping[str, float]) -> None:
+        start = end - self.window_ns
+        spectra = self.stress.take(end // self.window_ns)
+        rainflow = {n: committed[n] - self.start_damage.get(n, committed[n]) for n in self.names}
+        dirlik = {n: (spectra.dirlik_rate(n, self.curves[n]) * self.covered_s
+                      if spectra is not None else math.nan) for n in self.names}
+        flagged = []
+        for n in self.names:
+            a, b = rainflow[n], dirlik[n]
+            if math.isfinite(b) and max(a, b) > _COMPARE_FLOOR:
+                self.counts["compared"] += 1
+                if max(a, b) > self.cfg.spectral_flag_factor * min(a, b):
+                    flagged.append(n)
+        self.counts["flagged"] += len(flagged)
+        sea, sea_source = self._sea_state(start, end)
+        hours = self.covered_s / 3600.0
+        self.counts["windows"] += 1
+        if sea is None:
+            status = "no_sea_state"
+        elif self.covered_s < self.cfg.min_coverage * self.cfg.window_s:
+            status = "short"
+        else:
+            status = "learned"
+            self.table.learn(sea[0], sea[1], hours, [max(rainflow[n], 0.0) for n in self.names])
+        self.counts[status] += 1
+        window = {"end_ns": end, "hours": hours, "hs_m": None if sea is None else sea[0],
+                  "tp_s": None if sea is None else sea[1], "sea_state_from": sea_source,
+                  "status": status,
+                  "segments": 0 if spectra is None else spectra.segments,
+                  "rainflow": rainflow,
+                  "dirlik": {n: (v if math.isfinite(v) else None) for n, v in dirlik.items()},
+                  "flagged": flagged}
+        self.new_windows.append(window)
+        self.history.append(window)
+        del self.history[:-WINDOW_HISTORY]
+        # keep the newest waves sample at or before this window's end for the next one
+        keep = max((i for i, t in enumerate(self.waves_t) if t <= end), default=0)
+        del self.waves_t[:keep], self.waves_v[:keep]
+
+    def take_windows(self) -> list[dict[str, Any]]:
+        """Windows closed since the last call (for the sinks)."""
+        out, self.new_windows = self.new_windows, []
+        return out
+
+    # ---- outputs ---------------------------------------------------------------------------
+
+    def summary(self) -> dict[str, Any]:
+        """Counts and the table's coverage, for the status and the report."""
+        learned = self.table.hours >= self.table.min_hours
+        return {"window_s": self.cfg.window_s, "flag_factor": self.cfg.spectral_flag_factor,
+                **self.counts,
+                "bins_learned": int(learned.sum()), "hours_learned": float(self.table.hours.sum()),
+                "bins_model": int(np.sum(~learned & np.all(np.isfinite(self.table.model_rate),
+                                                             axis=0)))}
+
+    def state(self) -> dict[str, Any]:
+        return {"table": self.table.to_state(), "window_end": self.window_end,
+                "start_damage": dict(self.start_damage), "covered_s": self.covered_s,
+                "waves_t": list(self.waves_t), "waves_v": [list(v) for v in self.waves_v],
+                "counts": dict(self.counts), "stress": self.stress.state(),
+                "heave": self.heave.state(), "accel": self.accel.state(),
+                "history": list(self.history)}
