@@ -218,7 +218,8 @@ def segment_psds(segments: ArrayLike, fs_hz: float
     spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
     spec /= fs_hz * float(np.sum(w * w))
     spec[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
-    return np.fft.rfftfreq(n, 1.0 / fs_hz), spec
+    freqs = np.fft.rfftfreq(n, 1.0 / fs_hz).astype(np.float64, copy=False)
+    return freqs, spec.astype(np.float64, copy=False)
 
 
 def segment_psd(segments: ArrayLike, fs_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
