@@ -25,7 +25,7 @@ import dataclasses
 import json
 import math
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Protocol
+from typing import Any, Iterable, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -50,6 +50,7 @@ _SEA_STATE_FIELDS = {"waves": ("hs_m", "tp_s"), "motion": ("heave_m",), "imu": (
 STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
 _NEVER = np.iinfo(np.int64).min
+_EMPTY_SPAN_S = 3600.0  # at least this much of a gap without samples is evaluated tick by tick
 
 
 class AlertEngineLike(Protocol):
@@ -307,6 +308,11 @@ class Pipeline:
         # StepResult.qc is built only for sinks that read it (a dict per step otherwise)
         self._qc_sinks = any(getattr(s, "wants_qc", False) for s in self.sinks)
         self.tick_ns = int(round(config.alerts.eval_interval_s * 1e9))
+        # ticks evaluated after the last sample of a gap without any (a sensor clock jumping
+        # years ahead, logs far apart): enough for every sensor-time rule and the damage-rate
+        # window to see the data stop; the rest of the gap is skipped, not walked tick by tick
+        self._max_empty_ticks = -(-int(max(_EMPTY_SPAN_S, config.fatigue.rate_window_s) * 1e9)
+                                  // self.tick_ns) + 1
         cable = build_cable(config)
         self.components = {
             c.name: Component(c, cable, config.fatigue, st.get("components", {}).get(c.name))
@@ -534,6 +540,22 @@ class Pipeline:
             sink.on_step(step)
         return step
 
+    def _tick_ends(self, first_end: int, k: int, times: Sequence[np.ndarray]) -> np.ndarray:
+        """Ends of the ticks to evaluate, ``first_end + tick * i`` for i in 0..k, leaving out
+        all but the first ``_max_empty_ticks`` of a run of ticks without any sample of
+        ``times``: memory and time then depend on the data, not on how far the clock jumped."""
+        if k < self._max_empty_ticks:  # the usual slab: every tick
+            return first_end + self.tick_ns * np.arange(k + 1, dtype=np.int64)
+        # index of the tick each sample falls in (its end at or after the sample)
+        starts = np.unique(np.concatenate([np.zeros(1, np.int64)] + [
+            np.clip(-((first_end - x) // self.tick_ns), 0, k) for x in times if x.shape[0]]))
+        stops = np.minimum(starts + self._max_empty_ticks, np.append(starts[1:], k + 1))
+        lengths = stops - starts
+        offsets = np.cumsum(lengths) - lengths
+        keep = (np.arange(int(lengths.sum()), dtype=np.int64)
+                + np.repeat(starts - offsets, lengths))
+        return first_end + self.tick_ns * keep
+
     def _source_at(self, now: int) -> str:
         """The load source of the newest load sample, "none" once it is older than stale_after_s."""
         t = self.last["load_t_ns"]
@@ -552,10 +574,11 @@ class Pipeline:
             first = min(int(x.t[0]) for x in streams.values())
             self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
         ends: np.ndarray = np.zeros(0, np.int64)
-        if (tick_limit is not None and self.next_tick_ns is not None
-                and tick_limit >= self.next_tick_ns):
-            k = (tick_limit - self.next_tick_ns) // self.tick_ns
-            ends = self.next_tick_ns + self.tick_ns * np.arange(k + 1, dtype=np.int64)
+        next_tick = self.next_tick_ns
+        if tick_limit is not None and next_tick is not None and tick_limit >= next_tick:
+            k = (tick_limit - next_tick) // self.tick_ns
+            ends = self._tick_ends(next_tick, k, [t, *(x.t for x in streams.values())])
+            next_tick += (k + 1) * self.tick_ns
         cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
         evaluate = (self._has_rules or bool(self._tick_hooks) or self.sea_states is not None
                     ) and ends.shape[0] > 0
@@ -603,7 +626,7 @@ class Pipeline:
             self.open_estimate = (np.concatenate([base[0], e_t[rest:]]),
                                   np.concatenate([base[1], e_v[rest:]]))
         if ends.shape[0]:
-            self.next_tick_ns = int(ends[-1]) + self.tick_ns
+            self.next_tick_ns = next_tick
             self.tick_counts = {}
         stop = cuts_l[n_ticks]
         if stop > start:

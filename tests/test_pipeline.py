@@ -440,3 +440,44 @@ def test_a_sink_that_wants_qc_gets_the_flag_totals_in_each_step():
     p.flush()
     assert sink.qc["tension"] == p.status()["streams"]["tension"]["qc"]
     assert set(sink.qc) == {"tension", "imu", "gnss"}
+
+
+class _TickCounter:
+    def __init__(self) -> None:
+        self.ticks = 0
+
+    def on_step(self, step) -> None:
+        pass
+
+    def on_observation(self, obs) -> None:
+        self.ticks += 1
+
+
+def _run_with_jump(jump_ns: int) -> tuple[Pipeline, _TickCounter]:
+    rng = np.random.default_rng(8)
+    counter = _TickCounter()
+    p = Pipeline(default_config(), sinks=[counter])
+    for start in (T0, T0 + 600 * S + jump_ns):
+        for k in range(60):  # 10 minutes of 20 Hz tension in 10-s blocks
+            t = start + (k * 200 + np.arange(200, dtype=np.int64)) * 50_000_000
+            p.process(SampleBlock("vaps", "tension", t,
+                                  {"tension_N": 3000.0 + 800.0 * rng.standard_normal(200)}))
+    p.flush()
+    return p, counter
+
+
+def test_a_sensor_clock_jumping_years_ahead_costs_what_its_data_costs():
+    """A clock jumping 8 years ahead (or logs of one buoy far apart): the gap's ticks are not
+    walked one by one (25 million at 10 s), only the first hour after the data stops; the
+    committed damage is the same bits as with a 20-minute gap (every tick evaluated)."""
+    far, far_ticks = _run_with_jump(8 * 365 * 86400 * S)
+    near, near_ticks = _run_with_jump(20 * 60 * S)
+    assert committed_of(far) == committed_of(near) and committed_of(far)["conductor"] > 0
+    assert near_ticks.ticks == 60 + 120 + 60  # 10 + 20 + 10 minutes of 10 s ticks
+    assert far_ticks.ticks == 60 + 361 + 60  # the gap's first hour only
+    rules = [(a["rule"], a["event"]) for a in far.report()["alerts"] if a["rule"] == "stale"]
+    assert rules[0] == ("stale", "fire") and rules[-1] == ("stale", "clear")
+
+
+def committed_of(p: Pipeline) -> dict:
+    return {n: c["damage_committed"] for n, c in p.report()["components"].items()}
