@@ -190,6 +190,16 @@ class Daemon:
                                          "forecasts": 0, "forecasts_refused": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
+        # ages across a restart: the last arrivals and fatigue feed, saved as wall-clock times,
+        # in this life's monotonic frame (a stream silent since before the crash stays late)
+        saved_daemon = saved.get("daemon", {})
+        now_mono, now_wall = time.monotonic(), time.time_ns()
+
+        def mono_of(wall_ns: int) -> float:
+            return now_mono - max(0, now_wall - int(wall_ns)) / 1e9
+
+        for name, wall_ns in saved_daemon.get("arrivals", {}).items():
+            self.streams[name] = StreamHealth(last_arrival_mono=mono_of(wall_ns))
         self.sequences = SequenceTracker(saved.get("daemon", {}).get("sequences"))
         # per (stream, publisher): the last sequence number written to the recording, and the
         # one the recording held at its last flush (kept in the checkpoint): a redelivered
@@ -211,8 +221,10 @@ class Daemon:
                                       restored.saved_ns if restored is not None else None)
         self._last_doc: dict[str, Any] | None = None  # the last status built (read by /metrics)
         self._last_live_mono = 0.0
-        self._load_t_ns: Any = None  # the pipeline's newest load time, and when it last moved
-        self._load_mono = time.monotonic()
+        # the pipeline's newest load time, and when it last moved
+        fed = saved_daemon.get("fatigue_fed")
+        self._load_t_ns: Any = fed[0] if fed else None
+        self._load_mono = mono_of(fed[1]) if fed else time.monotonic()
         # stream -> (accepted, rejected, when accepted last moved)
         self._accepted: dict[str, tuple[int, int, float]] = {}
         self.metrics = None
@@ -617,11 +629,21 @@ class Daemon:
         return {"status": self.status(), "state": self.checkpoint_state()}
 
     def checkpoint_state(self) -> dict[str, Any]:
-        """The pipeline's state, the daemon's counters and live-rule state, and the last
-        status (shown by ``buoymon status`` while the daemon is stopped)."""
+        """The pipeline's state, the daemon's counters and live-rule state, the wall-clock
+        times of the last arrivals and fatigue feed, and the last status (shown by ``buoymon
+        status`` while the daemon is stopped)."""
+        now_mono, now_wall = time.monotonic(), time.time_ns()
+
+        def wall_of(mono: float) -> int:
+            return now_wall - int((now_mono - mono) * 1e9)
+
         return {
             "pipeline": self.pipeline.state(),
             "daemon": {"counters": dict(self.counters), "live": self.live.state(),
+                       "arrivals": {name: wall_of(h.last_arrival_mono)
+                                    for name, h in self.streams.items()
+                                    if h.last_arrival_mono is not None},
+                       "fatigue_fed": [self._load_t_ns, wall_of(self._load_mono)],
                        "sequences": self.sequences.state(),
                        "recorded": {s: dict(d) for s, d in self._flushed.items()},
                        "last_status": self._last_doc},

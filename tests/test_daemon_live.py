@@ -425,3 +425,34 @@ def test_a_required_stream_that_never_appears_is_alerted(tmp_path):
     finally:
         c.close()
         assert d.terminate() == 0
+
+
+def test_a_restart_keeps_a_stale_stream_alerted_without_clearing_it(tmp_path):
+    """The tension stream stops, its data_age alert fires; the daemon is killed and restarted:
+    the stream is still as late as it was (ages are saved as wall-clock times), so the alert
+    is neither cleared nor fired again, and the status shows the age across the restart."""
+    port = free_port()
+    cfg = write_config(tmp_path / "cfg.toml", port, tmp_path / "state.sqlite", tension_age_s=1.0)
+    d = DaemonProcess([sys.executable, HARNESS, "run", str(cfg)], tmp_path)
+    d.wait_for("READY=1")
+    c = Client(port)
+    try:
+        now = time.time_ns() // 10**9 * 10**9
+        c.put(_block(now, 0))
+        fired, _ = c.wait_alert("data_age", "put")
+        wait_until_state(port, lambda s: s["state"]["daemon"].get("arrivals", {}).get("tension")
+                         and any(a["rule"] == "data_age" for a in s["status"]["alerts"]["active"]))
+        time.sleep(0.6)  # a checkpoint (every 0.5 s) holds the firing alert
+        d.kill9()
+        killed = time.monotonic()
+        d = DaemonProcess([sys.executable, HARNESS, "run", str(cfg)], tmp_path)
+        d.wait_for("READY=1")
+        st = wait_until_state(port, lambda s: s["status"]["uptime_s"] > 2.0)["status"]
+        tension = st["streams"]["tension"]
+        assert tension["data_stale"] and tension["data_age_s"] > time.monotonic() - killed
+        # still the alert that fired before the kill: a clear and a new fire would start anew
+        assert [(a["rule"], a["since_ns"]) for a in st["alerts"]["active"]
+                if a["component"] == "tension"] == [("data_age", fired["starts_at_ns"])]
+    finally:
+        c.close()
+        assert d.terminate() == 0

@@ -105,12 +105,16 @@ class LiveAlerts:
         self._firing: dict[tuple[str, str], AlertRecord] = {}
         # counter-increase rules: (rule, component) -> [last value, wall ns of last increase]
         self._counters: dict[tuple[str, str], list[int]] = {}
+        # restored alerts whose subject has not reported yet in this life (a stream's clock,
+        # a bridge source): kept for hold_s after the restart rather than cleared unseen
+        self._restored: set[tuple[str, str]] = set()
         try:
             for d in (saved or {}).get("firing", []):
                 rec = AlertRecord.from_dict(d)
                 self._firing[(rec.rule, rec.component)] = rec
             self._counters = {(r, c): [int(x) for x in v]
                               for r, c, *v in (saved or {}).get("counters", [])}
+            self._restored = set(self._firing)
         except (ValueError, TypeError, AttributeError) as exc:
             # a damaged part of the checkpoint costs the live rules' memory, not monitoring
             log.error("live alert state not restored", extra={"fields": {"error": repr(exc)}})
@@ -228,7 +232,10 @@ class LiveAlerts:
             elif not c.active and was is not None:
                 out.append(self._record(c, "clear", was.starts_at_ns, wall_ns))
                 del self._firing[key]
-        for key in [k for k in self._firing if k not in seen]:  # its subject is gone
+        self._restored &= set(self._firing) - seen
+        if _num(doc.get("uptime_s")) >= self.cfg.hold_s:
+            self._restored.clear()
+        for key in [k for k in self._firing if k not in seen | self._restored]:  # subject gone
             was = self._firing.pop(key)
             out.append(AlertRecord(**{**_fields(was), "state": "resolved", "event": "clear",
                                       "ends_at_ns": wall_ns, "at_ns": wall_ns}))
