@@ -21,6 +21,7 @@ part of the saved state; figures read between ticks include them.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from typing import Any, Mapping
 
@@ -92,9 +93,16 @@ def build_cable(config: Config) -> Any:
     if factory is None:
         raise ConfigError(f"config error: cable.preset = {config.cable.preset!r}: "
                           "not a models.helix.HelixCable preset")
+    base = factory()
+    known = [f.name for f in dataclasses.fields(base)]
+    unknown = sorted(set(config.cable.overrides) - set(known))
+    if unknown:  # a misspelt key: name it and the nearest field, not a Python signature
+        hints = [f"cable.{k}: unknown key" + (f" (did you mean {m[0]!r}?)" if (
+            m := difflib.get_close_matches(k, known, n=1)) else "") for k in unknown]
+        raise ConfigError("config error: " + "; ".join(hints) + f"; expected one of {known}")
     try:
-        return dataclasses.replace(factory(), **config.cable.overrides)
-    except (TypeError, ValueError) as exc:  # an unknown field, or a value the model refuses
+        return dataclasses.replace(base, **config.cable.overrides)
+    except (TypeError, ValueError) as exc:  # a value the model refuses
         raise ConfigError(f"config error: cable: {exc}") from None
 
 

@@ -34,11 +34,15 @@ def _reachable(endpoint: str) -> str:
 
 def load_target(path: str) -> DaemonTarget:
     """The daemon of configuration file ``path`` (ValueError naming key and value)."""
-    with open(path, "rb") as f:
-        try:
+    try:
+        with open(path, "rb") as f:
             raw = tomllib.load(f)
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"config error: {path}: {exc}") from None
+    except FileNotFoundError:
+        hint = " (the systemd unit's default; pass --config CFG.toml)" \
+            if path == DEFAULT_CONFIG else ""
+        raise ValueError(f"config error: {path}: no such file{hint}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"config error: {path}: {exc}") from None
     buoy = raw.get("buoy", {}).get("id") if isinstance(raw.get("buoy"), dict) else None
     if not isinstance(buoy, str):
         raise ValueError(f"config error: {path}: buoy.id = {buoy!r}: must be a string")

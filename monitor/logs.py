@@ -22,7 +22,11 @@ class JsonFormatter(logging.Formatter):
             entry.update(extra)
         if record.exc_info:
             entry["exc"] = self.formatException(record.exc_info)
-        return json.dumps(entry, default=str)
+        # strict JSON: a NaN or infinity in a field is null, as everywhere else we emit JSON
+        # (imported here: `buoymon --help` sets up logging and must not import numpy, 0.1 s)
+        from monitor.strict_json import json_ready  # noqa: PLC0415
+
+        return json.dumps(json_ready(entry), default=str, allow_nan=False)
 
 
 def setup_logging(level: str = "info") -> None:

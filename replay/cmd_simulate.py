@@ -13,12 +13,20 @@ import argparse
 import ipaddress
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from monitor.cli_paths import check_output
 from monitor.quanta import add_quantum_option, parse_quanta
 from replay.cmd_replay import MIN_SPEED
 from replay.simulate import LOAD_MODELS, SimConfig, simulate
+
+
+def default_start(publish: str | None) -> str:
+    """``--start`` when not given: the current second when publishing live, else 2000-01-01."""
+    if publish is None:
+        return "2000-01-01T00:00:00Z"
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -35,8 +43,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--tp", type=float, required=True, help="peak period Tp (s)")
     p.add_argument("--seed", type=int, required=True, help="random seed (integer >= 0)")
     p.add_argument("--buoy-id", default="vaps", help="buoy id for the topics (default vaps)")
-    p.add_argument("--start", default="2000-01-01T00:00:00Z",
-                   help="sensor time of the first sample, ISO 8601 (default 2000-01-01T00:00:00Z)")
+    p.add_argument("--start", default=None,
+                   help="sensor time of the first sample, ISO 8601 (default: now with --publish, "
+                        "so a live daemon sees no clock skew at real-time speed; "
+                        "2000-01-01T00:00:00Z otherwise, for reproducible files)")
     p.add_argument("--mean-span", type=float, default=31.0,
                    help="mean horizontal anchor -> buoy distance in m, the steady drift "
                         "(default 31; the 40 m line in 23 m of water is straight at 32.7)")
@@ -95,7 +105,8 @@ def run(args: argparse.Namespace) -> int:
         if args.speed is not None and not args.speed >= MIN_SPEED:
             raise ValueError(f"--speed {args.speed}: must be >= {MIN_SPEED:g}")
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
-                        buoy_id=args.buoy_id, start=args.start, dropouts=args.dropouts,
+                        buoy_id=args.buoy_id, start=args.start or default_start(args.publish),
+                        dropouts=args.dropouts,
                         spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span,
                         load_model=args.load_model, quanta=parse_quanta(args.quantum))
     except ValueError as e:
