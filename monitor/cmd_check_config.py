@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tomllib
 
 from monitor.config import load_config, run_section_parsers
 
@@ -14,7 +15,34 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _bridge_only(path: str) -> bool:
+    """A bridge's own file (``buoymon bridge --config``): sources but no monitored component."""
+    try:
+        with open(path, "rb") as f:
+            raw = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError):
+        return False  # load_config reports it
+    return "source" in raw and "component" not in raw
+
+
+def _check_bridge(path: str) -> int:
+    from monitor.bridge.config import load_bridge_config  # noqa: PLC0415 (bridge files only)
+
+    try:
+        cfg = load_bridge_config(path)
+    except ValueError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    print(f"{path}: ok (a bridge configuration: buoymon bridge --config)")
+    print(f"  buoy {cfg.buoy_id}: publishing to {', '.join(cfg.connect)}")
+    for s in cfg.sources:
+        print(f"  [[source]] {s.name}: {s.transport} -> {s.sensor}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if _bridge_only(args.config):
+        return _check_bridge(args.config)
     try:
         config = load_config(args.config)
         sections = run_section_parsers(config)

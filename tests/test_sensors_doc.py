@@ -104,3 +104,18 @@ def test_the_custom_driver_as_printed_publishes_a_polled_load_cell(tmp_path):
         off = np.abs(b.fields["tension_N"][:, None] - kg[None, :] * 9.80665).min(axis=1)
         assert np.all(off <= 0.05 + 1e-9), off
         assert (b.t_ns[-1] - b.t_ns[0]) >= 1_000_000_000 and len(b) >= 5  # ~10 readings / s
+
+
+def test_check_config_validates_a_bridge_file_as_the_bridge_reads_it(tmp_path, capsys):
+    from monitor.cli import main
+
+    good = tmp_path / "bridge.toml"
+    good.write_text('[buoy]\nid = "vaps"\n[bridge]\nconnect = ["tcp/127.0.0.1:7447"]\n'
+                    '[[source]]\nname = "lc"\nsensor = "tension"\ntransport = "udp"\n'
+                    'port = 10110\nformat = "delimited"\ncolumns = { tension_N = 1 }\n')
+    assert main(["check-config", str(good)]) == 0
+    assert "lc: udp -> tension" in capsys.readouterr().out
+    bad = tmp_path / "bad.toml"
+    bad.write_text(good.read_text().replace('sensor = "tension"', 'sensor = "tensoin"'))
+    assert main(["check-config", str(bad)]) == 2
+    assert "source[0].sensor = 'tensoin': must be one of" in capsys.readouterr().err
