@@ -166,8 +166,9 @@ def run(args: argparse.Namespace) -> int:
     elif args.alerts_command == "list":
         print(format_table(result["alerts"]))
     else:
-        print(f"{args.alerts_command} done: " + ", ".join(
-            f"{k}={v}" for k, v in result.items() if k not in ("ok", "op", "alert")))
+        details = ", ".join(f"{k}={v}" for k, v in result.items()
+                            if k not in ("ok", "op", "alert"))
+        print(f"{args.alerts_command} done" + (f": {details}" if details else ""))
     return 0
 
 
@@ -175,12 +176,15 @@ def format_table(alerts: list[dict[str, Any]]) -> str:
     """Active alerts as an aligned text table."""
     if not alerts:
         return "no active alerts"
-    header = ("FINGERPRINT", "SEVERITY", "RULE", "COMPONENT", "SINCE (sensor time, UTC)",
-              "VALUE", "THRESHOLD", "ACKED BY")
+    from monitor.alerts.live import LIVE_RULES  # noqa: PLC0415 (a table to print)
+
+    # live rules run on the logger's clock, the others on sensor time (docs/DAEMON.md)
+    header = ("FINGERPRINT", "SEVERITY", "RULE", "COMPONENT",
+              "SINCE (UTC; sensor time, * logger clock)", "VALUE", "THRESHOLD", "ACKED BY")
     rows = [header] + [(
         a["fingerprint"], a["severity"], a["rule"], a["labels"]["component"],
         datetime.fromtimestamp(a["starts_at_ns"] / 1e9, tz=timezone.utc).strftime(
-            "%Y-%m-%d %H:%M:%S"),
+            "%Y-%m-%d %H:%M:%S") + (" *" if a["rule"] in LIVE_RULES else ""),
         a["annotations"]["value"], a["annotations"]["threshold"], a["acked_by"] or "-",
     ) for a in alerts]
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
