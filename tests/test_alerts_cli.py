@@ -184,3 +184,18 @@ def test_daemon_checkpoint_list_and_reset(tmp_path, capsys):
     garbage.write_bytes(b"\x81\x00\xff" * 10)
     assert main(["alerts", "list", "--state", str(garbage)]) == 1
     assert "neither a daemon checkpoint nor a JSON state file" in capsys.readouterr().err
+
+
+def test_alert_table_marks_logger_clock_times():
+    from monitor.alerts.cmd_alerts import format_table
+
+    def alert(rule: str, starts_s: int) -> dict:
+        return {"fingerprint": "f" + rule, "severity": "warning", "rule": rule,
+                "labels": {"component": "tension"}, "starts_at_ns": starts_s * 10**9,
+                "annotations": {"value": "1", "threshold": "0"}, "acked_by": ""}
+
+    lines = format_table([alert("data_age", 1_795_000_000), alert("stale", 946_684_800)])
+    lines = lines.splitlines()
+    assert "SINCE (UTC; sensor time, * logger clock)" in lines[0]
+    assert "2026-11-18 11:06:40 *" in lines[1] and "2000-01-01 00:00:00 " in lines[2] + " "
+    assert "*" not in lines[2]
