@@ -296,6 +296,12 @@ class Daemon:
                 finish = getattr(ext, "finish_input", None)
                 if finish is not None:
                     finish()
+            self._drain()
+            # what the sensor publishers sent but is still on its way (a bridge inside the
+            # daemon flushing its last block): take it from their caches, by number (no
+            # waiting for publishers that are not there)
+            self._first_catch_up = False
+            self._catch_up()
             subscriber.undeclare()  # stop intake, then finish what already arrived
             self._drain()
             self._publish_status()

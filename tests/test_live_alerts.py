@@ -105,7 +105,7 @@ def test_counter_increases_fire_for_hold_s_and_old_counts_do_not_alert():
                            ("alert_outbox_dropped", "webhook", "clear")}
 
 
-def test_state_survives_a_restart_and_clears_what_no_longer_holds():
+def test_state_survives_a_restart_and_clears_what_no_longer_holds_after_hold_s():
     live = LiveAlerts("b1", LiveConfig())
     live.evaluate(doc(age=9.0, accepted=1, missed=1), NS)
     live.evaluate(doc(age=9.0, accepted=1, missed=2), 2 * NS)
@@ -113,8 +113,12 @@ def test_state_survives_a_restart_and_clears_what_no_longer_holds():
     again = LiveAlerts("b1", LiveConfig(), saved)
     assert {(r.rule, r.component) for r in again.active()} == {
         ("data_age", "tension"), ("samples_missed", "tension")}
-    # the restarted daemon has no tension stream in its status any more: both clear
-    recs = again.evaluate({"uptime_s": 1.0, "streams": {}}, 3 * NS)
+    # just restarted, the tension stream has not reported yet: no evidence either way, so
+    # both stay firing (no clear now and fire again later) ...
+    assert again.evaluate({"uptime_s": 1.0, "streams": {}}, 3 * NS) == []
+    assert len(again.active()) == 2
+    # ... until hold_s (600 s) of this life without the stream: then its subject is gone
+    recs = again.evaluate({"uptime_s": 600.0, "streams": {}}, 600 * NS)
     assert fired(recs) == {("data_age", "tension", "clear"),
                            ("samples_missed", "tension", "clear")}
     assert again.active() == []
