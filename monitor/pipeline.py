@@ -448,7 +448,9 @@ class Pipeline:
                            + (f" (the buoy sends {', '.join(present)}: set motion_sensor = "
                               f"\"auto\")" if present else ""))
             elif cfg.motion_sensor == "auto" and not present:
-                out.append("no motion samples (imu or motion) for the estimator")
+                out.append("no motion samples (imu or motion) for the estimator" + (
+                    ": nothing stands in for the load cell if it stops" if "tension" in seen
+                    else ""))
         if self.stats.n["measured"] + self.stats.n["estimated"] == 0 and seen:
             out.append("no load could be formed: fatigue damage is not being computed")
         return out

@@ -155,7 +155,7 @@ def _replayed(r: Report, span_days: float) -> list[str]:
                      f"{tension_text(r.breaking_load_N)} breaking load)")
         out.append(line + ".")
     for problem in r.load_problems:
-        out.append(f"No load: {problem}.")
+        out.append(f"Load: {problem}.")  # a gap in the load chain, not always "no load"
     return out
 
 
