@@ -20,7 +20,7 @@ def _bridge_only(path: str) -> bool:
     try:
         with open(path, "rb") as f:
             raw = tomllib.load(f)
-    except (OSError, tomllib.TOMLDecodeError):
+    except (OSError, ValueError):  # unreadable, not UTF-8, not TOML: load_config reports it
         return False  # load_config reports it
     return "source" in raw and "component" not in raw
 
