@@ -1,7 +1,9 @@
 """Runs the configured sources: lines -> samples -> blocks -> publisher, and the status.
 
 One thread reads every source (:class:`monitor.bridge.transports.Links`), parses, cuts
-blocks, publishes and reports. A block closes when a sample lies ``block_s``
+blocks, publishes and reports. It sleeps until a source is readable or the next timed duty
+is due (a block to close on the wall clock, a state to change, the status, a transport's
+own), so a block goes out as soon as its closing line arrives. A block closes when a sample lies ``block_s``
 after its first one, or when ``block_s`` of wall-clock time has passed since its first
 sample arrived (a quiet instrument still gets its samples out). Times must increase
 strictly within a source: a sample at or before the last one is counted
@@ -27,6 +29,7 @@ the daemon (:mod:`monitor.bridge.embedded`).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import Counter
@@ -44,11 +47,8 @@ from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.bridge")
 _LOG_EVERY_S = 60.0
-# closing blocks on the wall clock, states, status: checked this often, not after every read
-_DUTY_S = 0.01
-# shortest time between two turns of the bridge's loop (its latency): a turn per read of each
-# source would cost more than the lines' parsing
-_PACE_S = 0.004
+# run(until=...): how often ``until()`` is asked (the only wait that is not on a due duty)
+_UNTIL_S = 0.05
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
@@ -116,11 +116,13 @@ class Bridge:
         self._links: Links | None = None
         self._status_pub: Any = None
         self._next_status = 0.0
-        self._next_duties = 0.0
+        self._states_due = True  # a state may have changed (a connect, a line after a stall)
 
     def stop(self) -> None:
         """Ask :meth:`run` to return (safe from signal handlers and other threads)."""
         self._stop.set()
+        if self._links is not None:
+            self._links.wake()
 
     def _link(self, i: int) -> Link:
         src = self.sources[i]
@@ -145,21 +147,40 @@ class Bridge:
         self._next_status = time.monotonic()
 
     def step(self, wait_s: float) -> None:
-        """Read what the instruments sent (waiting up to ``wait_s`` for something), then
-        close due blocks, update the states and publish a due status."""
+        """Read what the instruments sent (waiting up to ``wait_s`` for something, or less
+        if a duty is due sooner), then close due blocks, update the states and publish a due
+        status."""
         assert self._links is not None, "open() first"
-        self._links.pump(wait_s)
+        self._links.pump(min(wait_s, self.next_due() - time.monotonic()))
         now = time.monotonic()
-        if now < self._next_duties:
-            return
-        self._next_duties = now + _DUTY_S
         for src in self.sources:
             if src.t and now - src.block_opened_mono >= src.cfg.block_s:
                 self._flush(src)
-        self._update_states(now)
+        if self._states_due or now >= self._next_state_change():
+            self._states_due = False
+            self._update_states(now)
         if now >= self._next_status:
             self.publish_status()
             self._next_status = now + self.cfg.status_interval_s
+
+    def next_due(self) -> float:
+        """The monotonic time of the next timed duty (the links' own included)."""
+        due = min(self._next_status, self._next_state_change(), self._links.next_due()
+                  if self._links is not None else math.inf)
+        for src in self.sources:
+            if src.t:
+                due = min(due, src.block_opened_mono + src.cfg.block_s)
+        return due
+
+    def _next_state_change(self) -> float:
+        """When a source's quiet time passes ``stall_s`` next (reading -> stalled,
+        connecting -> disconnected)."""
+        due = math.inf
+        for src in self.sources:
+            if src.state in ("reading", "connecting"):
+                due = min(due, max(src.link_mono, src.last_line_mono or src.link_mono)
+                          + src.cfg.stall_s)
+        return due
 
     def close(self) -> None:
         """Close the links, flush every block, publish a last status (``stopped``)."""
@@ -174,18 +195,14 @@ class Bridge:
             self._status_pub.undeclare()
             self._status_pub = None
 
-    def run(self, until: Callable[[], bool] = lambda: False) -> None:
-        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end.
-        A turn at most every ``_PACE_S``: meanwhile the instruments' bytes wait in the
-        kernel's buffers, so a turn takes many lines of every source at once."""
+    def run(self, until: Callable[[], bool] | None = None) -> None:
+        """Serve until :meth:`stop` (or ``until()``, asked every ``_UNTIL_S``); flushes what
+        is buffered at the end."""
         self.open()
+        wait_s = math.inf if until is None else _UNTIL_S
         try:
-            while not self._stop.is_set() and not until():
-                began = time.monotonic()
-                self.step(0.05)
-                rest = began + _PACE_S - time.monotonic()
-                if rest > 0:
-                    time.sleep(rest)
+            while not self._stop.is_set() and not (until is not None and until()):
+                self.step(wait_s)
         finally:
             self.close()
 
@@ -208,6 +225,7 @@ class Bridge:
             if src.connected != bool(data):
                 src.connected = bool(data)
                 src.link_mono = time.monotonic()
+                self._states_due = True
             return
         if kind == "event":
             src.events[data] += 1
@@ -216,6 +234,8 @@ class Bridge:
         now = time.monotonic()
         src.lines += len(data)
         src.last_line_mono = now
+        if src.state != "reading":
+            self._states_due = True
         for line in data:
             self._line(src, line, recv_ns, now)
 
