@@ -32,6 +32,7 @@ from monitor.bridge.config import SourceConfig
 
 MAX_LINE = 4096
 _READ = 65536
+_FLOOD = 8192  # a read this long: more is waiting (1 kHz lines bring ~1 kB per 20 ms)
 _FILE_READ = 1 << 20  # per turn: a long file is read over several turns, the others served
 _IDLE_S = 0.2  # no byte for this long with nothing buffered: the instrument is between lines
 # a followed file has no readiness to wait on: looked at this often (appends, rotation,
@@ -111,6 +112,7 @@ class Link:
         self.finished = False  # stdin at its end: nothing more will come
         self.backlog = False  # more to read at once (a long file)
         self.next_poll_mono = 0.0  # when :meth:`poll` is due (links with ``poll_s``)
+        self.full = False  # the last read was a flood's (``_FLOOD``): more is waiting
         # set by Links: stop waiting on a file object (before it is closed); what to wait
         # on has changed
         self.forget: Callable[[Any], None] = lambda fileobj: None
@@ -162,6 +164,7 @@ class Link:
         self.retry_mono = time.monotonic() + self.cfg.reconnect_s
 
     def got(self, data: bytes) -> None:
+        self.full = len(data) >= _FLOOD
         self.last_data_mono = time.monotonic()
         self.lines.feed(data)
 
@@ -298,6 +301,7 @@ class UdpLink(Link):
                 return
             self.lines.reset(synced=True)  # each datagram holds whole lines
             self.got(data if data.endswith(b"\n") else data + b"\n")
+        self.full = True
 
     def close(self) -> None:
         _close(getattr(self, "sock", None))
@@ -366,15 +370,17 @@ LINKS: dict[str, type[Link]] = {"serial": SerialLink, "tcp_client": TcpClientLin
 
 
 class Links:
-    """Every source's link, served by one thread: :meth:`pump` opens what is due, waits for
-    readiness up to a timeout, reads, polls the files and notices idle links when due;
-    :meth:`next_due` says when the next of those timed duties is."""
+    """Every source's link, served by one thread: :meth:`pump` waits for readiness up to a
+    timeout and reads; :meth:`duties` opens what is due, polls the files and marks idle links,
+    and :meth:`next_due` says when that is next needed."""
 
     def __init__(self, links: list[Link]) -> None:
         self.links = links
         self.sel = selectors.DefaultSelector()
         self._registered: dict[Any, tuple[Link, int]] = {}
         self._dirty = True
+        self.stale = True
+        self.full = False  # a read in the last pump was a flood's: more is waiting
         # stop() from another thread or a signal handler: a byte here ends the wait at once
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -386,6 +392,7 @@ class Links:
 
     def _changed(self) -> None:
         self._dirty = True
+        self.stale = True
 
     def _forget(self, fileobj: Any) -> None:
         if self._registered.pop(fileobj, None) is not None:
@@ -398,9 +405,26 @@ class Links:
         except OSError:  # full (a wake is pending anyway) or closed (nothing to wake)
             pass
 
+    def duties(self, now: float) -> None:
+        """The timed duties due at ``now``: open what is due, poll the files, mark idle
+        links."""
+        for link in self.links:
+            if not link.opened and not link.finished and now >= link.retry_mono:
+                self._open(link)
+            if link.opened and link.poll_s is not None and (link.backlog
+                                                            or now >= link.next_poll_mono):
+                link.next_poll_mono = now + link.poll_s
+                try:
+                    link.poll()
+                except OSError:
+                    link.fail()
+            if not link.lines.synced and now - link.last_data_mono >= _IDLE_S:
+                link.lines.idle()
+
     def next_due(self) -> float:
-        """The monotonic time of the next timed duty: a reopen, a file poll, an idle mark
-        (``inf`` if none)."""
+        """The monotonic time of the next timed duty (``inf`` if none); :attr:`stale` says
+        it may have moved since it was last asked (a link opened, failed, reconnected)."""
+        self.stale = False
         due = math.inf
         for link in self.links:
             if not link.opened:
@@ -414,18 +438,12 @@ class Links:
         return due
 
     def pump(self, timeout_s: float) -> None:
-        """Read what is ready, waiting up to ``timeout_s`` for something (a timed duty's
-        time is the caller's: :meth:`next_due`)."""
-        now = time.monotonic()
-        for link in self.links:
-            if not link.opened and not link.finished and now >= link.retry_mono:
-                self._open(link)
+        """Read what is ready, waiting up to ``timeout_s`` (``inf``: until something is)."""
         if self._dirty:
             self._dirty = False
             self._sync()
-        if any(link.backlog for link in self.links):
-            timeout_s = 0.0
-        wait = None if timeout_s == math.inf else max(timeout_s, 0.0)  # None: until ready
+        wait = None if timeout_s == math.inf else max(timeout_s, 0.0)
+        self.full = False
         for key, mask in self.sel.select(wait):
             link = key.data
             if link is None:
@@ -437,17 +455,9 @@ class Links:
                 link.ready(key.fileobj, mask)
             except OSError:
                 link.fail()
-        now = time.monotonic()
-        for link in self.links:
-            if link.opened and link.poll_s is not None and (link.backlog
-                                                            or now >= link.next_poll_mono):
-                link.next_poll_mono = now + link.poll_s
-                try:
-                    link.poll()
-                except OSError:
-                    link.fail()
-            if not link.lines.synced and now - link.last_data_mono >= _IDLE_S:
-                link.lines.idle()
+            if link.full:
+                link.full = False
+                self.full = True
 
     def _drain_wake(self) -> None:
         try:
@@ -466,7 +476,7 @@ class Links:
         else:
             link.opened = True
             link.next_poll_mono = 0.0
-        self._dirty = True
+        self._changed()
 
     def _sync(self) -> None:
         """Register exactly what each link waits on now."""
