@@ -6,8 +6,8 @@ is due (a block to close on the wall clock, a state to change, the status, a tra
 own); near a block's close every read is immediate, so the block goes out as soon as its
 closing line arrives (between blocks reads gather: ``_GATHER_S``). A block closes when a
 sample lies ``block_s`` after its first one, or when ``block_s`` of wall-clock time has
-passed since its first sample arrived (a quiet instrument still gets its samples out). Times must increase
-strictly within a source: a sample at or before the last one is counted
+passed since its first sample arrived (a quiet instrument still gets its samples out).
+Times must increase strictly within a source: a sample at or before the last one is counted
 (``time_backwards``) and dropped, so no garbage time reaches the monitor.
 
 Status: every ``status_interval_s`` a JSON document on ``buoy/<id>/bridge/status``: per
