@@ -11,32 +11,37 @@
    (TCP flow control: nothing is lost), until the bridge's status counts them all: lines per
    second and CPU per 1000 lines at saturation.
 
-Measured 2026-11-25 on the 2-core development machine (AMD EPYC, shared with 7 other jobs,
-load average 6-7 during the runs; issue 16's targets: 5 x 1 kHz under 5 % of one core, under
-5 ms of latency per block):
+Measured 2026-11-25 on the 2-core development machine (AMD EPYC), 14:10-14:31 UTC while
+it was quiet (load average 0.4-1.1; earlier figures had 6-7). Issue 16's targets: 5 x 1 kHz
+under 5 % of one core, under 5 ms of latency per block.
 
-=============================  ======================  =====================================
-                               reader thread per       one thread for all sources
-                               source (first version)  (selectors, a turn every >= 4 ms),
-                                                       leaner per-line path (two runs)
-=============================  ======================  =====================================
-5 x 1 kHz: bridge CPU          16.6 % of one core      7.0 and 8.5 % of one core
-  per 1000 lines               33.2 ms                 13.9 and 16.8 ms
-  latency, closing line        p50 4.1, p99 18.7 ms    p50 5.6 and 7.3, p99 12.4 and 23 ms
-  latency, last sample         p50 6.1 ms              p50 7.6 and 9.2 ms
-flat out, one TCP source       105,800 lines/s,        202,900 lines/s, 2.9 ms per 1000
-                               3.6 ms per 1000 lines   lines
-idle (5 sources, no data)      0.4 %                   0.6 %
-=============================  ======================  =====================================
+=============================  ======================  ====================  ==================
+                               one thread, a turn      event-driven: wakes   + between blocks
+                               every >= 4 ms (before;  on readable or the    reads gather up
+                               one run at load 0.8)    next due duty         to 20 ms (shipped;
+                                                       (15-s run)            two runs)
+=============================  ======================  ====================  ==================
+5 x 1 kHz: bridge CPU          6.9 % of one core       11.2 % of one core    6.2 and 5.5 %
+  per 1000 lines               13.9 ms                 22.4 ms               12.4 and 11.0 ms
+  latency, closing line        p50 6.6, p99 10.8 ms    p50 2.7, p99 7.7 ms   p50 3.1 and 2.3,
+                                                                             p99 8.5 and 5.6 ms
+  latency, last sample         p50 8.7 ms              p50 5.2 ms            p50 5.5 and 4.6 ms
+flat out, one TCP source       202,800 lines/s,        214,100 lines/s,      153,800 and
+                               3.0 ms per 1000 lines   4.0 ms per 1000       159,700 lines/s,
+                                                                             4.0 and 3.6 ms
+idle (5 sources, no data;      0.7 %                   -                     0.4 %
+  status every 0.2 s; 10 s)
+=============================  ======================  ====================  ==================
 
-Targets NOT met here. CPU: the flat-out cost (2.9 ms per 1000 lines: 1.5 % of a core at 5,000
-lines/s) is what parsing costs; the rest at 1 kHz is waking up 250 times a second on a
-loaded machine (cold caches after every sleep). Latency: a turn every 4 ms adds 2 ms on
-average; the rest is waiting for a CPU on this machine (7 runnable jobs on 2 cores), which a
-buoy's logger would not see. Both figures move by +-30 % between runs here. The turn period
-(monitor.bridge.runner._PACE_S) trades one for the other: 8 ms gave 6.7 % of a core and
-p50 11 ms, 4 ms (shipped) 9.3 % and p50 6 ms, 2 ms 13 % and p50 6 ms (12-s runs): a turn
-costs about 0.2 ms here, a line 3 us.
+Latency target met (p50 2-3 ms from the closing line, against 6.6 ms with the 4-ms turns:
+a read no longer waits for a turn). CPU target NOT met: 5.5-6.2 % of one core. A wake-up per
+read (2,500 a second here) cost 11 % (first event-driven version: ~40 us each, against ~3 us
+a line); reading immediately only within 50 ms of a block's close and gathering 20 ms
+otherwise (monitor.bridge.runner._GATHER_S) brings it back to 5.5-6.2 %. What is left is not
+profiled yet (flat out the lines cost 3.6-4 ms per 1000, i.e. 2 % at 5,000 lines/s). Flat
+out is slower than before (154-160k lines/s against 203k): a read under 8 kB during the
+burst is followed by a gather pause. A pure wake-up-per-read loop (no gathering) measured
+15.5 % of a core, p50 2.8 ms (15-s run) before the duties got their own due time.
 
 Usage: PYTHONPATH=. python bench/bench_bridge.py [--seconds 20] [--burst 200000]
 """

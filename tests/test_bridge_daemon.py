@@ -16,6 +16,7 @@ import urllib.request
 import pytest
 
 from daemon_harness import ENV, DaemonProcess, free_port, wait_until_state
+from monitor.bridge.transports import _IDLE_S
 from monitor.config import load_config
 from test_bridge import (LBF, REPO, checkpointed_figures, committed, import_and_replay,
                          maine_lines, pytestmark)  # noqa: F401 (pytestmark: skip without data)
@@ -84,6 +85,8 @@ def test_bridge_inside_the_daemon_pty_to_damage_counters_metrics_and_a_stall(tmp
     try:
         d.wait_for("READY=1", timeout=120)
         wait_until_state(port, lambda s: bridge_source(s).get("connected"), buoy="maine")
+        # a port quiet for _IDLE_S after its open is between lines: the first line counts
+        time.sleep(_IDLE_S + 0.1)
         write(range(600))
         st = wait_until_state(port, lambda s: bridge_source(s).get("samples") == 600,
                               buoy="maine", timeout=60)

@@ -1,10 +1,13 @@
 """Runs the configured sources: lines -> samples -> blocks -> publisher, and the status.
 
 One thread reads every source (:class:`monitor.bridge.transports.Links`), parses, cuts
-blocks, publishes and reports. A block closes when a sample lies ``block_s``
-after its first one, or when ``block_s`` of wall-clock time has passed since its first
-sample arrived (a quiet instrument still gets its samples out). Times must increase
-strictly within a source: a sample at or before the last one is counted
+blocks, publishes and reports. It sleeps until a source is readable or the next timed duty
+is due (a block to close on the wall clock, a state to change, the status, a transport's
+own); near a block's close every read is immediate, so the block goes out as soon as its
+closing line arrives (between blocks reads gather: ``_GATHER_S``). A block closes when a
+sample lies ``block_s`` after its first one, or when ``block_s`` of wall-clock time has
+passed since its first sample arrived (a quiet instrument still gets its samples out).
+Times must increase strictly within a source: a sample at or before the last one is counted
 (``time_backwards``) and dropped, so no garbage time reaches the monitor.
 
 Status: every ``status_interval_s`` a JSON document on ``buoy/<id>/bridge/status``: per
@@ -27,6 +30,7 @@ the daemon (:mod:`monitor.bridge.embedded`).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections import Counter
@@ -44,11 +48,17 @@ from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.bridge")
 _LOG_EVERY_S = 60.0
-# closing blocks on the wall clock, states, status: checked this often, not after every read
-_DUTY_S = 0.01
-# shortest time between two turns of the bridge's loop (its latency): a turn per read of each
-# source would cost more than the lines' parsing
-_PACE_S = 0.004
+# run(until=...): how often ``until()`` is asked (the only wait that is not on a due duty)
+_UNTIL_S = 0.05
+# Between blocks a source's lines only wait for their block, so their bytes may wait in the
+# kernel's buffers too: after a read the loop pauses up to _GATHER_S and the next read takes
+# every line of every source at once (a wake-up costs ~10 times a line: bench/bench_bridge.py).
+# From _NEAR_S before a block's close (its first line's arrival + block_s; that arrival itself
+# up to _GATHER_S late) every read is immediate, so the closing line is not delayed. Receive
+# times are taken at the read, so a source timed by the bridge (not the instrument) means no
+# pause at all. 20 ms is 1.8 kB at 921,600 Bd, well inside a tty's 4-kB buffer.
+_GATHER_S = 0.02
+_NEAR_S = 2 * _GATHER_S + 0.01
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
@@ -116,11 +126,14 @@ class Bridge:
         self._links: Links | None = None
         self._status_pub: Any = None
         self._next_status = 0.0
-        self._next_duties = 0.0
+        self._due = 0.0  # the next timed duty (monotonic)
+        self._recheck = True  # something may have changed a state or brought a duty forward
 
     def stop(self) -> None:
         """Ask :meth:`run` to return (safe from signal handlers and other threads)."""
         self._stop.set()
+        if self._links is not None:
+            self._links.wake()
 
     def _link(self, i: int) -> Link:
         src = self.sources[i]
@@ -145,14 +158,21 @@ class Bridge:
         self._next_status = time.monotonic()
 
     def step(self, wait_s: float) -> None:
-        """Read what the instruments sent (waiting up to ``wait_s`` for something), then
-        close due blocks, update the states and publish a due status."""
+        """Do the timed duties that are due (open and poll links, close blocks on the wall
+        clock, update the states, publish the status), then read what the instruments send,
+        waiting up to ``wait_s`` for something (less if a duty falls due sooner). A wake-up
+        for data does only the reads: the duties' time is kept, and moved only by what can
+        bring it forward (a block opened, a link event, a line after a stall)."""
         assert self._links is not None, "open() first"
-        self._links.pump(wait_s)
         now = time.monotonic()
-        if now < self._next_duties:
-            return
-        self._next_duties = now + _DUTY_S
+        if now >= self._due or self._recheck or self._links.stale:
+            self._duties(now)
+        self._links.pump(min(wait_s, self._due - time.monotonic()))
+
+    def _duties(self, now: float) -> None:
+        assert self._links is not None
+        self._recheck = False
+        self._links.duties(now)
         for src in self.sources:
             if src.t and now - src.block_opened_mono >= src.cfg.block_s:
                 self._flush(src)
@@ -160,6 +180,21 @@ class Bridge:
         if now >= self._next_status:
             self.publish_status()
             self._next_status = now + self.cfg.status_interval_s
+        due = min(self._next_status, self._next_state_change(), self._links.next_due())
+        for src in self.sources:
+            if src.t:
+                due = min(due, src.block_opened_mono + src.cfg.block_s)
+        self._due = due
+
+    def _next_state_change(self) -> float:
+        """When a source's quiet time passes ``stall_s`` next (reading -> stalled,
+        connecting -> disconnected)."""
+        due = math.inf
+        for src in self.sources:
+            if src.state in ("reading", "connecting"):
+                due = min(due, max(src.link_mono, src.last_line_mono or src.link_mono)
+                          + src.cfg.stall_s)
+        return due
 
     def close(self) -> None:
         """Close the links, flush every block, publish a last status (``stopped``)."""
@@ -174,20 +209,33 @@ class Bridge:
             self._status_pub.undeclare()
             self._status_pub = None
 
-    def run(self, until: Callable[[], bool] = lambda: False) -> None:
-        """Serve until :meth:`stop` (or ``until()``); flushes what is buffered at the end.
-        A turn at most every ``_PACE_S``: meanwhile the instruments' bytes wait in the
-        kernel's buffers, so a turn takes many lines of every source at once."""
+    def run(self, until: Callable[[], bool] | None = None) -> None:
+        """Serve until :meth:`stop` (or ``until()``, asked every ``_UNTIL_S``); flushes what
+        is buffered at the end."""
         self.open()
+        wait_s = math.inf if until is None else _UNTIL_S
         try:
-            while not self._stop.is_set() and not until():
-                began = time.monotonic()
-                self.step(0.05)
-                rest = began + _PACE_S - time.monotonic()
-                if rest > 0:
-                    time.sleep(rest)
+            while not self._stop.is_set() and not (until is not None and until()):
+                pause = self._gather_s(time.monotonic())
+                if pause > 0:
+                    time.sleep(pause)
+                self.step(wait_s)  # then ``until()``: it sees what this step read
         finally:
             self.close()
+
+    def _gather_s(self, now: float) -> float:
+        """How long the next read may wait (``_GATHER_S`` comment): 0 near a block's close,
+        with a source timed by the bridge, with more waiting than a read takes (a flood), or
+        with a duty due."""
+        if self._links is None or self._links.full:
+            return 0.0
+        pause = min(_GATHER_S, self._due - now)
+        for src in self.sources:
+            if src.connected and src.time_source != "instrument":
+                return 0.0
+            if src.t:
+                pause = min(pause, src.block_opened_mono + src.cfg.block_s - _NEAR_S - now)
+        return pause
 
     def _update_states(self, now_mono: float) -> None:
         for src in self.sources:
@@ -208,14 +256,18 @@ class Bridge:
             if src.connected != bool(data):
                 src.connected = bool(data)
                 src.link_mono = time.monotonic()
+                self._recheck = True
             return
         if kind == "event":
+            self._recheck = True  # an overlong line unsyncs a link: an idle mark is due
             src.events[data] += 1
             self._log(src, data)
             return
         now = time.monotonic()
         src.lines += len(data)
         src.last_line_mono = now
+        if src.state != "reading":
+            self._recheck = True
         for line in data:
             self._line(src, line, recv_ns, now)
 
@@ -238,6 +290,7 @@ class Bridge:
             self._flush(src)
         if not src.t:
             src.block_opened_mono = now_mono
+            self._due = min(self._due, now_mono + src.cfg.block_s)
         src.t.append(t_ns)
         src.values.append(vals)
         src.last_t_ns = t_ns

@@ -2,9 +2,10 @@
 a file another logger appends to (followed through rotation and truncation), stdin.
 
 One thread serves every source: :class:`Links` waits on all their descriptors at once
-(``selectors``), reads what is ready and cuts it into lines, so a turn takes the reads of
-every source together. (A reader thread per source handing each read to a parsing thread
-cost 9 times the parsing at 5 x 1 kHz: bench/bench_bridge.py.) Each :class:`Link` calls
+(``selectors``) and wakes when one is readable, or when a timed duty is due (a reopen, a file
+to look at, an idle link to mark), so its CPU follows the data and a line is read as soon as
+it arrives. (A reader thread per source handing each read to a parsing thread cost 9 times
+the parsing at 5 x 1 kHz: bench/bench_bridge.py.) Each :class:`Link` calls
 ``emit(lines, recv_ns)`` with the complete lines of a read, ``event(reason)`` for what the
 bridge counts and ``connected(up)``. Events: ``disconnected`` (a device unplugged, a socket
 reset, an open or connect that failed), ``partial_line`` (the bytes before the first newline
@@ -19,6 +20,7 @@ so a wall-clock step never reorders them.
 from __future__ import annotations
 
 import errno
+import math
 import os
 import selectors
 import socket
@@ -30,8 +32,12 @@ from monitor.bridge.config import SourceConfig
 
 MAX_LINE = 4096
 _READ = 65536
+_FLOOD = 8192  # a read this long: more is waiting (1 kHz lines bring ~1 kB per 20 ms)
 _FILE_READ = 1 << 20  # per turn: a long file is read over several turns, the others served
 _IDLE_S = 0.2  # no byte for this long with nothing buffered: the instrument is between lines
+# a followed file has no readiness to wait on: looked at this often (appends, rotation,
+# truncation)
+_FILE_POLL_S = 0.005
 Emit = Callable[[list[bytes], int], None]
 Event = Callable[[str], None]
 
@@ -94,6 +100,8 @@ class LineSplitter:
 class Link:
     """One source's transport: opened, read when ready, closed and reopened on failure."""
 
+    poll_s: float | None = None  # :meth:`poll` is called this often while open (None: never)
+
     def __init__(self, cfg: SourceConfig, lines: LineSplitter, event: Event,
                  connected: Callable[[bool], None]) -> None:
         self.cfg, self.lines, self.event, self.connected = cfg, lines, event, connected
@@ -103,6 +111,8 @@ class Link:
         self.is_up = False  # connected (as reported)
         self.finished = False  # stdin at its end: nothing more will come
         self.backlog = False  # more to read at once (a long file)
+        self.next_poll_mono = 0.0  # when :meth:`poll` is due (links with ``poll_s``)
+        self.full = False  # the last read was a flood's (``_FLOOD``): more is waiting
         # set by Links: stop waiting on a file object (before it is closed); what to wait
         # on has changed
         self.forget: Callable[[Any], None] = lambda fileobj: None
@@ -121,7 +131,7 @@ class Link:
         """Read what is ready on ``fileobj`` (raise OSError on a failure)."""
 
     def poll(self) -> None:
-        """Called every turn while open (files, which are always "ready")."""
+        """Called every ``poll_s`` while open (files, which are always "ready")."""
 
     def close(self) -> None:
         """Release the descriptors (never raises)."""
@@ -154,6 +164,7 @@ class Link:
         self.retry_mono = time.monotonic() + self.cfg.reconnect_s
 
     def got(self, data: bytes) -> None:
+        self.full = len(data) >= _FLOOD
         self.last_data_mono = time.monotonic()
         self.lines.feed(data)
 
@@ -290,6 +301,7 @@ class UdpLink(Link):
                 return
             self.lines.reset(synced=True)  # each datagram holds whole lines
             self.got(data if data.endswith(b"\n") else data + b"\n")
+        self.full = True
 
     def close(self) -> None:
         _close(getattr(self, "sock", None))
@@ -300,6 +312,7 @@ class FileLink(Link):
     start) and truncation (read again from the start)."""
 
     rotated = False  # a rotated-in file is read whole, whatever ``from_start`` says
+    poll_s = _FILE_POLL_S
 
     def open(self) -> None:
         self.f = open(self.cfg.path, "rb")
@@ -357,52 +370,101 @@ LINKS: dict[str, type[Link]] = {"serial": SerialLink, "tcp_client": TcpClientLin
 
 
 class Links:
-    """Every source's link, served by one thread: :meth:`pump` opens what is due, waits for
-    readiness up to a timeout, reads, and notices idle links."""
+    """Every source's link, served by one thread: :meth:`pump` waits for readiness up to a
+    timeout and reads; :meth:`duties` opens what is due, polls the files and marks idle links,
+    and :meth:`next_due` says when that is next needed."""
 
     def __init__(self, links: list[Link]) -> None:
         self.links = links
         self.sel = selectors.DefaultSelector()
         self._registered: dict[Any, tuple[Link, int]] = {}
         self._dirty = True
+        self.stale = True
+        self.full = False  # a read in the last pump was a flood's: more is waiting
+        # stop() from another thread or a signal handler: a byte here ends the wait at once
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self.sel.register(self._wake_r, selectors.EVENT_READ, None)
         for link in links:
             link.forget = self._forget
             link.changed = self._changed
 
     def _changed(self) -> None:
         self._dirty = True
+        self.stale = True
 
     def _forget(self, fileobj: Any) -> None:
         if self._registered.pop(fileobj, None) is not None:
             self.sel.unregister(fileobj)
 
-    def pump(self, timeout_s: float) -> None:
-        now = time.monotonic()
+    def wake(self) -> None:
+        """End a :meth:`pump`'s wait (safe from other threads and signal handlers)."""
+        try:
+            self._wake_w.send(b"\0")
+        except OSError:  # full (a wake is pending anyway) or closed (nothing to wake)
+            pass
+
+    def duties(self, now: float) -> None:
+        """The timed duties due at ``now``: open what is due, poll the files, mark idle
+        links."""
         for link in self.links:
             if not link.opened and not link.finished and now >= link.retry_mono:
                 self._open(link)
+            if link.opened and link.poll_s is not None and (link.backlog
+                                                            or now >= link.next_poll_mono):
+                link.next_poll_mono = now + link.poll_s
+                try:
+                    link.poll()
+                except OSError:
+                    link.fail()
+            if not link.lines.synced and now - link.last_data_mono >= _IDLE_S:
+                link.lines.idle()
+
+    def next_due(self) -> float:
+        """The monotonic time of the next timed duty (``inf`` if none); :attr:`stale` says
+        it may have moved since it was last asked (a link opened, failed, reconnected)."""
+        self.stale = False
+        due = math.inf
+        for link in self.links:
+            if not link.opened:
+                if not link.finished:
+                    due = min(due, link.retry_mono)
+                continue
+            if link.poll_s is not None:
+                due = min(due, 0.0 if link.backlog else link.next_poll_mono)
+            if not link.lines.synced and not link.lines.buf:
+                due = min(due, link.last_data_mono + _IDLE_S)
+        return due
+
+    def pump(self, timeout_s: float) -> None:
+        """Read what is ready, waiting up to ``timeout_s`` (``inf``: until something is)."""
         if self._dirty:
             self._dirty = False
             self._sync()
-        if any(link.backlog for link in self.links):
-            timeout_s = 0.0
-        for key, mask in self.sel.select(timeout_s):
+        wait = None if timeout_s == math.inf else max(timeout_s, 0.0)
+        self.full = False
+        for key, mask in self.sel.select(wait):
             link = key.data
+            if link is None:
+                self._drain_wake()
+                continue
             if not link.opened:  # failed earlier in this turn
                 continue
             try:
                 link.ready(key.fileobj, mask)
             except OSError:
                 link.fail()
-        now = time.monotonic()
-        for link in self.links:
-            if link.opened:
-                try:
-                    link.poll()
-                except OSError:
-                    link.fail()
-            if now - link.last_data_mono >= _IDLE_S:
-                link.lines.idle()
+            if link.full:
+                link.full = False
+                self.full = True
+
+    def _drain_wake(self) -> None:
+        try:
+            while self._wake_r.recv(4096):
+                pass
+        except OSError:
+            pass
 
     def _open(self, link: Link) -> None:
         try:
@@ -413,7 +475,8 @@ class Links:
             link.retry_mono = time.monotonic() + link.cfg.reconnect_s
         else:
             link.opened = True
-        self._dirty = True
+            link.next_poll_mono = 0.0
+        self._changed()
 
     def _sync(self) -> None:
         """Register exactly what each link waits on now."""
@@ -436,3 +499,5 @@ class Links:
         for link in self.links:
             link.close()
         self.sel.close()
+        self._wake_r.close()
+        self._wake_w.close()
