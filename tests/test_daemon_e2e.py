@@ -503,9 +503,12 @@ def test_record_command_keeps_every_message_and_replays_to_the_live_damage(tmp_p
         while not [r for r in session.liveliness().get(recorder_token_key(BUOY), timeout=1)]:
             assert time.monotonic() < deadline and rec.poll() is None, "recorder not up"
             time.sleep(0.1)
-    # published as `buoymon simulate --publish` does: a peer, like the recorder's daemon
+    # published as `buoymon simulate --publish` does: a peer, like the recorder's daemon. At
+    # 30x real time (4 s): flat out (120 s of both streams in well under a second) a stall
+    # of one stream for ~80 ms under a loaded CI machine put it beyond the 10-s live ordering
+    # horizon, whose samples then count as time_backwards (seen once in CI)
     with zenoh_io.open_session(publisher_config([f"tcp/127.0.0.1:{port}"])) as session:
-        publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=None)
+        publish_blocks(session, blocks, zenoh_io.ProtobufCodec(), speed=30.0)
         wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
                          buoy=BUOY)
     deadline = time.monotonic() + 60  # until the recorder has flushed the last block
