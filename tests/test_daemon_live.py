@@ -456,3 +456,11 @@ def test_a_restart_keeps_a_stale_stream_alerted_without_clearing_it(tmp_path):
     finally:
         c.close()
         assert d.terminate() == 0
+    # the stopped daemon's checkpoint lists it too (`alerts list --state`)
+    out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "list", "--state",
+                          str(tmp_path / "state.sqlite"), "--json"], env=ENV,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    listed = json.loads(out.stdout)["alerts"]
+    assert [(a["rule"], a["starts_at_ns"]) for a in listed if a["rule"] == "data_age"] == \
+        [("data_age", fired["starts_at_ns"])]

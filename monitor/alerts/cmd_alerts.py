@@ -204,6 +204,13 @@ def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]
                     or not isinstance(saved.state.get("pipeline"), dict):
                 raise ValueError(f"{path}: the daemon checkpoint holds no pipeline state yet")
             outer = saved.state
+            live = ((outer.get("daemon") or {}).get("live") or {}).get("firing") or []
+            if command is None and live:  # the live (logger-clock) rules' alerts are kept too
+                result = _apply(outer["pipeline"], path, None)[0] \
+                    if "alerts" in outer["pipeline"] else {"buoy": live[0].get("buoy"),
+                                                           "alerts": []}
+                result["alerts"] += [a for a in live if isinstance(a, dict)]
+                return result
             result, changed = _apply(outer["pipeline"], path, command)
             if changed:
                 store.save(outer)
