@@ -22,16 +22,21 @@ N_SECONDS = 120
 def log(tmp_path):
     """120 one-second tension blocks (sample value = sample index, stored exactly to a 1 N
     quantum) in ~10 chunks, with Message Index records (they count a lost chunk's messages)."""
-    path = tmp_path / "good.mcap"
-    with LogWriter(path, chunk_size=1024, quanta={"tension_N": 1.0}, message_index=True) as w:
+    path, chunks = _write_log(tmp_path / "good.mcap", message_index=True)
+    return path, path.read_bytes(), chunks
+
+
+def _write_log(path, message_index: bool = False):
+    """The 120-block log (see ``log``); returns (path, its chunk indexes in file order)."""
+    with LogWriter(path, chunk_size=1024, quanta={"tension_N": 1.0},
+                   message_index=message_index) as w:
         for k in range(N_SECONDS):
             t = T0 + k * S + np.arange(20, dtype=np.int64) * (S // 20)
             w.write_block(SampleBlock("b1", "tension", t, {"tension_N": k * 20 + np.arange(20.0)}),
                           recv_ns=T0 + (k + 1) * S)
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    return path, path.read_bytes(), chunks
+    return path, sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
 
 
 def _read(path):
@@ -332,15 +337,7 @@ def test_channel_defined_only_in_a_damaged_chunk_comes_from_the_summary(tmp_path
 def test_without_message_index_a_lost_chunk_has_an_unknown_count(tmp_path):
     """The default writer leaves Message Index records out (bytes): a chunk lost to a bad CRC
     is still reported with its time range, its message count as unknown."""
-    path = tmp_path / "plain.mcap"
-    with LogWriter(path, chunk_size=1024, quanta={"tension_N": 1.0}) as w:
-        for k in range(N_SECONDS):
-            t = T0 + k * S + np.arange(20, dtype=np.int64) * (S // 20)
-            w.write_block(SampleBlock("b1", "tension", t, {"tension_N": k * 20 + np.arange(20.0)}),
-                          recv_ns=T0 + (k + 1) * S)
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    path, chunks = _write_log(tmp_path / "plain.mcap")
     assert all(c.message_index_length == 0 for c in chunks) and len(chunks) >= 10
     victim = chunks[3]
     bad = bytearray(path.read_bytes())

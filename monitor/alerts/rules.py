@@ -302,17 +302,16 @@ class TensionHigh(Rule):
         return f"cable tension above {self.threshold:.0%} of the breaking strength ({mbl:g} kN)"
 
 
-class ConductorStress(Rule):
-    """Peak conductor stress in a tick above ``threshold`` x the component's (derated)
-    endurance stress."""
+class _ConductorStressAbove(Rule):
+    """Peak conductor stress in a tick above ``threshold`` x a reference stress of the
+    component (``reference_Pa``); subclasses name the reference and say what it means."""
 
-    kind = "conductor_stress"
     unit = "Pa"
 
-    def __init__(self, cfg: RuleConfig, target: str, endurance_Pa: float) -> None:
+    def __init__(self, cfg: RuleConfig, target: str, reference_Pa: float) -> None:
         super().__init__(cfg, target)
-        self.endurance_Pa = endurance_Pa
-        self.level = self.threshold * endurance_Pa
+        self.reference_Pa = reference_Pa
+        self.level = self.threshold * reference_Pa
 
     def observe(self, obs: Observation, tick: TickStats) -> float | None:
         comp = obs.components.get(self.target)
@@ -325,38 +324,29 @@ class ConductorStress(Rule):
     def threshold_value(self) -> float:
         return self.level
 
+
+class ConductorStress(_ConductorStressAbove):
+    """Peak conductor stress in a tick above ``threshold`` x the component's (derated)
+    endurance stress."""
+
+    kind = "conductor_stress"
+
     def summary(self) -> str:
         return (f"conductor stress of {self.target} above {self.threshold:g} x its derated "
-                f"endurance stress ({self.endurance_Pa / 1e6:.4g} MPa)")
+                f"endurance stress ({self.reference_Pa / 1e6:.4g} MPa)")
 
 
-class ConductorYield(Rule):
+class ConductorYield(_ConductorStressAbove):
     """Peak conductor stress in a tick above ``threshold`` x the stress at which the hot spot
     (scf x stress) reaches the conductor's tensile yield: the elastic helix model and the S-N
     curve do not hold there, so the damage figures are underestimates."""
 
     kind = "conductor_yield"
-    unit = "Pa"
-
-    def __init__(self, cfg: RuleConfig, target: str, yield_Pa: float) -> None:
-        super().__init__(cfg, target)
-        self.yield_Pa = yield_Pa
-        self.level = self.threshold * yield_Pa
-
-    def observe(self, obs: Observation, tick: TickStats) -> float | None:
-        comp = obs.components.get(self.target)
-        return None if comp is None else _finite_or_none(comp.max_stress_Pa)
-
-    def holds(self, value: float) -> bool:
-        return value > self.level
-
-    @property
-    def threshold_value(self) -> float:
-        return self.level
 
     def summary(self) -> str:
         return (f"elastic model beyond yield: damage underestimated ({self.target} above "
-                f"{self.threshold:g} x its yield stress, {self.yield_Pa / 1e6:.4g} MPa nominal)")
+                f"{self.threshold:g} x its yield stress, {self.reference_Pa / 1e6:.4g} MPa "
+                "nominal)")
 
 
 class SlackSnap(Rule):
