@@ -69,7 +69,7 @@ import time
 
 import numpy as np
 
-from models import _fatigue_loops
+from models.fatigue import _loops as _fatigue_loops
 from models._jit import numba_module
 from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow
 from models.helix import HelixCable, conductor_stress

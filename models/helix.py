@@ -67,7 +67,7 @@ from typing import Literal
 
 import numpy as np
 
-from models import _fatigue_loops as _loops
+from models.fatigue import _loops
 from models._jit import HAVE_NUMBA
 
 Lay = Literal["left", "right"]
@@ -280,7 +280,7 @@ def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay 
 
 def axial_kernel_args(cable: HelixCable, lay: Lay) -> tuple[float, float, float, float, float] | None:
     """(k, tan a, cos a, +-R G_c, E_i): the arguments of the compiled axial-stress kernel
-    (``_fatigue_loops.axial_stress``) for this cable and lay, or None when the axial
+    (``models.fatigue._loops.axial_stress``) for this cable and lay, or None when the axial
     stress needs the general formula (a compressible core, or limited twist: piecewise)."""
     try:
         return cable._kernel_args[lay]

@@ -24,7 +24,7 @@ the ductile rule of App. 4 with the helix's axial, bending and shear terms
 stress concentration factor is the component's ``scf`` (``monitor`` applies it to the S-N curve
 and to the yield check): default 1.0, because neither the seed nor the manufacturer gives one
 for the BIW moulding and the seed's lab test (App. 2) already fails later than the unconcentrated
-model predicts (``models.lab_fatigue``).
+model predicts (``models.fatigue.lab_calibration``).
 
 The static bend raises the mean and peak stress, not the range of a tension cycle; it matters
 for yield (``HelixCable.conductor_yield_Pa``) and for a mean-stress correction.

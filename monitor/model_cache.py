@@ -5,8 +5,8 @@ kernels about half a second more to load) at every start of ``buoymon replay``, 
 ``run``; loading the finished build from this cache takes milliseconds.
 
 An entry is a pickle named by a SHA-256 of the build's kind and inputs, of the source of the
-``models`` package and of the module that defines the build function, and of the Python and
-numpy versions: a change to any of them never reuses a stale build. The directory is ``$BUOYMON_CACHE_DIR``, else ``$XDG_CACHE_HOME/buoymon``,
+``models`` package (subpackages included) and of the module that defines the build function,
+and of the Python and numpy versions: a change to any of them never reuses a stale build. The directory is ``$BUOYMON_CACHE_DIR``, else ``$XDG_CACHE_HOME/buoymon``,
 else ``~/.cache/buoymon`` (created private to the user; ``BUOYMON_CACHE_DIR=""`` turns the
 cache off). Like numba's own cache it loads pickles, so it must not be writable by others.
 An entry that cannot be read is rebuilt and rewritten; a directory that cannot be written
@@ -45,8 +45,9 @@ def cache_dir() -> Path | None:
 @functools.lru_cache(maxsize=8)
 def _code_version(builder_file: str) -> str:
     h = hashlib.sha256(f"{sys.version}|numpy {np.__version__}".encode())
-    for f in [*sorted(_MODELS.glob("*.py")), Path(builder_file)]:
-        h.update(f.name.encode())
+    # every module of the package, subpackages (models/catenary/, models/fatigue/) included
+    for f in [*sorted(_MODELS.rglob("*.py")), Path(builder_file)]:
+        h.update(str(f.relative_to(_MODELS) if f.is_relative_to(_MODELS) else f.name).encode())
         h.update(f.read_bytes())
     return h.hexdigest()
 

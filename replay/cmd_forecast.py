@@ -23,7 +23,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from models.miner import remaining_life_days
+from models.fatigue.miner import remaining_life_days
 from models.sea_state_table import (HS_EDGES_M, TP_EDGES_S, DamageRateTable, Projection,
                                     project_damage)
 from monitor.alerts.config import AlertsConfig

@@ -1,10 +1,10 @@
 """Seed 004's lab fatigue test through the product: predicted against observed cycles to failure.
 
 The App. 2 (c) test cycles a piece of the cable from 0 to F kN at 13.6 cycles/min
-(``models.lab_fatigue.cam_tension``). Here that tension is a synthetic load-cell log fed through
+(``models.fatigue.lab_calibration.cam_tension``). Here that tension is a synthetic load-cell log fed through
 the same pipeline as a buoy's (validation, load selection, stress per component, streaming
 rainflow, Miner damage); each component's predicted life is the cycles fed over the damage they
-caused. The observed lives (``models.lab_fatigue.LAB_FAILURES``) and the method are documented
+caused. The observed lives (``models.fatigue.lab_calibration.LAB_FAILURES``) and the method are documented
 in docs/CONDUCTOR.md.
 """
 
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.lab_fatigue import LAB_FAILURES, LAB_RATE_HZ, cam_tension
+from models.fatigue.lab_calibration import LAB_FAILURES, LAB_RATE_HZ, cam_tension
 from monitor.blocks import SampleBlock
 from monitor.config import Config
 from replay.runner import run_blocks

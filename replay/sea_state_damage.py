@@ -8,7 +8,7 @@ configuration turns it into stress and Miner damage exactly as the pipeline does
 factor; rainflow with the residue counted as half cycles, ``models.fatigue.damage``).
 
 Next to it, the Dirlik damage of the same stress's spectrum (Welch estimate,
-:mod:`models.spectral_fatigue`) is a cross-check: a sea state where the two disagree by more
+:mod:`models.fatigue.spectral`) is a cross-check: a sea state where the two disagree by more
 than a factor is one where the load is far from Gaussian (slack or snap loads, a load bound
 clipped at zero), and the rainflow figure is the one to trust.
 """
@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
 from models import fatigue
-from models.spectral_fatigue import damage_rate_from_psd
+from models.fatigue.spectral import damage_rate_from_psd
 from monitor.components import Component, build_cable
 from monitor.config import Config
 from replay.simulate import BASE_HZ, SimConfig, clean_tension

@@ -214,8 +214,8 @@ def _tension_table(span_m: float, depth_m: float, cable_mass: float):
     """The seed 004 mooring's tension table around a mean fairlead position, with its
     limits: pure and about 0.1 s to solve, so solved once per position (a design check
     simulates hundreds of sea states on the same mooring)."""
-    from models.catenary_table import TensionTable
-    from models.catenary_vaps import vaps_mooring
+    from models.catenary.tension_table import TensionTable
+    from models.catenary.vaps import vaps_mooring
 
     x_lim = (max(span_m - 6.0, 0.5), span_m + 2.5)
     z_lim = (max(depth_m - 4.0, 0.0), depth_m + 4.0)
@@ -227,7 +227,7 @@ def _tension_table(span_m: float, depth_m: float, cable_mass: float):
 class _Mooring:
     """Line tension from buoy motion through the physics models (stateful, streaming).
 
-    Quasi-static part: the seed 004 mooring (:func:`models.catenary_vaps.vaps_mooring`, its
+    Quasi-static part: the seed 004 mooring (:func:`models.catenary.vaps.vaps_mooring`, its
     assumed weights) tabulated around the mean fairlead position (``cfg.mean_span_m`` from the
     anchor horizontally, ``cfg.depth_m`` above it); dynamics: the axial inertia of the finite
     line in :class:`models.estimator.MotionTensionEstimator`, fed with the displacements.
@@ -238,7 +238,7 @@ class _Mooring:
     MASS_PER_LENGTH = 1.10  # kg/m in air, the cable mass assumed by vaps_mooring()
 
     def __init__(self, cfg: SimConfig):
-        from models.catenary_vaps import vaps_mooring
+        from models.catenary.vaps import vaps_mooring
         from models.estimator import EstimatorConfig, Flag, MotionTensionEstimator
 
         line = vaps_mooring(cable_mass=self.MASS_PER_LENGTH)

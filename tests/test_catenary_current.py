@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from models.catenary import Joint, Line, Segment, solve
-from models.catenary_current import Drag, solve_in_current
-from models.catenary_seeds import critical_angle, current_cord_tension, hydrodynamic_constant
+from models.catenary.current import Drag, solve_in_current
+from models.catenary.closed_forms import critical_angle, current_cord_tension, hydrodynamic_constant
 
 
 def test_no_current_equals_catenary_multisegment():

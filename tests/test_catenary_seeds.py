@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from models import catenary_seeds as cs
+from models.catenary import closed_forms as cs
 from models.catenary import solve_line
 
 SHARED = next((p / "shared" for p in Path(__file__).resolve().parents[1:]

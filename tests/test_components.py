@@ -1,4 +1,4 @@
-"""monitor.components.Component.run_ticks: the compiled pass (models.fatigue_stream.commit_ticks)
+"""monitor.components.Component.run_ticks: the compiled pass (models.fatigue.ticks.commit_ticks)
 equals the feed/commit loop."""
 
 import dataclasses
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-import models._fatigue_loops as fatigue_loops
+import models.fatigue._loops as fatigue_loops
 from monitor.components import Component, build_cable
 from monitor.config import default_config
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.miner import MinerAccumulator
-from models.sn_curve import SNCurve
+from models.fatigue.miner import MinerAccumulator
+from models.fatigue.sn_curve import SNCurve
 
 def test_cached_damage_rate_equals_a_fresh_computation():
     rng = np.random.default_rng(5)

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from models import _fatigue_loops as loops
+from models.fatigue import _loops as loops
 from models._jit import HAVE_NUMBA, numba_module
 
 needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed")

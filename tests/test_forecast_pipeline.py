@@ -16,7 +16,7 @@ import pytest
 from scipy import signal
 
 from models import fatigue
-from models.spectral_fatigue import damage_rate_from_psd
+from models.fatigue.spectral import damage_rate_from_psd
 from monitor.blocks import SampleBlock
 from monitor.config import ConfigError, config_with, default_config
 from monitor.pipeline import Pipeline

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from models.helix import HelixCable, conductor_stress
-from models.lab_fatigue import LAB_FAILURES, LAB_RATE_HZ, calibrate, cam_tension, vaps_lab_calibration
-from models.sn_curve import SNCurve
+from models.fatigue.lab_calibration import LAB_FAILURES, LAB_RATE_HZ, calibrate, cam_tension, vaps_lab_calibration
+from models.fatigue.sn_curve import SNCurve
 
 REF = json.loads((Path(__file__).parent / "reference" / "issue20_lab_validation.json").read_text())
 

@@ -61,7 +61,7 @@ def test_backends_agree(stress):
     curve = SNCurve.dnv_rp_c203("C", "seawater_cp", scf=3.0)
     a = _replay(stress, [5000], curve, "numba")
     b = _replay(stress, [5000], curve, "numpy")
-    # both evaluate log_det/exp_det (models._fatigue_loops) and sum in order: the same bits
+    # both evaluate log_det/exp_det (models.fatigue._loops) and sum in order: the same bits
     assert a.damage_committed == b.damage_committed
     np.testing.assert_array_equal(a.histogram[1], b.histogram[1])
     assert a.histogram[2] == b.histogram[2]
@@ -191,7 +191,7 @@ def test_bad_input():
 
 @pytest.mark.parametrize("backend", ["numba", "numpy"])
 def test_committed_sum_matches_qats_and_fatpack(backend):
-    # the accumulator's own log/exp (models._fatigue_loops) against the peers' numpy power
+    # the accumulator's own log/exp (models.fatigue._loops) against the peers' numpy power
     qats_sn = pytest.importorskip("qats.fatigue.sn")
     fatpack = pytest.importorskip("fatpack")
     rng = np.random.default_rng(7)

@@ -132,10 +132,10 @@ def test_a_change_to_the_builders_module_invalidates_its_entries(tmp_path, monke
 
 
 def test_a_change_to_the_models_source_invalidates_every_entry(tmp_path, monkeypatch):
-    assert (model_cache._MODELS / "catenary_table.py").is_file()
+    assert (model_cache._MODELS / "catenary" / "tension_table.py").is_file()
     src = tmp_path / "models"
-    src.mkdir()
-    (src / "table.py").write_text("A = 1\n")
+    (src / "catenary").mkdir(parents=True)
+    (src / "catenary" / "table.py").write_text("A = 1\n")  # a subpackage's module counts too
     monkeypatch.setattr(model_cache, "_MODELS", src)
     monkeypatch.setenv("BUOYMON_CACHE_DIR", str(tmp_path / "c"))
     calls: list = []
@@ -143,7 +143,7 @@ def test_a_change_to_the_models_source_invalidates_every_entry(tmp_path, monkeyp
     try:
         model_cache.cached("demo", Inputs(1.0, "x"), _builder(calls, 1))
         model_cache.cached("demo", Inputs(1.0, "x"), _builder(calls, 1))
-        (src / "table.py").write_text("A = 2\n")
+        (src / "catenary" / "table.py").write_text("A = 2\n")
         model_cache._code_version.cache_clear()
         assert model_cache.cached("demo", Inputs(1.0, "x"), _builder(calls, 2)) == 2
     finally:

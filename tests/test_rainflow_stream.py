@@ -24,7 +24,7 @@ def _astm_totals(series) -> dict:
 
 def astm_residue_oracle(points: list[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ASTM E1049 three-point counting of a (short) turning-point sequence, in plain Python:
-    the oracle of the compiled residue count (``_fatigue_loops._residue_cycles``)."""
+    the oracle of the compiled residue count (``models.fatigue._loops._residue_cycles``)."""
     out: list[tuple[float, float, float]] = []
     stack: list[float] = []
     start = 0  # index in stack of the series' current starting point
@@ -112,7 +112,7 @@ def test_residue_cycles_equal_the_three_point_oracle_bit_for_bit(seed, monkeypat
         want = np.array(astm_residue_oracle(rf.residue.tolist()))
         assert want.shape[1] >= 7
         np.testing.assert_array_equal(np.array(rf.residue_half_cycles()), want)
-        monkeypatch.setattr("models._fatigue_loops.residue_cycles_compiled", None)
+        monkeypatch.setattr("models.fatigue._loops.residue_cycles_compiled", None)
         np.testing.assert_array_equal(np.array(rf.residue_half_cycles()), want)  # uncompiled
         monkeypatch.undo()
         full += int(np.count_nonzero(want[2] == 1.0))

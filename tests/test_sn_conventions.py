@@ -4,7 +4,7 @@ knee's cycle count (qats, fatpack)."""
 import numpy as np
 import pytest
 
-from models.sn_curve import SNCurve
+from models.fatigue.sn_curve import SNCurve
 
 MPA = 1e6
 

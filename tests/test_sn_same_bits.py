@@ -5,7 +5,7 @@ former formulas differed in the last bits for 98.5 % of 200,000 random ranges).
 
 The oracle is the formula evaluated independently with numpy: segment by
 ``searchsorted``, then exp(m ln S + ln(dff / a)) with the compiled loops' log and exp
-applied to arrays (``models._fatigue_loops.log_det``/``exp_det`` are plain numpy there).
+applied to arrays (``models.fatigue._loops.log_det``/``exp_det`` are plain numpy there).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from models._fatigue_loops import damage_loop, exp_det, log_det
+from models.fatigue._loops import damage_loop, exp_det, log_det
 from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow
 from monitor.components import Component, build_cable
 from monitor.config import default_config

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from models.sn_curve import SNCurve
-from models.spectral_fatigue import (cycle_rate_hz, damage_rate, damage_rate_from_psd,
+from models.fatigue.sn_curve import SNCurve
+from models.fatigue.spectral import (cycle_rate_hz, damage_rate, damage_rate_from_psd,
                                      range_density, spectral_moments, tovo_benasciutti_b)
 from models.waves import jonswap
 

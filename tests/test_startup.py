@@ -65,7 +65,7 @@ def test_help_lists_every_command_and_imports_none_of_them():
 def test_check_config_builds_the_models_without_numba():
     status, modules, out = _imports_of(["check-config", str(REPO / "monitor" / "vaps_seed004.toml")])
     assert status == 0 and ": ok" in out
-    assert "models.helix" in modules and "models.sn_curve" in modules  # it did build them
+    assert "models.helix" in modules and "models.fatigue.sn_curve" in modules  # it did build them
     assert not {m.split(".")[0] for m in modules} & (set(HEAVY) - {"numpy"})
 
 

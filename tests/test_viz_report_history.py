@@ -77,7 +77,7 @@ def test_bad_arguments():
 
 
 def test_sn_curve_field_from_the_fatigue_model():
-    from models.sn_curve import SNCurve
+    from models.fatigue.sn_curve import SNCurve
 
     curve = SNCurve.vaps_copper()
     f = sn_curve_field(curve, 80e6)

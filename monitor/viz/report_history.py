@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from models.sn_curve import SNCurve
+from models.fatigue.sn_curve import SNCurve
 from monitor.blocks import SampleBlock
 from monitor.events import StepResult
 from monitor.viz.cycle_histogram import CycleHistogram, check_edges
@@ -26,7 +26,7 @@ from monitor.viz.cycle_histogram import CycleHistogram, check_edges
 REPORT_RANGE_EDGES_Pa: tuple[float, ...] = tuple(np.linspace(0.0, 1000e6, 501).tolist())
 
 def sn_curve_field(curve: SNCurve, max_range_Pa: float, n: int = 60) -> dict[str, Any]:
-    """The report's ``components[name].sn_curve`` for a ``models.sn_curve.SNCurve``: cycles to
+    """The report's ``components[name].sn_curve`` for a ``models.fatigue.sn_curve.SNCurve``: cycles to
     failure at ``n`` log-spaced nominal zero-mean stress ranges from ``max_range_Pa / 1000`` to
     ``3 * max_range_Pa``, and the nominal endurance stress when the curve has one."""
     if not np.isfinite(max_range_Pa) or max_range_Pa <= 0:

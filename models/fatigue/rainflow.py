@@ -25,7 +25,7 @@ cycle never depends on later samples, the cycles and the order in which they clo
 same for any split of the series into blocks; together with the residue half cycles they
 total the ASTM E1049 (``rainflow.extract_cycles``) counts for every (range, mean).
 
-Two backends give identical results: ``"numba"`` compiles ``_fatigue_loops.feed_loop``
+Two backends give identical results: ``"numba"`` compiles ``_loops.feed_loop``
 (a few microseconds per call; per chunk of samples, a branch-free pass finds the confirmed
 turning points, then the four-point stack consumes them); ``"numpy"`` extracts
 monotone-run ends with vectorised numpy and runs the same state machine, uncompiled, over
@@ -41,19 +41,19 @@ from typing import Literal
 
 import numpy as np
 
-from models import _fatigue_loops as _loops
+from models.fatigue import _loops
 
 # the compiled loop and the layout of the state vector it shares with the numpy backend
-from models import _fatigue_loops as _loops
-from models._fatigue_loops import CAND as _CAND
-from models._fatigue_loops import CHUNK as _CHUNK
-from models._fatigue_loops import DIR as _DIR
-from models._fatigue_loops import HEADER as _HEADER
-from models._fatigue_loops import HYST as _HYST
-from models._fatigue_loops import NS as _NS
-from models._fatigue_loops import STARTED as _STARTED
-from models._fatigue_loops import cycle_room as _cycle_room
-from models._fatigue_loops import feed_loop as _feed_loop
+from models.fatigue import _loops
+from models.fatigue._loops import CAND as _CAND
+from models.fatigue._loops import CHUNK as _CHUNK
+from models.fatigue._loops import DIR as _DIR
+from models.fatigue._loops import HEADER as _HEADER
+from models.fatigue._loops import HYST as _HYST
+from models.fatigue._loops import NS as _NS
+from models.fatigue._loops import STARTED as _STARTED
+from models.fatigue._loops import cycle_room as _cycle_room
+from models.fatigue._loops import feed_loop as _feed_loop
 from models._jit import HAVE_NUMBA
 
 Backend = Literal["auto", "numba", "numpy"]
@@ -80,7 +80,7 @@ def _run_ends(x: np.ndarray, st: np.ndarray) -> np.ndarray:
 
 
 def _feed_compiled(st: np.ndarray, x: np.ndarray):
-    """The compiled loop, into an output allocated here (``_fatigue_loops.feed_loop``)."""
+    """The compiled loop, into an output allocated here (``_loops.feed_loop``)."""
     out = np.empty((3, _cycle_room(st, x.size)))
     k, used = _loops.feed_compiled(st, x, out)
     return out[:, :k], used

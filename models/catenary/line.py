@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from models import catenary_kernel as _k
+from models.catenary import kernel as _k
 
 REGIMES = {
     _k.SUSPENDED: "suspended",

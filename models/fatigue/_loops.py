@@ -3,7 +3,7 @@
 They live in one file because numba's on-disk cache only checks the source file of the
 compiled function: the building blocks a loop calls must sit in the same file, or editing
 one would leave the callers' cached machine code stale. The modules that own the physics
-document it (``models.helix``, ``models.rainflow_stream``, ``models.miner``); this file is
+document it (``models.helix``, ``models.fatigue.rainflow``, ``models.fatigue.miner``); this file is
 their machinery, and every function here also runs as plain Python (numba is optional).
 
 Determinism. Committed damage must be the same to the last bit for any split of a series

@@ -18,10 +18,10 @@ from typing import Sequence
 
 import numpy as np
 
-from models import _fatigue_loops as _loops
-from models._fatigue_loops import NS as _NS
-from models.miner import MinerAccumulator
-from models.rainflow_stream import StreamingRainflow
+from models.fatigue import _loops
+from models.fatigue._loops import NS as _NS
+from models.fatigue.miner import MinerAccumulator
+from models.fatigue.rainflow import StreamingRainflow
 
 
 @dataclass(frozen=True)

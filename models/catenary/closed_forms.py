@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from models.catenary_kernel import _phi_from_excess
+from models.catenary.kernel import _phi_from_excess
 
 
 # --- seed 001 (Aleksandrov 1970) -----------------------------------------------------------

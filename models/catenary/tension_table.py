@@ -1,6 +1,6 @@
 """Precomputed fairlead-force table for fast motion -> tension estimates.
 
-Exact multi-segment solves (models.catenary_line.solve) on a grid of fairlead positions,
+Exact multi-segment solves (models.catenary.line.solve) on a grid of fairlead positions,
 interpolated with bicubic Hermite patches that use the exact end stiffness (dH/dx, dH/dz,
 dV/dx, dV/dz) as node slopes, so the interpolant matches values and slopes at every node.
 The accuracy is measured when the table is built, against exact solves at every cell centre
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from models.catenary_line import Line, broadcast_pair, solve
+from models.catenary.line import Line, broadcast_pair, solve
 
 
 @numba.njit(cache=True)

@@ -27,7 +27,7 @@ compressive mean; a mean at or above the ultimate strength ``ultimate_Pa`` gives
 damage (the part has failed statically); SWT/Walker give no damage when S_max <= 0.
 
 Presets: ``vaps_copper()`` (seed 004, Marks annealed copper x 0.42),
-``vaps_lab_calibrated()`` (the same shape fitted to seed 004's lab failures, models.lab_fatigue),
+``vaps_lab_calibrated()`` (the same shape fitted to seed 004's lab failures, models.fatigue.lab_calibration),
 ``dnv_rp_c203(detail, environment, knee)`` (DNV-RP-C203 Edition April 2016, Tables 2-1 air and
 2-2 seawater with cathodic protection; the 2024 edition changed B1 to C2 and is not
 tabulated here), ``dnv_chain_studless()`` (DNV-OS-E301 studless chain, m = 3,
@@ -46,7 +46,7 @@ from typing import Literal
 
 import numpy as np
 
-from models import _fatigue_loops as _loops
+from models.fatigue import _loops
 
 
 LowStress = Literal["miner", "cutoff", "haibach"]
@@ -192,11 +192,11 @@ class SNCurve:
     def vaps_lab_calibrated(cls, low_stress: LowStress = "haibach", **options) -> "SNCurve":
         """``vaps_copper`` shifted in life to seed 004's lab failures (App. 2), x 3.74 in life.
 
-        Fitted by ``models.lab_fatigue.vaps_lab_calibration`` (method, mean-stress convention
+        Fitted by ``models.fatigue.lab_calibration.vaps_lab_calibration`` (method, mean-stress convention
         and uncertainty documented there): the test-calibrated alternative to the
         handbook-conservative ``vaps_copper``.
         """
-        from models.lab_fatigue import vaps_lab_calibration  # it builds on this module
+        from models.fatigue.lab_calibration import vaps_lab_calibration  # it builds on this module
 
         return vaps_lab_calibration(cls.vaps_copper(low_stress=low_stress)).curve(**options)
 
@@ -259,7 +259,7 @@ class SNCurve:
 
     @cached_property
     def kernel_params(self) -> np.ndarray:
-        """The curve as the compiled loops read it (``models._fatigue_loops``): [scale from
+        """The curve as the compiled loops read it (``models.fatigue._loops``): [scale from
         nominal Pa ranges to the curve's MPa (scf x derating / 1e6), cut-off MPa (0 if
         none), n_seg, m_i..., ln(dff / a_i)..., ascending segment bounds MPa...]."""
         m, log_a, bounds = self._segments
@@ -291,7 +291,7 @@ class SNCurve:
     def damage_per_cycle(self, range_Pa, counts=1.0, mean_Pa=None) -> np.ndarray:
         """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa.
 
-        Evaluated by the compiled loops' own per-cycle function (``_fatigue_loops.damage_loop``,
+        Evaluated by the compiled loops' own per-cycle function (``_loops.damage_loop``,
         exp(m ln S + ln(dff / a)) with their log and exp), so a cycle's damage has the same
         bits here as in the committed Miner sum."""
         s = self.effective_range_MPa(range_Pa, mean_Pa)

@@ -1,10 +1,14 @@
 """Fatigue engine: the stable import path for S-N curves, streaming rainflow and Miner damage.
 
-- ``SNCurve`` (``models.sn_curve``): S-N curves for stress RANGES in Pa.
-- ``StreamingRainflow`` (``models.rainflow_stream``): incremental four-point counting.
-- ``MinerAccumulator`` (``models.miner``): committed/provisional damage, rate, histogram;
+Modules: ``sn_curve``, ``rainflow``, ``miner``, ``ticks`` (the alert-tick pass), ``_loops``
+(their compiled loops, one file for numba's cache), ``spectral`` (damage rate from a stress
+spectrum), ``lab_calibration`` (seed 004's lab test and the curve calibrated to it).
+
+- ``SNCurve`` (``models.fatigue.sn_curve``): S-N curves for stress RANGES in Pa.
+- ``StreamingRainflow`` (``models.fatigue.rainflow``): incremental four-point counting.
+- ``MinerAccumulator`` (``models.fatigue.miner``): committed/provisional damage, rate, histogram;
   ``remaining_life_days(damage, rate)``.
-- ``commit_ticks`` (``models.fatigue_stream``): the steps below for whole alert ticks in
+- ``commit_ticks`` (``models.fatigue.ticks``): the steps below for whole alert ticks in
   one compiled call (the monitor's path); the same bits as the separate calls.
 - ``damage(stress_series_Pa, sn_curve, hysteresis=0.0, include_residue=True) -> float``:
   one-shot Miner damage of a whole stress history.
@@ -24,10 +28,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.fatigue_stream import TickCommits, commit_ticks
-from models.miner import MinerAccumulator, remaining_life_days
-from models.rainflow_stream import StreamingRainflow
-from models.sn_curve import SNCurve
+from models.fatigue.miner import MinerAccumulator, remaining_life_days
+from models.fatigue.rainflow import StreamingRainflow
+from models.fatigue.sn_curve import SNCurve
+from models.fatigue.ticks import TickCommits, commit_ticks
 
 __all__ = ["SNCurve", "StreamingRainflow", "MinerAccumulator", "TickCommits",
            "commit_ticks", "damage", "remaining_life_days"]

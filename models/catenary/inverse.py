@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models.catenary_line import Line, LineSolution, broadcast_pair, solve
+from models.catenary.line import Line, LineSolution, broadcast_pair, solve
 
 
 def span_from_top_tension(line: Line, t_top, height, rtol: float = 1e-12,

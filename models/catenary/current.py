@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from models.catenary_line import Line, solve
+from models.catenary.line import Line, solve
 
 
 @dataclass(frozen=True)

@@ -37,9 +37,9 @@ from typing import Literal
 
 import numpy as np
 
-from models import _fatigue_loops as _loops
+from models.fatigue import _loops
 from models._jit import HAVE_NUMBA
-from models.sn_curve import SNCurve
+from models.fatigue.sn_curve import SNCurve
 
 _DAY_S = 86400.0
 _STATE_VERSION = 1
@@ -149,7 +149,7 @@ class MinerAccumulator:
 
     def _take_kernel_totals(self, committed: float, cycles: float, time_s: float | None) -> float:
         """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
-        ``_table`` (``models.fatigue_stream``); return the damage added."""
+        ``_table`` (``models.fatigue.ticks``); return the damage added."""
         added = committed - self._committed
         self._committed = committed
         self._cycles += cycles

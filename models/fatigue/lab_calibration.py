@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from models.helix import HelixCable, conductor_stress
-from models.sn_curve import SNCurve
+from models.fatigue.sn_curve import SNCurve
 
 LAB_RATE_HZ = 13.6 / 60.0
 LAB_FAILURES: tuple[tuple[float, float], ...] = ((8.9e3, 25.0e3), (9.8e3, 17.1e3), (9.8e3, 27.0e3))

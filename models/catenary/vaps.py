@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from models.catenary_line import Joint, Line, Segment
+from models.catenary.line import Joint, Line, Segment
 
 G = 9.81
 STEEL_DENSITY = 7850.0
