@@ -5,8 +5,7 @@ sensor noise; about 2.9 million closed cycles). Prints samples per second for la
 and for 20-sample blocks (one second of data per call, as the service feeds it), for
 
 - ``separate``: ``conductor_stress`` + ``StreamingRainflow.feed`` + ``MinerAccumulator.add_cycles``
-  (the monitor's per-tick fallback; its compiled path is ``models.fatigue.commit_ticks``), per
-  backend;
+  (the library path; the monitor's is ``models.fatigue.commit_ticks``);
 
 then the CPU time of each separate stage on the whole series in one block. Targets
 (issue 3): >= 50 M samples/s in large blocks (1e6, 1e7), >= 1 M samples/s in 20-sample
@@ -30,7 +29,8 @@ deterministic log/exp, the chunked Miner loop and the short-chain turning-point 
 
 The numba and numpy backends now give the same committed damage to the last bit (before:
 2e-16 apart). The numpy fallback is slower on tiny blocks because its log/exp are some
-30 numpy operations per call (the price of matching the compiled bits). With hysteresis
+30 numpy operations per call (the price of matching the compiled bits); since issue 18 it is
+no longer a production backend but the tests' oracle (tests/fatigue_oracles.py). With hysteresis
 > 0 the turning-point pass has a longer dependency chain: fused about 70 M samples/s.
 The compiled fused loop showed packed vdivpd/vsqrtpd on ymm registers (LLVM prefers
 256-bit vectors on this CPU): the stress and log/exp loops vectorise. The fused path
@@ -82,15 +82,15 @@ def wave_tension(n: int, seed: int = 0) -> np.ndarray:
             + 150.0 * rng.normal(size=n))
 
 
-def run(tension: np.ndarray, block: int, backend: str) -> tuple[float, float, float]:
+def run(tension: np.ndarray, block: int) -> tuple[float, float, float]:
     """(wall s, CPU s, final damage) for the whole path over ``tension`` in ``block``s."""
     cable = HelixCable.vaps_biw()
-    rf = StreamingRainflow(backend=backend)
-    miner = MinerAccumulator(SNCurve.vaps_copper(), backend=backend)
+    rf = StreamingRainflow()
+    miner = MinerAccumulator(SNCurve.vaps_copper())
     blocks = [tension[i:i + block] for i in range(0, tension.size, block)]
     t0, c0 = time.perf_counter(), time.process_time()
     for k, b in enumerate(blocks):
-        stress = conductor_stress(b, cable, "left", backend=backend)
+        stress = conductor_stress(b, cable, "left")
         miner.add_cycles(*rf.feed(stress), time_s=k * block / 20.0)
     return time.perf_counter() - t0, time.process_time() - c0, miner.damage_committed
 
@@ -140,7 +140,7 @@ def versus_pylife(tension: np.ndarray, repeats: int = 5) -> None:
     ours, theirs = [], []
     for _ in range(repeats):
         theirs.append(pylife_run())
-        ours.append(run(tension, tension.size, "numba"))
+        ours.append(run(tension, tension.size))
     n = tension.size
     rates = {name: (n / min(r[0] for r in runs) / 1e6, n / min(r[1] for r in runs) / 1e6)
              for name, runs in (("ours", ours), ("pylife", theirs))}
@@ -167,26 +167,21 @@ def vector_instructions() -> str:
 def main() -> None:
     n = int(float(sys.argv[1])) if len(sys.argv) > 1 else 10_000_000
     tension = wave_tension(n)
-    run(tension[:1000], 20, "numba")  # compile / load the numba cache outside the timing
+    run(tension[:1000], 20)  # compile / load the numba cache outside the timing
     print(f"samples: {n:.3g} (20 Hz, 6 s waves + noise); best of 3 runs; CPU time excludes")
     print(f"waiting for a core on a shared machine (load average now "
           f"{' '.join(f'{v:.1f}' for v in os.getloadavg())})")
     damages = {}
-    cases = [("numba", n), ("numba", 1_000_000), ("numba", 100_000), ("numba", 20),
-             ("numpy", 100_000), ("numpy", 20)]
-    for backend, block in cases:
-        # the numpy fallback is slow per call: a shorter run for its 20-sample case
-        sub = tension[: min(n, 200_000)] if (backend, block) == ("numpy", 20) else tension
-        runs = [run(sub, block, backend) for _ in range(3)]
+    for block in (n, 1_000_000, 100_000, 20):
+        runs = [run(tension, block) for _ in range(3)]
         wall = min(r[0] for r in runs)
         cpu = min(r[1] for r in runs)
-        if sub.size == n:
-            damages[(backend, block)] = runs[0][2]
-        calls = -(-sub.size // block)
-        print(f"{backend:6s} block {block:>9d}: {sub.size / wall / 1e6:7.2f} M samples/s wall, "
-              f"{sub.size / cpu / 1e6:7.2f} M samples/s CPU ({wall / calls * 1e6:10.2f} us/call)")
-    print(f"committed damage {damages[('numba', n)]:.9e}; identical for all backends and "
-          f"block sizes over the whole series: {len(set(damages.values())) == 1}")
+        damages[block] = runs[0][2]
+        calls = -(-tension.size // block)
+        print(f"block {block:>9d}: {tension.size / wall / 1e6:7.2f} M samples/s wall, "
+              f"{tension.size / cpu / 1e6:7.2f} M samples/s CPU ({wall / calls * 1e6:10.2f} us/call)")
+    print(f"committed damage {damages[n]:.9e}; identical for all block sizes: "
+          f"{len(set(damages.values())) == 1}")
     stage_split(tension)
     versus_pylife(tension)
     print(f"packed divide/sqrt in the compiled commit loop: {vector_instructions()}")

@@ -161,7 +161,7 @@ def naive_baseline(path: Path) -> tuple[float, int, float]:
     stress = helix.conductor_stress(tension, helix.HelixCable.vaps_biw(), lay="left")
     cycles = np.array([(r, c) for r, _, c, _, _ in rainflow.extract_cycles(stress)])
     sn = fatigue.SNCurve.vaps_copper()
-    damage = float(np.sum(sn.damage_per_cycle(cycles[:, 0], cycles[:, 1])))
+    damage = float(np.sum(sn.damage_per_cycle(cycles[:, 0], counts=cycles[:, 1])))
     return time.process_time() - start, tension.shape[0], damage
 
 

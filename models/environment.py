@@ -19,7 +19,7 @@ any source of sea states:
   estimate instead of the WAVFOR bound.
 * :meth:`LoadCycles.histogram` bins the cycles; :func:`damage` gives the Miner damage of each
   entry against an S-N curve (``models.fatigue.SNCurve`` or any object with
-  ``damage_per_cycle(range_Pa, counts, mean_Pa)``) after an optional tension -> stress map
+  ``damage_per_cycle(range_Pa, mean_Pa, counts)``) after an optional tension -> stress map
   (e.g. ``models.helix.conductor_stress``); per storm with :func:`damage_per_row`, per year
   with :func:`annual_damage`.
 """
@@ -28,13 +28,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Literal, Protocol
+from typing import Callable, Literal
 
 import numpy as np
 import rainflow
 from numpy.typing import ArrayLike, NDArray
 
 from models.estimator import EstimatorConfig, QuasiStatic, simulate_tension
+from models.fatigue.spectral import DamageCurve
 from models.waves import buoy_motion
 from models.wavfor import WavforBuoy, seed004_period, wavfor
 
@@ -43,12 +44,6 @@ HOURS_PER_YEAR = 8766.0  # 365.25 days
 TZ_OVER_TP_JONSWAP = 0.7782
 
 LoadRange = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]
-
-
-class DamageCurve(Protocol):
-    def damage_per_cycle(
-        self, range_Pa: ArrayLike, counts: ArrayLike = 1.0, mean_Pa: ArrayLike | None = None
-    ) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True)
@@ -287,7 +282,7 @@ def damage(
     """
     conv = (lambda a: a) if to_stress is None else (lambda a: np.asarray(to_stress(a), float))
     mean = None if cycles.means is None else conv(cycles.means)
-    return np.asarray(sn_curve.damage_per_cycle(conv(cycles.ranges), cycles.counts, mean), float)
+    return np.asarray(sn_curve.damage_per_cycle(conv(cycles.ranges), mean, cycles.counts), float)
 
 
 def damage_per_row(

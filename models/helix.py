@@ -49,7 +49,7 @@ Public API
   condition above
 - ``stress_terms(tension_N, cable, lay="left") -> (sigma_a, sigma_b, tau)`` [Pa]
 - ``HelixCable`` (frozen dataclass), ``HelixCable.vaps_biw()``
-- ``conductor_stress(tension_N, cable, lay="left", combined=False, backend="auto") -> ndarray``
+- ``conductor_stress(tension_N, cable, lay="left", combined=False) -> ndarray``
   [Pa]; NaN/inf tension raises ValueError
 - ``tension_for_stress(stress_Pa, cable, lay="left") -> ndarray`` [N], the inverse
   ("equivalent cable load" of the seed's predicted-failure table)
@@ -68,7 +68,6 @@ from typing import Literal
 import numpy as np
 
 from models.fatigue import _loops
-from models._jit import HAVE_NUMBA
 
 Lay = Literal["left", "right"]
 TwistRestraint = Literal["free", "restrained", "limited"]
@@ -245,34 +244,23 @@ def _lay_sign(lay: str, cable: HelixCable) -> float:
 
 
 def conductor_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay = "left",
-                     combined: bool = False, backend: Literal["auto", "numba", "numpy"] = "auto") -> np.ndarray:
+                     combined: bool = False) -> np.ndarray:
     """Conductor stress [Pa] for cable tension(s) ``tension_N`` [N] (seed 004 App. 4).
 
     ``lay`` is the conductor lay hand; it tightens the helix when equal to
     ``cable.core_twist_hand``. ``combined=False`` returns the axial (Knapp) stress,
     ``combined=True`` the ductile combination sqrt((sa + sb)^2 + 3 tau^2).
     Vectorised: returns a float64 array of the shape of ``tension_N``. The axial path
-    runs as one compiled loop when numba is available (``backend``), else as numpy;
-    both evaluate the same expression in the same order.
+    runs as one compiled loop (plain Python without numba).
     """
     t = np.asarray(tension_N, dtype=np.float64)
     args = None if combined else axial_kernel_args(cable, lay)
     if args is None:
         return _stress_general(_check_finite(t), cable, _lay_sign(lay, cable), cable.pitch_m,
                                cable.helix_radius_m, combined)
-    if backend != "numpy" and HAVE_NUMBA:
-        flat = t.reshape(-1)
-        out = np.empty(flat.size)
-        bad = _loops.axial_compiled(flat, *args, out)
-    elif backend in ("auto", "numpy"):
-        # E |cos a * sqrt((1 + e_c)^2 + (C'/P)^2) - 1|; both terms are O(1): no overflow
-        k, tan_a, cos_a, rg_signed, e_mod = args
-        a = 1.0 + k * t
-        b = tan_a + rg_signed * t
-        out = np.abs(cos_a * np.sqrt(a * a + b * b) - 1.0) * e_mod
-        bad = _first_bad(out.reshape(-1))
-    else:
-        raise ValueError(f"backend {backend!r} is not available")
+    flat = t.reshape(-1)
+    out = np.empty(flat.size)
+    bad = (_loops.axial_compiled or _loops.axial_loop)(flat, *args, out)
     if bad >= 0:
         raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {bad})")
     return out.reshape(t.shape)
@@ -287,13 +275,6 @@ def axial_kernel_args(cable: HelixCable, lay: Lay) -> tuple[float, float, float,
     except (KeyError, TypeError):  # not a lay (TypeError: not even hashable)
         _check_lay(lay)
         raise
-
-
-def _first_bad(out: np.ndarray) -> int:
-    """Index of the first non-finite stress (a NaN/inf tension propagates to it), or -1."""
-    if np.isfinite(np.sum(out)):
-        return -1
-    return int(np.flatnonzero(~np.isfinite(out))[0])
 
 
 def _stress_general(t: np.ndarray, cable: HelixCable, sign: float, pitch, radius,

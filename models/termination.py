@@ -42,7 +42,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Callable, Literal
+from typing import Callable
 
 import numpy as np
 
@@ -91,16 +91,15 @@ def bend_strain(bend: TerminationBend, helix_radius_m: float) -> float:
 
 
 def termination_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: Lay,
-                       bend: TerminationBend,
-                       backend: Literal["auto", "numba", "numpy"] = "auto") -> np.ndarray:
+                       bend: TerminationBend) -> np.ndarray:
     """Conductor stress [Pa] in the termination at cable tension(s) [N], without the SCF.
 
     sqrt((sigma_a + sigma_b + E_i eps_bend)^2 + 3 tau^2) (seed 004 App. 4's ductile rule, the
     bend of App. 3A as an added axial strain). The helix terms follow the cable's twist
     boundary condition. NaN/inf tension raises ValueError. Where the helix's axial kernel
     applies (free or restrained twist, incompressible core) the terms are evaluated without
-    trigonometry (``_stress``), in one compiled loop when numba is available (``backend``);
-    otherwise by ``helix.stress_terms``.
+    trigonometry (``_stress``), in one compiled loop (plain Python without numba); otherwise
+    by ``helix.stress_terms``.
     """
     sigma_bend = cable.conductor_modulus_Pa * bend_strain(bend, cable.helix_radius_m)
     args = axial_kernel_args(cable, lay)
@@ -109,19 +108,12 @@ def termination_stress(tension_N: np.ndarray | float, cable: HelixCable, lay: La
         return np.sqrt((sigma_a + sigma_b + sigma_bend) ** 2 + 3.0 * tau ** 2)
     t = np.asarray(tension_N, dtype=np.float64)
     coefs = _coefficients(cable, args, sigma_bend)
-    loop = _loop_compiled() if backend != "numpy" else None
-    out: np.ndarray
-    if loop is not None:
-        out = np.empty(t.size)
-        bad = loop(t.reshape(-1), *coefs, out)
-        out = out.reshape(t.shape)
-    else:  # the same expression on arrays
-        out = _stress(t, *coefs)
-        flat = out.reshape(-1)
-        bad = -1 if np.all(np.isfinite(flat)) else int(np.flatnonzero(~np.isfinite(flat))[0])
+    out = np.empty(t.size)
+    loop: Callable = _loop_compiled() or _loop
+    bad = loop(t.reshape(-1), *coefs, out)
     if bad >= 0:
         raise ValueError(f"tension_N contains NaN or inf, or is out of range (index {bad})")
-    return out
+    return out.reshape(t.shape)
 
 
 def _coefficients(cable: HelixCable, args: tuple[float, float, float, float, float],

@@ -192,8 +192,9 @@ class Component:
         feed/commit loop (the same bits)."""
         if not stops:
             return TickRun((_EMPTY,) * 3, [])
+        ranges, means, counts = self._pending
         run = fatigue.commit_ticks(self.rainflow, self.miner, stress_Pa, stops,
-                                   [e / 1e9 for e in ends_ns], (self._pending[0], self._pending[2]),
+                                   [e / 1e9 for e in ends_ns], (ranges, means, counts),
                                    residue=figures)
         if run is not None:  # the compiled pass
             self._pending = [_EMPTY, _EMPTY, _EMPTY]
@@ -221,7 +222,7 @@ class Component:
         """Damage of the pending cycles, each as the committed ones' (``damage_per_cycle``)."""
         if ranges.shape[0] == 0:
             return 0.0
-        return float(np.sum(self.sn_curve.damage_per_cycle(ranges, counts, means)))
+        return float(np.sum(self.sn_curve.damage_per_cycle(ranges, means, counts)))
 
     def figures(self) -> dict[str, float]:
         """damage (with pending cycles and the open residue as half cycles), committed, rate, life.

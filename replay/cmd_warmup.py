@@ -13,7 +13,8 @@ model (sea, buoy motion, catenary, axial dynamics, WAVFOR; the log writer and en
 both logs replayed through the pipeline with the demo's components (reader, decoder,
 validation, QARTOD, motion estimator, rainflow, Miner, alert ticks), the live daemon's
 Zenoh codec, and the library's per-call path (conductor_stress -> StreamingRainflow.feed ->
-MinerAccumulator.add_cycles, with the residue and the S-N curve's damage per cycle).
+MinerAccumulator.add_cycles, with the residue, the S-N curve's damage per cycle and a
+mean-corrected curve's commit).
 """
 
 from __future__ import annotations
@@ -59,10 +60,13 @@ def warm_up(folder: Path, config_path: str | None = None) -> None:
     codec.decode(f"buoy/{block.buoy_id}/sensor/{block.sensor}", codec.encode(block), 0)
     rainflow, miner = StreamingRainflow(), MinerAccumulator(SNCurve.vaps_copper())
     stress = conductor_stress(np.array([1e3, 3e3, 500.0, 2.5e3, 800.0]), HelixCable.vaps_biw())
-    miner.add_cycles(*rainflow.feed(stress), time_s=0.0)
+    cycles = rainflow.feed(stress)
+    miner.add_cycles(*cycles, time_s=0.0)
     miner.residue_damage(rainflow)
-    ranges, means, counts = rainflow.residue_half_cycles()
-    miner.sn_curve.damage_per_cycle(ranges, counts, means)
+    miner.sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())
+    # a mean-corrected curve commits through its own loop (the damages given)
+    goodman = miner.sn_curve.with_factors(mean_correction="goodman", ultimate_Pa=220e6)
+    MinerAccumulator(goodman).add_cycles(*cycles)
     if config_path is not None:
         from monitor.config import load_config
         from monitor.load_source import build_estimator

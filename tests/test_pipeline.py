@@ -97,7 +97,7 @@ def test_damage_equals_hand_computation_with_astm_rainflow():
     stress = helix.conductor_stress(x[good], helix.HelixCable.vaps_biw(), lay="left")
     cycles = np.array([(r, m, c) for r, m, c, _, _ in rainflow.extract_cycles(stress)])
     sn = fatigue.SNCurve.vaps_copper()
-    expected = float(np.sum(sn.damage_per_cycle(cycles[:, 0], cycles[:, 2], cycles[:, 1])))
+    expected = float(np.sum(sn.damage_per_cycle(cycles[:, 0], cycles[:, 1], cycles[:, 2])))
     rep = p.report()
     assert rep["samples"]["tension"]["accepted"] == int(good.sum())
     assert rep["samples"]["tension"]["rejected"]["nan"] == int(np.isnan(x).sum())

@@ -63,7 +63,7 @@ def test_measured_load_cell_damage_equals_the_rainflow_package(tmp_path, capsys)
     # hand computation: helix stress of the as-built conductor, ASTM rainflow, copper S-N
     stress = helix.conductor_stress(tension, helix.HelixCable.vaps_biw(), lay="left")
     cyc = np.array([(r, m, c) for r, m, c, _, _ in rainflow.extract_cycles(stress)])
-    per_cycle = fatigue.SNCurve.vaps_copper().damage_per_cycle(cyc[:, 0], cyc[:, 2], cyc[:, 1])
+    per_cycle = fatigue.SNCurve.vaps_copper().damage_per_cycle(cyc[:, 0], cyc[:, 1], cyc[:, 2])
     full = cyc[:, 2] == 1.0
     fig = rep["components"]["conductor"]
     assert fig["damage_committed"] == pytest.approx(float(per_cycle[full].sum()), rel=1e-12)

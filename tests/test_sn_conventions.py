@@ -29,7 +29,7 @@ def test_cycles_convention_matches_qats_and_fatpack(detail, environment, knee):
     rng = np.random.default_rng(11)
     ranges = rng.uniform(5.0, 300.0, 300)
     counts = rng.integers(1, 1000, 300).astype(float)
-    ours = curve.damage_per_cycle(ranges * MPA, counts).sum()
+    ours = curve.damage_per_cycle(ranges * MPA, counts=counts).sum()
     q = qats_sn.minersum(ranges, counts, {"m1": m1, "m2": m2, "loga1": curve.log_a[0], "nswitch": knee})
     fp = fatpack.BiLinearEnduranceCurve(1.0)
     fp.Nc, fp.m1, fp.m2, fp.Nd = 10 ** curve.log_a[0], m1, m2, knee

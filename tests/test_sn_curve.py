@@ -67,7 +67,7 @@ def test_hand_computed_miner_sum_across_the_knee():
     n1 = 10 ** 12.164 / 120.0 ** 3  # 8.44221e5 cycles
     n2 = 10 ** 15.606 / 30.0 ** 5  # 1.66109e8 cycles
     assert n1 == pytest.approx(8.44221e5, rel=1e-5) and n2 == pytest.approx(1.66109e8, rel=1e-5)
-    d = curve.damage_per_cycle(np.array([120.0, 30.0]) * MPA, np.array([2000.0, 3e6]))
+    d = curve.damage_per_cycle(np.array([120.0, 30.0]) * MPA, counts=np.array([2000.0, 3e6]))
     assert d.sum() == pytest.approx(2000 / n1 + 3e6 / n2, rel=1e-12)
     assert d.sum() == pytest.approx(0.0204295, rel=1e-5)
 
@@ -85,7 +85,7 @@ def test_miner_sum_matches_qats_and_fatpack(detail, environment, knee):
     log_a1 = preset.log_a[0]
     # the peers define the lower segment by continuity at the knee cycle count
     log_a2 = m2 / m1 * log_a1 + (1 - m2 / m1) * np.log10(knee)
-    ours = SNCurve.multi_slope((m1, m2), (log_a1, log_a2)).damage_per_cycle(ranges * MPA, counts).sum()
+    ours = SNCurve.multi_slope((m1, m2), (log_a1, log_a2)).damage_per_cycle(ranges * MPA, counts=counts).sum()
     q = qats_sn.minersum(ranges, counts, {"m1": m1, "m2": m2, "loga1": log_a1, "nswitch": knee})
     fp = fatpack.BiLinearEnduranceCurve(1.0)
     fp.Nc, fp.m1, fp.m2, fp.Nd = 10 ** log_a1, m1, m2, knee
@@ -93,7 +93,7 @@ def test_miner_sum_matches_qats_and_fatpack(detail, environment, knee):
     assert ours == pytest.approx(q, rel=1e-12)
     assert ours == pytest.approx(f, rel=1e-12)
     # the preset uses the RP's printed log a2; the difference is the table's rounding
-    assert preset.damage_per_cycle(ranges * MPA, counts).sum() == pytest.approx(q, rel=5e-3)
+    assert preset.damage_per_cycle(ranges * MPA, counts=counts).sum() == pytest.approx(q, rel=5e-3)
 
 
 def test_chain_curve():
@@ -123,7 +123,7 @@ def test_mean_stress_corrections():
     np.testing.assert_allclose(gerber.effective_range_MPa(s, half), [20.0 / 0.75], rtol=1e-12)
     # no credit for a compressive mean; failure at or above the ultimate strength
     np.testing.assert_allclose(goodman.effective_range_MPa(s, -half), [20.0], rtol=1e-12)
-    assert np.isinf(goodman.damage_per_cycle(s, 1.0, np.array([su])))
+    assert np.isinf(goodman.damage_per_cycle(s, np.array([su])))
     # SWT on a 0-to-max cycle (mean = range/2): S_ar = sqrt(S_max S_a) = S / sqrt(2)
     swt = none.with_factors(mean_correction="swt")
     np.testing.assert_allclose(swt.effective_range_MPa(s, s / 2), [2 * 20.0 / np.sqrt(2)], rtol=1e-12)
@@ -134,7 +134,7 @@ def test_mean_stress_corrections():
     np.testing.assert_allclose(walker.effective_range_MPa(s, s / 2), swt.effective_range_MPa(s, s / 2))
     # fully reversed cycles are unchanged by SWT; entirely compressive ones do no damage
     np.testing.assert_allclose(swt.effective_range_MPa(s, np.zeros(1)), [20.0], rtol=1e-12)
-    assert swt.damage_per_cycle(s, 1.0, -s)[0] == 0.0
+    assert swt.damage_per_cycle(s, -s)[0] == 0.0
     with pytest.raises(ValueError, match="mean"):
         swt.damage_per_cycle(s)
 

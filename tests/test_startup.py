@@ -140,5 +140,5 @@ def test_after_warmup_no_command_compiles(tmp_path):
                   "miner.add_cycles(*rf.feed(x), time_s=0.0)\n"
                   "miner.residue_damage(rf)\n"
                   "r, m, c = rf.residue_half_cycles()\n"
-                  "miner.sn_curve.damage_per_cycle(r, c, m)\n")
+                  "miner.sn_curve.damage_per_cycle(r, m, c)\n")
     assert NOTICE_START not in lib.stderr

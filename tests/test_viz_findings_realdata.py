@@ -32,7 +32,7 @@ def _hand_damage(tension: np.ndarray, lay: str) -> tuple[float, float]:
     """Miner damage incl. half cycles and the peak stress of a conductor, by hand."""
     stress = helix.conductor_stress(tension, helix.HelixCable.vaps_biw(), lay=lay)
     cyc = np.array([(r, m, c) for r, m, c, _, _ in rainflow.extract_cycles(stress)])
-    per_cycle = fatigue.SNCurve.vaps_copper().damage_per_cycle(cyc[:, 0], cyc[:, 2], cyc[:, 1])
+    per_cycle = fatigue.SNCurve.vaps_copper().damage_per_cycle(cyc[:, 0], cyc[:, 1], cyc[:, 2])
     return float(per_cycle.sum()), float(stress.max())
 
 

@@ -11,8 +11,8 @@ into blocks, so every value is computed from its own inputs by IEEE-754 operatio
 and sums run sequentially in closure order. ``log_det``/``exp_det`` are table-free,
 branch-free log and exp (within 1 ulp; reduction and minimax coefficients of Sun's fdlibm
 ``e_log.c``/``e_exp.c``), so compiled loops vectorise them; numba compiles without
-fast-math, so a vector body and its scalar remainder round alike, and the numpy backend,
-running the same functions on arrays, gets the same bits.
+fast-math, so a vector body and its scalar remainder round alike, and the same functions
+on numpy arrays (the tests' oracles) or run as plain Python give the same bits.
 """
 
 from __future__ import annotations
@@ -498,6 +498,7 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
 
 _LOOPS: dict[str, Callable] = {"axial_compiled": axial_loop, "feed_compiled": feed_loop,
                                "commit_compiled": commit_loop,
+                               "commit_damage_compiled": _commit_damage,
                                "damage_compiled": damage_loop, "residue_compiled": residue_loop,
                                "residue_cycles_compiled": residue_cycles_loop,
                                "ticks_compiled": ticks_loop}

@@ -1,7 +1,7 @@
 """Palmgren-Miner damage accumulation for a stream of rainflow cycles.
 
 ``MinerAccumulator(sn_curve, histogram_edges_Pa=None, rate_window_s=86400.0,
-rate_buckets=24, reference_cycles=1e7, backend="auto")``
+rate_buckets=24, reference_cycles=1e7)``
   ``add_cycles(ranges_Pa, means_Pa, counts, time_s=None) -> float``
       commit closed cycles (never revised); returns the damage they added. ``time_s``
       (seconds, any epoch, non-decreasing) dates them for the damage rate.
@@ -33,12 +33,9 @@ which do depend on blocking; it is a monitoring figure, not an exact one.
 from __future__ import annotations
 
 import math
-from typing import Literal
-
 import numpy as np
 
 from models.fatigue import _loops
-from models._jit import HAVE_NUMBA
 from models.fatigue.sn_curve import SNCurve
 
 _DAY_S = 86400.0
@@ -57,8 +54,7 @@ class MinerAccumulator:
     """Committed + provisional Miner damage with rate, histogram and remaining life."""
 
     def __init__(self, sn_curve: SNCurve, histogram_edges_Pa=None, rate_window_s: float = _DAY_S,
-                 rate_buckets: int = 24, reference_cycles: float = 1e7,
-                 backend: Literal["auto", "numba", "numpy"] = "auto"):
+                 rate_buckets: int = 24, reference_cycles: float = 1e7):
         if not isinstance(sn_curve, SNCurve):
             raise ValueError(f"sn_curve must be an SNCurve, got {type(sn_curve).__name__}")
         edges = np.asarray(np.linspace(0.0, 100e6, 101) if histogram_edges_Pa is None else histogram_edges_Pa,
@@ -71,12 +67,7 @@ class MinerAccumulator:
             raise ValueError(f"rate_buckets must be >= 1, got {rate_buckets!r}")
         if not (math.isfinite(reference_cycles) and reference_cycles > 0):
             raise ValueError(f"reference_cycles must be positive, got {reference_cycles!r}")
-        if backend == "auto":
-            backend = "numba" if HAVE_NUMBA else "numpy"
-        if backend not in ("numba", "numpy") or (backend == "numba" and not HAVE_NUMBA):
-            raise ValueError(f"backend {backend!r} is not available")
         self.sn_curve = sn_curve
-        self.backend = backend
         self.rate_window_s = float(rate_window_s)
         self.rate_buckets = int(rate_buckets)
         self.reference_cycles = float(reference_cycles)
@@ -122,20 +113,25 @@ class MinerAccumulator:
         time_s = self._check_time(time_s)
         if r.size == 0:
             added = 0.0
-        elif self._needs_means:
-            if means_Pa is None:
-                raise ValueError(f"the S-N curve's mean_correction={self.sn_curve.mean_correction!r} needs means_Pa")
-            # mean-corrected ranges drive the damage; the histogram keeps the nominal ones
-            added = self._commit_numpy(r, n, means_Pa)
-        elif self.backend == "numba":
-            committed, added, cycles, bad = _loops.commit_compiled(r, n, self._params, self._table,
-                                                                   self._inv_width, self._committed)
-            if bad >= 0:
-                raise ValueError(f"cycle {bad} has an invalid range or count ({r[bad]!r}, {n[bad]!r})")
+        else:
+            start = self._committed
+            if self._needs_means:
+                if means_Pa is None:
+                    raise ValueError(f"the S-N curve's mean_correction={self.sn_curve.mean_correction!r} needs means_Pa")
+                # mean-corrected ranges drive the damage, the histogram keeps the nominal ones:
+                # each cycle's damage first, then the compiled loop's in-order sum and binning
+                _check_cycles(r, n)
+                d = self.sn_curve.damage_per_cycle(r, means_Pa, n)
+                committed, cycles = (_loops.commit_damage_compiled or _loops._commit_damage)(
+                    r, n, np.ascontiguousarray(d, dtype=np.float64), self._table, self._inv_width, start)
+            else:
+                committed, _, cycles, bad = (_loops.commit_compiled or _loops.commit_loop)(
+                    r, n, self._params, self._table, self._inv_width, start)
+                if bad >= 0:  # nothing committed; the same test names the cycle
+                    _check_cycles(r, n)
             self._committed = committed
             self._cycles += cycles
-        else:
-            added = self._commit_numpy(r, n, None)
+            added = committed - start
         if time_s is not None:
             self._date(added, time_s)
         return added
@@ -157,26 +153,10 @@ class MinerAccumulator:
             self._date(added, time_s)
         return added
 
-    def _commit_numpy(self, raw: np.ndarray, n: np.ndarray, means) -> float:
-        """The compiled loop's sum and histogram in numpy (mean-corrected curves, or the
-        numpy backend); each cycle's damage from ``SNCurve.damage_per_cycle``."""
-        bad = np.flatnonzero(~((raw >= 0) & np.isfinite(raw) & (n >= 0) & np.isfinite(n)))
-        if bad.size:
-            raise ValueError(f"cycle {bad[0]} has an invalid range or count ({raw[bad[0]]!r}, {n[bad[0]]!r})")
-        d = self.sn_curve.damage_per_cycle(raw, n, means)
-        start = self._committed
-        # sequential (cumulative) sum in closure order: split invariant, unlike np.sum
-        self._committed = float(np.cumsum(np.concatenate(([start], d)))[-1])
-        self._cycles += float(np.cumsum(np.concatenate(([0.0], n)))[-1])
-        idx = np.searchsorted(self._edges, raw, side="right") - 1
-        inside = idx >= 0
-        np.add.at(self._hist, idx[inside], n[inside])
-        return self._committed - start
-
     def set_provisional(self, ranges_Pa, means_Pa, counts) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""
-        d = self.sn_curve.damage_per_cycle(np.asarray(ranges_Pa, dtype=np.float64),
-                                           np.asarray(counts, dtype=np.float64), means_Pa)
+        d = self.sn_curve.damage_per_cycle(np.asarray(ranges_Pa, dtype=np.float64), means_Pa,
+                                           np.asarray(counts, dtype=np.float64))
         self._provisional = float(np.sum(d))
         return self._provisional
 
@@ -185,10 +165,9 @@ class MinerAccumulator:
         end of a series (``rainflow.residue_half_cycles()``), each cycle's damage as the
         committed ones', summed in counting order; nothing is stored. Cheap enough for
         every alert tick: one compiled pass over the residue without mean correction."""
-        if not self._needs_means and HAVE_NUMBA:
-            return _loops.residue_compiled(rainflow._st, self._params)
-        ranges, means, counts = rainflow.residue_half_cycles()
-        d = self.sn_curve.damage_per_cycle(ranges, counts, means)
+        if not self._needs_means:
+            return (_loops.residue_compiled or _loops.residue_loop)(rainflow._st, self._params)
+        d = self.sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())
         return float(np.cumsum(d)[-1]) if d.shape[0] else 0.0
 
     def set_provisional_from(self, rainflow) -> float:
@@ -288,12 +267,12 @@ class MinerAccumulator:
         }
 
     @classmethod
-    def from_state(cls, state: dict, backend: Literal["auto", "numba", "numpy"] = "auto") -> "MinerAccumulator":
+    def from_state(cls, state: dict) -> "MinerAccumulator":
         if state.get("version") != _STATE_VERSION:
             raise ValueError(f"unsupported MinerAccumulator state version {state.get('version')!r}")
         acc = cls(SNCurve.from_dict(state["sn_curve"]), histogram_edges_Pa=state["histogram_edges_Pa"],
                   rate_window_s=state["rate_window_s"], rate_buckets=state["rate_buckets"],
-                  reference_cycles=state["reference_cycles"], backend=backend)
+                  reference_cycles=state["reference_cycles"])
         hist = np.asarray(state["histogram_counts"], dtype=np.float64)
         if hist.shape != acc._table[1].shape:
             raise ValueError("histogram_counts does not match histogram_edges_Pa")
@@ -306,3 +285,10 @@ class MinerAccumulator:
         acc._buckets = {int(k): float(v) for k, v in state["buckets"]}
         acc._rate = acc._older = None
         return acc
+
+
+def _check_cycles(ranges: np.ndarray, counts: np.ndarray) -> None:
+    """ValueError naming the first cycle with a negative or non-finite range or count."""
+    bad = np.flatnonzero(~((ranges >= 0) & np.isfinite(ranges) & (counts >= 0) & np.isfinite(counts)))
+    if bad.size:
+        raise ValueError(f"cycle {bad[0]} has an invalid range or count ({ranges[bad[0]]!r}, {counts[bad[0]]!r})")

@@ -1,6 +1,6 @@
 """Streaming four-point rainflow counting with the residue carried across blocks.
 
-``StreamingRainflow(hysteresis=0.0, backend="auto")``
+``StreamingRainflow(hysteresis=0.0)``
   ``feed(block) -> (ranges, means, counts)``  cycles closed by this block, numpy float64
       arrays in closure order (counts are all 1.0: four-point counting closes whole cycles).
   ``residue``                    open turning points (numpy array), oldest first; the last
@@ -25,25 +25,19 @@ cycle never depends on later samples, the cycles and the order in which they clo
 same for any split of the series into blocks; together with the residue half cycles they
 total the ASTM E1049 (``rainflow.extract_cycles``) counts for every (range, mean).
 
-Two backends give identical results: ``"numba"`` compiles ``_loops.feed_loop``
-(a few microseconds per call; per chunk of samples, a branch-free pass finds the confirmed
-turning points, then the four-point stack consumes them); ``"numpy"`` extracts
-monotone-run ends with vectorised numpy and runs the same state machine, uncompiled, over
-those only (the gate gives the same turning points on run ends as on all samples, because
-a run's end is its farthest point). ``"auto"`` picks numba when it imports. A NaN or inf in a block raises ValueError and nothing from that block is
-counted.
+The counting runs in one compiled loop, ``_loops.feed_loop`` (a few microseconds per call;
+per chunk of samples, a branch-free pass finds the confirmed turning points, then the
+four-point stack consumes them); without numba the same loop runs as plain Python. A NaN
+or inf in a block raises ValueError and nothing from that block is counted.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Literal
 
 import numpy as np
 
-from models.fatigue import _loops
-
-# the compiled loop and the layout of the state vector it shares with the numpy backend
+# the compiled loop and the layout of the counter state vector
 from models.fatigue import _loops
 from models.fatigue._loops import CAND as _CAND
 from models.fatigue._loops import CHUNK as _CHUNK
@@ -53,68 +47,23 @@ from models.fatigue._loops import HYST as _HYST
 from models.fatigue._loops import NS as _NS
 from models.fatigue._loops import STARTED as _STARTED
 from models.fatigue._loops import cycle_room as _cycle_room
-from models.fatigue._loops import feed_loop as _feed_loop
-from models._jit import HAVE_NUMBA
-
-Backend = Literal["auto", "numba", "numpy"]
 
 _STATE_VERSION = 1
 
 
-def _run_ends(x: np.ndarray, st: np.ndarray) -> np.ndarray:
-    """Samples (vectorised) that end a monotone run; the state machine only needs these."""
-    if st[_STARTED] == 0.0:
-        y = x
-    else:
-        y = np.concatenate(([st[_CAND]], x))
-    keep = np.empty(y.size, dtype=bool)
-    keep[:1] = True
-    np.not_equal(y[1:], y[:-1], out=keep[1:])
-    z = y[keep]
-    if z.size < 2:
-        return z[:0] if st[_STARTED] != 0.0 else z
-    step = np.sign(np.diff(z))
-    turn = np.flatnonzero(step[1:] != step[:-1]) + 1
-    ends = np.concatenate((z[turn], z[-1:]))
-    return ends if st[_STARTED] != 0.0 else np.concatenate((z[:1], ends))
-
-
-def _feed_compiled(st: np.ndarray, x: np.ndarray):
-    """The compiled loop, into an output allocated here (``_loops.feed_loop``)."""
+def _feed(st: np.ndarray, x: np.ndarray):
+    """The counting loop (compiled, else plain Python) into an output allocated here."""
     out = np.empty((3, _cycle_room(st, x.size)))
-    k, used = _loops.feed_compiled(st, x, out)
+    k, used = (_loops.feed_compiled or _loops.feed_loop)(st, x, out)
     return out[:, :k], used
-
-
-def _feed_numpy(st: np.ndarray, x: np.ndarray):
-    """Pure numpy/Python twin of the compiled loop: same state machine on run ends only."""
-    bad = np.flatnonzero(~np.isfinite(x))
-    if bad.size:
-        return np.empty((3, 0)), -(int(bad[0]) + 1)
-    ends = _run_ends(x, st)
-    if ends.size == 0:
-        return np.empty((3, 0)), x.size
-    # the state machine gives the same result on any subsequence that keeps every run
-    # end; feed() has grown the stack storage so that the whole block fits
-    out = np.empty((3, _cycle_room(st, ends.size)))
-    k, _ = _feed_loop(st, ends, out)
-    return out[:, :k], x.size
 
 
 class StreamingRainflow:
     """Incremental four-point rainflow counter (see module docstring for the API)."""
 
-    def __init__(self, hysteresis: float = 0.0, backend: Backend = "auto", _capacity: int = 4 * _CHUNK):
+    def __init__(self, hysteresis: float = 0.0, _capacity: int = 4 * _CHUNK):
         if not (isinstance(hysteresis, (int, float)) and math.isfinite(hysteresis) and hysteresis >= 0):
             raise ValueError(f"hysteresis must be a finite number >= 0, got {hysteresis!r}")
-        if backend == "auto":
-            backend = "numba" if HAVE_NUMBA else "numpy"
-        if backend not in ("numba", "numpy"):
-            raise ValueError(f"backend must be 'auto', 'numba' or 'numpy', got {backend!r}")
-        if backend == "numba" and not HAVE_NUMBA:
-            raise ValueError("backend='numba' requested but numba is not importable")
-        self.backend = backend
-        self._feed = _feed_compiled if backend == "numba" else _feed_numpy
         self._st = np.zeros(_HEADER + max(int(_capacity), 2 * _CHUNK))
         self._st[_HYST] = float(hysteresis)
         self._samples = 0
@@ -138,16 +87,14 @@ class StreamingRainflow:
         x = np.asarray(block, dtype=np.float64)
         if x.ndim != 1:
             x = x.reshape(-1) if x.ndim == 0 else _reject_shape(x)
-        if self.backend == "numpy" and self._st.size - _HEADER < int(self._st[_NS]) + x.size + _CHUNK:
-            self._grow(int(self._st[_NS]) + x.size + _CHUNK)
-        cycles, used = self._feed(self._st, x)
+        cycles, used = _feed(self._st, x)
         if used < 0:
             raise ValueError(f"stress block contains NaN or inf at index {-used - 1}; block not counted")
-        if used < x.size:  # compiled loop: stack storage full; grow and finish the block
+        if used < x.size:  # stack storage full: grow it and finish the block
             parts = [cycles]
             while used < x.size:
                 self._grow()
-                more, n = self._feed(self._st, x[used:])
+                more, n = _feed(self._st, x[used:])
                 parts.append(more)
                 used += n
             cycles = np.concatenate(parts, axis=1)
@@ -188,14 +135,14 @@ class StreamingRainflow:
         }
 
     @classmethod
-    def from_state(cls, state: dict, backend: Backend = "auto") -> "StreamingRainflow":
+    def from_state(cls, state: dict) -> "StreamingRainflow":
         """Rebuild a counter saved with ``state()``."""
         if state.get("version") != _STATE_VERSION:
             raise ValueError(f"unsupported StreamingRainflow state version {state.get('version')!r}")
         stack = [float(v) for v in state["stack"]]
         if state["direction"] not in (-1, 0, 1) or not all(math.isfinite(v) for v in stack):
             raise ValueError("corrupt StreamingRainflow state")
-        rf = cls(hysteresis=float(state["hysteresis"]), backend=backend, _capacity=2 * len(stack) + 4 * _CHUNK)
+        rf = cls(hysteresis=float(state["hysteresis"]), _capacity=2 * len(stack) + 4 * _CHUNK)
         rf._st[_NS] = len(stack)
         rf._st[_CAND] = float(state["candidate"])
         rf._st[_DIR] = float(state["direction"])

@@ -34,7 +34,8 @@ tabulated here), ``dnv_chain_studless()`` (DNV-OS-E301 studless chain, m = 3,
 a_D = 6.0e10, stress range in MPa on the nominal area).
 
 Methods: ``cycles_to_failure(range_Pa, mean_Pa=None)``, ``damage_per_cycle(range_Pa,
-counts=1, mean_Pa=None)``, ``stress_range_at(cycles)`` (inverse, Pa, zero mean),
+mean_Pa=None, counts=1)`` (the (ranges, means, counts) order of ``StreamingRainflow.feed``),
+``stress_range_at(cycles)`` (inverse, Pa, zero mean),
 ``to_dict()`` / ``from_dict()``.
 """
 
@@ -288,7 +289,7 @@ class SNCurve:
         s = _mean_corrected(r * self.scf, sm, self.mean_correction, self.ultimate_Pa, self.walker_gamma)
         return s * (self.derating / _MPA)
 
-    def damage_per_cycle(self, range_Pa, counts=1.0, mean_Pa=None) -> np.ndarray:
+    def damage_per_cycle(self, range_Pa, mean_Pa=None, counts=1.0) -> np.ndarray:
         """Miner damage count / N(S) (times ``dff``) of each cycle; stress ranges in Pa.
 
         Evaluated by the compiled loops' own per-cycle function (``_loops.damage_loop``,
@@ -306,7 +307,7 @@ class SNCurve:
 
     def cycles_to_failure(self, range_Pa, mean_Pa=None) -> np.ndarray:
         """N(S) for stress ranges in Pa (inf below a cut-off or for zero range); excludes dff."""
-        d = self.damage_per_cycle(range_Pa, 1.0, mean_Pa) / self.dff
+        d = self.damage_per_cycle(range_Pa, mean_Pa) / self.dff
         with np.errstate(divide="ignore"):
             return 1.0 / d
 

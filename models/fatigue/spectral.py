@@ -49,8 +49,10 @@ _PANELS_PER_DECADE = 64
 
 
 class DamageCurve(Protocol):
-    def damage_per_cycle(self, range_Pa: ArrayLike, counts: ArrayLike = 1.0,
-                         mean_Pa: ArrayLike | None = None) -> NDArray[np.float64]: ...
+    """What the damage functions need of an S-N curve (``models.fatigue.SNCurve`` has it)."""
+
+    def damage_per_cycle(self, range_Pa: ArrayLike, mean_Pa: ArrayLike | None = None,
+                         counts: ArrayLike = 1.0) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True)

@@ -3,12 +3,12 @@
 ``commit_ticks(rainflow, miner, stress_Pa, stops, times_s, pending=None, residue=True)``
   tick k takes ``stress_Pa[stops[k-1]:stops[k]]``
   (from 0 for the first) and commits its closed cycles dated ``times_s[k]``, after the
-  ``pending`` (ranges, counts) cycles closed earlier in the first tick. Returns a
+  ``pending`` (ranges, means, counts) cycles closed earlier in the first tick. Returns a
   :class:`TickCommits` with each tick's committed damage, damage rate and (if
   ``residue``) the open residue's damage at its end (``MinerAccumulator.residue_damage``),
-  and the closed cycles; or None when the compiled pass is unavailable (a numpy backend, a
-  mean-corrected curve), then the caller runs ``rainflow.feed`` and ``miner.add_cycles``
-  per tick, which give the same bits.
+  and the closed cycles; or None for a mean-corrected curve (the pass commits nominal
+  ranges), then the caller runs ``rainflow.feed`` and ``miner.add_cycles`` per tick, which
+  give the same bits. Without numba the pass runs as plain Python.
 """
 
 from __future__ import annotations
@@ -37,17 +37,16 @@ class TickCommits:
 
 def commit_ticks(rainflow: StreamingRainflow, miner: MinerAccumulator, stress_Pa: np.ndarray,
                  stops: Sequence[int], times_s: Sequence[float],
-                 pending: tuple[np.ndarray, np.ndarray] | None = None,
+                 pending: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                  residue: bool = True) -> TickCommits | None:
     """Stress samples through the counter and the accumulator tick by tick in one compiled
-    pass (see the module docstring); None when that pass is unavailable."""
-    ticks_compiled = _loops.ticks_compiled
-    if (ticks_compiled is None or rainflow.backend != "numba" or miner.backend != "numba"
-            or miner._needs_means):
+    pass (see the module docstring); None for a mean-corrected curve."""
+    if miner._needs_means:
         return None
+    ticks_loop = _loops.ticks_compiled or _loops.ticks_loop
     n_ticks = len(stops)
     x = np.ascontiguousarray(stress_Pa[:stops[-1]] if n_ticks else stress_Pa[:0], dtype=np.float64)
-    pre_r, pre_c = pending if pending is not None else (np.zeros(0), np.zeros(0))
+    pre_r, _, pre_c = pending if pending is not None else (np.zeros(0), None, np.zeros(0))
     # the compiled pass works on the components' own state arrays (same package)
     size = (int(rainflow._st[_NS]) + x.shape[0]) // 2 + 2  # each closed cycle pops two points
     out_r, out_m = np.empty(size), np.empty(size)
@@ -56,10 +55,10 @@ def commit_ticks(rainflow: StreamingRainflow, miner: MinerAccumulator, stress_Pa
     stops_a = np.asarray(stops, dtype=np.int64)
     k, nc, total = 0, 0, miner._committed
     while k < n_ticks:
-        k, nc, total = ticks_compiled(x, stops_a, k, rainflow._st, miner._params, miner._table,
-                                      miner._inv_width, total, np.asarray(pre_r, np.float64),
-                                      np.asarray(pre_c, np.float64), out_r, out_m, nc,
-                                      committed, cycles, res, residue)
+        k, nc, total = ticks_loop(x, stops_a, k, rainflow._st, miner._params, miner._table,
+                                  miner._inv_width, total, np.asarray(pre_r, np.float64),
+                                  np.asarray(pre_c, np.float64), out_r, out_m, nc,
+                                  committed, cycles, res, residue)
         if k < 0:
             raise ValueError("stress_Pa contains NaN or inf; nothing counted")
         if k < n_ticks:
