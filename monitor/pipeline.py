@@ -320,7 +320,7 @@ class Pipeline:
         st = state or {}
         self.config = config
         self.buoy_id = config.buoy.id
-        self.sinks = list(sinks)
+        self.sinks = tuple(sinks)  # fixed: the hooks below are taken from them once
         # optional sink hooks, called by the core so live and replay feed them alike: raw
         # blocks (e.g. GNSS positions for the Rerun map) and each alert tick's observation
         self._block_hooks = [s.on_block for s in self.sinks if hasattr(s, "on_block")]
