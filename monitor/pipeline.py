@@ -88,7 +88,7 @@ def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, 
 def alert_to_dict(record: Any) -> dict[str, Any]:
     if hasattr(record, "to_dict"):
         return record.to_dict()
-    if dataclasses.is_dataclass(record):
+    if dataclasses.is_dataclass(record) and not isinstance(record, type):
         return dataclasses.asdict(record)
     return dict(record)
 
@@ -206,6 +206,10 @@ class _TensionStats:
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
+    # set by prepare(): per tick end, samples received and rejected, rejected per reason
+    # (None without rejections), accepted, and the last accepted time
+    _ticks: tuple[list[int], list[int], list[list[int]] | None, list[int], list[int]]
+
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
         self.t, self.codes = t, codes
@@ -215,7 +219,6 @@ class _StreamSlab:
         else:  # the usual case: no copies
             self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
         self._before = validator_before
-        self._ticks: tuple[list | None, ...] | None = None
 
     @staticmethod
     def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
@@ -390,9 +393,10 @@ class Pipeline:
                                           "time_start_ns": None, "time_end_ns": None}))
         self.new_alerts: list[Any] = []
         # load samples of the tick not yet evaluated: (t_ns, tension_N, source)
-        self.open_tick = _NO_LOAD if "open_tick" not in st else (
-            np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
-            np.array(st["open_tick"][2], np.int8))
+        self.open_tick: tuple[np.ndarray, np.ndarray, np.ndarray] = (
+            _NO_LOAD if "open_tick" not in st else
+            (np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
+             np.array(st["open_tick"][2], np.int8)))
         # motion estimates of the tick not yet evaluated (t_ns, tension_N), full-estimate mode
         self.open_estimate = (np.array(st["open_estimate"][0], np.int64),
                               np.array(st["open_estimate"][1], np.float64)
@@ -541,10 +545,10 @@ class Pipeline:
         self.new_alerts = []
         if self.sea_states is not None:  # before the ticks this slab completes
             for name, wanted in _SEA_STATE_FIELDS.items():
-                info = streams.get(name)
-                if info is not None and info.acc_t.shape[0]:
-                    fields = dict(zip(SENSOR_FIELDS[name], info.acc_values))
-                    getattr(self.sea_states, name)(info.acc_t, *(fields[f] for f in wanted))
+                part = streams.get(name)
+                if part is not None and part.acc_t.shape[0]:
+                    fields = dict(zip(SENSOR_FIELDS[name], part.acc_values))
+                    getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
             self.sea_states.load(t, stresses)
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
         if t.shape[0]:
@@ -706,8 +710,9 @@ class Pipeline:
         if stop > start:
             for name, comp in self.components.items():
                 closed[name].append(comp.feed(stresses[name][start:stop]))
-            self.open_tick = tuple(np.concatenate([o, x[start:]])
-                                   for o, x in zip(self.open_tick, (t, v, src)))
+            o_t, o_v, o_src = self.open_tick
+            self.open_tick = (np.concatenate([o_t, t[start:]]), np.concatenate([o_v, v[start:]]),
+                              np.concatenate([o_src, src[start:]]))
         prev_end = ticks.ends_l[-1] if ticks.n else _NEVER
         for s, info in streams.items():
             # what this slab adds to the tick still open

@@ -193,7 +193,7 @@ class StreamMerge:
             return rel
         drop = np.zeros(rel["pub"].shape[0], bool)
         # runs of equal (pub, stream): compare each message with the earlier kept ones
-        for j in np.flatnonzero(same) + 1:
+        for j in (np.flatnonzero(same) + 1).tolist():
             i = j - 1
             while (i >= 0 and rel["pub"][i] == rel["pub"][j]
                    and rel["stream"][i] == rel["stream"][j]):

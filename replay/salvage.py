@@ -218,7 +218,7 @@ class FileSalvage:
                     got = inflate(content, cut, self._dctx), None
                 else:
                     f.seek(ln, 1)
-                awaiting = self._chunk(*got, pos, ctx, st)
+                awaiting = self._chunk(got[0], got[1], pos, ctx, st)
                 if ahead is not None and not cut:
                     # the next chunk is inflated and digested while the caller works
                     ahead.schedule(pos + 9 + ln, dict(ctx.channels))
@@ -270,7 +270,7 @@ class FileSalvage:
         st.chunks += 1
         if c.raw is None:
             st.bad_chunks += 1
-            st.lost.append(LostRange(c.error, pos, c.t_lo, c.t_hi))
+            st.lost.append(LostRange(c.error or "chunk lost", pos, c.t_lo, c.t_hi))
             return [st.lost[-1], len(st.lost) - 1] if c.indexed else None
         n = self._deliver(scanned if scanned is not None else digest(c.raw, ctx.channels),
                           ctx, st)
