@@ -110,7 +110,8 @@ class AlertDelivery:
         self.zenoh = ZenohAlertSink(session, pipeline.buoy_id, active=self.engine.active())
         self.outbox = OutboxSink.from_config(AlertsConfig.from_dict(alerts_raw, "alerts"),
                                              active=self.engine.active())
-        pipeline.sinks.extend(s for s in (self.zenoh, self.outbox) if s is not None)
+        # the daemon hands these the pipeline's alert transitions (monitor.daemon.Attach)
+        self.alert_channels = [s for s in (self.zenoh, self.outbox) if s is not None]
 
     def poll(self) -> None:
         self.zenoh.apply_commands(self.engine)

@@ -81,8 +81,33 @@ class Extension(Protocol):
     # shutdown before the daemon stops intake (an input inside the daemon sends its last data)
 
 
-# attach(session, pipeline) -> extensions; may add sinks to ``pipeline.sinks``
+# attach(session, pipeline) -> extensions; an extension delivering alerts lists its channels
+# (objects with ``on_step`` and ``publish(records)``) in ``alert_channels``
 Attach = Callable[[Any, PipelineLike], Sequence[Extension]]
+
+
+class _AlertChannels:
+    """The pipeline's alert sink, fixed when the pipeline is built: hands the alert
+    transitions of each step, and the live rules' (:meth:`publish`), to the delivery channels
+    the extensions open once the Zenoh session is up."""
+
+    def __init__(self) -> None:
+        self.channels: list[Any] = []
+
+    def on_step(self, step: StepResult) -> None:
+        for channel in self.channels:
+            channel.on_step(step)
+
+    def publish(self, records: list[Any]) -> None:
+        for channel in self.channels:
+            try:
+                channel.publish(records)
+            except Exception as exc:  # noqa: BLE001 (one channel must not stop the others)
+                log.error("live alert delivery failed", extra={"fields": {
+                    "sink": type(channel).__name__, "error": repr(exc)}})
+
+    def close(self) -> None:
+        """The channels are closed by the extensions that opened them."""
 
 
 class _RecordAlertsSink:
@@ -236,7 +261,9 @@ class Daemon:
         self.recorder = (McapRecorder(config.record.dir, config.record.rotate_s,
                                       config.record.flush_interval_s)
                          if config.record.enabled else None)
-        sinks = [_RecordAlertsSink(self.recorder)] if self.recorder is not None else []
+        self._alert_channels = _AlertChannels()
+        sinks: list[Sink] = [_RecordAlertsSink(self.recorder)] if self.recorder is not None else []
+        sinks.append(self._alert_channels)
         self.pipeline = make_pipeline(saved.get("pipeline"), sinks)
         self._attach = attach
         self._extensions: Sequence[Extension] = ()
@@ -275,6 +302,8 @@ class Daemon:
                 zenoh_io.monitor_token_key(self.buoy_id)))
             if self._attach is not None:
                 self._extensions = self._attach(self.session, self.pipeline)
+                for ext in self._extensions:
+                    self._alert_channels.channels.extend(getattr(ext, "alert_channels", ()))
                 declared.extend(_Closing(e) for e in self._extensions)
             declared.append(zenoh_io.declare_forecast_subscriber(
                 self.session, self.buoy_id, self._q))
@@ -690,21 +719,14 @@ class Daemon:
         self._dirty_status = False
 
     def _deliver_live(self, records: list[Any], sensor_time_ns: int) -> None:
-        """Live-rule transitions take the pipeline's alert path: every alert sink of the
-        pipeline (Zenoh alert keys, outbox channels: anything with ``publish(records)``), and
-        the recording, stamped with the sensor time like every other message."""
+        """Live-rule transitions take the pipeline's alert path: every alert delivery channel
+        (Zenoh alert keys, outbox channels), and the recording, stamped with the sensor time
+        like every other message."""
         for rec in records:
             log.warning("live alert", extra={"fields": {
                 "rule": rec.rule, "component": rec.component, "event": rec.event,
                 "value": rec.value, "summary": rec.summary}})
-        for sink in getattr(self.pipeline, "sinks", ()):
-            publish = getattr(sink, "publish", None)
-            if publish is not None:
-                try:
-                    publish(records)
-                except Exception as exc:  # noqa: BLE001 (one sink must not stop the others)
-                    log.error("live alert delivery failed", extra={"fields": {
-                        "sink": type(sink).__name__, "error": repr(exc)}})
+        self._alert_channels.publish(records)
         if self.recorder is not None and sensor_time_ns > 0:  # as publish_json
             for rec in records:
                 self.recorder.write(rec.key, zenoh_io.to_json_bytes(rec.to_dict()), JSON_OBJECT,

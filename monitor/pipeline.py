@@ -88,7 +88,7 @@ def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, 
 def alert_to_dict(record: Any) -> dict[str, Any]:
     if hasattr(record, "to_dict"):
         return record.to_dict()
-    if dataclasses.is_dataclass(record):
+    if dataclasses.is_dataclass(record) and not isinstance(record, type):
         return dataclasses.asdict(record)
     return dict(record)
 
@@ -206,6 +206,10 @@ class _TensionStats:
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
+    # set by prepare(): per tick end, samples received and rejected, rejected per reason
+    # (None without rejections), accepted, and the last accepted time
+    _ticks: tuple[list[int], list[int], list[list[int]] | None, list[int], list[int]]
+
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
         self.t, self.codes = t, codes
@@ -215,7 +219,6 @@ class _StreamSlab:
         else:  # the usual case: no copies
             self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
         self._before = validator_before
-        self._ticks: tuple[list | None, ...] | None = None
 
     @staticmethod
     def before(v: StreamValidator) -> tuple[int, dict[str, int], bool, int]:
@@ -260,6 +263,26 @@ class _StreamSlab:
         )
 
 
+@dataclasses.dataclass(slots=True)
+class _SlabTicks:
+    """The ticks one slab completes: their ends, the sample index after each end in the
+    slab's load series (``cuts``, one more: the slab's length) and the first tick end after
+    them; when they are evaluated, their load figures and (full-estimate mode) mean motion
+    estimates."""
+
+    ends: np.ndarray
+    ends_l: list[int]
+    cuts: list[int]
+    next_tick: int | None
+    evaluate: bool
+    load: _TickLoad | None
+    est_means: list[float] | None
+
+    @property
+    def n(self) -> int:
+        return len(self.ends_l)
+
+
 class _LazyStreams(Mapping[str, StreamObs]):
     """Per-tick stream health, computed only for the streams a rule looks at (each at most
     once: the first slab tick also takes the counts earlier slabs left for it)."""
@@ -300,7 +323,7 @@ class Pipeline:
         st = state or {}
         self.config = config
         self.buoy_id = config.buoy.id
-        self.sinks = list(sinks)
+        self.sinks = tuple(sinks)  # fixed: the hooks below are taken from them once
         # optional sink hooks, called by the core so live and replay feed them alike: raw
         # blocks (e.g. GNSS positions for the Rerun map) and each alert tick's observation
         self._block_hooks = [s.on_block for s in self.sinks if hasattr(s, "on_block")]
@@ -370,9 +393,10 @@ class Pipeline:
                                           "time_start_ns": None, "time_end_ns": None}))
         self.new_alerts: list[Any] = []
         # load samples of the tick not yet evaluated: (t_ns, tension_N, source)
-        self.open_tick = _NO_LOAD if "open_tick" not in st else (
-            np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
-            np.array(st["open_tick"][2], np.int8))
+        self.open_tick: tuple[np.ndarray, np.ndarray, np.ndarray] = (
+            _NO_LOAD if "open_tick" not in st else
+            (np.array(st["open_tick"][0], np.int64), np.array(st["open_tick"][1], np.float64),
+             np.array(st["open_tick"][2], np.int8)))
         # motion estimates of the tick not yet evaluated (t_ns, tension_N), full-estimate mode
         self.open_estimate = (np.array(st["open_estimate"][0], np.int64),
                               np.array(st["open_estimate"][1], np.float64)
@@ -521,10 +545,10 @@ class Pipeline:
         self.new_alerts = []
         if self.sea_states is not None:  # before the ticks this slab completes
             for name, wanted in _SEA_STATE_FIELDS.items():
-                info = streams.get(name)
-                if info is not None and info.acc_t.shape[0]:
-                    fields = dict(zip(SENSOR_FIELDS[name], info.acc_values))
-                    getattr(self.sea_states, name)(info.acc_t, *(fields[f] for f in wanted))
+                part = streams.get(name)
+                if part is not None and part.acc_t.shape[0]:
+                    fields = dict(zip(SENSOR_FIELDS[name], part.acc_values))
+                    getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
             self.sea_states.load(t, stresses)
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
         if t.shape[0]:
@@ -570,8 +594,25 @@ class Pipeline:
                       tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray]
                       ) -> dict[str, list[np.ndarray]]:
         """Rainflow and Miner damage over the slab's whole ticks (each committed at its end),
-        the alert rules at every tick end, and the samples after the last end kept pending."""
+        the alert rules at every tick end, and the samples after the last end kept pending;
+        returns each component's closed cycles (ranges, means, counts)."""
+        ticks = self._due_ticks(t, v, src, stresses, streams, tick_limit, estimate)
         closed: dict[str, list[tuple[np.ndarray, ...]]] = {n: [] for n in self.components}
+        figures = self._commit_ticks(stresses, ticks, closed)
+        self._evaluate_ticks(t, v, src, streams, ticks, figures)
+        self._carry_estimate(estimate, ticks.ends)
+        if ticks.n:
+            self.next_tick_ns = ticks.next_tick
+            self.tick_counts = {}
+        self._keep_open_tick(t, v, src, stresses, streams, ticks, closed)
+        return {n: [np.concatenate(parts) for parts in zip(*cycles)] for n, cycles in closed.items()}
+
+    def _due_ticks(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                   stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
+                   tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray]) -> _SlabTicks:
+        """The ticks this slab completes (those ending at or before ``tick_limit``; the grid
+        starts at the first sample's tick) and, when they are evaluated, their load figures,
+        stream health and mean motion estimates."""
         if self.next_tick_ns is None and streams:
             first = min(int(x.t[0]) for x in streams.values())
             self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
@@ -584,66 +625,101 @@ class Pipeline:
         cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
         evaluate = (self._has_rules or bool(self._tick_hooks) or self.sea_states is not None
                     ) and ends.shape[0] > 0
+        load, est_means = None, None
         if evaluate:
             for info in streams.values():
                 info.prepare(ends)
             load = _TickLoad(v, src, stresses, np.append(0, cuts[:-2]), cuts[:-1])
             if self._full_estimate:
                 est_means = self._estimate_means(*estimate, ends)
-        start, prev_end = 0, _NEVER
-        cuts_l, ends_l = cuts.tolist(), ends.tolist()  # python ints for the per-tick loop
-        n_ticks = ends.shape[0]
-        # rainflow and Miner over the slab's whole ticks, with every tick's figures
+        # python ints for the per-tick loop
+        return _SlabTicks(ends, ends.tolist(), cuts.tolist(), next_tick, evaluate, load,
+                          est_means)
+
+    def _commit_ticks(self, stresses: Mapping[str, np.ndarray], ticks: _SlabTicks,
+                      closed: Mapping[str, list[tuple[np.ndarray, ...]]]
+                      ) -> dict[str, list[tuple[float, float, float, float]]]:
+        """Rainflow and Miner over the slab's whole ticks, each committed at its end; returns
+        every component's figures at every tick end (when the ticks are evaluated)."""
         figures = {}
         for name, comp in self.components.items():
-            run = comp.run_ticks(stresses[name], cuts_l[:n_ticks], ends_l, evaluate)
+            run = comp.run_ticks(stresses[name], ticks.cuts[:ticks.n], ticks.ends_l,
+                                 ticks.evaluate)
             figures[name] = run.figures
             closed[name].append(run.cycles)
+        return figures
+
+    def _evaluate_ticks(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                        streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
+                        figures: Mapping[str, list[tuple[float, float, float, float]]]) -> None:
+        """Each tick end in turn: the newest load sample so far, then (when evaluated) the
+        alert rules; the damage split of the evaluated ticks."""
         split_rows: list[tuple[int, int, float, float]] = []  # per evaluated tick
-        for k in range(n_ticks):
-            stop, end = cuts_l[k], ends_l[k]
+        start = 0
+        for k in range(ticks.n):
+            stop = ticks.cuts[k]
             if stop > start:
                 self.last["load_t_ns"], self.last["load_src"] = int(t[stop - 1]), int(src[stop - 1])
-            if evaluate:
-                tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
-                tick, j = load, k
-                if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
-                    tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
-                    tick = _TickLoad(tv, ts, {n: c.stress(tv, record=False) for n, c in self.components.items()},
-                                     np.zeros(1, np.int64), np.full(1, tv.shape[0]))
-                    j = 0
-                est_mean = est_means[k] if self._full_estimate else tick.est[j]
-                self._evaluate(k, end, tt, tv, tick, j, streams,
-                               {n: f[k] for n, f in figures.items()}, est_mean)
-                split_rows.append((tick.n_meas[j], tick.n[j], tick.meas[j], est_mean))
+            if ticks.evaluate:
+                split_rows.append(self._evaluate_tick(k, t[start:stop], v[start:stop],
+                                                      src[start:stop], streams, ticks, figures))
             self.open_tick = _NO_LOAD
-            start, prev_end = stop, end
+            start = stop
         if split_rows:
-            self.damage_split.ticks({n: [f[k][1] for k in range(n_ticks)]
+            self.damage_split.ticks({n: [f[k][1] for k in range(ticks.n)]
                                      for n, f in figures.items()}, split_rows)
-        if self._full_estimate:
-            e_t, e_v = estimate
-            rest = int(np.searchsorted(e_t, ends[-1], side="right")) if ends.shape[0] else 0
-            base = _NO_LOAD[:2] if ends.shape[0] else self.open_estimate
-            self.open_estimate = (np.concatenate([base[0], e_t[rest:]]),
-                                  np.concatenate([base[1], e_v[rest:]]))
-        if ends.shape[0]:
-            self.next_tick_ns = next_tick
-            self.tick_counts = {}
-        stop = cuts_l[n_ticks]
+
+    def _evaluate_tick(self, k: int, tt: np.ndarray, tv: np.ndarray, ts: np.ndarray,
+                       streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
+                       figures: Mapping[str, list[tuple[float, float, float, float]]]
+                       ) -> tuple[int, int, float, float]:
+        """The alert rules at the end of the slab's ``k``-th tick, whose load samples in this
+        slab are ``(tt, tv, ts)``; returns the tick's damage-split row (measured samples,
+        samples, measured mean, estimated mean)."""
+        assert ticks.load is not None  # prepared whenever the ticks are evaluated
+        tick, j = ticks.load, k
+        if self.open_tick[0].shape[0]:  # the tick began in an earlier slab
+            tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
+            tick = _TickLoad(tv, ts, {n: c.stress(tv, record=False) for n, c in self.components.items()},
+                             np.zeros(1, np.int64), np.full(1, tv.shape[0]))
+            j = 0
+        est_mean = ticks.est_means[k] if ticks.est_means is not None else tick.est[j]
+        self._evaluate(k, ticks.ends_l[k], tt, tv, tick, j, streams,
+                       {n: f[k] for n, f in figures.items()}, est_mean)
+        return tick.n_meas[j], tick.n[j], tick.meas[j], est_mean
+
+    def _carry_estimate(self, estimate: tuple[np.ndarray, np.ndarray], ends: np.ndarray) -> None:
+        """Full-estimate mode: keep the motion estimates after the last tick end for the
+        tick still open."""
+        if not self._full_estimate:
+            return
+        e_t, e_v = estimate
+        rest = int(np.searchsorted(e_t, ends[-1], side="right")) if ends.shape[0] else 0
+        base = _NO_LOAD[:2] if ends.shape[0] else self.open_estimate
+        self.open_estimate = (np.concatenate([base[0], e_t[rest:]]),
+                              np.concatenate([base[1], e_v[rest:]]))
+
+    def _keep_open_tick(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
+                        stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
+                        ticks: _SlabTicks, closed: Mapping[str, list[tuple[np.ndarray, ...]]]
+                        ) -> None:
+        """The samples after the last tick end: their cycles close now but are committed at
+        that tick's end; their load and each stream's counts wait for the tick's evaluation."""
+        start = ticks.cuts[ticks.n - 1] if ticks.n else 0
+        stop = ticks.cuts[ticks.n]
         if stop > start:
-            # the samples after the last tick end: their cycles wait for that tick's end
             for name, comp in self.components.items():
                 closed[name].append(comp.feed(stresses[name][start:stop]))
-            self.open_tick = tuple(np.concatenate([o, x[start:]])
-                                   for o, x in zip(self.open_tick, (t, v, src)))
+            o_t, o_v, o_src = self.open_tick
+            self.open_tick = (np.concatenate([o_t, t[start:]]), np.concatenate([o_v, v[start:]]),
+                              np.concatenate([o_src, src[start:]]))
+        prev_end = ticks.ends_l[-1] if ticks.n else _NEVER
         for s, info in streams.items():
             # what this slab adds to the tick still open
             received, rej = info.counts_after(prev_end)
             counts = self.tick_counts.setdefault(s, [0, 0])
             counts[0] += received
             counts[1] += rej
-        return {n: [np.concatenate(parts) for parts in zip(*cycles)] for n, cycles in closed.items()}
 
     def _estimate_means(self, e_t: np.ndarray, e_v: np.ndarray, ends: np.ndarray) -> list[float]:
         """Mean motion estimate in each tick ending at ``ends`` (the first one with the

@@ -57,7 +57,7 @@ def write_html(path: str, report: dict) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from replay.report import summary_text, write_report
-    from replay.reader import expand_paths
+    from replay.log_files import expand_paths
     from replay.runner import replay_logs
 
     try:

@@ -113,7 +113,7 @@ def discover(paths: Iterable[str | Path]) -> list[BuoyArchive]:
     """
     per_buoy: dict[str, list[tuple[int, str]]] = {}
     seen: set[Path] = set()
-    from replay.reader import expand_paths
+    from replay.log_files import expand_paths
 
     for path in expand_paths(paths, recursive=True, missing="raise"):
         real = path.resolve()

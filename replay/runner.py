@@ -34,7 +34,7 @@ def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
     going back in time); files whose start cannot be read go last, in the order given. A
     missing path is logged and skipped (the others are still replayed); FileNotFoundError
     if nothing is left."""
-    from replay.reader import expand_paths, file_start_ns
+    from replay.log_files import expand_paths, file_start_ns
 
     out: list[Path] = []
     seen: set[Path] = set()
@@ -230,7 +230,8 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     """
     from monitor.viz.report_history import ReportHistory
     from replay.forecast_log import read_forecasts
-    from replay.reader import LogReader, time_span
+    from replay.log_files import time_span
+    from replay.reader import LogReader
     from replay.report import add_plot_fields
 
     files = collect_logs(paths)

@@ -58,7 +58,7 @@ class FakePipeline:
     time are rejected as duplicates, NaNs as nan: the contract the real pipeline keeps."""
 
     def __init__(self, state: Any = None, delay_s: float = 0.0, state_delay_s: float = 0.0,
-                 alerts_raw: Any = None) -> None:
+                 alerts_raw: Any = None, sinks: Any = ()) -> None:
         from monitor.alerts.engine import AlertEngine
 
         state = state or {}
@@ -68,7 +68,7 @@ class FakePipeline:
         self.alerts = AlertEngine.from_config(alerts_raw or {}, BUOY, {})
         self.delay_s = delay_s  # simulated processing time per block
         self.state_delay_s = state_delay_s  # simulated time to take a checkpoint
-        self.sinks: list[Any] = []  # alert sinks attached by the daemon (as the real pipeline)
+        self.sinks = tuple(sinks)  # the daemon's, fixed at construction as the real pipeline's
         self.last_t = dict(state.get("last_t", {}))
         self.total = float(state.get("total", 0.0))
         self.accepted = dict(state.get("accepted", {}))
@@ -154,7 +154,8 @@ def main(argv: list[str]) -> int:
         with open(argv[1], "rb") as f:
             alerts_raw = tomllib.load(f).get("alerts", {})
         daemon = Daemon(BUOY, load_daemon_config(argv[1]),
-                        lambda state, sinks: FakePipeline(state, delay, state_delay, alerts_raw),
+                        lambda state, sinks: FakePipeline(state, delay, state_delay, alerts_raw,
+                                                             sinks),
                         FakeCodec(),
                         attach=lambda session, pipe: [AlertDelivery(session, pipe, alerts_raw)])
         for sig in (signal.SIGTERM, signal.SIGINT):

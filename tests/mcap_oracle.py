@@ -11,7 +11,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
-from replay.reader import expand_paths
+from replay.log_files import expand_paths
 
 
 def _generic_values(field) -> np.ndarray:

@@ -13,7 +13,8 @@ from mcap.stream_reader import StreamReader
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from mcap_oracle import reference_blocks
 from monitor.quanta import DEFAULT_QUANTA
-from replay.reader import LogReader, iter_blocks, time_span
+from replay.log_files import time_span
+from replay.reader import LogReader, iter_blocks
 from replay.writer import LogWriter, Series, alert_topic, status_topic
 
 T0 = 1_750_000_000 * 10**9
@@ -271,7 +272,7 @@ def test_coalesced_blocks_span_at_most_coalesce_s_so_replay_keeps_every_sample(t
     cuts the release into <= 1800 s blocks, so the replay's ordering (1 h horizon) never
     passes a stream by; every sample is accepted, as with one block per message."""
     from monitor.config import default_config
-    from replay.reader import COALESCE_NS
+    from replay.merge import COALESCE_NS
     from replay.runner import run_blocks
 
     path = tmp_path / "long.mcap"

@@ -1,0 +1,167 @@
+"""Locating records in MCAP bytes (https://mcap.dev/spec), for the damage-tolerant reader.
+
+A numba scan finds the records of a decompressed chunk (or of a run of top-level records) and
+the sensor payloads of known channels are decoded in bulk (:func:`monitor.codec.decode_many`);
+a signature search finds the next compressed chunk after a corrupt record; the summary section
+is read when the footer and its CRC are intact.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+from typing import BinaryIO, Iterator, Mapping
+
+import numba
+import numpy as np
+
+from monitor import codec
+from replay.writer import MAGIC, OP_CHUNK, OP_FOOTER
+
+@numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread
+def scan_records(buf):
+    """Locate records in a decompressed chunk (or any record sequence).
+
+    Returns message fields (channel, log, publish, payload offset, payload length), the other
+    records (opcode, content offset, length), the end position and a status: 0 all records
+    complete, 1 the buffer ends inside a record, 2 an impossible record (opcode 0).
+    """
+    n = buf.shape[0]
+    cap = n // 31 + 1
+    ch = np.empty(cap, np.int64)
+    log = np.empty(cap, np.int64)
+    pub = np.empty(cap, np.int64)
+    doff = np.empty(cap, np.int64)
+    dlen = np.empty(cap, np.int64)
+    ocap = n // 9 + 1
+    oop = np.empty(ocap, np.int64)
+    ooff = np.empty(ocap, np.int64)
+    olen = np.empty(ocap, np.int64)
+    m = 0
+    o = 0
+    p = 0
+    status = 0
+    while p < n:
+        if p + 9 > n:
+            status = 1
+            break
+        op = buf[p]
+        ln = np.uint64(0)
+        for i in range(8):
+            ln |= np.uint64(buf[p + 1 + i]) << np.uint64(8 * i)
+        if op == 0:
+            status = 2
+            break
+        if ln > np.uint64(n - p - 9):
+            status = 1
+            break
+        c = p + 9
+        if op == 5 and ln >= 22:
+            ch[m] = np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)
+            lt = np.uint64(0)
+            pt = np.uint64(0)
+            for i in range(8):
+                lt |= np.uint64(buf[c + 6 + i]) << np.uint64(8 * i)
+                pt |= np.uint64(buf[c + 14 + i]) << np.uint64(8 * i)
+            log[m] = np.int64(lt)
+            pub[m] = np.int64(pt)
+            doff[m] = c + 22
+            dlen[m] = np.int64(ln) - 22
+            m += 1
+        else:
+            oop[o] = op
+            ooff[o] = c
+            olen[o] = np.int64(ln)
+            o += 1
+        p = c + np.int64(ln)
+    return ch[:m], log[:m], pub[:m], doff[:m], dlen[:m], oop[:o], ooff[:o], olen[:o], p, status
+
+
+@dataclass(slots=True)
+class Digest:
+    """A run of records located by :func:`scan_records`, its messages grouped by channel
+    (indices in record order) and the payloads of the channels already known decoded."""
+
+    buf: np.ndarray
+    scan: tuple
+    groups: dict[int, np.ndarray]
+    decoded: dict[int, tuple]
+
+
+def digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str]) -> Digest:
+    """Scan ``raw`` and decode the messages of the sensor channels in ``channels``. A pure
+    function of its inputs, so the read-ahead thread can run it (channel definitions never
+    change once read, so a copy of them taken earlier decodes the same)."""
+    buf = np.frombuffer(raw, np.uint8)
+    scan = scan_records(buf)
+    ch, doff, dlen = scan[0], scan[3], scan[4]
+    groups = {c: np.flatnonzero(ch == c) for c in np.unique(ch).tolist()}
+    decoded = {}
+    for c, sel in groups.items():
+        target = channels.get(c)
+        if isinstance(target, tuple):
+            decoded[c] = codec.decode_many(buf, doff[sel], dlen[sel], target[1])
+    return Digest(buf, scan, groups, decoded)
+
+
+MAX_CUT_CHUNK = 64 << 20  # bytes read for a chunk whose length runs past the end of file
+_CHUNK_SIGNATURES = (b"\x04\x00\x00\x00zstd", b"\x03\x00\x00\x00lz4")
+_SIG_AT = 37  # opcode, length, start, end, uncompressed size, CRC: then the compression string
+
+
+def find_chunk(f: BinaryIO, start: int, size: int) -> int | None:
+    """Offset of the first plausible compressed Chunk record at or after ``start``, else None."""
+    block = 1 << 20
+    at = start
+    while at < size:
+        f.seek(at)
+        buf = f.read(block + 64)
+        hits = []
+        for sig in _CHUNK_SIGNATURES:
+            i = buf.find(sig)
+            while i >= 0:
+                s = at + i - _SIG_AT
+                if s >= start and i >= _SIG_AT and buf[i - _SIG_AT] == OP_CHUNK:
+                    (ln,) = struct.unpack_from("<Q", buf, i - _SIG_AT + 1)
+                    if 0 < ln <= size - s - 9:
+                        hits.append(s)
+                        break
+                i = buf.find(sig, i + 1)
+        if hits:
+            return min(hits)
+        at += block
+    return None
+
+
+def str_at(b: bytes | memoryview, p: int) -> tuple[str, int]:
+    (n,) = struct.unpack_from("<I", b, p)
+    return bytes(b[p + 4:p + 4 + n]).decode("utf-8", "replace"), p + 4 + n
+
+
+# ------------------------------------------------------------------------------ streams
+
+
+def summary_records(f: BinaryIO, size: int) -> Iterator[tuple[int, bytes]]:
+    """``(opcode, content)`` of the summary section's records, when the file ends in an
+    intact footer and its summary passes the footer's CRC; nothing otherwise."""
+    if size < 8 + 37:
+        return
+    f.seek(size - 37)
+    tail = f.read(37)  # footer record (opcode, length, 20 bytes), then the magic
+    if tail[-8:] != MAGIC or tail[0] != OP_FOOTER:
+        return
+    start, _, crc = struct.unpack_from("<QQI", tail, 9)
+    if not 8 <= start < size - 37:
+        return
+    f.seek(start)
+    buf = f.read(size - 37 - start)
+    if crc != 0 and zlib.crc32(tail[:25], zlib.crc32(buf)) != crc:
+        return
+    pos = 0
+    while pos + 9 <= len(buf):
+        op, ln = struct.unpack_from("<BQ", buf, pos)
+        if ln > len(buf) - pos - 9:
+            return
+        yield op, buf[pos + 9:pos + 9 + ln]
+        pos += 9 + ln
