@@ -155,9 +155,7 @@ class MinerAccumulator:
 
     def set_provisional(self, ranges_Pa, means_Pa, counts) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""
-        d = self.sn_curve.damage_per_cycle(np.asarray(ranges_Pa, dtype=np.float64), means_Pa,
-                                           np.asarray(counts, dtype=np.float64))
-        self._provisional = float(np.sum(d))
+        self._provisional = _in_order_sum(self.sn_curve.damage_per_cycle(ranges_Pa, means_Pa, counts))
         return self._provisional
 
     def residue_damage(self, rainflow) -> float:
@@ -167,8 +165,7 @@ class MinerAccumulator:
         every alert tick: one compiled pass over the residue without mean correction."""
         if not self._needs_means:
             return (_loops.residue_compiled or _loops.residue_loop)(rainflow._st, self._params)
-        d = self.sn_curve.damage_per_cycle(*rainflow.residue_half_cycles())
-        return float(np.cumsum(d)[-1]) if d.shape[0] else 0.0
+        return _in_order_sum(self.sn_curve.damage_per_cycle(*rainflow.residue_half_cycles()))
 
     def set_provisional_from(self, rainflow) -> float:
         """Provisional damage from a ``StreamingRainflow``'s residue; return it."""
@@ -292,3 +289,9 @@ def _check_cycles(ranges: np.ndarray, counts: np.ndarray) -> None:
     bad = np.flatnonzero(~((ranges >= 0) & np.isfinite(ranges) & (counts >= 0) & np.isfinite(counts)))
     if bad.size:
         raise ValueError(f"cycle {bad[0]} has an invalid range or count ({ranges[bad[0]]!r}, {counts[bad[0]]!r})")
+
+
+def _in_order_sum(damages: np.ndarray) -> float:
+    """The damages added one by one in order, as the compiled loops add them (numpy's
+    ``sum`` is pairwise: other last bits)."""
+    return float(np.cumsum(damages)[-1]) if damages.size else 0.0
