@@ -1,6 +1,7 @@
 """The check-factor test (monitor.check_factor): linear waves pass, horizontal glitches fail,
 streaming equals batch for any block split with state save/restore."""
 
+import json
 import math
 
 import numpy as np
@@ -10,7 +11,7 @@ from scipy.optimize import brentq
 
 from models.waves import buoy_motion
 from monitor.check_factor import MEMORY, CheckFactor, bound
-from monitor.config import default_config
+from monitor.config import config_with, default_config
 from monitor.qartod import CHECK, FAIL, StreamQC
 from monitor.validate import StreamValidator
 
@@ -133,3 +134,26 @@ def test_the_shipped_motion_stream_rejects_and_counts_it_by_name():
     flags, _ = qc.check(tn, np.stack([z, x, y]))
     np.testing.assert_array_equal(flags[CHECK] == FAIL, want)
     assert "check_factor" not in StreamValidator("tension", cfg.validate["tension"]).qc_counts()
+
+
+@pytest.mark.parametrize("cuts", [[1], [700, 701, 2500], list(range(97, 3000, 331))])
+def test_the_validator_streams_it_with_restarts(cuts):
+    cfg = default_config()
+    t, z, x, y = record(3000, 9)
+    tn, values = np.rint(t * S).astype(np.int64), np.stack([z, x, y])
+    never = np.iinfo(np.int64).min
+    whole = StreamValidator("motion", cfg.validate["motion"])
+    want = whole.check(tn, values, never)
+    v, got = StreamValidator("motion", cfg.validate["motion"]), []
+    for a, b in zip([0, *cuts], [*cuts, tn.shape[0]]):
+        v = StreamValidator("motion", cfg.validate["motion"], json.loads(json.dumps(v.state())))
+        got.append(v.check(tn[a:b], values[:, a:b], never))
+    np.testing.assert_array_equal(np.concatenate(got), want)
+    assert v.rejected == whole.rejected and v.qc_counts() == whole.qc_counts()
+    assert whole.rejected["check_factor"] > 0
+
+
+def test_switched_off_by_config():
+    cfg = config_with(default_config(), validate={"motion": {"check_factor": False}})
+    assert cfg.validate["motion"].check_factor is None
+    assert "check_factor" not in StreamValidator("motion", cfg.validate["motion"]).qc_counts()
