@@ -25,10 +25,11 @@ steady (the Spotter record's glitches) makes one at once. Flags, per sample: 4 f
 ``W`` of a violation (a violating window cannot say which of its samples are wrong, and a
 displacement filter disturbed by a glitch takes tens of seconds to recover); 2 not evaluated
 until the stream's pairs span one longest period ``T_max`` (a shorter window gives a ratio
-that is not a property of the sea: over 4,000 random starts in the Spotter's clean window, a
-window of the first pair alone exceeds ``C^2`` at about 30 % of them, of 4 s at 0.9 %, of 12.5 s never
-but reaches 6.57, of 25 s at most 4.13); 9 missing (a NaN or infinite field; velocities join the finite samples
-either side); 1 pass. No suspect flag: the bound already holds for every linear sea.
+that is not a property of the sea: over 4,000 random starts in the Spotter's clean window,
+the first pair alone exceeds ``C^2`` at about 30 % of them, a 4-s window at 0.9 %, a 12.5-s
+one never but reaches 6.57, a 25-s one at most 4.13); 9 missing (a NaN or infinite field;
+velocities join the finite samples either side); 1 pass. No suspect flag: the bound already
+holds for every linear sea.
 
 Streaming: the memory (last finite sample, the window's pairs, their sums, the time of the
 last violation) is carried across blocks and saved in the state, so any split of a stream
