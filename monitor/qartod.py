@@ -67,7 +67,7 @@ def _params(fields: tuple[FieldLimits, ...]) -> np.ndarray:
                       f.flat_suspect_s, f.flat_fail_s] for f in fields], dtype=np.float64)
 
 
-_N_TESTS = 6  # the kernels leave the check factor's row 2 (its own kernel fills it)
+_N_TESTS = 6  # the kernels leave the check factor's row at 2 (not evaluated): CheckFactor fills it
 # counts column of a flag: suspect 0, fail 1, missing 2
 _SLOT = np.array([0, 0, 0, 0, 1, 0, 0, 0, 0, 2], np.int64)
 
