@@ -39,7 +39,15 @@ no damage split, no over-break rule) 0.479 s (median of rounds 0.497 s), the shi
 cumulative sum each (same bits: additions in the same order) and the QC kernel's tallies
 moved into locals; report and state of the replay identical to the last bit before and after.
 
+Measured 2026-11-25 15:48 UTC on the same machine (load average 3.6-3.8), ``--days 1 --no-qc
+6`` (child processes on one core, QC on and stubbed out interleaved, CPU from the reader's
+start, numba cache loads included): with QC best 1.135 s, median 1.174 s; stubbed out best
+1.108 s, median 1.195 s: QC +2.4 % (best), -1.8 % (median, within the noise). This log has no
+``motion`` stream; the check-factor test of one costs 21 ns a sample (the Spotter's 218,556
+samples: 4.6 ms, in-process best of 7, against ~5 s for the record's replay).
+
 Usage: python bench/bench_replay.py [--days 30] [--baseline-days 1] [--dir DIR [--reuse]] [--keep]
+       python bench/bench_replay.py --days 1 --no-qc 6   (the QC's cost alone, interleaved)
 """
 
 from __future__ import annotations
@@ -96,11 +104,25 @@ def write_log(path: Path, days: float, seed: int = 4) -> int:
     return n_tension
 
 
-def child_replay(path: str, rules: bool, one_core: bool) -> None:
+def _stub_qc() -> None:
+    """QC off, for its cost: every QARTOD test of every stream returns "not evaluated" (2)
+    without running; the validator's own rules (nan, range, rate) still run."""
+    from monitor import qartod
+
+    def check(self, t_ns, values):
+        n = t_ns.shape[0]
+        return np.full((len(qartod.TESTS), n), qartod.NOT_EVALUATED, np.uint8), np.zeros(n, np.uint8)
+
+    qartod.StreamQC.check = check
+
+
+def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> None:
     """Run in a child process: replay, print figures as JSON (with this process's peak RSS).
     ``one_core`` pins the process (and so the reader's read-ahead thread) to one CPU."""
     if one_core:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    if not qc:
+        _stub_qc()
     from monitor.config import config_with, default_config
     from replay.reader import LogReader
     from replay.runner import run_blocks
@@ -124,11 +146,26 @@ def child_replay(path: str, rules: bool, one_core: bool) -> None:
     }))
 
 
-def replay_in_child(path: Path, rules: bool = True, one_core: bool = True) -> dict:
+def replay_in_child(path: Path, rules: bool = True, one_core: bool = True,
+                    qc: bool = True) -> dict:
     cmd = ([sys.executable, __file__, "--child-replay", str(path)] + ([] if rules else ["--no-rules"])
-           + (["--one-core"] if one_core else []))
+           + (["--one-core"] if one_core else []) + ([] if qc else ["--qc-off"]))
     out = subprocess.run(cmd, check=True, capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def qc_cost(path: Path, rounds: int) -> None:
+    """Print the CPU cost of the QARTOD QC: replays of ``path`` on one core with QC on and
+    stubbed out, interleaved (on, off, on, off...) so that the machine's load drifts alike."""
+    cpu: dict[bool, list[float]] = {True: [], False: []}
+    for _ in range(rounds):
+        for qc in (True, False):
+            cpu[qc].append(replay_in_child(path, qc=qc)["cpu_s"])
+    on, off = (np.array(cpu[q]) for q in (True, False))
+    print(f"QC cost ({rounds} interleaved rounds, one core, CPU s): with QC best {on.min():.3f} "
+          f"median {np.median(on):.3f}; QC stubbed out best {off.min():.3f} median "
+          f"{np.median(off):.3f}; QC {on.min() / off.min() - 1:+.1%} (best), "
+          f"{np.median(on) / np.median(off) - 1:+.1%} (median); target within 10 %")
 
 
 def naive_baseline(path: Path) -> tuple[float, int, float]:
@@ -172,12 +209,17 @@ def main() -> None:
     ap.add_argument("--dir", help="where to write the logs (default: a temporary directory)")
     ap.add_argument("--keep", action="store_true", help="keep the generated logs")
     ap.add_argument("--reuse", action="store_true", help="reuse logs already in --dir")
+    ap.add_argument("--no-qc", type=int, metavar="ROUNDS", default=0,
+                    help="only measure the QC's cost: ROUNDS interleaved replays of the log "
+                         "with QC on and stubbed out")
     ap.add_argument("--child-replay", help=argparse.SUPPRESS)
+    ap.add_argument("--qc-off", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--no-rules", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--one-core", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child_replay:
-        child_replay(args.child_replay, rules=not args.no_rules, one_core=args.one_core)
+        child_replay(args.child_replay, rules=not args.no_rules, one_core=args.one_core,
+                     qc=not args.qc_off)
         return
     work = Path(args.dir or tempfile.mkdtemp(prefix="bench_replay_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -189,6 +231,9 @@ def main() -> None:
             write_log(small, 1.0)
         print(f"{args.days:g}-day log: {big.stat().st_size / 1e6:.0f} MB "
               f"(written or found in {time.perf_counter() - t:.1f} s)")
+        if args.no_qc:
+            qc_cost(big, args.no_qc)
+            return
         r_big = replay_in_child(big)
         r_small = replay_in_child(small)
         r_plain = replay_in_child(big, rules=False)

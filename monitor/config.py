@@ -302,6 +302,8 @@ class SensorLimits:
     # motion: the watch circle (span_m, stretched line length m, depth m): a position the
     # line cannot reach is a location fail (None = off)
     watch_circle: tuple[float, float, float] | None = None
+    # motion: the check-factor test (depth m, longest wave period s), None = off
+    check_factor: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -511,6 +513,7 @@ def _parse_load(r: SectionReader) -> LoadConfig:
 
 
 _G = 9.81
+LONGEST_WAVE_S = 25.0  # the longest wave period (s) the QC takes for a sea (waves tp_s, motion)
 
 
 def qc_defaults(mooring: MooringConfig, load: LoadConfig) -> dict[str, dict[str, dict[str, float]]]:
@@ -530,7 +533,7 @@ def qc_defaults(mooring: MooringConfig, load: LoadConfig) -> dict[str, dict[str,
         "imu": {},
         "gnss": {},
         "waves": {"hs_m": {"suspect_max": 0.78 * d}, "tp_s": {"suspect_min": 1.0,
-                                                             "suspect_max": 25.0}},
+                                                             "suspect_max": LONGEST_WAVE_S}},
     }
     for name in SENSOR_FIELDS["motion"]:
         span = d if name == "heave_m" else length
@@ -596,8 +599,11 @@ def _parse_validate(r: SectionReader, load: LoadConfig,
         if sensor == "motion" and s.bool("watch_circle", True):
             # 2 % stretch: about a steel-cored cable's elongation near its breaking load
             watch = (mooring.span_m, 1.02 * mooring.length_m, mooring.depth_m)
+        check = None
+        if sensor == "motion" and s.bool("check_factor", True):
+            check = (mooring.depth_m, LONGEST_WAVE_S)
         s.done()
-        out[sensor] = SensorLimits(fields, stale, location, watch)
+        out[sensor] = SensorLimits(fields, stale, location, watch, check)
     return out
 
 

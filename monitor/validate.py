@@ -10,7 +10,11 @@ Rules, applied to each sample in time order, first match wins:
 ``out_of_range``    any field is outside ``[min, max]`` of ``[validate.<sensor>.<field>]``;
 ``spike``           any field changed faster than ``max_rate_per_s`` since the last accepted
                     sample: ``|v - v_last| > max_rate_per_s * (t - t_last)``;
-``flat_line``       the QARTOD flat-line test fails (monitor.qartod): a stuck sensor.
+``flat_line``       the QARTOD flat-line test fails (monitor.qartod): a stuck sensor;
+``check_factor``    (motion) the check-factor test fails (monitor.check_factor): horizontal
+                    motion no wave makes, e.g. a GNSS multipath excursion. The whole sample
+                    goes, heave too (the estimator needs all three displacements), and the
+                    fail lasts a window (50 s), so the estimator sees a gap and restarts.
 
 A displacement (``motion``) sample whose position the line cannot reach is ``out_of_range``
 and a QARTOD ``location`` fail: its horizontal distance from the anchor,
@@ -44,12 +48,12 @@ import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
-from monitor.qartod import FAIL, FLAT, StreamQC
+from monitor.qartod import CHECK, FAIL, FLAT, StreamQC
 
 ACCEPTED = 0
 REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
-                            "flat_line")
-_NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT = 1, 2, 3, 4, 5, 6
+                            "flat_line", "check_factor")
+_NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 
 
 @numba.njit(cache=True, nogil=True)
@@ -115,9 +119,11 @@ class StreamValidator:
         self.last_values = np.zeros(len(self.fields))
         self.accepted = 0
         self.rejected = {r: 0 for r in REASONS}
+        check = limits.check_factor if sensor == "motion" else None
         self.qc = StreamQC(
             tuple(limits.fields[f] for f in self.fields),
-            limits.location_range_max_m, None if state is None else state.get("qc"))
+            limits.location_range_max_m, None if state is None else state.get("qc"),
+            None if check is None else (*check, limits.stale_after_s))
         if state is not None:
             self.has_last = bool(state["has_last"])
             self.last_t_ns = int(state["last_t_ns"])
@@ -137,7 +143,7 @@ class StreamValidator:
                              f"and {len(self.fields)} fields")
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
-        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT or _RANGE
+        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT, _CHECK or _RANGE
         qc_values = values
         if n and not np.isfinite(values).all():
             # an infinite value is missing here, as it is once saved (strict JSON state) and
@@ -146,13 +152,16 @@ class StreamValidator:
         if n and int(t_ns[0]) > max(seen, floor_ns) and (n == 1 or bool(np.all(t_ns[1:] > t_ns[:-1]))):
             new = None  # the usual case: every sample is new
             flags, _ = self.qc.check(t_ns, qc_values)
+            qc_code[flags[CHECK] == FAIL] = _CHECK
             qc_code[flags[FLAT] == FAIL] = _FLAT
         elif n:
             before = np.maximum.accumulate(np.concatenate(([max(seen, floor_ns)], t_ns[:-1])))
             new = t_ns > before
             if new.any():
                 flags, _ = self.qc.check(t_ns[new], qc_values[:, new])
-                qc_code[np.flatnonzero(new)[flags[FLAT] == FAIL]] = _FLAT
+                idx = np.flatnonzero(new)
+                qc_code[idx[flags[CHECK] == FAIL]] = _CHECK
+                qc_code[idx[flags[FLAT] == FAIL]] = _FLAT
         if self._watch is not None and n:
             outside = self._outside_watch_circle(qc_values)
             qc_code[outside] = _RANGE

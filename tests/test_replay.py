@@ -57,7 +57,8 @@ def test_report_contract_and_summary(tmp_path):
     assert report["time_start"] == "2023-11-14T22:13:20.000Z"  # T0 = 1.7e9 s
     assert set(report["samples"]) == {"tension", "imu", "gnss"}
     assert set(report["samples"]["tension"]["rejected"]) == {
-        "nan", "out_of_range", "spike", "duplicate", "time_backwards", "flat_line"}
+        "nan", "out_of_range", "spike", "duplicate", "time_backwards", "flat_line",
+        "check_factor"}
     assert set(report["samples"]["tension"]["qc"]) == {
         "gross_range", "spike", "rate_of_change", "flat_line"}
     assert set(report["samples"]["gnss"]["qc"]) >= {"location"}
