@@ -28,6 +28,7 @@ from models.sea_state_table import (HS_EDGES_M, TP_EDGES_S, DamageRateTable, Pro
                                     project_damage)
 from monitor.alerts.config import AlertsConfig
 from monitor.config import Config, ConfigError, default_config, load_config
+from monitor.strict_json import json_ready
 from replay.sea_state_files import SeaStates, read_sea_states
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -126,16 +127,26 @@ def _component(proj: Projection, source: np.ndarray, c: int, d0: float, span_day
                thresholds: Sequence[float]) -> dict[str, Any]:
     end, low, high = (float(a[c, -1]) for a in (proj.damage, proj.low, proj.high))
     rate = (end - d0) / span_days if span_days > 0 else 0.0
+    # an unrated step makes the end damage NaN: the life is then unknown, not unlimited
+    life = remaining_life_days(end, rate) if math.isfinite(rate) else math.nan
     return {
         "damage_now": d0, "damage_end": end, "damage_end_low": low, "damage_end_high": high,
         "damage_rate_per_day": rate,
-        "remaining_life_days_at_end": remaining_life_days(end, rate),
+        "remaining_life_days_at_end": life,
         "steps_learned": int(np.sum(source == "learned")),
         "steps_model": int(np.sum(source == "model")),
         "steps_unrated": int(np.sum(source == "none")),
         "thresholds": {f"{thr:g}": {"at": _iso(t), "earliest": _iso(t_early)}
                        for thr, (t, t_early) in proj.crossings[c].items()},
     }
+
+
+def _life_text(days: float) -> str:
+    if math.isnan(days):
+        return "unknown"
+    if math.isinf(days):
+        return "unlimited (no damage accrues)"
+    return f"{days:.3g} days at that rate" + (f" ({days * 24:.3g} h)" if days < 2 else "")
 
 
 def _iso(t_s: float | None) -> str | None:
@@ -185,11 +196,15 @@ def run(args: argparse.Namespace) -> int:
             for thr, v in c["thresholds"].items())
         print(f"  {name}: damage {c['damage_now']:.3g} now -> {c['damage_end']:.3g} at the end "
               f"(band {c['damage_end_low']:.3g} to {c['damage_end_high']:.3g}); {crossings}")
+        print(f"    damage rate {c['damage_rate_per_day']:.3g} per day (the forecast's mean); "
+              f"remaining life at the end {_life_text(c['remaining_life_days_at_end'])}"
+              + (f"; {c['steps_unrated']} steps unrated" if c["steps_unrated"] else ""))
     if args.save_table is not None:
         args.save_table.write_text(json.dumps(table.to_state()))
     if args.publish:
         publish_forecast(config.buoy.id, states, args.publish)
         print(f"sent to buoy/{config.buoy.id}/forecast/waves")
     if args.json is not None:
-        args.json.write_text(json.dumps(result, indent=1))
+        # strict JSON: an unknown figure (NaN) or an unlimited life (inf) is null
+        args.json.write_text(json.dumps(json_ready(result), indent=1, allow_nan=False))
     return 0
