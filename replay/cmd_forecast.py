@@ -26,6 +26,7 @@ import numpy as np
 from models.miner import remaining_life_days
 from models.sea_state_table import (HS_EDGES_M, TP_EDGES_S, DamageRateTable, Projection,
                                     project_damage)
+from models.waves import breaking_height
 from monitor.alerts.config import AlertsConfig
 from monitor.config import Config, ConfigError, default_config, load_config
 from monitor.strict_json import json_ready
@@ -116,6 +117,9 @@ def forecast(config: Config, states: SeaStates, damage_now: Sequence[float],
         "buoy_id": config.buoy.id, "steps": len(states), "skipped": dict(states.skipped),
         "time_start": _iso(states.t_s[0]), "time_end": _iso(proj.t_end_s[-1]),
         "steps_outside_table": int(table.outside(states.hs_m, states.tp_s).sum()),
+        # Hs above the breaking height of its Tp in the mooring's depth: not a possible sea
+        "steps_breaking": int(np.sum(states.hs_m > breaking_height(states.tp_s,
+                                                                    config.mooring.depth_m))),
         "components": {}}
     for c, name in enumerate(table.components):
         out["components"][name] = _component(proj, rates.source[c], c, damage_now[c],
@@ -146,6 +150,8 @@ def _life_text(days: float) -> str:
         return "unknown"
     if math.isinf(days):
         return "unlimited (no damage accrues)"
+    if days == 0.0:
+        return "none (the damage reaches 1 within the forecast)"
     return f"{days:.3g} days at that rate" + (f" ({days * 24:.3g} h)" if days < 2 else "")
 
 
@@ -155,15 +161,49 @@ def _iso(t_s: float | None) -> str | None:
     return datetime.fromtimestamp(t_s, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def _json_file(path: Path, what: str) -> Any:
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{path}: not JSON, expected {what} ({e})") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: expected {what}, got a JSON {type(doc).__name__}")
+    return doc
+
+
+def _table_file(path: Path) -> DamageRateTable:
+    """A damage-rate table written by ``--save-table``; ValueError naming the file if not."""
+    what = "a damage-rate table (buoymon forecast --save-table)"
+    doc = _json_file(path, what)
+    try:
+        return DamageRateTable.from_state(doc)
+    except KeyError as e:
+        raise ValueError(f"{path}: not {what}: no {e}") from None
+    except (TypeError, ValueError) as e:  # wrong shapes or values
+        raise ValueError(f"{path}: not {what}: {e}") from None
+
+
 def _damage_from_report(path: Path | None, names: Sequence[str]) -> list[float]:
     if path is None:
         return [0.0] * len(names)
-    comps = json.loads(path.read_text()).get("components", {})
+    doc = _json_file(path, "a replay report (buoymon replay --report)")
+    comps = doc.get("components")
+    if not isinstance(comps, dict):
+        raise ValueError(f"{path}: not a replay report (buoymon replay --report): no "
+                         "components")
     missing = [n for n in names if n not in comps]
     if missing:
         raise ValueError(f"{path}: no component {missing[0]!r} in the report (the report and "
                          "the configuration must name the same components)")
-    return [float(comps[n]["damage"]) for n in names]
+    out = []
+    for n in names:
+        d = comps[n].get("damage") if isinstance(comps[n], dict) else None
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not (
+                math.isfinite(d) and d >= 0):
+            raise ValueError(f"{path}: component {n!r}: damage = {d!r}: must be a finite "
+                             "number >= 0")
+        out.append(float(d))
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -172,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
         names = [c.name for c in config.components]
         states = read_sea_states(args.sea_states)
         if args.table is not None:
-            table = DamageRateTable.from_state(json.loads(args.table.read_text()))
+            table = _table_file(args.table)
             if list(table.components) != names:
                 raise ValueError(f"{args.table}: table components {list(table.components)} "
                                  f"!= the configuration's {names}")
@@ -186,9 +226,13 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError, KeyError) as e:
         print(f"buoymon forecast: {e}", file=sys.stderr)
         return 2
+    skipped = "; ".join(f"{n} {why}" for why, n in sorted(result["skipped"].items()))
     print(f"forecast {result['time_start']} to {result['time_end']} ({result['steps']} steps"
           + (f", {result['steps_outside_table']} beyond the table's sea states"
-             if result["steps_outside_table"] else "") + ")")
+             if result["steps_outside_table"] else "")
+          + (f", {result['steps_breaking']} not a possible sea (Hs above the breaking "
+             "height of its Tp)" if result["steps_breaking"] else "")
+          + (f"; rows skipped: {skipped}" if skipped else "") + ")")
     for name, c in result["components"].items():
         crossings = "; ".join(
             f"reaches {thr} at {v['at']} (as early as {v['earliest']})" if v["at"] else
