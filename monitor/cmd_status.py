@@ -56,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
                 return 0
             print("\x1b[H\x1b[2J" + text, flush=True)  # home and clear: one screen
             time.sleep(1.0)
+    except BrokenPipeError:
+        raise  # stdout's reader went away: monitor.cli ends quietly
     except (ValueError, OSError) as exc:
         print(f"buoymon status: {exc}", file=sys.stderr)
         return 1
@@ -172,8 +174,12 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
     else:
         out.append(f"health: {'ok' if health.get('ok', True) else 'FAILING'}"
                    + "".join(f"\n  {r}" for r in health.get("reasons", [])))
+    age = _n(doc.get("fatigue_feed_age_s"), "{:.1f}", " s")
+    # the age counts from the start while nothing has fed fatigue (the fatigue_blind rule)
+    fed = (f"fatigue not fed yet ({age} since the start)"
+           if "load_t_ns" in doc and doc["load_t_ns"] is None else f"fatigue fed {age} ago")
     out.append(f"sensor time {_t(doc.get('now_ns'))}; load source {doc.get('load_source')}; "
-               f"fatigue fed {_n(doc.get('fatigue_feed_age_s'), '{:.1f}', ' s')} ago")
+               + fed)
     rows: list[tuple[str, ...]] = [
         ("STREAM", "AGE", "RATE", "ACCEPTED", "REJECTED", "MISSED", "CLOCK")]
     for name, s in sorted((doc.get("streams") or {}).items()):

@@ -391,6 +391,16 @@ def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     assert js["last_seen_age_s"] >= 1.0
     assert "daemon not running" in js["status"]["health"]["reasons"][0]
     assert set(js["status"]["health"]["at_last_checkpoint"]) >= {"ok", "reasons"}
+    # `status --watch | head -1`: the reader goes away; the command ends quietly, status 0
+    # (was "buoymon status: [Errno 32] Broken pipe", status 1)
+    watch = subprocess.Popen([sys.executable, "-m", "monitor.cli", "status", "--config",
+                              str(cfg), "--watch"], env=ENV, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    assert "daemon NOT RUNNING" in watch.stdout.readline()
+    watch.stdout.close()
+    assert watch.wait(timeout=60) == 0
+    err = watch.stderr.read()
+    assert "Broken pipe" not in err and "Traceback" not in err and "Exception" not in err
     # no state file either: a clear error naming it
     (tmp_path / "state.sqlite").unlink()
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config", str(cfg)],
