@@ -391,6 +391,21 @@ def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     assert js["last_seen_age_s"] >= 1.0
     assert "daemon not running" in js["status"]["health"]["reasons"][0]
     assert set(js["status"]["health"]["at_last_checkpoint"]) >= {"ok", "reasons"}
+    # `alerts list` of the stopped daemon's configuration: its checkpoint's alerts, said so
+    # (was "no answer from buoy" and status 1); ack/reset name --state instead of guessing.
+    # This daemon has no alert rules, only live ones: its buoy id comes from their labels
+    out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "list", "--config",
+                          str(cfg), "--timeout", "1", "--json"], env=ENV, capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert f"the alerts of its last checkpoint ({tmp_path / 'state.sqlite'}) follow" in out.stderr
+    listed = json.loads(out.stdout)
+    assert listed["buoy"] == BUOY and isinstance(listed["alerts"], list)
+    out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "ack", "x", "--who", "a",
+                          "--why", "b", "--config", str(cfg), "--timeout", "1"], env=ENV,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1
+    assert f"--state {tmp_path / 'state.sqlite'} acts on its checkpoint" in out.stderr
     # `status --watch | head -1`: the reader goes away; the command ends quietly, status 0
     # (was "buoymon status: [Errno 32] Broken pipe", status 1)
     watch = subprocess.Popen([sys.executable, "-m", "monitor.cli", "status", "--config",
