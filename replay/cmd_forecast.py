@@ -61,7 +61,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def publish_forecast(buoy_id: str, states: SeaStates, connect: Sequence[str],
                      wait_for_subscriber_s: float = 10.0) -> None:
     """Put the sea states on ``buoy/<id>/forecast/waves`` (the payload of
-    :mod:`monitor.forecast`, issued at the first step's time)."""
+    :mod:`monitor.forecast`, issued at the first step's time); OSError if no daemon
+    subscribes within ``wait_for_subscriber_s`` (a forecast put to nobody is lost)."""
     from monitor import zenoh_io  # noqa: PLC0415 (zenoh only when publishing)
     from monitor.publisher import publisher_config  # noqa: PLC0415
 
@@ -70,8 +71,13 @@ def publish_forecast(buoy_id: str, states: SeaStates, connect: Sequence[str],
     with zenoh_io.open_session(publisher_config(connect)) as session:
         pub = zenoh_io.declare_json_publisher(session, zenoh_io.forecast_key(buoy_id))
         deadline = time.monotonic() + wait_for_subscriber_s
-        while not pub.matching_status and time.monotonic() < deadline:
+        while not pub.matching_status.matching and time.monotonic() < deadline:
             time.sleep(0.01)
+        if not pub.matching_status.matching:
+            pub.undeclare()
+            raise OSError(f"no daemon of buoy {buoy_id!r} subscribed to "
+                          f"{zenoh_io.forecast_key(buoy_id)} via {list(connect)} within "
+                          f"{wait_for_subscriber_s:g} s: the forecast was not sent")
         pub.put(zenoh_io.to_json_bytes(doc))
         pub.undeclare()
 
@@ -245,10 +251,14 @@ def run(args: argparse.Namespace) -> int:
               + (f"; {c['steps_unrated']} steps unrated" if c["steps_unrated"] else ""))
     if args.save_table is not None:
         args.save_table.write_text(json.dumps(table.to_state()))
-    if args.publish:
-        publish_forecast(config.buoy.id, states, args.publish)
-        print(f"sent to buoy/{config.buoy.id}/forecast/waves")
     if args.json is not None:
         # strict JSON: an unknown figure (NaN) or an unlimited life (inf) is null
         args.json.write_text(json.dumps(json_ready(result), indent=1, allow_nan=False))
+    if args.publish:
+        try:
+            publish_forecast(config.buoy.id, states, args.publish)
+        except OSError as e:
+            print(f"buoymon forecast: {e}", file=sys.stderr)
+            return 1
+        print(f"sent to buoy/{config.buoy.id}/forecast/waves")
     return 0
