@@ -393,7 +393,8 @@ def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     assert set(js["status"]["health"]["at_last_checkpoint"]) >= {"ok", "reasons"}
     # `alerts list` of the stopped daemon's configuration: its checkpoint's alerts, said so
     # (was "no answer from buoy" and status 1); ack/reset name --state instead of guessing.
-    # This daemon has no alert rules, only live ones: its buoy id comes from their labels
+    # This daemon has no alert rules (no engine state), and perhaps no live alert: listed
+    # as none (was "state has no "alerts" entry", status 1), its buoy id from the status
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "list", "--config",
                           str(cfg), "--timeout", "1", "--json"], env=ENV, capture_output=True,
                          text=True, timeout=60)

@@ -218,11 +218,13 @@ def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]
                     or not isinstance(saved.state.get("pipeline"), dict):
                 raise ValueError(f"{path}: the daemon checkpoint holds no pipeline state yet")
             outer = saved.state
-            live = ((outer.get("daemon") or {}).get("live") or {}).get("firing") or []
-            if command is None and live:  # the live (logger-clock) rules' alerts are kept too
+            daemon = outer.get("daemon") or {}
+            live = (daemon.get("live") or {}).get("firing") or []
+            if command is None:  # the live (logger-clock) rules' alerts are listed too
+                # a configuration without alert rules keeps no engine: live alerts only
                 result = _apply(outer["pipeline"], path, None)[0] \
                     if "alerts" in outer["pipeline"] else {
-                        "buoy": (live[0].get("labels") or {}).get("buoy"), "alerts": []}
+                        "buoy": (daemon.get("last_status") or {}).get("buoy_id"), "alerts": []}
                 result["alerts"] += [a for a in live if isinstance(a, dict)]
                 return result
             result, changed = _apply(outer["pipeline"], path, command)
