@@ -65,4 +65,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"  components: {comps}")
     for name, status in sections.items():
         print(f"  [{name}] {status}")
+    for c in config.components:
+        if c.location == "termination" and c.bend_radius_m is None:
+            print(f"  note: component {c.name}: termination bend not configured "
+                  "(bend_radius_m, bend_angle_deg): no bend strain, the free span's stress; "
+                  "conductor_yield and conductor_stress see no bend until it is set "
+                  "(docs/CONDUCTOR.md)")
     return 0

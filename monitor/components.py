@@ -81,8 +81,9 @@ def yield_stress_Pa(cfg: ComponentConfig, cable: Any) -> float | None:
 
 
 def build_bend(cfg: ComponentConfig) -> Any:
-    """The termination bend of a ``location = "termination"`` component, else None."""
-    if cfg.location != "termination":
+    """The termination bend of a ``location = "termination"`` component with its bend
+    configured, else None (no bend strain: the free span's stress)."""
+    if cfg.location != "termination" or cfg.bend_radius_m is None:
         return None
     return termination.TerminationBend(cfg.bend_radius_m, math.radians(cfg.bend_angle_deg),
                                        cfg.bend_gauge_length_m)

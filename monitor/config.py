@@ -248,7 +248,8 @@ class ComponentConfig:
     dff: float
     hysteresis_Pa: float
     # where along a conductor: "free_span" (the helix far from the ends) or "termination"
-    # (where a moulding fixes the conductors: models.termination, with this bend geometry)
+    # (where a moulding fixes the conductors: models.termination, with this bend geometry;
+    # without one the bend is not configured and the stress is the free span's)
     location: str = "free_span"
     bend_radius_m: float | None = None
     bend_angle_deg: float | None = None
@@ -474,6 +475,10 @@ def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
         for key in _BEND_KEYS:
             if r.has(key):
                 raise r.error(key, r.raw(key), 'only with location = "termination"')
+        return {"location": location}
+    if not any(r.has(key) for key in _BEND_KEYS):
+        # bend not measured: no bend strain (an assumed one would put the locked copper
+        # beyond yield at rest, docs/CONDUCTOR.md), said by check-config
         return {"location": location}
     return {
         "location": location,
