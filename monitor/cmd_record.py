@@ -59,7 +59,7 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
     (:class:`monitor.sequence.SequenceTracker`, in memory): when a sensor publisher appears
     (at start too) its whole cache is recorded, and a gap in the numbers is filled from the
     cache first, so a recorder restarted within the cache window loses nothing (what it
-    recorded before is recorded again; readers drop exact duplicates)."""
+    recorded before is recorded again; a replay rejects the duplicate samples)."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     seqs = SequenceTracker()
     with zenoh_io.open_session(zc) as session:

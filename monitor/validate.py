@@ -6,6 +6,9 @@ Rules, applied to each sample in time order, first match wins:
 ``time_backwards``  its time is earlier than the last accepted sample, or not later than the
                     point the pipeline has already processed this stream to (a sample that
                     arrived after the reorder horizon, see :mod:`monitor.ordering`);
+``duplicate``       its time equals that of the newest sample seen before it (accepted or
+                    not): one verdict per sample time, so a second copy of a rejected sample
+                    is not judged again;
 ``nan``             any field is NaN or infinite;
 ``out_of_range``    any field is outside ``[min, max]`` of ``[validate.<sensor>.<field>]``;
 ``spike``           any field changed faster than ``max_rate_per_s`` since the last accepted
@@ -31,6 +34,10 @@ split-invariant: the validator's whole memory is ``(t_last, v_last)``, carried a
 saved in the state, so any split of a stream into blocks gives the same verdicts. It also makes a
 re-delivered sample after a restart a ``duplicate``/``time_backwards`` and never counted twice.
 A genuine step in the signal is accepted once ``max_rate_per_s * elapsed`` covers it.
+
+This is the one place duplicates are removed and counted, live and in replay: the ordering
+(:mod:`monitor.ordering`, stable) puts each copy right behind its original, and the log reader
+delivers every copy it reads.
 
 Rejected samples are simply absent downstream: the fatigue series is the accepted samples in
 time order. A run of rejections therefore joins the accepted samples either side; if the run is
@@ -58,7 +65,7 @@ _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 
 @numba.njit(cache=True, nogil=True)
 def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
-              qc_code):  # pragma: no cover
+              qc_code, repeat):  # pragma: no cover
     # Sequential by nature: each verdict depends on the last ACCEPTED sample before it.
     n = t.shape[0]
     nf = values.shape[0]
@@ -73,6 +80,10 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
         if (has_last and ti < last_t) or ti <= floor_t:
             codes[i] = _BACK
             counts[_BACK] += 1
+            continue
+        if repeat[i]:
+            codes[i] = _DUP
+            counts[_DUP] += 1
             continue
         code = 0
         for f in range(nf):
@@ -144,6 +155,7 @@ class StreamValidator:
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
         qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT, _CHECK or _RANGE
+        repeat = np.zeros(n, np.bool_)  # the time of the newest sample seen before it
         qc_values = values
         if n and not np.isfinite(values).all():
             # an infinite value is missing here, as it is once saved (strict JSON state) and
@@ -155,8 +167,9 @@ class StreamValidator:
             qc_code[flags[CHECK] == FAIL] = _CHECK
             qc_code[flags[FLAT] == FAIL] = _FLAT
         elif n:
-            before = np.maximum.accumulate(np.concatenate(([max(seen, floor_ns)], t_ns[:-1])))
-            new = t_ns > before
+            newest = np.maximum.accumulate(np.concatenate(([seen], t_ns[:-1])))
+            repeat = t_ns == newest
+            new = t_ns > np.maximum(newest, floor_ns)
             if new.any():
                 flags, _ = self.qc.check(t_ns[new], qc_values[:, new])
                 idx = np.flatnonzero(new)
@@ -170,7 +183,7 @@ class StreamValidator:
         codes, counts, last_t, has_last = _validate(
             t_ns, values, self._lo, self._hi, self._rate,
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),
-            qc_code,
+            qc_code, repeat,
         )
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
         counts = counts.tolist()

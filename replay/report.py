@@ -215,7 +215,7 @@ def summary_text(report: Mapping[str, Any]) -> str:
         lines.append(f"    ... and {len(episodes) - MAX_EPISODE_LINES} more (see the report)")
     read = report["inputs"]["read"]
     damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
-                                       "bad_payloads", "late", "duplicates")}
+                                       "bad_payloads", "late")}
     parts = [f"{k.replace('_', ' ')} {v}" for k, v in damage.items() if v]
     unreadable = read.get("unreadable_files") or []
     cut = [f for f in read.get("incomplete_files") or [] if f not in unreadable]

@@ -51,7 +51,6 @@ class FileStats:
     chunks: int = 0
     bad_chunks: int = 0
     complete: bool = False  # data section ended properly (DataEnd record reached)
-    duplicates: int = 0
     late: int = 0
     bad_payloads: int = 0
     skipped: dict[str, int] = field(default_factory=dict)  # non-sensor / undecodable channels
@@ -73,8 +72,7 @@ class FileStats:
 class FileContext:
     """Schemas and channels of one file: channel id -> (stream, field numbers) or a skip reason."""
 
-    def __init__(self, fidx: int):
-        self.fidx = fidx
+    def __init__(self) -> None:
         self.schemas: dict[int, tuple[str, str, bytes]] = {}
         self.channels: dict[int, tuple[int, tuple] | str] = {}
         self.last_log = 0
@@ -132,9 +130,8 @@ class FileSalvage:
         self.read_ahead = read_ahead
         self._dctx = zstandard.ZstdDecompressor()
 
-    def read_file(self, fidx: int, path: Path, st: FileStats) -> Iterator[None]:
-        """Read one file (the ``fidx``-th) record by record; yield after each batch of
-        messages."""
+    def read_file(self, path: Path, st: FileStats) -> Iterator[None]:
+        """Read one file record by record; yield after each batch of messages."""
         try:
             f = open(path, "rb")
         except OSError as e:
@@ -147,7 +144,7 @@ class FileSalvage:
             if f.read(8) != MAGIC:
                 st.error = "not an MCAP file (bad or missing magic bytes)"
                 return
-            ctx = FileContext(fidx)
+            ctx = FileContext()
             self._summary_definitions(f, size, ctx)
             f.seek(8)
             ahead = ReadAhead(f.fileno(), size, digest) if self.read_ahead else None
