@@ -1,58 +1,47 @@
-"""The one TOML configuration file: loading, validation, and the core sections.
+"""The one TOML configuration file: loaded once, parsed once into typed sections.
 
 Every model parameter lives in one file (see docs/ARCHITECTURE.md for the layout and
-``monitor/vaps_seed004.toml`` for the shipped example, which is also the default). Errors are
-:class:`ConfigError` (a ValueError) whose message names the key path and the bad value::
+``monitor/vaps_seed004.toml`` for the shipped example, which is also the default).
+:func:`load_config` reads it and :func:`parse_config` turns every section into its typed
+object, which the modules receive from :class:`Config`: the core sections (``buoy``,
+``mooring``, ``cable``, ``component``, ``fatigue``, ``load``, ``validate``, ``ordering``)
+here, and the service's sections declared by their owners (``alerts``: monitor.alerts.config;
+``zenoh``, ``state``, ``record``, ``health``, ``metrics``: monitor.daemon_config; ``rerun``:
+monitor.viz.rerun_options; ``bridge``/``[[source]]``: monitor.bridge.config; ``forecast``:
+monitor.forecast_config). Errors are :class:`ConfigError` (a ValueError) whose message names
+the key path and the bad value, with the nearest known name for a misspelt key or section::
 
     config error: component[1].lay = 'up': must be one of ['left', 'right']
-
-This module parses the sections the pipeline core needs (``buoy``, ``mooring``, ``cable``,
-``component``, ``fatigue``, ``load``, ``validate``, ``ordering`` and the ``alerts`` timing keys).
-Sections owned by other modules (``zenoh``, ``state``, ``record``, ``health``, ``rerun``, the
-alert rules) are kept as raw tables (:meth:`Config.section`) for their owners to parse
-(:class:`SectionReader` helps), and ``buoymon check-config`` runs every parser listed in
-:data:`SECTION_PARSERS`, so one command validates the whole file.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
+from monitor.alerts.config import AlertsConfig
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
+from monitor.bridge.config import BridgeConfig, parse_bridge_config
+from monitor.daemon_config import DaemonConfig, parse_daemon_sections
+from monitor.forecast_config import ForecastConfig
+from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, read_toml, unknown)
+from monitor.viz.rerun_options import RerunOptions
+
+__all__ = ["MAX_DURATION_S", "ConfigError", "SectionReader"]  # re-exported for the sections' users
 
 DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
-# longest time span a duration key may give: time is int64 ns, and a span in ns must fit with
-# room to add it to a time stamp (1e9 s is about 32 years)
-MAX_DURATION_S = 1e9
-
-# Top-level sections parsed by other modules: name -> "module:attribute.path", a callable
-# taking the section's raw table and raising ValueError on a bad value. A module that is not
-# installed yet leaves its section unchecked (check-config says so).
-SECTION_PARSERS: dict[str, str] = {
-    "alerts": "monitor.alerts.config:AlertsConfig.from_dict",
-    "zenoh": "monitor.daemon_config:ZenohConfig.from_dict",
-    "state": "monitor.daemon_config:StateConfig.from_dict",
-    "record": "monitor.daemon_config:RecordConfig.from_dict",
-    "health": "monitor.daemon_config:HealthConfig.from_dict",
-    "metrics": "monitor.daemon_config:MetricsConfig.from_dict",
-    "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
-    "bridge": "monitor.bridge.config:parse_bridge_section",
-    "source": "monitor.bridge.config:parse_sources",
-    "forecast": "monitor.forecast_config:ForecastConfig.from_dict",
-}
-# external sections that are arrays of tables ([[source]]), not tables
-LIST_SECTIONS = ("source",)
 
 CORE_SECTIONS = (
     "buoy", "mooring", "cable", "component", "fatigue", "load", "validate", "ordering", "alerts",
 )
+# the sections of the live service, each declared by its owner; check-config lists them
+SERVICE_SECTIONS = ("zenoh", "state", "record", "health", "metrics", "rerun", "bridge", "source",
+                    "forecast")
 
 # Default physical limits and spike rates per sensor field; [validate.<sensor>] overrides them.
 # Rates are generous on purpose: a spike check must never reject real wave loading.
@@ -69,112 +58,6 @@ DEFAULT_LIMITS: Mapping[str, Mapping[str, tuple[float, float, float]]] = {
 DEFAULT_STALE_S: Mapping[str, float] = {
     "tension": 5.0, "motion": 5.0, "imu": 5.0, "gnss": 60.0, "waves": 7200.0,
 }
-
-
-class ConfigError(ValueError):
-    """A configuration value is missing, of the wrong type or out of range."""
-
-
-def _fmt(value: Any) -> str:
-    return repr(value)
-
-
-class SectionReader:
-    """Typed, path-aware access to one TOML table; unknown keys are errors.
-
-    ``r = SectionReader(table, "alerts.rule[2]")``; ``r.float("threshold", gt=0)``;
-    ``r.done()`` raises if the table holds a key nobody read (a typo, usually).
-    """
-
-    def __init__(self, table: Any, path: str) -> None:
-        if not isinstance(table, Mapping):
-            raise ConfigError(f"config error: {path} = {_fmt(table)}: must be a table")
-        self.table = table
-        self.path = path
-        self._seen: set[str] = set()
-
-    def _key(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def error(self, key: str, value: Any, why: str) -> ConfigError:
-        return ConfigError(f"config error: {self._key(key)} = {_fmt(value)}: {why}")
-
-    def has(self, key: str) -> bool:
-        return key in self.table
-
-    def raw(self, key: str, default: Any = None) -> Any:
-        self._seen.add(key)
-        return self.table.get(key, default)
-
-    def _required(self, key: str) -> Any:
-        self._seen.add(key)
-        if key not in self.table:
-            raise ConfigError(f"config error: {self._key(key)} is missing")
-        return self.table[key]
-
-    def str(self, key: str, default: str | None = None, choices: Sequence[str] | None = None) -> str:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, str):
-            raise self.error(key, value, "must be a string")
-        if choices is not None and value not in choices:
-            raise self.error(key, value, f"must be one of {list(choices)}")
-        return value
-
-    def float(self, key: str, default: float | None = None, *, gt: float | None = None,
-              ge: float | None = None, le: float | None = None, allow_inf: bool = False) -> float:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, value, "must be a number")
-        value = float(value)
-        if math.isnan(value) or (math.isinf(value) and not allow_inf):
-            raise self.error(key, value, "must be a finite number")
-        if gt is not None and not value > gt:
-            raise self.error(key, value, f"must be > {gt:g}")
-        if ge is not None and not value >= ge:
-            raise self.error(key, value, f"must be >= {ge:g}")
-        if le is not None and not value <= le:
-            raise self.error(key, value, f"must be <= {le:g}")
-        return value
-
-    def int(self, key: str, default: int | None = None, *, ge: int | None = None) -> int:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(key, value, "must be an integer")
-        if ge is not None and value < ge:
-            raise self.error(key, value, f"must be >= {ge}")
-        return value
-
-    def bool(self, key: str, default: bool | None = None) -> bool:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, bool):
-            raise self.error(key, value, "must be true or false")
-        return value
-
-    def floats(self, key: str, default: Sequence[float] | None = None, *,
-               increasing: bool = False, min_len: int = 1) -> tuple[float, ...]:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, (list, tuple)) or len(value) < min_len or any(
-            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-            for v in value
-        ):
-            raise self.error(key, value, f"must be a list of at least {min_len} finite numbers")
-        out = tuple(float(v) for v in value)
-        if increasing and any(b <= a for a, b in zip(out, out[1:])):
-            raise self.error(key, value, "must be strictly increasing")
-        return out
-
-    def table_list(self, key: str) -> list[Mapping[str, Any]]:
-        value = self.raw(key, [])
-        if not isinstance(value, list):
-            raise self.error(key, value, "must be an array of tables ([[...]])")
-        return value
-
-    def done(self) -> None:
-        extra = sorted(set(self.table) - self._seen)
-        if extra:
-            raise ConfigError(
-                f"config error: {self.path or 'top level'}: unknown key(s) {extra}"
-            )
 
 
 @dataclass(frozen=True)
@@ -311,13 +194,9 @@ class OrderingConfig:
 
 
 @dataclass(frozen=True)
-class AlertsTiming:
-    eval_interval_s: float
-    resend_interval_s: float
-
-
-@dataclass(frozen=True)
 class Config:
+    """The whole file, parsed: every section as its owner's typed object."""
+
     buoy: BuoyConfig
     mooring: MooringConfig
     cable: CableConfig
@@ -326,18 +205,17 @@ class Config:
     load: LoadConfig
     validate: Mapping[str, SensorLimits]
     ordering: OrderingConfig
-    alerts: AlertsTiming
-    raw: Mapping[str, Any] = field(repr=False)
+    alerts: AlertsConfig
+    forecast: ForecastConfig
+    daemon: DaemonConfig
+    rerun: RerunOptions
+    bridge: BridgeConfig | None  # the [[source]] tables: the bridge runs inside the daemon
+    raw: Mapping[str, Any] = field(repr=False)  # the document, for config_with's edits
     source: str = "<dict>"
 
-    def section(self, name: str) -> Any:
-        """The raw table of a top-level section ({} when absent; the list of tables of a
-        :data:`LIST_SECTIONS` one), for the module that owns it."""
-        value = self.raw.get(name, {})
-        if not isinstance(value, Mapping) and not (name in LIST_SECTIONS
-                                                   and isinstance(value, list)):
-            raise ConfigError(f"config error: {name} = {_fmt(value)}: must be a table")
-        return value
+    def section(self, name: str) -> Mapping[str, Any]:
+        """The raw table of a top-level section ({} when absent), to edit with config_with."""
+        return self.raw.get(name, {})
 
 
 def _parse_buoy(r: SectionReader) -> BuoyConfig:
@@ -608,23 +486,12 @@ def _parse_ordering(r: SectionReader) -> OrderingConfig:
     return out
 
 
-def _parse_alert_timing(raw: Any) -> AlertsTiming:
-    # Only the timing keys are core; rules and delivery belong to monitor.alerts.
-    r = SectionReader(raw, "alerts")
-    interval = r.float("eval_interval_s", 10.0, gt=0, le=MAX_DURATION_S)
-    if interval * 1e9 != round(interval * 1e9):
-        raise r.error("eval_interval_s", interval, "must be a whole number of nanoseconds")
-    return AlertsTiming(interval, r.float("resend_interval_s", 3600.0, ge=0,  # 0 = never
-                                          le=MAX_DURATION_S))
-
-
 def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
     """Validate a parsed TOML document and return the typed configuration."""
     top = SectionReader(data, "")
-    known = set(CORE_SECTIONS) | set(SECTION_PARSERS)
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ConfigError(f"config error: unknown section(s) {unknown}; expected {sorted(known)}")
+    for name in data:
+        if name not in CORE_SECTIONS + SERVICE_SECTIONS:
+            raise unknown("", name, data[name], CORE_SECTIONS + SERVICE_SECTIONS, "section")
     load = _parse_load(SectionReader(top.raw("load", {}), "load"))
     tables = top.table_list("component")
     if not tables:
@@ -648,7 +515,11 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
         validate=_parse_validate(SectionReader(top.raw("validate", {}), "validate"), load,
                                  mooring),
         ordering=_parse_ordering(SectionReader(top.raw("ordering", {}), "ordering")),
-        alerts=_parse_alert_timing(top.raw("alerts", {})),
+        alerts=AlertsConfig.from_dict(data.get("alerts")),
+        forecast=ForecastConfig.from_dict(data.get("forecast")),
+        daemon=parse_daemon_sections(data),
+        rerun=RerunOptions.from_toml(data.get("rerun", {})),
+        bridge=parse_bridge_config(data) if "source" in data else None,
         raw=data,
         source=source,
     )
@@ -656,17 +527,7 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
 
 def load_config(path: str | Path) -> Config:
     """Read and validate a TOML configuration file."""
-    path = Path(path)
-    try:
-        with path.open("rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise ConfigError(f"config error: file {str(path)!r} not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config error: {path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"config error: {path}: not valid TOML (not UTF-8 text)") from None
-    return parse_config(data, source=str(path))
+    return parse_config(read_toml(path), source=str(path))
 
 
 def default_config() -> Config:
@@ -683,38 +544,3 @@ def config_with(config: Config, **sections: Any) -> Config:
     data = dict(config.raw)
     data.update(sections)
     return parse_config(data, source=config.source)
-
-
-def run_section_parsers(config: Config) -> dict[str, str]:
-    """Run every external section parser; return ``{section: "ok" | "not checked: ..."}``.
-
-    A ConfigError from a parser propagates.
-    """
-    results: dict[str, str] = {}
-    for name, target in SECTION_PARSERS.items():
-        if name not in config.raw:
-            continue
-        module_name, func_name = target.split(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            missing = exc.name or ""
-            if module_name == missing or module_name.startswith(missing + "."):
-                results[name] = f"not checked: {module_name} is not installed"
-                continue
-            raise
-        parser: Any = module
-        for attr in func_name.split("."):
-            parser = getattr(parser, attr, None)
-        if not callable(parser):
-            results[name] = f"not checked: {module_name} has no {func_name}"
-            continue
-        try:
-            parser(config.section(name))
-        except ConfigError:
-            raise
-        except ValueError as exc:
-            msg = str(exc)
-            raise ConfigError(msg if msg.startswith("config error") else f"config error: {msg}") from None
-        results[name] = "ok"
-    return results

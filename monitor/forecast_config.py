@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from monitor.config import SectionReader
+from monitor.schema import SectionReader
 
 SEVERITIES = ("info", "warning", "critical")
 

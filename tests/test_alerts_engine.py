@@ -12,6 +12,7 @@ import pytest
 from monitor.alerts.config import AlertsConfig
 from monitor.alerts.engine import AlertEngine
 from monitor.events import ComponentObs, Observation, StreamObs
+from monitor.schema import ConfigError
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
@@ -163,9 +164,9 @@ def test_operator_commands_validate():
     ({"evaluate_s": 3}, "alerts.evaluate_s = 3: unknown key"),
 ])
 def test_config_errors_name_key_and_value(section, message):
-    with pytest.raises(ValueError) as exc:
+    with pytest.raises(ConfigError) as exc:
         AlertsConfig.from_dict(section)
-    assert str(exc.value).startswith(message), str(exc.value)
+    assert str(exc.value).startswith("config error: " + message), str(exc.value)
 
 
 def test_engine_errors_for_unknown_components():

@@ -235,7 +235,7 @@ def test_options_errors_name_the_key():
         RerunOptions.from_toml({"range_edges_Pa": [1.0, 1.0]})
     with pytest.raises(ValueError, match=r"rerun.mean_edges_Pa"):
         RerunOptions.from_toml({"mean_edges_Pa": ["a", "b"]})
-    with pytest.raises(ValueError, match=r"rerun.colour: unknown key"):
+    with pytest.raises(ValueError, match=r"rerun.colour = 'red': unknown key"):
         RerunOptions.from_toml({"colour": "red"})
     with pytest.raises(ValueError, match=r"rerun.anchor_lat_deg = 91"):
         RerunOptions(anchor_lat_deg=91.0)

@@ -27,7 +27,7 @@ Layout (every key optional unless marked)::
     [alerts.outbox]             # durable queue for webhook/email
     path = "alerts_outbox.sqlite", retry_base_s = 5, retry_max_s = 600
 
-Errors raise ValueError naming the key and the value, e.g.
+Errors raise ConfigError naming the key and the value, e.g.
 ``alerts.rule[2].threshold = -1: must be > 0`` (rule indices count from 0, as in the file's
 array of tables).
 """
@@ -41,7 +41,7 @@ from typing import Any, Mapping
 from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth, check_url,
                                          parse_auth)
 from monitor.alerts.records import SEVERITIES
-from monitor.config import MAX_DURATION_S
+from monitor.schema import MAX_DURATION_S, ConfigError, did_you_mean, unknown
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
@@ -105,8 +105,8 @@ def _show(value: Any) -> str:
     return repr(value)
 
 
-def _err(where: str, value: Any, msg: str) -> ValueError:
-    return ValueError(f"{where} = {_show(value)}: {msg}")
+def _err(where: str, value: Any, msg: str) -> ConfigError:
+    return ConfigError(f"config error: {where} = {_show(value)}: {msg}")
 
 
 def _number(where: str, value: Any, spec: ParamSpec) -> float:
@@ -140,7 +140,7 @@ def _chunk_ok(s: str) -> bool:
 def _check_keys(where: str, d: Mapping[str, Any], allowed: set[str]) -> None:
     for key in d:
         if key not in allowed:
-            raise _err(f"{where}.{key}", d[key], f"unknown key; expected one of {sorted(allowed)}")
+            raise unknown(where, key, d[key], allowed)
 
 
 @dataclass(frozen=True)
@@ -214,9 +214,13 @@ class AlertsConfig:
             raise _err(where, d, "must be a table")
         _check_keys(where, d, {"eval_interval_s", "resend_interval_s", "history_limit", "rule",
                                "webhook", "email", "alertmanager", "outbox"})
-        eval_s = _number(f"{where}.eval_interval_s", d.get("eval_interval_s", 10.0), _p(0, 0.0))
+        eval_s = _number(f"{where}.eval_interval_s", d.get("eval_interval_s", 10.0),
+                         _p(0, 0.0, unit="s"))
+        if eval_s * 1e9 != round(eval_s * 1e9):  # the alert tick grid is in int64 ns
+            raise _err(f"{where}.eval_interval_s", eval_s,
+                       "must be a whole number of nanoseconds")
         resend = _number(f"{where}.resend_interval_s", d.get("resend_interval_s", 3600.0),
-                         _p(0, 0.0, True))
+                         _p(0, 0.0, True, unit="s"))  # 0 = never
         hist = d.get("history_limit", 10000)
         if isinstance(hist, bool) or not isinstance(hist, int) or hist < 1:
             raise _err(f"{where}.history_limit", hist, "must be an integer >= 1")
@@ -272,10 +276,12 @@ def _rule(where: str, r: Any) -> RuleConfig:
     if not isinstance(r, Mapping):
         raise _err(where, r, "must be a table")
     if "kind" not in r:
-        raise ValueError(f"{where}.kind: missing; expected one of {sorted(KIND_PARAMS)}")
+        raise ConfigError(f"config error: {where}.kind: missing; expected one of "
+                          f"{sorted(KIND_PARAMS)}")
     kind = r["kind"]
     if kind not in KIND_PARAMS:
-        raise _err(f"{where}.kind", kind, f"unknown rule kind; expected one of {sorted(KIND_PARAMS)}")
+        raise _err(f"{where}.kind", kind, f"unknown rule kind{did_you_mean(str(kind), KIND_PARAMS)}; "
+                   f"expected one of {sorted(KIND_PARAMS)}")
     _, specs = KIND_PARAMS[kind]
     _check_keys(where, r, {"kind", "name", "component", "severity", *specs})
     name = _string(f"{where}.name", r.get("name", kind), _chunk_ok,
@@ -291,7 +297,8 @@ def _rule(where: str, r: Any) -> RuleConfig:
     for key, spec in specs.items():
         if key not in r:
             if spec.default is None:
-                raise ValueError(f"{where}.{key}: missing; rule kind {kind!r} requires it")
+                raise ConfigError(f"config error: {where}.{key}: missing; rule kind {kind!r} "
+                                  "requires it")
             params[key] = float(spec.default)
         else:
             params[key] = _number(f"{where}.{key}", r[key], spec)

@@ -6,14 +6,13 @@ Errors name the key and the value, as every configuration error of the product d
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
-from monitor.config import ConfigError
 from monitor.quanta import quanta as sensor_quanta
+from monitor.schema import ConfigError, check_keys, error, read_toml
 
 TRANSPORTS = ("serial", "tcp_client", "tcp_server", "udp", "file", "stdin")
 FORMATS = ("delimited", "nmea", "csv")
@@ -57,7 +56,7 @@ class BridgeConfig:
 
 
 def _err(key: str, value: Any, why: str) -> ConfigError:
-    return ConfigError(f"config error: {key} = {value!r}: {why}")
+    return error("", key, value, why)
 
 
 def _num(where: str, d: Mapping[str, Any], key: str, default: float, low: float = 0.0) -> float:
@@ -86,12 +85,7 @@ def _str(where: str, d: Mapping[str, Any], key: str, default: str | None = None,
 
 
 def _source(where: str, d: Any) -> SourceConfig:
-    if not isinstance(d, Mapping):
-        raise _err(where, d, "must be a table ([[source]])")
-    allowed = set(SourceConfig.__dataclass_fields__)
-    for k in d:
-        if k not in allowed:
-            raise _err(f"{where}.{k}", d[k], f"unknown key; expected one of {sorted(allowed)}")
+    check_keys(where, d, SourceConfig.__dataclass_fields__)
     name = _str(where, d, "name")
     sensor = _str(where, d, "sensor", choices=tuple(SENSOR_FIELDS))
     transport = _str(where, d, "transport", choices=TRANSPORTS)
@@ -148,11 +142,7 @@ _BRIDGE_KEYS = ("connect", "status_interval_s", "cache_blocks", "quanta")
 def parse_bridge_section(b: Any) -> tuple[tuple[str, ...], float, int, dict[str, float]]:
     """``[bridge]``: (connect endpoints, status interval, cache blocks per stream, quanta of
     the fields on the wire)."""
-    if not isinstance(b, Mapping):
-        raise _err("bridge", b, "must be a table")
-    for k in b:
-        if k not in _BRIDGE_KEYS:
-            raise _err(f"bridge.{k}", b[k], f"unknown key; expected one of {list(_BRIDGE_KEYS)}")
+    check_keys("bridge", b, _BRIDGE_KEYS)
     connect = b.get("connect", ["tcp/127.0.0.1:7447"])
     if not isinstance(connect, list) or not connect or not all(isinstance(e, str) for e in connect):
         raise _err("bridge.connect", connect, "must be a non-empty list of Zenoh endpoints")
@@ -196,8 +186,4 @@ def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:
-    try:
-        raw = tomllib.loads(Path(path).read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config error: {path}: {exc}") from None
-    return parse_bridge_config(raw)
+    return parse_bridge_config(read_toml(path))

@@ -54,9 +54,7 @@ def shape_provider(config: Config) -> ShapeProvider:
 def rerun_options(config: Config) -> RerunOptions:
     """``[rerun]`` of the configuration, the mooring's anchor and bearing filled in, and a
     watch circle of the line's horizontal reach (sqrt(length^2 - depth^2)) unless set."""
-    section: Mapping[str, Any] = config.raw.get("rerun", {}) or {}
-    opts = RerunOptions.from_toml(section)
-    m = config.mooring
+    section, opts, m = config.section("rerun"), config.rerun, config.mooring
     fill: dict[str, Any] = {}
     if "anchor_lat_deg" not in section and math.isfinite(m.anchor_lat_deg):
         fill["anchor_lat_deg"] = m.anchor_lat_deg

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, Mapping
 
+from monitor.schema import ConfigError, check_keys
 from monitor.viz.cycle_histogram import DEFAULT_MEAN_EDGES_Pa, DEFAULT_RANGE_EDGES_Pa, check_edges
 
 
@@ -70,7 +71,7 @@ class RerunOptions:
             v = getattr(self, name)
             if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
                     or v < 0):
-                raise ValueError(
+                raise ConfigError(
                     f"config error: rerun.{name} = {v!r}: must be a finite number >= 0")
         for name, limit in (("anchor_lat_deg", 90.0), ("anchor_lon_deg", 180.0),
                             ("bearing_deg", 360.0)):
@@ -78,30 +79,33 @@ class RerunOptions:
             nan_ok = name != "bearing_deg"  # NaN anchor: use the first GNSS fix
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (
                     abs(v) <= limit or (nan_ok and math.isnan(v))):
-                raise ValueError(f"config error: rerun.{name} = {v!r}: must be within "
+                raise ConfigError(f"config error: rerun.{name} = {v!r}: must be within "
                                  f"[-{limit:g}, {limit:g}]")
         if not isinstance(self.flush_samples, int) or self.flush_samples < 1:
-            raise ValueError(
+            raise ConfigError(
                 f"config error: rerun.flush_samples = {self.flush_samples!r}: "
                 "must be an integer >= 1"
             )
         for name in ("range_edges_Pa", "mean_edges_Pa"):
-            edges = check_edges(getattr(self, name), f"config error: rerun.{name}")
+            try:
+                edges = check_edges(getattr(self, name), f"config error: rerun.{name}")
+            except ValueError as exc:  # check_edges serves the report too: a ValueError
+                raise ConfigError(str(exc)) from None
             object.__setattr__(self, name, tuple(edges.tolist()))  # frozen: normalise once
         for name in ("web_port", "grpc_port"):
             p = getattr(self, name)
             if not isinstance(p, int) or not 0 <= p <= 65535:
-                raise ValueError(f"config error: rerun.{name} = {p!r}: must be a port 0-65535")
+                raise ConfigError(f"config error: rerun.{name} = {p!r}: must be a port 0-65535")
         for name in ("rrd", "connect", "server_memory_limit"):
             if not isinstance(getattr(self, name), str):
-                raise ValueError(
+                raise ConfigError(
                     f"config error: rerun.{name} = {getattr(self, name)!r}: must be a string")
         if not isinstance(self.serve_web, bool):
-            raise ValueError(
+            raise ConfigError(
                 f"config error: rerun.serve_web = {self.serve_web!r}: must be true/false")
         schemes = ("rerun://", "rerun+http://", "rerun+https://")
         if self.connect and not self.connect.startswith(schemes):
-            raise ValueError(
+            raise ConfigError(
                 f"config error: rerun.connect = {self.connect!r}: must be a rerun:// or "
                 "rerun+http(s):// URL, e.g. rerun+http://127.0.0.1:9876/proxy"
             )
@@ -109,12 +113,7 @@ class RerunOptions:
     @classmethod
     def from_toml(cls, section: Mapping[str, Any]) -> "RerunOptions":
         """Build from the ``[rerun]`` table of the config file; unknown keys are errors."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(section) - known)
-        if unknown:
-            raise ValueError(
-                f"config error: rerun.{unknown[0]}: unknown key (known: {sorted(known)})")
-        return cls(**section)
+        return cls(**check_keys("rerun", section, (f.name for f in fields(cls))))
 
     def for_replay(self) -> "RerunOptions":
         """Coarser sampling for bulk replay of long logs (same entities as live)."""
