@@ -29,7 +29,7 @@ from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.bridge.config import BridgeConfig, parse_bridge_config
 from monitor.daemon_config import DaemonConfig, parse_daemon_sections
 from monitor.forecast_config import ForecastConfig
-from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, read_toml, unknown)
+from monitor.schema import MAX_DURATION_S, ConfigError, SectionReader, error, read_toml, unknown
 from monitor.viz.rerun_options import RerunOptions
 
 __all__ = ["MAX_DURATION_S", "ConfigError", "SectionReader"]  # re-exported for the sections' users
@@ -306,10 +306,8 @@ def _parse_sn(value: Any, path: str) -> SNCurveConfig:
     cycles = s.floats("cycles", min_len=2)
     s.done()
     if len(ranges) != len(cycles) or any(v <= 0 for v in ranges + cycles):
-        raise ConfigError(
-            f"config error: {path} = {_fmt(value)}: stress_range_Pa and cycles must be "
-            "positive lists of the same length"
-        )
+        raise error("", path, value,
+                    "stress_range_Pa and cycles must be positive lists of the same length")
     return SNCurveConfig(None, ranges, cycles)
 
 
