@@ -29,7 +29,8 @@ from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.bridge.config import BridgeConfig, parse_bridge_config
 from monitor.daemon_config import DaemonConfig, parse_daemon_sections
 from monitor.forecast_config import ForecastConfig
-from monitor.schema import MAX_DURATION_S, ConfigError, SectionReader, error, read_toml, unknown
+from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, error, parse_struct,
+                            read_toml, unknown)
 from monitor.viz.rerun_options import RerunOptions
 
 __all__ = ["MAX_DURATION_S", "ConfigError", "SectionReader"]  # re-exported for the sections' users
@@ -514,7 +515,7 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
                                  mooring),
         ordering=_parse_ordering(SectionReader(top.raw("ordering", {}), "ordering")),
         alerts=AlertsConfig.from_dict(data.get("alerts")),
-        forecast=ForecastConfig.from_dict(data.get("forecast")),
+        forecast=parse_struct(ForecastConfig, data.get("forecast"), "forecast"),
         daemon=parse_daemon_sections(data),
         rerun=RerunOptions.from_toml(data.get("rerun", {})),
         bridge=parse_bridge_config(data) if "source" in data else None,
