@@ -10,10 +10,10 @@ component's S-N curve (:func:`report_plot_fields`).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Mapping
 
+import msgspec
 import numpy as np
 
 from monitor.config import Config
@@ -64,7 +64,7 @@ def rerun_options(config: Config) -> RerunOptions:
         fill["bearing_deg"] = m.bearing_deg
     if "watch_circle_m" not in section and m.length_m > m.depth_m:
         fill["watch_circle_m"] = math.sqrt(m.length_m ** 2 - m.depth_m ** 2)
-    return replace(opts, **fill)
+    return msgspec.structs.replace(opts, **fill)
 
 
 class ViewerSink:
