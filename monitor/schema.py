@@ -114,8 +114,8 @@ def _describe(tp: Any) -> str:
         return f"one of {sorted(get_args(tp))}"
     if tp is str:
         return "a non-empty string" if m.min_length else "a string"
-    bounds = " and ".join(f"{op} {v:g}" for op, v in ((">", m.gt), (">=", m.ge), ("<", m.lt),
-                                                        ("<=", m.le)) if v is not None)
+    bounds = " and ".join(f"{op} {v:g}" if isinstance(v, float) else f"{op} {v}" for op, v in (
+        (">", m.gt), (">=", m.ge), ("<", m.lt), ("<=", m.le)) if v is not None)
     if tp is int:
         return f"an integer {bounds}".rstrip()
     if tp is float:
@@ -156,6 +156,9 @@ def parse_struct(cls: type[S], raw: Any, where: str) -> S:
                 for m in get_args(tp)[1:]):
             raise error(where, key, value, f"must be {_describe(tp)}")
         values[key] = out
+    for key, f in fields.items():
+        if f.required and key not in values:
+            raise ConfigError(f"config error: {where}.{key} is missing")
     obj = cls(**values)
     check = getattr(obj, "check", None)
     return check(where, table) if check is not None else obj

@@ -52,8 +52,7 @@ def session_config_dict(zc: ZenohConfig) -> dict[str, Any]:
     }
     transport: dict[str, Any] = {}
     if zc.tls is not None:
-        tls = {k: v for k, v in msgspec.structs.asdict(zc.tls).items() if v is not None and k != "enable_mtls"}
-        tls["enable_mtls"] = zc.tls.enable_mtls
+        tls = {k: v for k, v in msgspec.structs.asdict(zc.tls).items() if v is not None}
         transport["link"] = {"tls": tls}
     if zc.auth is not None:
         usrpwd = {k: v for k, v in msgspec.structs.asdict(zc.auth).items() if v is not None}
