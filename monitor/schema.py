@@ -131,12 +131,25 @@ def _struct_type(tp: Any) -> type[msgspec.Struct] | None:
     return None
 
 
+def convert(where: str, key: str, value: Any, tp: Any) -> Any:
+    """``value`` as type ``tp`` (msgspec conversion with ``tp``'s bounds); floats must be finite
+    unless its ``Meta`` has ``extra={"nonfinite": True}``. ConfigError naming key and value."""
+    try:
+        out = msgspec.convert(value, tp)
+    except msgspec.ValidationError:
+        raise error(where, key, value, f"must be {_describe(tp)}") from None
+    if isinstance(out, float) and not math.isfinite(out) and not any(
+            isinstance(m, msgspec.Meta) and (m.extra or {}).get("nonfinite")
+            for m in get_args(tp)[1:]):
+        raise error(where, key, value, f"must be {_describe(tp)}")
+    return out
+
+
 def parse_struct(cls: type[S], raw: Any, where: str) -> S:
     """The section ``cls`` from its TOML table ``raw`` (None or absent keys: the defaults).
 
-    Every key is converted by msgspec against its declared type; a nested Struct is parsed
-    the same way under ``where.key``; floats must be finite unless a field's ``Meta`` has
-    ``extra={"nonfinite": True}``. Then ``cls.check(obj, where, raw)`` if it exists.
+    Every key is converted by :func:`convert` against its declared type; a nested Struct is
+    parsed the same way under ``where.key``. Then ``cls.check(obj, where, raw)`` if it exists.
     """
     fields = {f.name: f for f in msgspec.structs.fields(cls)}
     table = check_keys(where, {} if raw is None else raw, fields)
@@ -146,16 +159,8 @@ def parse_struct(cls: type[S], raw: Any, where: str) -> S:
         nested = _struct_type(tp)
         if nested is not None and isinstance(value, Mapping):
             values[key] = parse_struct(nested, value, f"{where}.{key}")
-            continue
-        try:
-            out = msgspec.convert(value, tp)
-        except msgspec.ValidationError:
-            raise error(where, key, value, f"must be {_describe(tp)}") from None
-        if isinstance(out, float) and not math.isfinite(out) and not any(
-                isinstance(m, msgspec.Meta) and (m.extra or {}).get("nonfinite")
-                for m in get_args(tp)[1:]):
-            raise error(where, key, value, f"must be {_describe(tp)}")
-        values[key] = out
+        else:
+            values[key] = convert(where, key, value, tp)
     for key, f in fields.items():
         if f.required and key not in values:
             raise ConfigError(f"config error: {where}.{key} is missing")
