@@ -27,7 +27,7 @@ import math
 import tomllib
 from pathlib import Path
 from types import UnionType
-from typing import (Any, Iterable, Literal, Mapping, Sequence, TypeVar, Union, get_args,
+from typing import (Annotated, Any, Iterable, Literal, Mapping, Sequence, TypeVar, Union, get_args,
                     get_origin)
 
 import msgspec
@@ -119,7 +119,8 @@ def _describe(tp: Any) -> str:
     if tp is int:
         return f"an integer {bounds}".rstrip()
     if tp is float:
-        return f"a finite number {bounds}".rstrip()
+        kind = "a number (inf allowed)" if (m.extra or {}).get("nonfinite") else "a finite number"
+        return f"{kind} {bounds}".rstrip()
     return f"of type {getattr(tp, '__name__', tp)}"
 
 
@@ -133,14 +134,15 @@ def _struct_type(tp: Any) -> type[msgspec.Struct] | None:
 
 def convert(where: str, key: str, value: Any, tp: Any) -> Any:
     """``value`` as type ``tp`` (msgspec conversion with ``tp``'s bounds); floats must be finite
-    unless its ``Meta`` has ``extra={"nonfinite": True}``. ConfigError naming key and value."""
+    (+-inf allowed when its ``Meta`` has ``extra={"nonfinite": True}``, NaN never).
+    ConfigError naming key and value."""
     try:
         out = msgspec.convert(value, tp)
     except msgspec.ValidationError:
         raise error(where, key, value, f"must be {_describe(tp)}") from None
-    if isinstance(out, float) and not math.isfinite(out) and not any(
+    if isinstance(out, float) and (math.isnan(out) or math.isinf(out) and not any(
             isinstance(m, msgspec.Meta) and (m.extra or {}).get("nonfinite")
-            for m in get_args(tp)[1:]):
+            for m in get_args(tp)[1:])):
         raise error(where, key, value, f"must be {_describe(tp)}")
     return out
 
@@ -197,18 +199,17 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
         self._seen.add(key)
         return self.table.get(key, default)
 
-    def _required(self, key: str) -> Any:
+    def _value(self, key: str, default: Any) -> Any:
+        """The key's value, or ``default``; None: the key is required."""
         self._seen.add(key)
-        if key not in self.table:
+        if key not in self.table and default is None:
             raise ConfigError(f"config error: {self.path + '.' if self.path else ''}{key} "
                               "is missing")
-        return self.table[key]
+        return self.table.get(key, default)
 
     def str(self, key: str, default: str | None = None, choices: Sequence[str] | None = None
             ) -> str:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, str):
-            raise self.error(key, value, "must be a string")
+        value = convert(self.path, key, self._value(key, default), str)
         if choices is not None and value not in choices:
             raise self.error(key, value, f"must be one of {list(choices)}")
         return value
@@ -216,30 +217,18 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
     def float(self, key: builtins.str, default: float | None = None, *,
               gt: float | None = None, ge: float | None = None, le: float | None = None,
               allow_inf: bool = False) -> float:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, value, "must be a number")
-        value = float(value)
-        if math.isnan(value) or (math.isinf(value) and not allow_inf):
-            raise self.error(key, value, "must be a finite number")
-        if gt is not None and not value > gt:
-            raise self.error(key, value, f"must be > {gt:g}")
-        if ge is not None and not value >= ge:
-            raise self.error(key, value, f"must be >= {ge:g}")
-        if le is not None and not value <= le:
-            raise self.error(key, value, f"must be <= {le:g}")
-        return value
+        bounds = {k: v for k, v in (("gt", gt), ("ge", ge), ("le", le)) if v is not None}
+        # msgspec's stubs list the bound combinations one by one; any of them is valid here
+        meta = msgspec.Meta(**bounds, extra={"nonfinite": allow_inf})  # type: ignore[call-overload]
+        return convert(self.path, key, self._value(key, default), Annotated[float, meta])
 
     def bool(self, key: builtins.str, default: bool | None = None) -> bool:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, bool):
-            raise self.error(key, value, "must be true or false")
-        return value
+        return convert(self.path, key, self._value(key, default), bool)
 
     def floats(self, key: builtins.str, default: Sequence[builtins.float] | None = None, *,
                increasing: builtins.bool = False, min_len: int = 1
                ) -> tuple[builtins.float, ...]:
-        value = self._required(key) if default is None else self.raw(key, default)
+        value = self._value(key, default)
         if not isinstance(value, (list, tuple)) or len(value) < min_len or any(
             isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
             for v in value

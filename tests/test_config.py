@@ -53,7 +53,7 @@ def test_default_is_the_seed_004_mooring():
     (lambda d: d["component"][0].update(layy="left"),
      "config error: component[0].layy = 'left': unknown key (did you mean 'lay'?)"),
     (lambda d: d["component"][0].update(dff=-1),
-     "config error: component[0].dff = -1.0: must be > 0"),
+     "config error: component[0].dff = -1: must be a finite number > 0"),
     (lambda d: d["component"][0].update(kind="axial"),
      "config error: component[0].area_m2 is missing"),
     (lambda d: d["component"][0].update(mean_stress="goodman"),
@@ -65,7 +65,7 @@ def test_default_is_the_seed_004_mooring():
     (lambda d: d["load"].update(source="guess"),
      "config error: load.source = 'guess': must be one of ['auto', 'measured', 'estimated']"),
     (lambda d: d["load"].update(stale_after_s="5"),
-     "config error: load.stale_after_s = '5': must be a number"),
+     "config error: load.stale_after_s = '5': must be a finite number > 0 and <= 1e+09"),
     (lambda d: d["validate"]["tension"]["tension_N"].update(max=-6000.0),
      "config error: validate.tension.tension_N.max = -6000.0: must be > min (-5000)"),
     (lambda d: d["validate"].update(sonar={}),
@@ -201,11 +201,11 @@ def test_resend_interval_zero_means_never():
 
 @pytest.mark.parametrize("section, message", [
     ({"validate": {"tension": {"tension_N": {"flat_tolerance": -1.0}}}},
-     "validate.tension.tension_N.flat_tolerance = -1.0: must be >= 0"),
+     "validate.tension.tension_N.flat_tolerance = -1.0: must be a number (inf allowed) >= 0"),
     ({"validate": {"motion": {"heave_m": {"suspect_min": 2.0, "suspect_max": 1.0}}}},
      "validate.motion.heave_m.suspect_max = 1.0: must be >= suspect_min"),
     ({"validate": {"gnss": {"location_range_max_m": "far"}}},
-     "validate.gnss.location_range_max_m = 'far': must be a number"),
+     "validate.gnss.location_range_max_m = 'far': must be a finite number >= 0"),
     ({"load": {"motion_sensor": "gps"}}, "load.motion_sensor = 'gps': must be one of"),
     ({"load": {"slack_limit_N": 50_000.0}}, "load.slack_limit_N = 50000.0: must be < breaking"),
 ])
