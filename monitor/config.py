@@ -33,7 +33,6 @@ from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, error, p
                             read_toml, unknown)
 from monitor.viz.rerun_options import RerunOptions
 
-__all__ = ["MAX_DURATION_S", "ConfigError", "SectionReader"]  # re-exported for the sections' users
 
 DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
 

@@ -84,6 +84,14 @@ def test_default_is_the_seed_004_mooring():
      "config error: fatigue.histogram_edges_Pa = [0.0, 2.0, 1.0]: must be strictly increasing"),
     (lambda d: d.update(zenohh={}),
      "config error: zenohh = {}: unknown section (did you mean 'zenoh'?)"),
+    (lambda d: d["component"][0].update(sn_curve={"stress_range_Pa": [2e8, 1e8], "cycles": [1e4]}),
+     "config error: component[0].sn_curve.cycles = [10000.0]: must be a list of at least 2 "
+     "finite numbers"),
+    (lambda d: d["component"][0].update(sn_curve={"stress_range_Pa": [2e8, 1e8],
+                                                  "cycles": [1e4, 1e5, 1e6]}),
+     "config error: component[0].sn_curve = {'stress_range_Pa': [200000000.0, 100000000.0], "
+     "'cycles': [10000.0, 100000.0,...: stress_range_Pa and cycles must be positive lists of "
+     "the same length"),  # a long value is cut short
     (lambda d: d["ordering"].update(horizon_s=float("nan")),
      "config error: ordering.horizon_s = nan: must be a finite number"),
 ])
