@@ -22,7 +22,10 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Annotated, Any, Literal, Mapping
+
+import msgspec
+from msgspec import Meta
 
 from monitor.alerts.config import AlertsConfig
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
@@ -60,10 +63,20 @@ DEFAULT_STALE_S: Mapping[str, float] = {
 }
 
 
-@dataclass(frozen=True)
-class BuoyConfig:
+Positive = Annotated[float, Meta(gt=0)]
+Seconds = Annotated[float, Meta(gt=0, le=MAX_DURATION_S)]  # a span becomes int64 ns
+
+
+class BuoyConfig(msgspec.Struct, frozen=True):
     id: str
-    design_life_years: float
+    design_life_years: Positive = 20.0
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "BuoyConfig":
+        try:
+            validate_buoy_id(self.id)
+        except ValueError as exc:
+            raise error(where, "id", self.id, str(exc)) from None
+        return self
 
 
 @dataclass(frozen=True)
@@ -138,23 +151,39 @@ class ComponentConfig:
     bend_gauge_length_m: float | None = None  # None: conductors locked at the bend
 
 
-@dataclass(frozen=True)
-class FatigueConfig:
-    rate_window_s: float
-    histogram_edges_Pa: tuple[float, ...]
-    reference_cycles: float
+class FatigueConfig(msgspec.Struct, frozen=True):
+    rate_window_s: Seconds = 3600.0
+    histogram_edges_Pa: Annotated[tuple[float, ...], Meta(
+        min_length=2, description="a list of at least 2 finite numbers")] = tuple(
+            i * 5.0e6 for i in range(41))
+    reference_cycles: Positive = 1.0e7
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "FatigueConfig":
+        edges = self.histogram_edges_Pa
+        if not all(math.isfinite(e) for e in edges):
+            raise error(where, "histogram_edges_Pa", raw.get("histogram_edges_Pa"),
+                        "must be a list of at least 2 finite numbers")
+        if any(b <= a for a, b in zip(edges, edges[1:])):
+            raise error(where, "histogram_edges_Pa", raw.get("histogram_edges_Pa"),
+                        "must be strictly increasing")
+        return self
 
 
-@dataclass(frozen=True)
-class LoadConfig:
-    source: str  # "auto" | "measured" | "estimated"
-    stale_after_s: float
+class LoadConfig(msgspec.Struct, frozen=True):
+    source: Literal["auto", "measured", "estimated"] = "auto"
+    stale_after_s: Seconds = 5.0
     # stream that feeds the motion estimator: "imu", "motion", or "auto" (the first of the two
     # that delivers an accepted sample, see monitor.load_source)
-    motion_sensor: str
-    motion_rate_hz: float  # its nominal sample rate (the estimator works on a fixed step)
-    breaking_load_N: float = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
+    motion_sensor: Literal["auto", "imu", "motion"] = "auto"
+    motion_rate_hz: Positive = 10.0  # its nominal sample rate (the estimator's fixed step)
+    breaking_load_N: Positive = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
     slack_limit_N: float = 0.0  # below this the line is slack: QC suspect
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "LoadConfig":
+        if not self.slack_limit_N < self.breaking_load_N:
+            raise error(where, "slack_limit_N", self.slack_limit_N,
+                        f"must be < breaking_load_N ({self.breaking_load_N:g})")
+        return self
 
 
 @dataclass(frozen=True)
@@ -187,10 +216,10 @@ class SensorLimits:
     watch_circle: tuple[float, float, float] | None = None
 
 
-@dataclass(frozen=True)
-class OrderingConfig:
-    horizon_s: float  # live: how far a stream may lag the newest data before it is passed by
-    replay_horizon_s: float  # replay: same, sized for coalesced log blocks
+class OrderingConfig(msgspec.Struct, frozen=True):
+    horizon_s: Seconds = 10.0  # live: how far a stream may lag the newest data before it is
+    #                            passed by
+    replay_horizon_s: Seconds = 3600.0  # replay: same, sized for coalesced log blocks
 
 
 @dataclass(frozen=True)
@@ -217,16 +246,6 @@ class Config:
         """The raw table of a top-level section ({} when absent), to edit with config_with."""
         return self.raw.get(name, {})
 
-
-def _parse_buoy(r: SectionReader) -> BuoyConfig:
-    buoy_id = r.str("id")
-    try:
-        validate_buoy_id(buoy_id)
-    except ValueError as exc:
-        raise r.error("id", buoy_id, str(exc)) from None
-    out = BuoyConfig(buoy_id, r.float("design_life_years", 20.0, gt=0))
-    r.done()
-    return out
 
 
 def _parse_mooring(r: SectionReader) -> MooringConfig:
@@ -358,34 +377,6 @@ def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
     }
 
 
-def _parse_fatigue(r: SectionReader) -> FatigueConfig:
-    edges = r.floats("histogram_edges_Pa", [i * 5.0e6 for i in range(41)], increasing=True,
-                     min_len=2)
-    out = FatigueConfig(
-        rate_window_s=r.float("rate_window_s", 3600.0, gt=0, le=MAX_DURATION_S),
-        histogram_edges_Pa=edges,
-        reference_cycles=r.float("reference_cycles", 1.0e7, gt=0),
-    )
-    r.done()
-    return out
-
-
-def _parse_load(r: SectionReader) -> LoadConfig:
-    out = LoadConfig(
-        source=r.str("source", "auto", choices=("auto", "measured", "estimated")),
-        stale_after_s=r.float("stale_after_s", 5.0, gt=0, le=MAX_DURATION_S),
-        motion_sensor=r.str("motion_sensor", "auto", choices=("auto", "imu", "motion")),
-        motion_rate_hz=r.float("motion_rate_hz", 10.0, gt=0),
-        breaking_load_N=r.float("breaking_load_N", 45_000.0, gt=0),
-        slack_limit_N=r.float("slack_limit_N", 0.0),
-    )
-    if not out.slack_limit_N < out.breaking_load_N:
-        raise r.error("slack_limit_N", out.slack_limit_N,
-                      f"must be < breaking_load_N ({out.breaking_load_N:g})")
-    r.done()
-    return out
-
-
 _G = 9.81
 
 
@@ -477,20 +468,13 @@ def _parse_validate(r: SectionReader, load: LoadConfig,
     return out
 
 
-def _parse_ordering(r: SectionReader) -> OrderingConfig:
-    out = OrderingConfig(r.float("horizon_s", 10.0, gt=0, le=MAX_DURATION_S),
-                         r.float("replay_horizon_s", 3600.0, gt=0, le=MAX_DURATION_S))
-    r.done()
-    return out
-
-
 def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
     """Validate a parsed TOML document and return the typed configuration."""
     top = SectionReader(data, "")
     for name in data:
         if name not in CORE_SECTIONS + SERVICE_SECTIONS:
             raise unknown("", name, data[name], CORE_SECTIONS + SERVICE_SECTIONS, "section")
-    load = _parse_load(SectionReader(top.raw("load", {}), "load"))
+    load = parse_struct(LoadConfig, data.get("load"), "load")
     tables = top.table_list("component")
     if not tables:
         raise ConfigError("config error: component: at least one [[component]] is required")
@@ -504,15 +488,15 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
     mooring = _parse_mooring(SectionReader(top.raw("mooring", {"preset": "vaps_seed004"}),
                                            "mooring"))
     return Config(
-        buoy=_parse_buoy(SectionReader(top.raw("buoy", {}), "buoy")),
+        buoy=parse_struct(BuoyConfig, data.get("buoy"), "buoy"),
         mooring=mooring,
         cable=_parse_cable(SectionReader(top.raw("cable", {}), "cable")),
         components=components,
-        fatigue=_parse_fatigue(SectionReader(top.raw("fatigue", {}), "fatigue")),
+        fatigue=parse_struct(FatigueConfig, data.get("fatigue"), "fatigue"),
         load=load,
         validate=_parse_validate(SectionReader(top.raw("validate", {}), "validate"), load,
                                  mooring),
-        ordering=_parse_ordering(SectionReader(top.raw("ordering", {}), "ordering")),
+        ordering=parse_struct(OrderingConfig, data.get("ordering"), "ordering"),
         alerts=AlertsConfig.from_dict(data.get("alerts")),
         forecast=parse_struct(ForecastConfig, data.get("forecast"), "forecast"),
         daemon=parse_daemon_sections(data),

@@ -111,7 +111,7 @@ def _describe(tp: Any) -> str:
     if tp is bool:
         return "true or false"
     if get_origin(tp) is Literal:
-        return f"one of {sorted(get_args(tp))}"
+        return f"one of {list(get_args(tp))}"
     if tp is str:
         return "a non-empty string" if m.min_length else "a string"
     bounds = " and ".join(f"{op} {v:g}" if isinstance(v, float) else f"{op} {v}" for op, v in (

@@ -184,5 +184,5 @@ def test_check_config_reads_the_bridge_sections_of_a_daemon_configuration(tmp_pa
     bad.write_text(base + '\n[[source]]\nname = "gps"\nsensor = "gnss"\ntransport = "udp"\n'
                    'port = 10110\nstal_s = 3\n')
     with pytest.raises(ConfigError, match=r"source\[0\]\.stal_s = 3: unknown key \(did you mean "
-                       "'stall_s'\?\)"):
+                       r"'stall_s'\?\)"):
         load_config(bad)
