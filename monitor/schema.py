@@ -153,18 +153,18 @@ def parse_struct(cls: type[S], raw: Any, where: str) -> S:
     Every key is converted by :func:`convert` against its declared type; a nested Struct is
     parsed the same way under ``where.key``. Then ``cls.check(obj, where, raw)`` if it exists.
     """
-    fields = {f.name: f for f in msgspec.structs.fields(cls)}
+    fields = {f.encode_name: f for f in msgspec.structs.fields(cls)}  # the TOML key names
     table = check_keys(where, {} if raw is None else raw, fields)
     values: dict[str, Any] = {}
     for key, value in table.items():
         tp = fields[key].type
         nested = _struct_type(tp)
         if nested is not None and isinstance(value, Mapping):
-            values[key] = parse_struct(nested, value, f"{where}.{key}")
+            values[fields[key].name] = parse_struct(nested, value, f"{where}.{key}")
         else:
-            values[key] = convert(where, key, value, tp)
+            values[fields[key].name] = convert(where, key, value, tp)
     for key, f in fields.items():
-        if f.required and key not in values:
+        if f.required and f.name not in values:
             raise ConfigError(f"config error: {where}.{key} is missing")
     obj = cls(**values)
     check = getattr(obj, "check", None)

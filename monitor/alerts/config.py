@@ -37,12 +37,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Any, Mapping
 
+import msgspec
 from msgspec import Meta
 
 from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth, check_url,
                                          parse_auth)
 from monitor.alerts.records import SEVERITIES
-from monitor.schema import MAX_DURATION_S, ConfigError, convert, did_you_mean, unknown
+from monitor.schema import MAX_DURATION_S, ConfigError, convert, did_you_mean, parse_struct, unknown
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
@@ -152,24 +153,41 @@ class WebhookConfig:
     auth: HttpAuth = HttpAuth()
 
 
-@dataclass(frozen=True)
-class EmailConfig:
-    host: str
-    port: int
-    sender: str
-    to: tuple[str, ...]
+class EmailConfig(msgspec.Struct, frozen=True):
+    """``[alerts.email]``: SMTP."""
+
+    host: Annotated[str, Meta(min_length=1)]
+    sender: Annotated[str, Meta(pattern="@", description="an e-mail address")
+                      ] = msgspec.field(name="from")
+    to: Annotated[str | tuple[str, ...], Meta(
+        description="an address or a non-empty list of addresses")] = ()
+    port: Annotated[int, Meta(ge=1, le=65535)] = 25
     starttls: bool = False
     username: str = ""
-    password_env: str = ""
-    timeout_s: float = 10.0
+    password_env: str = ""  # the environment variable holding the password
+    timeout_s: Positive = 10.0
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "EmailConfig":
+        to = (self.to,) if isinstance(self.to, str) else self.to
+        if not to or not all("@" in a for a in to):
+            raise _err(f"{where}.to", raw.get("to"),
+                       "must be an address or a non-empty list of addresses")
+        return msgspec.structs.replace(self, to=to)
 
 
-@dataclass(frozen=True)
-class OutboxConfig:
-    path: str = "alerts_outbox.sqlite"
-    retry_base_s: float = 5.0
-    retry_max_s: float = 600.0
-    max_pending: int = 10000
+class OutboxConfig(msgspec.Struct, frozen=True):
+    """``[alerts.outbox]``: the durable queue of webhook, e-mail and Alertmanager messages."""
+
+    path: Annotated[str, Meta(min_length=1)] = "alerts_outbox.sqlite"
+    retry_base_s: Positive = 5.0
+    retry_max_s: Positive = 600.0  # backoff doubles from retry_base_s up to this
+    max_pending: Annotated[int, Meta(ge=1)] = 10000  # per channel
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "OutboxConfig":
+        if self.retry_max_s < self.retry_base_s:
+            raise _err(f"{where}.retry_max_s", raw.get("retry_max_s"),
+                       f"must be >= retry_base_s ({self.retry_base_s:g})")
+        return self
 
 
 @dataclass(frozen=True)
@@ -212,10 +230,10 @@ class AlertsConfig:
         return cls(
             eval_interval_s=eval_s, resend_interval_s=resend, history_limit=hist, rules=rules,
             webhook=_webhook(f"{where}.webhook", d["webhook"]) if "webhook" in d else None,
-            email=_email(f"{where}.email", d["email"]) if "email" in d else None,
+            email=parse_struct(EmailConfig, d["email"], f"{where}.email") if "email" in d else None,
             alertmanager=(_alertmanager(f"{where}.alertmanager", d["alertmanager"])
                           if "alertmanager" in d else None),
-            outbox=_outbox(f"{where}.outbox", d.get("outbox", {})),
+            outbox=parse_struct(OutboxConfig, d.get("outbox"), f"{where}.outbox"),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -317,37 +335,3 @@ def _alertmanager(where: str, d: Any) -> AlertmanagerConfig:
         instance=text["instance"], runbook_url=text["runbook_url"],
         generator_url=text["generator_url"], auth=parse_auth(where, d, _err),
     )
-
-
-def _email(where: str, d: Any) -> EmailConfig:
-    if not isinstance(d, Mapping):
-        raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"host", "port", "from", "to", "starttls", "username", "password_env",
-                           "timeout_s"})
-    port = _get(where, d, "port", Annotated[int, Meta(ge=1, le=65535)], 25)
-    to = d.get("to")
-    if isinstance(to, str):
-        to = [to]
-    if not isinstance(to, list) or not to or not all(isinstance(a, str) and "@" in a for a in to):
-        raise _err(f"{where}.to", to, "must be an address or a non-empty list of addresses")
-    return EmailConfig(
-        host=_string(f"{where}.host", d.get("host")), port=port,
-        sender=_string(f"{where}.from", d.get("from"), lambda s: "@" in s, "an e-mail address"),
-        to=tuple(to), starttls=_get(where, d, "starttls", bool, False),
-        username=_get(where, d, "username", str, ""),
-        password_env=_get(where, d, "password_env", str, ""),
-        timeout_s=_get(where, d, "timeout_s", Positive, 10.0),
-    )
-
-
-def _outbox(where: str, d: Any) -> OutboxConfig:
-    if not isinstance(d, Mapping):
-        raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"path", "retry_base_s", "retry_max_s", "max_pending"})
-    base = _get(where, d, "retry_base_s", Positive, 5.0)
-    top = _get(where, d, "retry_max_s", Positive, 600.0)
-    if top < base:
-        raise _err(f"{where}.retry_max_s", d.get("retry_max_s"), f"must be >= retry_base_s ({base:g})")
-    cap = _get(where, d, "max_pending", Annotated[int, Meta(ge=1)], 10000)
-    return OutboxConfig(path=_string(f"{where}.path", d.get("path", "alerts_outbox.sqlite")),
-                        retry_base_s=base, retry_max_s=top, max_pending=cap)
