@@ -74,8 +74,10 @@ def unknown(where: str, key: str, value: Any, known: Iterable[str], what: str = 
             ) -> ConfigError:
     """A key (or section) nobody reads, with the nearest known name: a typo, usually."""
     known = sorted(known)
-    return error(where, key, value,
-                 f"unknown {what}{did_you_mean(key, known)}; expected one of {known}")
+    why = f"unknown {what}{did_you_mean(key, known)}; expected one of {known}"
+    if what == "section":  # its whole table would say nothing more
+        return ConfigError(f"config error: [{key}]: {why}")
+    return error(where, key, value, why)
 
 
 def check_keys(where: str, table: Any, known: Iterable[str], what: str = "key"

@@ -83,7 +83,7 @@ def test_default_is_the_seed_004_mooring():
     (lambda d: d["fatigue"].update(histogram_edges_Pa=[0.0, 2.0, 1.0]),
      "config error: fatigue.histogram_edges_Pa = [0.0, 2.0, 1.0]: must be strictly increasing"),
     (lambda d: d.update(zenohh={}),
-     "config error: zenohh = {}: unknown section (did you mean 'zenoh'?)"),
+     "config error: [zenohh]: unknown section (did you mean 'zenoh'?)"),
     (lambda d: d["component"][0].update(sn_curve={"stress_range_Pa": [2e8, 1e8], "cycles": [1e4]}),
      "config error: component[0].sn_curve.cycles = [10000.0]: must be a list of at least 2 "
      "finite numbers"),
@@ -175,7 +175,7 @@ def test_every_section_is_parsed_once_into_its_typed_object():
 @pytest.mark.parametrize("section, message", [
     # a misspelt section, a nested key, an alert rule's parameter, a bridge source's key
     ({"zenoh": {}, "forecst": {}},
-     "config error: forecst = {}: unknown section (did you mean 'forecast'?); expected one of "),
+     "config error: [forecst]: unknown section (did you mean 'forecast'?); expected one of "),
     ({"validate": {"tension": {"tension_N": {"suspect_mx": 1e4}}}},
      "config error: validate.tension.tension_N.suspect_mx = 10000.0: unknown key (did you mean "
      "'suspect_max'?)"),
