@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tomllib
 
-from monitor.config import load_config, run_section_parsers
+from monitor.schema import read_toml
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,24 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _bridge_only(path: str) -> bool:
+def _check_bridge(path: str, raw: dict) -> int:
     """A bridge's own file (``buoymon bridge --config``): sources but no monitored component."""
-    try:
-        with open(path, "rb") as f:
-            raw = tomllib.load(f)
-    except (OSError, ValueError):  # unreadable, not UTF-8, not TOML: load_config reports it
-        return False  # load_config reports it
-    return "source" in raw and "component" not in raw
+    from monitor.bridge.config import parse_bridge_config  # noqa: PLC0415 (bridge files only)
 
-
-def _check_bridge(path: str) -> int:
-    from monitor.bridge.config import load_bridge_config  # noqa: PLC0415 (bridge files only)
-
-    try:
-        cfg = load_bridge_config(path)
-    except ValueError as exc:
-        print(exc, file=sys.stderr)
-        return 2
+    cfg = parse_bridge_config(raw)
     print(f"{path}: ok (a bridge configuration: buoymon bridge --config)")
     print(f"  buoy {cfg.buoy_id}: publishing to {', '.join(cfg.connect)}")
     for s in cfg.sources:
@@ -41,11 +27,12 @@ def _check_bridge(path: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    if _bridge_only(args.config):
-        return _check_bridge(args.config)
     try:
-        config = load_config(args.config)
-        sections = run_section_parsers(config)
+        raw = read_toml(args.config)
+        if "source" in raw and "component" not in raw:
+            return _check_bridge(args.config, raw)
+        from monitor.config import SERVICE_SECTIONS, parse_config  # noqa: PLC0415
+        config = parse_config(raw, source=args.config)
         # the model objects the pipeline will build: S-N curves, the cable
         from monitor.components import build_cable, build_sn_curve
 
@@ -63,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"  buoy {config.buoy.id}: {config.mooring.length_m:g} m line in "
           f"{config.mooring.depth_m:g} m of water; load source {config.load.source}")
     print(f"  components: {comps}")
-    for name, status in sections.items():
-        print(f"  [{name}] {status}")
+    for name in ("alerts", *SERVICE_SECTIONS):
+        if name in raw:
+            print(f"  [{name}] ok")
     for c in config.components:
         if c.location == "termination" and c.bend_radius_m is None:
             print(f"  note: component {c.name}: termination bend not configured "

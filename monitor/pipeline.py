@@ -36,7 +36,6 @@ from monitor.config import Config, ConfigError
 from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.forecast import ForecastAlerts, parse_forecast
-from monitor.forecast_config import ForecastConfig
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
@@ -74,15 +73,8 @@ def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, 
     components = {name: {"endurance_stress_Pa": e, "yield_stress_Pa": (yield_Pa or {}).get(name)}
                   for name, e in endurance_Pa.items()}
     if state:
-        return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
-    try:
-        return AlertEngine.from_config(config.section("alerts"), buoy_id, components)
-    except ConfigError:
-        raise
-    except ValueError as exc:  # a rule naming a component or stream the config lacks
-        msg = str(exc)
-        raise ConfigError(msg if msg.startswith("config error") else f"config error: {msg}"
-                          ) from None
+        return AlertEngine.from_state(state, config.alerts, buoy_id, components)
+    return AlertEngine.from_config(config.alerts, buoy_id, components)
 
 
 def alert_to_dict(record: Any) -> dict[str, Any]:
@@ -918,10 +910,7 @@ def _build_forecasting(config: Config, components: Mapping[str, Component], tick
                        st: Mapping[str, Any]) -> tuple[SeaStateLearner | None,
                                                        ForecastAlerts | None]:
     """The ``[forecast]`` learner and forecast alerts (None, None when switched off)."""
-    try:
-        cfg = ForecastConfig.from_dict(config.section("forecast"))
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
+    cfg = config.forecast
     if not cfg.enabled:
         return None, None
     prior = None

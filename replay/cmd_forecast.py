@@ -27,7 +27,6 @@ from models.fatigue.miner import remaining_life_days
 from models.sea_state_table import (HS_EDGES_M, TP_EDGES_S, DamageRateTable, Projection,
                                     project_damage)
 from models.waves import breaking_height
-from monitor.alerts.config import AlertsConfig
 from monitor.config import Config, ConfigError, default_config, load_config
 from monitor.strict_json import json_ready
 from replay.sea_state_files import SeaStates, read_sea_states
@@ -84,8 +83,8 @@ def publish_forecast(buoy_id: str, states: SeaStates, connect: Sequence[str],
 
 def damage_thresholds(config: Config) -> list[float]:
     """The configuration's damage alert thresholds (``damage_fraction`` rules), ascending."""
-    rules = AlertsConfig.from_dict(config.section("alerts")).rules
-    return sorted({float(r.params["threshold"]) for r in rules if r.kind == "damage_fraction"})
+    return sorted({float(r.params["threshold"]) for r in config.alerts.rules
+                   if r.kind == "damage_fraction"})
 
 
 def fill_model_rates(table: DamageRateTable, config: Config, states: SeaStates,

@@ -229,11 +229,11 @@ def test_view_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
 
 @pytest.mark.parametrize("old, new, message", [
     ("replay_horizon_s = 3600.0", "replay_horizon_s = 1e300",
-     "ordering.replay_horizon_s = 1e+300: must be <= 1e+09"),
+     "ordering.replay_horizon_s = 1e+300: must be a finite number > 0 and <= 1e+09"),
     ("eval_interval_s = 10.0", "eval_interval_s = 1e12",
-     "alerts.eval_interval_s = 1000000000000.0: must be <= 1e+09"),
-    ("on_delay_s = 60.0", "on_delay_s = 1e300", "on_delay_s = 1e+300: must be <= 1e+09"),
-    ("window_s = 600.0", "window_s = 1e300", "window_s = 1e+300: must be <= 1e+09"),
+     "alerts.eval_interval_s = 1000000000000.0: must be a finite number > 0 and <= 1e+09"),
+    ("on_delay_s = 60.0", "on_delay_s = 1e300", "alerts.rule[2].on_delay_s = 1e+300: must be a finite number >= 0 and <= 1e+09"),
+    ("window_s = 600.0", "window_s = 1e300", "window_s = 1e+300: must be a finite number > 0 and <= 1e+09"),
 ])
 def test_config_durations_have_a_ceiling(tmp_path, capsys, old, new, message):
     # durations become int64 nanoseconds: 1e300 s passed check-config and then the replay

@@ -125,16 +125,11 @@ def run_outbox(args: argparse.Namespace) -> int:
 
 
 def _outbox_path(config: str | None) -> Path:
-    import tomllib  # noqa: PLC0415
-
     from monitor.alerts.config import AlertsConfig  # noqa: PLC0415
+    from monitor.schema import read_toml  # noqa: PLC0415
 
     path = Path(config or DEFAULT_CONFIG)
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"config error: {path}: {exc}") from None
-    out = Path(AlertsConfig.from_dict(raw.get("alerts"), "alerts").outbox.path)
+    out = Path(AlertsConfig.from_dict(read_toml(path).get("alerts")).outbox.path)
     return out if out.is_absolute() else Path.cwd() / out
 
 
