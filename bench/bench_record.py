@@ -11,8 +11,10 @@ mcap's reader; the figures are the writing alone: messages and payload megabytes
 second (process time, best of the interleaved rounds) and the files' size.
 
 Measured 2026-11-25 on the 2-core development machine shared with other jobs (load 4-5),
-1 day (345,648 sensor messages + 86,400 status documents, 43.0 MB of payloads), best of 3
-interleaved rounds: see the commit that added this script for the figures.
+1 day (432,049 messages: the simulator's 1-s blocks and a status document per second, 36.7 MB
+of payloads), 3 interleaved rounds: monitor.mcap_file CPU best 2.70 s (median 3.92 s),
+160 k messages/s, 13.6 MB/s per CPU second; mcap's Writer 3.98 s (4.60 s), 109 k messages/s,
+9.2 MB/s; wall time is the 17,280 fsyncs' (7-8 s both); files 26.2 MB against 25.6 MB.
 
 Usage: python bench/bench_record.py [--hours 24] [--rounds 3] [--log FILE.mcap]
 """
