@@ -543,6 +543,9 @@ class Pipeline:
                     getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
             self.sea_states.load(t, stresses)
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
+        for s, n in slab.copies.items():  # counted after the ticks: not in their counts
+            self.validators[s].rejected["duplicate"] += n
+            rejected["duplicate"] += n
         if t.shape[0]:
             self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
         if upto is not None:

@@ -35,9 +35,10 @@ saved in the state, so any split of a stream into blocks gives the same verdicts
 re-delivered sample after a restart a ``duplicate``/``time_backwards`` and never counted twice.
 A genuine step in the signal is accepted once ``max_rate_per_s * elapsed`` covers it.
 
-This is the one place duplicates are removed and counted, live and in replay: the ordering
-(:mod:`monitor.ordering`, stable) puts each copy right behind its original, and the log reader
-delivers every copy it reads.
+Duplicates are removed and counted in the pipeline only, live and in replay alike (the log
+reader delivers every copy it reads): the ordering (:mod:`monitor.ordering`, stable) drops an
+exact copy it finds right behind its original, this rule rejects any other sample at a time
+already seen; both land in the one ``duplicate`` count.
 
 Rejected samples are simply absent downstream: the fatigue series is the accepted samples in
 time order. A run of rejections therefore joins the accepted samples either side; if the run is

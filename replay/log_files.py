@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from replay.mcap_scan import summary_records
-from replay.writer import MAGIC, OP_CHUNK, OP_MESSAGE, OP_STATISTICS
+from monitor.mcap_file import MAGIC, OP_CHUNK, OP_MESSAGE, OP_STATISTICS
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,8 @@
 """The cross-file merge of the reader: messages of all files through one reorder window,
 released in sensor-time order and coalesced into blocks (the ordering guarantees in
 :mod:`replay.reader`). Every copy of a message is delivered: duplicates are the pipeline's
-to reject and count (:mod:`monitor.validate`), live and in replay alike."""
+to drop and count (:mod:`monitor.ordering`, :mod:`monitor.validate`), live and in replay
+alike."""
 
 from __future__ import annotations
 

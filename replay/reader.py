@@ -43,10 +43,10 @@ Ordering guarantees (deterministic for the same files in the same order):
 3. A message read after messages more than the window newer than it (``publish_time`` at or
    before an already released one) is *late*: it is counted in ``late`` and delivered with the
    next release, i.e. out of order; the pipeline's validation then rejects its samples.
-4. Every copy of a message is delivered (a recording re-written after a restart, overlapping
-   files): the pipeline rejects and counts duplicate samples, live and in replay alike
-   (:mod:`monitor.validate`, ``samples.<stream>.rejected.duplicate`` in the report). The
-   order of 2 puts each copy right behind the first.
+4. Every copy of a message is delivered (a recording's re-recorded messages, overlapping
+   files): the pipeline drops and counts duplicate samples, live and in replay alike
+   (:mod:`monitor.ordering`, :mod:`monitor.validate`; ``samples.<stream>.rejected.duplicate``
+   in the report). The order of 2 puts each copy right behind the first.
 5. With ``coalesce=True`` the messages of one topic in one release are concatenated, in the
    order of 2, into ONE :class:`SampleBlock` (tens of thousands of samples); the blocks of one
    release are ordered by (first publish time, topic). The samples of each topic are exactly

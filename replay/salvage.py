@@ -16,12 +16,12 @@ from typing import BinaryIO, Iterator, Protocol
 import zstandard
 
 from monitor import codec
-from replay.chunks import Inflated, ReadAhead, inflate
-from replay.mcap_scan import MAX_CUT_CHUNK, Digest, digest, find_chunk, str_at, summary_records
-from replay.writer import (
+from monitor.mcap_file import (
     MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, OP_MESSAGE_INDEX,
     OP_SCHEMA,
 )
+from replay.chunks import Inflated, ReadAhead, inflate
+from replay.mcap_scan import MAX_CUT_CHUNK, Digest, digest, find_chunk, str_at, summary_records
 
 
 @dataclass(frozen=True)
@@ -156,9 +156,9 @@ class FileSalvage:
 
     def _summary_definitions(self, f: BinaryIO, size: int, ctx: FileContext) -> None:
         """Take the schemas and channels repeated in the summary section, when the file ends
-        in an intact footer. mcap's own writer (``buoymon record``) defines a channel inside
-        the first chunk that uses it: should that chunk be damaged, the channel's messages in
-        the other chunks are then still decoded. The definitions are the same as in the data
+        in an intact footer. Other writers (mcap's own, which made buoymon's recordings before
+        monitor.mcap_file did) may define a channel inside the first chunk that uses it: should
+        that chunk be damaged, the channel's messages in the other chunks are then still decoded. The definitions are the same as in the data
         section (the first one read wins), so an intact file reads exactly as before."""
         scratch = FileStats(path="")  # a damaged summary loses no data: not reported as loss
         for op, content in summary_records(f, size):
