@@ -306,3 +306,17 @@ def test_replay_exits_2_for_config_errors_found_when_the_pipeline_is_built(tmp_p
     capsys.readouterr()
     assert main(["replay", str(log), "--config", str(cfg)]) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [
+    ["status", "--connect", "garbage"],
+    ["alerts", "list", "--buoy", "vaps", "--connect", "garbage"],
+    ["forecast", "--sea-states", "x.csv", "--publish", "garbage"],
+])
+def test_a_malformed_endpoint_is_a_usage_error(args, capsys):
+    """Was a zenoh.ZError traceback (alerts, forecast) or "daemon NOT RUNNING" (status)."""
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code == 2
+    assert ("'garbage' is not a Zenoh endpoint: expected <proto>/<address>, e.g. "
+            "tcp/127.0.0.1:7447") in capsys.readouterr().err
