@@ -7,6 +7,7 @@ import sys
 import tomllib
 
 from monitor.config import load_config, run_section_parsers
+from monitor.forecast_config import ForecastConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,6 +53,11 @@ def run(args: argparse.Namespace) -> int:
         build_cable(config)
         for component in config.components:
             build_sn_curve(component)
+        forecast = ForecastConfig.from_dict(config.section("forecast"))
+        if forecast.enabled and forecast.table is not None:  # the file, as the pipeline reads it
+            from monitor.pipeline import load_forecast_table  # noqa: PLC0415
+
+            load_forecast_table(config, forecast.table)
     except ValueError as exc:  # ConfigError, or a model rejecting a configured value
         print(exc, file=sys.stderr)
         return 2

@@ -320,3 +320,40 @@ def test_a_malformed_endpoint_is_a_usage_error(args, capsys):
     assert exc.value.code == 2
     assert ("'garbage' is not a Zenoh endpoint: expected <proto>/<address>, e.g. "
             "tcp/127.0.0.1:7447") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content, message", [
+    (None, "forecast.table = 't.json': [Errno 2] No such file or directory"),
+    ("{}", "forecast.table = 't.json': no 'components': not a table written by buoymon "
+           "forecast --save-table"),
+    ("[1,", "forecast.table = 't.json': Expecting value"),
+])
+def test_check_config_reads_the_forecast_table_as_the_replay_does(tmp_path, capsys, content,
+                                                                  message):
+    """A [forecast] table the pipeline cannot read: check-config said "[forecast] ok"."""
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    old = '# table = "table.json"'
+    assert old in text
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace(old, 'table = "t.json"', 1))
+    if content is not None:
+        (tmp_path / "t.json").write_text(content)
+    assert main(["check-config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+    log = tiny_log(tmp_path / "a.mcap")
+    assert main(["replay", str(log), "--config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
+    from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
+    from monitor.config import default_config
+
+    names = [c.name for c in default_config().components]
+    (tmp_path / "t.json").write_text(json.dumps(
+        DamageRateTable(names, HS_EDGES_M, TP_EDGES_S).to_state()))
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace('# table = "table.json"', 'table = "t.json"', 1))
+    assert main(["check-config", str(cfg)]) == 0
+    assert "[forecast] ok" in capsys.readouterr().out
