@@ -6,8 +6,7 @@ import argparse
 import sys
 import tomllib
 
-from monitor.config import load_config, run_section_parsers
-from monitor.forecast_config import ForecastConfig
+from monitor.config import Config, load_config, run_section_parsers
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,6 +40,25 @@ def _check_bridge(path: str) -> int:
     return 0
 
 
+def _check_forecast(config: Config) -> None:
+    """The ``[forecast]`` learner as the pipeline builds it: its window in whole alert ticks,
+    its table file readable and of the configuration's components."""
+    from monitor.components import build_sn_curve  # noqa: PLC0415 (models: not for --help)
+    from monitor.forecast_config import ForecastConfig  # noqa: PLC0415
+    from monitor.sea_state_learner import SeaStateLearner  # noqa: PLC0415
+
+    forecast = ForecastConfig.from_dict(config.section("forecast"))
+    if not forecast.enabled:
+        return
+    prior = None
+    if forecast.table is not None:
+        from monitor.pipeline import load_forecast_table  # noqa: PLC0415 (numba: only then)
+
+        prior = load_forecast_table(config, forecast.table)
+    curves = {c.name: build_sn_curve(c) for c in config.components}
+    SeaStateLearner(forecast, curves, config.alerts.eval_interval_s, prior)
+
+
 def run(args: argparse.Namespace) -> int:
     if _bridge_only(args.config):
         return _check_bridge(args.config)
@@ -53,11 +71,7 @@ def run(args: argparse.Namespace) -> int:
         build_cable(config)
         for component in config.components:
             build_sn_curve(component)
-        forecast = ForecastConfig.from_dict(config.section("forecast"))
-        if forecast.enabled and forecast.table is not None:  # the file, as the pipeline reads it
-            from monitor.pipeline import load_forecast_table  # noqa: PLC0415
-
-            load_forecast_table(config, forecast.table)
+        _check_forecast(config)
     except ValueError as exc:  # ConfigError, or a model rejecting a configured value
         print(exc, file=sys.stderr)
         return 2

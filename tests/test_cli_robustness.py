@@ -345,6 +345,22 @@ def test_check_config_reads_the_forecast_table_as_the_replay_does(tmp_path, caps
     assert message in capsys.readouterr().err
 
 
+def test_check_config_refuses_what_the_pipeline_refuses(tmp_path, capsys):
+    """A [forecast] window that is not whole alert ticks: check-config said ok, the replay
+    and the daemon then refused the file."""
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    old = "window_s = 1800.0 "
+    assert text.count(old) == 1
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace(old, "window_s = 15.0 ", 1))
+    message = ("config error: forecast.window_s = 15: must be a whole number of alert ticks "
+               "(alerts.eval_interval_s = 10)")
+    assert main(["check-config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+    assert main(["replay", str(tiny_log(tmp_path / "a.mcap")), "--config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+
+
 def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
     from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
     from monitor.config import default_config
@@ -357,3 +373,9 @@ def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
     cfg.write_text(text.replace('# table = "table.json"', 'table = "t.json"', 1))
     assert main(["check-config", str(cfg)]) == 0
     assert "[forecast] ok" in capsys.readouterr().out
+    # a table of other components: refused as the pipeline refuses it
+    (tmp_path / "t.json").write_text(json.dumps(
+        DamageRateTable(["wire"], HS_EDGES_M, TP_EDGES_S).to_state()))
+    assert main(["check-config", str(cfg)]) == 2
+    assert ("config error: forecast.table: components ['wire'] != the configuration's "
+            f"{names}") in capsys.readouterr().err
