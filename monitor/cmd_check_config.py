@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tomllib
+from typing import Any
 
 from monitor.config import Config, load_config, run_section_parsers
 
@@ -59,6 +60,19 @@ def _check_forecast(config: Config) -> None:
     SeaStateLearner(forecast, curves, config.alerts.eval_interval_s, prior)
 
 
+def _check_alert_rules(config: Config, cable: Any) -> None:
+    """The ``[alerts]`` rules against the components and streams, as the pipeline's engine
+    takes them (``monitor.pipeline.build_alert_engine``): a rule naming a component the
+    configuration lacks is refused here, not at the first replay."""
+    from monitor.alerts.engine import AlertEngine  # noqa: PLC0415
+    from monitor.components import (build_sn_curve, endurance_stress_Pa,  # noqa: PLC0415
+                                     yield_stress_Pa)
+
+    AlertEngine.from_config(config.section("alerts"), config.buoy.id, {
+        c.name: {"endurance_stress_Pa": endurance_stress_Pa(c, build_sn_curve(c)),
+                 "yield_stress_Pa": yield_stress_Pa(c, cable)} for c in config.components})
+
+
 def run(args: argparse.Namespace) -> int:
     if _bridge_only(args.config):
         return _check_bridge(args.config)
@@ -68,12 +82,15 @@ def run(args: argparse.Namespace) -> int:
         # the model objects the pipeline will build: S-N curves, the cable
         from monitor.components import build_cable, build_sn_curve
 
-        build_cable(config)
+        cable = build_cable(config)
         for component in config.components:
             build_sn_curve(component)
         _check_forecast(config)
+        _check_alert_rules(config, cable)
     except ValueError as exc:  # ConfigError, or a model rejecting a configured value
-        print(exc, file=sys.stderr)
+        msg = str(exc)
+        print(msg if msg.startswith("config error") else f"config error: {msg}",
+              file=sys.stderr)
         return 2
     comps = ", ".join(
         f"{c.name} ({c.kind}{', ' + c.lay + ' lay' if c.lay else ''}, {c.sn_curve.preset or 'table'})"

@@ -379,3 +379,22 @@ def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
     assert main(["check-config", str(cfg)]) == 2
     assert ("config error: forecast.table: components ['wire'] != the configuration's "
             f"{names}") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("rule, message", [
+    ('kind = "damage_fraction"\nname = "x"\ncomponent = "conductr"\nthreshold = 0.2\n',
+     'alerts.rule[8].component = "conductr": unknown component; expected one of '
+     "['conductor', 'conductor_termination']"),
+    ('kind = "stale"\nname = "y"\ncomponent = "tensoin"\n',
+     'alerts.rule[8].component = "tensoin": unknown sensor stream'),
+])
+def test_check_config_refuses_a_rule_for_a_component_the_config_lacks(tmp_path, capsys, rule,
+                                                                        message):
+    """check-config said ok; the replay then refused the file."""
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text + "\n[[alerts.rule]]\n" + rule)
+    assert main(["check-config", str(cfg)]) == 2
+    assert f"config error: {message}" in capsys.readouterr().err
+    assert main(["replay", str(tiny_log(tmp_path / "a.mcap")), "--config", str(cfg)]) in (1, 2)
+    assert message in capsys.readouterr().err
