@@ -158,6 +158,13 @@ def run(args: argparse.Namespace) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, frame: stop.set())
     recorder = McapRecorder(args.output, dcfg.record.rotate_s, dcfg.record.flush_interval_s)
-    n = record(buoy_id, client_side(dcfg.zenoh), recorder, stop, zenoh_io.default_codec())
+    zc = client_side(dcfg.zenoh)
+    try:
+        n = record(buoy_id, zc, recorder, stop, zenoh_io.default_codec())
+    except zenoh_io.zenoh.ZError as exc:  # the session did not open: nothing to record from
+        recorder.close()
+        log.error(f"cannot reach the daemon of buoy {buoy_id!r} at {list(zc.connect)} "
+                  f"([zenoh] of {args.config}): is `buoymon run` running? ({exc})")
+        return 1
     log.info("recording stopped", extra={"fields": {"messages": n, "files": recorder.files}})
     return 0

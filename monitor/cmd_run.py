@@ -135,5 +135,13 @@ def run(args: argparse.Namespace) -> int:
         return 2
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, frame: daemon.stop())
-    daemon.run()
+    from monitor.zenoh_io import zenoh  # noqa: PLC0415 (loaded by the daemon anyway)
+
+    try:
+        daemon.run()
+    except zenoh.ZError as exc:  # the session did not open: a port in use, a bad endpoint
+        zc = daemon.config.zenoh
+        log.error(f"[zenoh] cannot open the session (listen {list(zc.listen)}, connect "
+                  f"{list(zc.connect)}): {exc}")
+        return 2
     return 0

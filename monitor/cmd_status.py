@@ -18,7 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, load_target
+from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, endpoint_arg, load_target
 from monitor.viz.human import remaining_life_text
 
 
@@ -28,7 +28,7 @@ def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None
     p.add_argument("--config", default=DEFAULT_CONFIG, metavar="CFG.toml",
                    help=f"the daemon's configuration (default {DEFAULT_CONFIG})")
     p.add_argument("--buoy", help="buoy id (default: [buoy] id of the configuration)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+    p.add_argument("--connect", action="append", metavar="ENDPOINT", type=endpoint_arg,
                    help="Zenoh endpoint of the daemon (default: its [zenoh] listen endpoints)")
     p.add_argument("--timeout", type=float, default=1.0,
                    help="seconds to wait for the daemon before reading the state file "

@@ -6,6 +6,7 @@ the pipeline, so ``buoymon status`` and ``buoymon alerts`` start fast.
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,6 +16,18 @@ from monitor.schema import read_toml
 
 DEFAULT_CONFIG = "/etc/buoymon/buoymon.toml"  # the path of packaging/systemd/buoymon.service
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+def endpoint_arg(value: str) -> str:
+    """The argparse type of an ``ENDPOINT`` option: checked as a ``[zenoh] connect`` entry
+    is, so a malformed one is a usage error, not a Zenoh traceback or "not running"."""
+    try:
+        parse_daemon_sections({"zenoh": {"connect": [value]}})
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is not a Zenoh endpoint: expected <proto>/<address>, e.g. "
+            f"{DEFAULT_CONNECT}") from None
+    return value
 
 
 @dataclass(frozen=True)

@@ -918,7 +918,7 @@ def _build_forecasting(config: Config, components: Mapping[str, Component], tick
         return None, None
     prior = None
     if cfg.table is not None and not st.get("sea_states"):
-        prior = _load_table(config, cfg.table)
+        prior = load_forecast_table(config, cfg.table)
     curves = {n: c.sn_curve for n, c in components.items()}
     try:
         learner = SeaStateLearner(cfg, curves, tick_s, prior, st.get("sea_states"))
@@ -927,7 +927,7 @@ def _build_forecasting(config: Config, components: Mapping[str, Component], tick
     return learner, ForecastAlerts(cfg, config.buoy.id, tuple(curves), st.get("forecasts"))
 
 
-def _load_table(config: Config, path: str) -> DamageRateTable:
+def load_forecast_table(config: Config, path: str) -> DamageRateTable:
     """A saved table, its path relative to the configuration file's directory."""
     p = Path(path)
     if not p.is_absolute() and config.source and not config.source.startswith("<"):
@@ -935,4 +935,6 @@ def _load_table(config: Config, path: str) -> DamageRateTable:
     try:
         return DamageRateTable.from_state(json.loads(p.read_text()))
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ConfigError(f"config error: forecast.table = {path!r}: {exc}") from None
+        detail = (f"no {exc}: not a table written by buoymon forecast --save-table"
+                  if isinstance(exc, KeyError) else exc)
+        raise ConfigError(f"config error: forecast.table = {path!r}: {detail}") from None

@@ -349,5 +349,12 @@ def run_command(args: Any) -> int:
     monitor = ShoreMonitor(config, shore)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, frame: monitor.stop())
-    monitor.run()
+    from monitor import zenoh_io  # noqa: PLC0415 (zenoh only when actually serving)
+
+    try:
+        monitor.run()
+    except zenoh_io.zenoh.ZError as exc:  # the session did not open: no router or daemon there
+        log.error(f"cannot join the Zenoh network as a {zc.mode} of {list(zc.connect)}: is a "
+                  f"router or `buoymon run` listening there? ({exc})")
+        return 1
     return 0

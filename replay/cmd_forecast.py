@@ -28,6 +28,7 @@ from models.sea_state_table import (HS_EDGES_M, TP_EDGES_S, DamageRateTable, Pro
                                     project_damage)
 from models.waves import breaking_height
 from monitor.config import Config, ConfigError, default_config, load_config
+from monitor.daemon_target import endpoint_arg
 from monitor.strict_json import json_ready
 from replay.sea_state_files import SeaStates, read_sea_states
 
@@ -51,6 +52,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="simulator load model for bins without data (default wavfor)")
     p.add_argument("--json", type=Path, default=None, help="write the forecast as JSON here")
     p.add_argument("--publish", metavar="ENDPOINT", action="append", default=None,
+                   type=endpoint_arg,
                    help="also send the sea states to the daemon of the configuration's buoy "
                         "(Zenoh key buoy/<id>/forecast/waves; e.g. tcp/127.0.0.1:7447; "
                         "repeatable)")

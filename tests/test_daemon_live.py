@@ -357,6 +357,23 @@ def test_metrics_port_in_use_is_a_clear_error_at_start(tmp_path):
     assert "Traceback" not in out.stderr
 
 
+def test_zenoh_port_in_use_is_a_clear_error_at_start(tmp_path):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        taken = busy.getsockname()[1]
+        cfg = tmp_path / "cfg.toml"
+        cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
+                       + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{taken}"]\n'
+                       f'[state]\npath = "{tmp_path / "state.sqlite"}"\n'
+                       f'[metrics]\nport = {free_port()}\n')
+        out = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
+                             env=ENV, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert f"[zenoh] cannot open the session (listen ['tcp/127.0.0.1:{taken}'], connect [])" \
+        in out.stderr and "Address already in use" in out.stderr
+
+
 def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     port = free_port()
     cfg = write_config(tmp_path / "cfg.toml", port, tmp_path / "state.sqlite")

@@ -166,3 +166,22 @@ def test_a_killed_recording_with_a_damaged_first_chunk_decodes_the_later_ones(tm
     n_first = lost // s
     assert 0 < n_first < 60 and not st.skipped and not st.complete
     assert np.array_equal(values, np.arange(n_first * 20, 60 * 20.0))
+
+
+def test_record_command_without_a_daemon_is_a_clear_error(tmp_path):
+    """Nothing listens on the daemon's endpoint: exit status 1 and a message naming the buoy,
+    the endpoint and the likely cause (was a zenoh.ZError traceback)."""
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
+                   + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n')
+    p = subprocess.run([sys.executable, "-m", "monitor.cli", "record", "--config", str(cfg),
+                        "-o", str(tmp_path / "rec")], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    assert (f"cannot reach the daemon of buoy 'vaps' at ['tcp/127.0.0.1:{port}'] ([zenoh] of "
+            f"{cfg}): is `buoymon run` running?") in p.stderr

@@ -37,7 +37,7 @@ from typing import Any
 
 from monitor.alerts.engine import AlertEngine
 from monitor.atomic_file import atomic_write_text
-from monitor.daemon_target import DEFAULT_CONFIG, DEFAULT_CONNECT, load_target
+from monitor.daemon_target import DEFAULT_CONFIG, DEFAULT_CONNECT, endpoint_arg, load_target
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -55,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="the running daemon's configuration: its [buoy] id and [zenoh] "
                             f"endpoints (the default, {DEFAULT_CONFIG}, when neither --state "
                             "nor --buoy is given)")
-        sp.add_argument("--connect", action="append", metavar="ENDPOINT",
+        sp.add_argument("--connect", action="append", metavar="ENDPOINT", type=endpoint_arg,
                         help=f"Zenoh endpoint of the daemon (default {DEFAULT_CONNECT}, or the "
                              "configuration's); repeatable")
         sp.add_argument("--timeout", type=float, default=10.0,
