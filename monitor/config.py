@@ -269,7 +269,9 @@ class LoadConfig:
     # stream that feeds the motion estimator: "imu", "motion", or "auto" (the first of the two
     # that delivers an accepted sample, see monitor.load_source)
     motion_sensor: str
-    motion_rate_hz: float  # its nominal sample rate (the estimator works on a fixed step)
+    # its sample rate (Hz) for the estimator's fixed step, or "auto": the stream's own spacing
+    # (monitor.motion_rate)
+    motion_rate_hz: float | str
     breaking_load_N: float = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
     slack_limit_N: float = 0.0  # below this the line is slack: QC suspect
 
@@ -501,7 +503,8 @@ def _parse_load(r: SectionReader) -> LoadConfig:
         source=r.str("source", "auto", choices=("auto", "measured", "estimated")),
         stale_after_s=r.float("stale_after_s", 5.0, gt=0, le=MAX_DURATION_S),
         motion_sensor=r.str("motion_sensor", "auto", choices=("auto", "imu", "motion")),
-        motion_rate_hz=r.float("motion_rate_hz", 10.0, gt=0),
+        motion_rate_hz=("auto" if r.raw("motion_rate_hz", "auto") == "auto"
+                        else r.float("motion_rate_hz", gt=0)),
         breaking_load_N=r.float("breaking_load_N", 45_000.0, gt=0),
         slack_limit_N=r.float("slack_limit_N", 0.0),
     )

@@ -100,6 +100,7 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
                       "breaking_load_N": config.load.breaking_load_N},
         "load_source_at_end": pipeline_report["load_source"],
         "motion_sensor": pipeline_report.get("motion_sensor"),
+        "motion_rate": pipeline_report.get("motion_rate"),
         "load_problems": list(pipeline_report.get("load_problems", [])),
         "components": comps,
         "alerts": pipeline_report["alerts"],
