@@ -7,9 +7,10 @@ Spotter record stepped at 0.1 s: 4 and 16 times too large), so the step must be 
 
 ``[load] motion_rate_hz``:
 
-``"auto"`` (default)  the step is the stream's own spacing: the median of its first two
+``"auto"`` (default)  the step is the stream's own spacing: the shorter of its first two
                       intervals (its first three accepted samples, the first two of which
-                      only settle the estimator anyway), rounded to the microsecond (so a
+                      only settle the estimator anyway; the shorter, as a missing sample
+                      only lengthens one), rounded to the microsecond (so a
                       GPS-stamped 2.5 Hz stream with 0.2 us of time jitter steps at 0.4 s
                       exactly). Until then the samples wait (no estimate).
 a number (Hz)         the step is ``1 / motion_rate_hz``.
@@ -34,7 +35,7 @@ from typing import Any, Mapping
 import numpy as np
 
 TOLERANCE = 0.02  # relative difference of the median spacing from the step: a mismatch
-WINDOW = 16  # intervals in the running median
+WINDOW = 15  # intervals in the running median (odd: the median is one of them)
 _FIRST = 2  # intervals that set the step under "auto"
 
 # plan events: (sample index in the block, kind, new step in s or None)
@@ -110,7 +111,7 @@ class MotionRate:
                 continue
             self.ring.append(int(interval))
             del self.ring[:-WINDOW]
-            median = float(np.median(self.ring))
+            median = sorted(self.ring)[(len(self.ring) - 1) // 2]  # (the lower one)
             if self.dt is None:
                 if len(self.ring) >= _FIRST and median > 0:
                     self.dt = _step_s(median)
