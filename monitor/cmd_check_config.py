@@ -63,6 +63,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"  buoy {config.buoy.id}: {config.mooring.length_m:g} m line in "
           f"{config.mooring.depth_m:g} m of water; load source {config.load.source}")
     print(f"  components: {comps}")
+    rate = config.load.motion_rate_hz
+    print("  motion estimator step: " + (
+        "auto (the motion stream's own sample spacing)" if rate == "auto" else
+        f"{rate:g} Hz (a motion stream spaced otherwise gives no estimate: rate_mismatch)"))
     for name, status in sections.items():
         print(f"  [{name}] {status}")
     return 0

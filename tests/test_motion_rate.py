@@ -144,15 +144,28 @@ def test_a_rate_change_restarts_the_estimator_at_the_new_step():
         "(now 2.5 Hz)"]
 
 
-def test_config_takes_auto_or_a_rate(tmp_path):
+def test_config_takes_auto_or_a_rate(tmp_path, capsys):
     assert default_config().load.motion_rate_hz == "auto"
     assert config_with(default_config(), load={"motion_rate_hz": 2.5}).load.motion_rate_hz == 2.5
     for bad in ("fast", 0, -1.0, True):
         with pytest.raises(ConfigError, match="motion_rate_hz"):
             config_with(default_config(), load={"motion_rate_hz": bad})
     cfg = tmp_path / "c.toml"
-    cfg.write_text((REPO / "monitor/vaps_seed004.toml").read_text())
+    text = (REPO / "monitor/vaps_seed004.toml").read_text()
+    cfg.write_text(text)
     assert load_config(cfg).load.motion_rate_hz == "auto"
+    from monitor.cli import main
+
+    assert main(["check-config", str(cfg)]) == 0
+    assert ("  motion estimator step: auto (the motion stream's own sample spacing)\n"
+            in capsys.readouterr().out)
+    cfg.write_text(text.replace('motion_rate_hz = "auto"', "motion_rate_hz = 2.5"))
+    assert main(["check-config", str(cfg)]) == 0
+    assert ("  motion estimator step: 2.5 Hz (a motion stream spaced otherwise gives no "
+            "estimate: rate_mismatch)\n" in capsys.readouterr().out)
+    cfg.write_text(text.replace('motion_rate_hz = "auto"', 'motion_rate_hz = "10 Hz"'))
+    assert main(["check-config", str(cfg)]) == 2
+    assert "load.motion_rate_hz" in capsys.readouterr().err
 
 
 def _golden(tmp_path: Path, sensor: str) -> dict:
@@ -188,3 +201,36 @@ def test_a_10_hz_simulated_log_is_estimated_exactly_as_before(tmp_path, capsys):
         t = r["tension_N"]
         assert (t["max"], t["mean"], t["samples_estimated"],
                 r["components"]["conductor"]["damage"]) == figures
+
+
+def test_status_and_metrics_say_the_stream_is_not_at_the_configured_rate():
+    """A live pipeline told 10 Hz, fed a 2.5 Hz displacement stream: its status and the
+    metrics made from it carry the mismatch, and the status says it in words."""
+    from prometheus_client import generate_latest
+    from prometheus_client.parser import text_string_to_metric_families
+
+    from monitor.blocks import SampleBlock
+    from monitor.metrics import make_registry
+    from monitor.pipeline import Pipeline
+
+    config = config_with(default_config(), load={"source": "estimated", "motion_sensor": "motion",
+                                                 "motion_rate_hz": 10.0})
+    p = Pipeline(config)
+    t = _times([(0.4, 299)], t0_s=1.7e9)
+    heave = 0.3 * np.sin(np.arange(300) / 3.0)
+    for a in range(0, 300, 25):
+        p.process(SampleBlock("vaps", "motion", t[a:a + 25], {
+            "heave_m": heave[a:a + 25], "surge_m": 0.2 * heave[a:a + 25],
+            "sway_m": 0.1 * heave[a:a + 25]}))
+    p.flush()
+    status = p.status()
+    assert status["motion_rate"] == {"setting": 10.0, "hz": 10.0, "samples_rate_mismatch": 299,
+                                     "rate_changes": 0}
+    assert status["estimated_tension_N"] is None
+    assert status["load_problems"][0].startswith("299 motion samples gave no load estimate")
+    text = generate_latest(make_registry(lambda: status)).decode()
+    got = {(s.name, tuple(sorted(s.labels.items()))): s.value
+           for f in text_string_to_metric_families(text) for s in f.samples}
+    assert got[("buoymon_motion_rate_hz", (("buoy", "vaps"), ("setting", "10.0")))] == 10.0
+    assert got[("buoymon_motion_rate_mismatch_samples_total", (("buoy", "vaps"),))] == 299
+    assert got[("buoymon_motion_rate_changes_total", (("buoy", "vaps"),))] == 0

@@ -189,9 +189,14 @@ def test_spotter_auto_rate_equals_the_configured_rate_and_a_wrong_rate_is_report
     default, 10 Hz, withholds every sample after the first from the estimator and says so."""
     rows = slice(466, 9466)
     _, _, auto = _spotter_replay(tmp_path, "auto", rows, _spotter_config(tmp_path, None))
+    assert ("  motion estimator stepped at 2.5 Hz (the stream's own spacing)\n"
+            in capsys.readouterr().out)
     _, _, fixed = _spotter_replay(tmp_path, "fixed", rows, _spotter_config(tmp_path, "2.5"))
-    s, _, wrong = _spotter_replay(tmp_path, "wrong", rows, _spotter_config(tmp_path, "10.0"))
     capsys.readouterr()
+    s, _, wrong = _spotter_replay(tmp_path, "wrong", rows, _spotter_config(tmp_path, "10.0"))
+    summary = capsys.readouterr().out
+    assert "  motion estimator stepped at 10 Hz ([load] motion_rate_hz)\n" in summary
+    assert "  LOAD: 8,999 motion samples gave no load estimate: their spacing is not" in summary
     assert fixed["motion_rate"] == {"setting": 2.5, "hz": 2.5, "samples_rate_mismatch": 0,
                                     "rate_changes": 0}
     for key in ("config", "motion_rate", "inputs"):
