@@ -114,7 +114,7 @@ class _ModelsEstimator:
         st.pop("last_t_ns", None)
         self.model: Any = None
         self.waiting = rate.dt is None
-        if not self.waiting and not rate.withholding:
+        if rate.dt is not None and not rate.withholding:
             saved = estimator.EstimatorState.from_dict(st) if st else None
             self.model = estimator.MotionTensionEstimator(*_at_step(mooring, rate.dt), saved)
 
@@ -143,10 +143,9 @@ class _ModelsEstimator:
                 self.pending = []  # the spacing so far was another stretch's (the rate forgot it)
             elif self.sensor == "motion":
                 self.model.restart()
-        elif kind == STEP or kind == RESUME:
+        elif (kind == STEP or kind == RESUME) and dt is not None:
             self.waiting = False
-            self.model = self._est.MotionTensionEstimator(
-                *_at_step(self.mooring, self.rate.dt if dt is None else dt))
+            self.model = self._est.MotionTensionEstimator(*_at_step(self.mooring, dt))
             if self.pending:  # a stream's first samples: they only settle the model
                 rows = np.asarray(self.pending, dtype=np.float64).T
                 self.pending = []

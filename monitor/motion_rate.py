@@ -71,7 +71,8 @@ class MotionRate:
         """The events of the block of accepted sample times ``t_ns`` (in order): ``gap``
         (restart before the sample), ``step`` (the step is now the given one: build the
         estimator on it, fresh), ``withhold`` (from the sample on, no estimate), ``resume``
-        (from the sample on, estimates again, fresh). Advances the tracker."""
+        (from the sample on, estimates again at the given step, fresh). Advances the
+        tracker."""
         n = t_ns.shape[0]
         if n == 0:
             return []
@@ -80,14 +81,14 @@ class MotionRate:
         if self.last_t_ns is None:
             d = d[1:]  # the stream's first sample has no interval
         self.last_t_ns = int(t_ns[-1])
-        if self.dt is not None and not self.withholding and self._fast(d):
+        if self.dt is not None and not self.withholding and self._fast(d, self.dt):
             return self._fast_plan(d, n)
         return self._slow_plan(d, n)
 
-    def _fast(self, d: np.ndarray) -> bool:
+    def _fast(self, d: np.ndarray, dt: float) -> bool:
         """Every interval of the block and of the window a gap or within the tolerance of the
         step: then so is every running median (the usual block, vectorised)."""
-        step_ns = self.dt * 1e9
+        step_ns = dt * 1e9
         tol = TOLERANCE * step_ns
         ring = np.asarray(self.ring, dtype=np.float64)
         return bool(np.all((np.abs(d - step_ns) <= tol) | (d > self.gap_ns))
@@ -121,7 +122,7 @@ class MotionRate:
             if self.configured_hz is not None:
                 if off != self.withholding:
                     self.withholding = off
-                    events.append((i, WITHHOLD if off else RESUME, None))
+                    events.append((i, WITHHOLD, None) if off else (i, RESUME, self.dt))
                 self.mismatched += off
             elif off and median > 0:
                 self.dt = _step_s(median)
