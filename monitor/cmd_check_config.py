@@ -27,38 +27,6 @@ def _check_bridge(path: str, raw: dict) -> int:
     return 0
 
 
-def _check_forecast(config: Config) -> None:
-    """The ``[forecast]`` learner as the pipeline builds it: its window in whole alert ticks,
-    its table file readable and of the configuration's components."""
-    from monitor.components import build_sn_curve  # noqa: PLC0415 (models: not for --help)
-    from monitor.forecast_config import ForecastConfig  # noqa: PLC0415
-    from monitor.sea_state_learner import SeaStateLearner  # noqa: PLC0415
-
-    forecast = ForecastConfig.from_dict(config.section("forecast"))
-    if not forecast.enabled:
-        return
-    prior = None
-    if forecast.table is not None:
-        from monitor.pipeline import load_forecast_table  # noqa: PLC0415 (numba: only then)
-
-        prior = load_forecast_table(config, forecast.table)
-    curves = {c.name: build_sn_curve(c) for c in config.components}
-    SeaStateLearner(forecast, curves, config.alerts.eval_interval_s, prior)
-
-
-def _check_alert_rules(config: Config, cable: Any) -> None:
-    """The ``[alerts]`` rules against the components and streams, as the pipeline's engine
-    takes them (``monitor.pipeline.build_alert_engine``): a rule naming a component the
-    configuration lacks is refused here, not at the first replay."""
-    from monitor.alerts.engine import AlertEngine  # noqa: PLC0415
-    from monitor.components import (build_sn_curve, endurance_stress_Pa,  # noqa: PLC0415
-                                     yield_stress_Pa)
-
-    AlertEngine.from_config(config.section("alerts"), config.buoy.id, {
-        c.name: {"endurance_stress_Pa": endurance_stress_Pa(c, build_sn_curve(c)),
-                 "yield_stress_Pa": yield_stress_Pa(c, cable)} for c in config.components})
-
-
 def _check_forecast(config: Any) -> None:
     """The ``[forecast]`` learner as the pipeline builds it: its window in whole alert ticks,
     its table file readable and of the configuration's components."""
@@ -106,9 +74,9 @@ def run(args: argparse.Namespace) -> int:
         _check_forecast(config)
         _check_alert_rules(config, cable)
     except ValueError as exc:  # ConfigError, or a model rejecting a configured value
-        msg = str(exc)
-        print(msg if msg.startswith("config error") else f"config error: {msg}",
-              file=sys.stderr)
+        from monitor.schema import ConfigError  # noqa: PLC0415
+
+        print(exc if isinstance(exc, ConfigError) else f"config error: {exc}", file=sys.stderr)
         return 2
     comps = ", ".join(
         f"{c.name} ({c.kind}{', ' + c.lay + ' lay' if c.lay else ''}, {c.sn_curve.preset or 'table'})"
@@ -118,6 +86,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"  buoy {config.buoy.id}: {config.mooring.length_m:g} m line in "
           f"{config.mooring.depth_m:g} m of water; load source {config.load.source}")
     print(f"  components: {comps}")
+    rate = config.load.motion_rate_hz
+    print("  motion estimator step: " + (
+        "auto (the motion stream's own sample spacing)" if rate == "auto" else
+        f"{rate:g} Hz (a motion stream spaced otherwise gives no estimate: rate_mismatch)"))
     for name in ("alerts", *SERVICE_SECTIONS):
         if name in raw:
             print(f"  [{name}] ok")

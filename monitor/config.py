@@ -176,7 +176,9 @@ class LoadConfig(msgspec.Struct, frozen=True):
     # stream that feeds the motion estimator: "imu", "motion", or "auto" (the first of the two
     # that delivers an accepted sample, see monitor.load_source)
     motion_sensor: Literal["auto", "imu", "motion"] = "auto"
-    motion_rate_hz: Positive = 10.0  # its nominal sample rate (the estimator's fixed step)
+    # its sample rate (Hz) for the estimator's fixed step, or "auto": the stream's own spacing
+    # (monitor.motion_rate)
+    motion_rate_hz: Positive | Literal["auto"] = "auto"
     breaking_load_N: Positive = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
     slack_limit_N: float = 0.0  # below this the line is slack: QC suspect
 

@@ -37,6 +37,7 @@ from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.forecast import ForecastAlerts, parse_forecast
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
+from monitor.motion_rate import rate_problems
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
 from monitor.sea_state_learner import SeaStateLearner
@@ -467,6 +468,8 @@ class Pipeline:
                 out.append("no motion samples (imu or motion) for the estimator" + (
                     ": nothing stands in for the load cell if it stops" if "tension" in seen
                     else ""))
+        if self.estimator is not None:
+            out += rate_problems(self.estimator.rate_figures())
         if self.stats.n["measured"] + self.stats.n["estimated"] == 0 and seen:
             out.append("no load could be formed: fatigue damage is not being computed")
         return out
@@ -832,6 +835,7 @@ class Pipeline:
             "estimates_clamped": self.selector.estimates_clamped,
             "samples_above_break": dict(self.selector.above_break),
             "motion_sensor": self.motion_sensor,
+            "motion_rate": self.estimator.rate_figures() if self.estimator is not None else None,
             "load_problems": self.load_problems(),
             "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
                                "damage_by_source": self.damage_split.figures(
@@ -869,6 +873,7 @@ class Pipeline:
                           "samples_estimate_above_break": self.selector.above_break["estimated"]},
             "load_source": self.last["source"],
             "motion_sensor": self.motion_sensor,
+            "motion_rate": self.estimator.rate_figures() if self.estimator is not None else None,
             "load_problems": self.load_problems(),
             "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
                                "damage_by_source": self.damage_split.figures(

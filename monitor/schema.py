@@ -102,6 +102,8 @@ def _describe(tp: Any) -> str:
     options = [t for t in get_args(tp) if t is not type(None)]
     if get_origin(tp) in (Union, UnionType) and len(options) == 1:  # X | None: TOML has no None
         return _describe(options[0])
+    if get_origin(tp) in (Union, UnionType):  # e.g. a number or "auto"
+        return " or ".join(_describe(t) for t in options)
     metas = [m for m in get_args(tp)[1:] if isinstance(m, msgspec.Meta)]
     if get_origin(tp) is not None and metas:
         if metas[0].description:

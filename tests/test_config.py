@@ -21,7 +21,7 @@ def test_default_is_the_seed_004_mooring():
     assert c.buoy.id == "vaps"
     assert c.mooring.depth_m == 23.0 and c.mooring.length_m == 40.0
     assert c.mooring.preset == "vaps_seed004" and c.mooring.segments == ()
-    assert c.mooring.span_m == 29.0 and c.load.motion_rate_hz == 10.0
+    assert c.mooring.span_m == 29.0 and c.load.motion_rate_hz == "auto"
     assert c.cable.preset == "vaps_biw" and not c.cable.overrides
     comp, term = c.components  # the free span and the termination moulding (issue 20)
     assert (comp.kind, comp.lay, comp.sn_curve.preset) == ("conductor", "left", "vaps_copper")

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from models.estimator import seed004_estimator, simulate_tension
 from monitor.cli import main
 from monitor.config import default_config
 from monitor.qartod import CHECK, FAIL, SPIKE, SUSPECT
@@ -120,15 +121,18 @@ def test_spotter_glitches_do_not_make_the_answer(tmp_path, spotter):
                           _spotter_rows(s, xyz, slice(0, None)))
     clean = _import_replay(tmp_path, "clean", "time_s,surge_m,sway_m,heave_m",
                            _spotter_rows(s, xyz, slice(466, 176_000)))
-    # before the check factor: 113.5 kN / damage 34 whole, 23.6 kN / 9.8e-3 clean. Now both
-    # peak at the same wave (row 49,099, 6.19 kN); the whole record's damage is 8 % more, from
-    # its last 3.2 h of real sea after the glitches (1.68e-5 against 1.56e-5)
-    assert full["tension_N"]["max"] == pytest.approx(6188.6, abs=0.1)
+    # before the check factor: 113.5 kN / damage 34 whole, 23.6 kN / 9.8e-3 clean, and with
+    # the check factor but the 2.5 Hz record stepped at the old fixed 0.1 s (velocities 4x,
+    # accelerations 16x): 6.19 kN, 1.68e-5 / 1.56e-5. At its own step (motion_rate_hz "auto",
+    # 0.4 s) both peak at the same wave, 0.70 kN; the whole record's damage is 1.8 times the
+    # clean window's, from its last 3.2 h of real sea after the glitches
+    assert full["motion_rate"]["hz"] == clean["motion_rate"]["hz"] == 2.5
+    assert full["tension_N"]["max"] == pytest.approx(696.49, abs=0.01)
     assert full["tension_N"]["max"] == clean["tension_N"]["max"]
     d_full = full["components"]["conductor"]["damage"]
     d_clean = clean["components"]["conductor"]["damage"]
-    assert d_full == pytest.approx(1.680e-5, rel=1e-3)
-    assert d_clean == pytest.approx(1.556e-5, rel=1e-3)
+    assert d_full == pytest.approx(1.0469e-113, rel=1e-3)
+    assert d_clean == pytest.approx(5.8921e-114, rel=1e-3)
     assert d_clean <= d_full <= 2.0 * d_clean
 
 
@@ -154,6 +158,19 @@ def test_cdip_datawell_under_a_thousandth_fail(tmp_path):
     assert m["accepted"] + sum(m["rejected"].values()) == raw.shape[0]
     assert _fail_fraction(report, "motion") < 1e-3
     assert sum(m["rejected"].values()) / raw.shape[0] < 1e-3
+    # the load estimated at the record's own step (1 / 1.28 Hz = 0.78125 s): the same as the
+    # estimator of models.estimator run on it directly (every sample accepted, no gap)
+    assert report["motion_rate"] == {"setting": "auto", "hz": 1.28,
+                                     "samples_rate_mismatch": 0, "rate_changes": 0}
+    blocks = [b for b in LogReader(tmp_path / "cdip.mcap") if b.sensor == "motion"]
+    heave, surge, sway = (np.concatenate([b.fields[f] for b in blocks])
+                          for f in ("heave_m", "surge_m", "sway_m"))
+    assert heave.shape[0] == m["accepted"] == raw.shape[0]
+    direct = simulate_tension(heave, surge, sway, *seed004_estimator(dt=0.78125, span=29.0))
+    t = report["tension_N"]
+    assert t["samples_estimated"] == heave.shape[0] - 2  # the first two settle
+    assert t["max"] == direct.tension[2:].max() and 500.0 < t["max"] < 700.0
+    assert t["mean"] == pytest.approx(direct.tension[2:].mean(), rel=1e-7)  # (sums whole mN)
 
 
 def _tension(log: Path) -> tuple[np.ndarray, np.ndarray]:
