@@ -11,6 +11,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -26,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def _config(rate: float | str = "auto"):
     c = default_config()
-    return dataclasses.replace(c, load=dataclasses.replace(c.load, motion_rate_hz=rate))
+    return dataclasses.replace(c, load=msgspec.structs.replace(c.load, motion_rate_hz=rate))
 
 
 def _times(steps_s: list[tuple[float, int]], t0_s: float = 100.0) -> np.ndarray:
