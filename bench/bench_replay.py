@@ -12,16 +12,33 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Measured 2026-11-21 on the 2-core development machine, 30-day log of 1184 MB, 51.84 M
-tension samples: default configuration (6 alert rules, 10 s ticks) on one core 15.35 s =
-3.38 M tension samples/s (169,000 x real time); without alert rules 4.59 M/s; on 2 cores
-11.48 s wall = 4.52 M/s (the read-ahead thread inflates, checks and decodes the next chunk
-while the pipeline works). Peak RSS 189 MB (1 day) vs 195 MB (30 days), +3.0 %. Naive
-baseline 0.710 M/s: 4.8 x on one core (6.5 x without rules), 6.4 x on 2 cores, against the
-20 x target. Runs on this shared machine vary by up to +-15 %. Where the main thread's time
-goes (py-spy, 2 cores): the pipeline's alert ticks ~25 % (rules, observations, the compiled
-tick pass), the motion estimator ~20 %, validation ~8 %, what is left of reading (ordering
-and release of blocks) ~10 %, start-up ~5 %.
+Measured 2026-11-25 16:34 UTC on the 2-core development machine (shared with 6-8 other jobs,
+load average 2.5-4.0 through the run, so the wall times measure them too: the CPU times are
+the comparable figures), this build (compact log format; payloads of buoymon's own regular
+layout decoded in one pass, monitor/codec_regular.py), 30-day log of 322 MB, 51.84 M tension
+samples: default configuration (12 alert rule instances, 10 s ticks, QC, the sea-state
+learner) on one core 39.47 s wall, 21.62 CPU-s = 1.31 M tension samples/s wall (2.40 M per
+CPU-s); without alert rules 21.76 s wall, 15.45 CPU-s, 2.38 M/s; on 2 cores 20.64 s wall,
+18.43 CPU-s = 2.51 M/s (125,600 x real time). Peak RSS 213 MB (1 day) vs 223 MB (30 days),
++4.8 %. Naive baseline (mcap + protobuf per message, the compact values rebuilt as
+docs/LOG_FORMAT.md says, then ``rainflow``) 0.605 M/s: 2.2 x on one core by wall time
+(4.0 x by CPU time), 4.2 x on 2 cores. Targets (issue 22): 10 M/s wall on 2 cores and 10 x on
+one core: NOT reached. Earlier in the same session at load 7 the figures were 1.05 / 1.07 /
+0.93 M/s wall (21.19 / 17.75 / 20.97 CPU-s): on this machine only CPU times compare.
+Before / after this build's changes, the same 30-day log replayed in-process on 2 cores,
+alternating builds (load 4-5): 23.41, 24.67, 22.56, 23.95 CPU-s before, 21.75, 21.42, 20.11,
+23.00 after (-9 %); the report and state identical to the last bit. Reading the log alone on
+one thread: 4.72 -> 2.80 CPU-s (the decode was 0.65 us per 1-s tension message and 1.25 us per
+IMU message, now 0.12-0.27 and 0.16-0.30 us). The float64 format's figures (2026-11-21: 4.52
+M/s on 2 cores, 11.48 s wall, on a quiet machine) are not comparable with these.
+
+Where the main thread's time goes now (py-spy, 30-day log, 2 cores): alert ticks ~25 % (each
+tick's observation, the rule steps, stream health, the sea-state learner's window close);
+the sea-state learner's Welch spectra of the load and the IMU ~13 %; rainflow and Miner tick
+commits ~11 %; the reader's ordering and coalescing ~11 %; the motion estimator ~9 %;
+validation and QC ~8 %; the read-ahead thread is idle 73 % of the run. Alert ticks every 60 s
+instead of 10 s cut the CPU from 18.4-19.7 to 14.0-15.3 s: a third of the CPU is per-tick
+Python, the rest per-sample numpy and compiled passes spread over a dozen stages.
 
 Measured 2026-11-24 on the same machine (shared with other jobs), `--days 2 --baseline-days
 0.1`, warm compile cache, before / after QARTOD QC by default (issue 17: monitor.qartod on every
