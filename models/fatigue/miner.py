@@ -143,22 +143,13 @@ class MinerAccumulator:
                 raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
         return time_s
 
-    def _take_kernel_totals(self, committed: float, cycles: float, time_s: float | None) -> float:
-        """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
-        ``_table`` (``models.fatigue.ticks``); return the damage added."""
-        added = committed - self._committed
-        self._committed = committed
-        self._cycles += cycles
-        if time_s is not None:
-            self._date(added, time_s)
-        return added
-
     def _take_kernel_ticks(self, committed: np.ndarray, cycles: np.ndarray,
                            times_s: np.ndarray) -> np.ndarray:
-        """:meth:`_take_kernel_totals` for consecutive ticks (committed total, cycles and time
-        of each), dating each; returns the damage rate after each tick. The same float
-        operations in the same order as one call per tick (the loop is a replay's per-tick
-        hot path, so it runs on locals)."""
+        """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
+        ``_table`` (``models.fatigue.ticks``) for consecutive ticks (committed total, cycles
+        and time of each), dating each tick's damage as :meth:`add_cycles` does; returns the
+        damage rate after each tick. The loop is a replay's per-tick hot path, so it runs on
+        locals (the same float operations in the same order as one call per tick)."""
         rates = np.empty(len(committed))
         width = self.rate_window_s / self.rate_buckets
         keep = self.rate_buckets + 1
