@@ -12,25 +12,28 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Measured 2026-11-25 16:34 UTC on the 2-core development machine (shared with 6-8 other jobs,
-load average 2.5-4.0 through the run, so the wall times measure them too: the CPU times are
+Measured 2026-11-25 16:49 UTC on the 2-core development machine (shared with other jobs,
+load average 3.6-3.7 through the run, so the wall times measure them too: the CPU times are
 the comparable figures), this build (compact log format; payloads of buoymon's own regular
 layout decoded in one pass, monitor/codec_regular.py), 30-day log of 322 MB, 51.84 M tension
 samples: default configuration (12 alert rule instances, 10 s ticks, QC, the sea-state
-learner) on one core 39.47 s wall, 21.62 CPU-s = 1.31 M tension samples/s wall (2.40 M per
-CPU-s); without alert rules 21.76 s wall, 15.45 CPU-s, 2.38 M/s; on 2 cores 20.64 s wall,
-18.43 CPU-s = 2.51 M/s (125,600 x real time). Peak RSS 213 MB (1 day) vs 223 MB (30 days),
-+4.8 %. Naive baseline (mcap + protobuf per message, the compact values rebuilt as
-docs/LOG_FORMAT.md says, then ``rainflow``) 0.605 M/s: 2.2 x on one core by wall time
-(4.0 x by CPU time), 4.2 x on 2 cores. Targets (issue 22): 10 M/s wall on 2 cores and 10 x on
-one core: NOT reached. Earlier in the same session at load 7 the figures were 1.05 / 1.07 /
-0.93 M/s wall (21.19 / 17.75 / 20.97 CPU-s): on this machine only CPU times compare.
-Before / after this build's changes, the same 30-day log replayed in-process on 2 cores,
-alternating builds (load 4-5): 23.41, 24.67, 22.56, 23.95 CPU-s before, 21.75, 21.42, 20.11,
-23.00 after (-9 %); the report and state identical to the last bit. Reading the log alone on
-one thread: 4.72 -> 2.80 CPU-s (the decode was 0.65 us per 1-s tension message and 1.25 us per
-IMU message, now 0.12-0.27 and 0.16-0.30 us). The float64 format's figures (2026-11-21: 4.52
-M/s on 2 cores, 11.48 s wall, on a quiet machine) are not comparable with these.
+learner) on one core 30.34 s wall, 21.47 CPU-s = 1.71 M tension samples/s wall (2.41 M per
+CPU-s); without alert rules 23.53 s wall, 17.10 CPU-s, 2.20 M/s; on 2 cores 21.83 s wall,
+19.11 CPU-s = 2.37 M/s (118,700 x real time). Peak RSS 214 MB (1 day) vs 222 MB (30 days),
++4.0 %. Naive baseline (mcap + protobuf per message, the compact values rebuilt as
+docs/LOG_FORMAT.md says, then ``rainflow``) 0.538 M/s: 3.2 x on one core by wall time
+(4.5 x by CPU time), 4.4 x on 2 cores. Targets (issue 22): 10 M/s wall on 2 cores and 10 x on
+one core: NOT reached. At load 2.5-4 (16:34 UTC, before rebasing on main) the figures were
+1.31 / 2.38 / 2.51 M/s wall, at load 7 (16:28) 1.05 / 1.07 / 0.93 M/s: only CPU times compare
+on this machine. Before / after this build's changes, the same 30-day log replayed in-process
+on 2 cores, builds alternating: main of the same hour 24.29 / 23.88 CPU-s (20.5 / 21.5 s
+wall), this build 21.19 / 21.63 CPU-s (19.5 / 20.4 s wall) at load 1.4-1.9 (-11 % CPU); four
+pairs before the rebase at load 4-5: -9 %. The report and state identical to the last bit
+before and after (a golden of the benchmark log written before the change). Reading the log
+alone on one thread: 4.72 -> 2.80 CPU-s (the decode was 0.65 us per 1-s tension message and
+1.25 us per IMU message, now 0.12-0.27 and 0.16-0.30 us). The float64 format's figures
+(2026-11-21: 4.52 M/s on 2 cores, 11.48 s wall, on a quiet machine, before QC) are not
+comparable with these.
 
 Where the main thread's time goes now (py-spy, 30-day log, 2 cores): alert ticks ~25 % (each
 tick's observation, the rule steps, stream health, the sea-state learner's window close);
