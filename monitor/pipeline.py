@@ -41,6 +41,7 @@ from monitor.motion_rate import rate_problems
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
 from monitor.sea_state_learner import SeaStateLearner
+from monitor.stats_kernel import load_stats_pass
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
@@ -167,6 +168,15 @@ class _TensionStats:
 
     def add(self, v: np.ndarray, src: np.ndarray) -> None:
         if v.shape[0] == 0:
+            return
+        finite, n_meas, total, vmin, vmax = load_stats_pass(v, src, MEASURED, self.lo,
+                                                            self.width, self.hist)
+        if finite:  # the usual case, in one compiled pass
+            self.n["measured"] += n_meas
+            self.n["estimated"] += v.shape[0] - n_meas
+            self.total_mN += int(total)
+            self.min = min(self.min, float(vmin))
+            self.max = max(self.max, float(vmax))
             return
         bins = np.clip(((v - self.lo) / self.width).astype(np.int64), 0, self.BINS - 1)
         first = int(bins.min())  # count over the occupied range only: blocks are small
