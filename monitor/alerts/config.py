@@ -44,7 +44,7 @@ from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth
                                          parse_auth)
 from monitor.alerts.records import SEVERITIES
 from monitor.schema import (MAX_DURATION_S, ConfigError, check_keys, convert, did_you_mean,
-                            parse_struct)
+                            error, parse_struct)
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
@@ -91,14 +91,8 @@ KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, tuple[Any, float | None]]]] = 
 }
 
 
-def _show(value: Any) -> str:
-    if isinstance(value, str):
-        return '"' + value.replace('"', '\\"') + '"'
-    return repr(value)
-
-
 def _err(where: str, value: Any, msg: str) -> ConfigError:
-    return ConfigError(f"config error: {where} = {_show(value)}: {msg}")
+    return error("", where, value, msg)  # ``where`` is the whole key path here
 
 
 def _get(where: str, d: Mapping[str, Any], key: str, tp: Any, default: Any) -> Any:
