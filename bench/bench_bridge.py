@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import socket
 import subprocess
@@ -72,6 +73,7 @@ RATE_HZ = 1000
 BATCH = 2  # lines per write: one write every 2 ms
 BUOY = "bench"
 T0_S = 1_750_000_000
+BURST_K0 = 10**8  # the burst's sensor times start 10^5 s after the real-time streams
 # source name -> (stream, transport, number of fields)
 SOURCES = {"tension": ("tension", "udp", 1), "motion": ("motion", "udp", 3),
            "imu": ("imu", "tcp_server", 3), "gnss": ("gnss", "tcp_server", 2),
@@ -91,6 +93,13 @@ def cpu_s(pid: int) -> float:
     """User + system CPU seconds of a process."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def rss_mb(pid: int) -> float:
+    for row in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if row.startswith("VmRSS:"):
+            return int(row.split()[1]) / 1024
+    return float("nan")
 
 
 def line(k: int, n_fields: int) -> bytes:
@@ -180,6 +189,7 @@ def main() -> None:
     burst_port = free_port()
     master, slave = os.openpty()
     tty.setraw(slave)
+    load0 = os.getloadavg()
     sub = Subscriber(zport)
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "bridge.toml"
@@ -218,17 +228,23 @@ def main() -> None:
                     lat_close.append(at - closing)
                     lat_last.append(at - sent[(stream, t_last)])
                     worst[stream] = max(worst.get(stream, 0.0), at - closing)
-            # 2. flat out on one TCP connection
+            rss = rss_mb(proc.pid)
+            # 2. flat out on one TCP connection (its own sensor times, on the tension stream):
+            # done when the block of its last line arrives (a line 1 s later closes it)
+            data = b"".join(line(BURST_K0 + k, 1) for k in range(args.burst))
+            last_ns = (T0_S * 1000 + BURST_K0 + args.burst - 1) * 1_000_000
             with socket.create_connection(("127.0.0.1", burst_port)) as b:
                 time.sleep(0.5)
-                chunk = 2000
                 c0, t0 = cpu_s(proc.pid), time.monotonic()
-                for k in range(0, args.burst, chunk):
-                    b.sendall(b"".join(line(k + i, 1) for i in range(chunk)))
-                while sub.lines("burst") < args.burst and time.monotonic() < t0 + 300:
-                    time.sleep(0.01)
-                burst_s, burst_cpu = time.monotonic() - t0, cpu_s(proc.pid) - c0
-                got = sub.lines("burst")
+                b.sendall(data + line(BURST_K0 + args.burst - 1 + 1000, 1))
+                done = []
+                while not done and time.monotonic() < t0 + 300:
+                    time.sleep(0.002)
+                    done = [at for s, _, t_last, at in list(sub.arrived)
+                            if s == "tension" and t_last == last_ns]
+                burst_s, burst_cpu = (done or [math.nan])[0] - t0, cpu_s(proc.pid) - c0
+                time.sleep(0.5)  # the status counts the lines
+                got = sub.lines("burst") - 1
             for s in tcp.values():
                 s.close()
             udp.close()
@@ -252,9 +268,12 @@ def main() -> None:
           f"p99 {np.percentile(ml, 99):.2f} ms, max {ml.max():.2f} ms")
     print("  worst per stream: " + ", ".join(f"{k} {1e3 * v:.1f} ms"
                                              for k, v in sorted(worst.items())))
+    print(f"  bridge RSS: {rss:.0f} MB")
     print(f"flat out (one TCP source): {got:,} of {args.burst:,} lines in {burst_s:.2f} s: "
           f"{got / burst_s:,.0f} lines/s, CPU {1e3 * burst_cpu / max(got, 1) * 1000:.1f} ms "
           "per 1000 lines")
+    print("load average (1 min) at the start and the end: "
+          f"{load0[0]:.2f}, {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -45,6 +45,11 @@ class SourceConfig:
     reconnect_s: float = 2.0
     stall_s: float = 5.0  # no line for this long (or not connected): the source is down
 
+    @property
+    def timed_at_read(self) -> bool:
+        """Its samples take the time of the read (a delimited line without a time column)."""
+        return self.format == "delimited" and self.time_column is None
+
 
 @dataclass(frozen=True)
 class BridgeConfig:

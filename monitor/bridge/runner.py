@@ -33,16 +33,19 @@ import logging
 import math
 import threading
 import time
+from bisect import bisect_left
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from itertools import islice
+from operator import lt
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.bridge.config import BridgeConfig, SourceConfig
-from monitor.bridge.formats import Rejected, parser
-from monitor.bridge.transports import LINKS, LineSplitter, Link, Links, ReceiveClock
+from monitor.bridge.formats import Rejected, Samples, bulk_parser, parser
+from monitor.bridge.transports import FLOOD, LINKS, LineSplitter, Link, Links, ReceiveClock
 from monitor.sensors import PublisherOptions, SensorPublisher
 from monitor import zenoh_io
 
@@ -65,10 +68,15 @@ _QUIET = {"header_read"}
 _UNLOGGED = {"other_sentence", "repeat_fix"}
 
 
+# a read of fewer lines goes one by one: the bulk parser's set-up costs as much as a line
+_BULK_MIN = 2
+
+
 @dataclass
 class SourceState:
     cfg: SourceConfig
     parse: Callable[[str, int], Any]
+    parse_many: Callable[[list[bytes], int], Samples | None] | None = None
     connected: bool = False
     lines: int = 0
     samples: int = 0
@@ -82,8 +90,10 @@ class SourceState:
     # when ``connected`` last changed (or the bridge started): what a state's age counts from
     link_mono: float = field(default_factory=time.monotonic)
     state: str = "connecting"
+    # the open block: its first sample's time (None: no block open), its samples
+    first_t: int | None = None
     t: list[int] = field(default_factory=list)
-    values: list[list[float]] = field(default_factory=list)
+    values: list[Sequence[float]] = field(default_factory=list)
     block_opened_mono: float = 0.0
     logged: dict[str, float] = field(default_factory=dict)
 
@@ -121,7 +131,7 @@ class Bridge:
         self.cfg = cfg
         self.publisher = publisher
         self.clock = ReceiveClock()
-        self.sources = [SourceState(s, parser(s)) for s in cfg.sources]
+        self.sources = [SourceState(s, parser(s), bulk_parser(s)) for s in cfg.sources]
         self._stop = threading.Event()
         self._links: Links | None = None
         self._status_pub: Any = None
@@ -174,7 +184,7 @@ class Bridge:
         self._recheck = False
         self._links.duties(now)
         for src in self.sources:
-            if src.t and now - src.block_opened_mono >= src.cfg.block_s:
+            if src.first_t is not None and now - src.block_opened_mono >= src.cfg.block_s:
                 self._flush(src)
         self._update_states(now)
         if now >= self._next_status:
@@ -182,7 +192,7 @@ class Bridge:
             self._next_status = now + self.cfg.status_interval_s
         due = min(self._next_status, self._next_state_change(), self._links.next_due())
         for src in self.sources:
-            if src.t:
+            if src.first_t is not None:
                 due = min(due, src.block_opened_mono + src.cfg.block_s)
         self._due = due
 
@@ -225,15 +235,16 @@ class Bridge:
 
     def _gather_s(self, now: float) -> float:
         """How long the next read may wait (``_GATHER_S`` comment): 0 near a block's close,
-        with a source timed by the bridge, with more waiting than a read takes (a flood), or
-        with a duty due."""
-        if self._links is None or self._links.full:
+        with a source timed by the bridge, with more waiting than a read takes, in a flood
+        (data coming so fast that a gathered read would hold ``FLOOD`` bytes: a pause would
+        only slow the reading down), or with a duty due."""
+        if self._links is None or self._links.full or self._links.rate_Bps * _GATHER_S >= FLOOD:
             return 0.0
         pause = min(_GATHER_S, self._due - now)
         for src in self.sources:
             if src.connected and src.time_source != "instrument":
                 return 0.0
-            if src.t:
+            if src.first_t is not None:
                 pause = min(pause, src.block_opened_mono + src.cfg.block_s - _NEAR_S - now)
         return pause
 
@@ -268,8 +279,37 @@ class Bridge:
         src.last_line_mono = now
         if src.state != "reading":
             self._recheck = True
-        for line in data:
+        many = (src.parse_many(data, recv_ns) if src.parse_many is not None
+                and len(data) >= _BULK_MIN else None)
+        if many is not None and (src.last_t_ns is None or many.t_ns[0] > src.last_t_ns) \
+                and all(map(lt, many.t_ns, islice(many.t_ns, 1, None))):
+            self._samples(src, many, now)
+            return
+        for line in data:  # one by one: each rejection counted by its reason
             self._line(src, line, recv_ns, now)
+
+    def _samples(self, src: SourceState, many: Samples, now_mono: float) -> None:
+        """Samples of the bulk parser (times increasing, after the last) into blocks, as
+        :meth:`_line` puts them one by one."""
+        t, n, i = many.t_ns, len(many.t_ns), 0
+        while i < n:
+            if src.first_t is None:
+                self._open_block(src, t[i], now_mono)
+            end = bisect_left(t, src.first_t + src.block_ns, i)
+            src.t.extend(t[i:end])
+            src.values.extend(many.values[i:end])
+            if end < n:
+                self._flush(src)
+            i = end
+        src.last_t_ns = t[-1]
+        src.time_source = many.time_source
+        src.samples += n
+        src.last_sample_mono = now_mono
+
+    def _open_block(self, src: SourceState, t_ns: int, now_mono: float) -> None:
+        src.first_t = t_ns
+        src.block_opened_mono = now_mono
+        self._due = min(self._due, now_mono + src.cfg.block_s)
 
     def _line(self, src: SourceState, data: bytes, recv_ns: int, now_mono: float) -> None:
         try:
@@ -286,11 +326,10 @@ class Bridge:
         if src.last_t_ns is not None and t_ns <= src.last_t_ns:
             self._reject(src, "time_backwards")
             return
-        if src.t and t_ns - src.t[0] >= src.block_ns:
+        if src.first_t is not None and t_ns - src.first_t >= src.block_ns:
             self._flush(src)
-        if not src.t:
-            src.block_opened_mono = now_mono
-            self._due = min(self._due, now_mono + src.cfg.block_s)
+        if src.first_t is None:
+            self._open_block(src, t_ns, now_mono)
         src.t.append(t_ns)
         src.values.append(vals)
         src.last_t_ns = t_ns
@@ -314,13 +353,13 @@ class Bridge:
                 "count": src.rejected.get(reason, 0) or src.events.get(reason, 0)}})
 
     def _flush(self, src: SourceState) -> None:
-        if not src.t:
+        if src.first_t is None:
             return
         v = np.array(src.values, dtype=np.float64)
         fields = {f: v[:, k].copy() for k, f in enumerate(SENSOR_FIELDS[src.cfg.sensor])}
         block = SampleBlock(self.cfg.buoy_id, src.cfg.sensor, np.array(src.t, dtype=np.int64),
                             fields)
-        src.t, src.values = [], []
+        src.t, src.values, src.first_t = [], [], None
         self.publisher.publish_block(block)
         src.blocks += 1
 
