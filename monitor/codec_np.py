@@ -41,19 +41,17 @@ def varint(z: int) -> bytes:
 
 
 def varints(z: np.ndarray) -> np.ndarray:
-    """The concatenated varints of unsigned ``z`` (uint64) as uint8, one pass per 7-bit group
-    that any value reaches (values of a block of samples mostly take one or two)."""
+    """The concatenated varints of unsigned ``z`` (uint64) as uint8: every value's 7-bit
+    groups in a row of a table as wide as the longest varint, the rows' used bytes in order
+    (a few whole-array operations, whatever the lengths)."""
     z = np.asarray(z, np.uint64)
-    size = 1 + np.searchsorted(_GROUPS, z, side="right").astype(np.int64)
-    end = np.cumsum(size)
-    start = end - size
-    out = np.empty(int(end[-1]) if z.shape[0] else 0, np.uint8)
-    for j in range(int(size.max()) if z.shape[0] else 0):
-        m = size > j
-        group = (z[m] >> np.uint64(7 * j)) & np.uint64(0x7F)
-        more = (size[m] > j + 1).astype(np.uint64) << np.uint64(7)
-        out[start[m] + j] = group | more
-    return out
+    if z.shape[0] == 0:
+        return np.empty(0, np.uint8)
+    size = 1 + np.searchsorted(_GROUPS, z, side="right")
+    j = np.arange(int(size.max()))
+    groups = (z[:, None] >> (np.uint64(7) * j.astype(np.uint64))) & np.uint64(0x7F)
+    more = (j < (size - 1)[:, None]).astype(np.uint64) << np.uint64(7)
+    return (groups | more).astype(np.uint8)[j < size[:, None]]
 
 
 def zigzag(d: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ import math
 import re
 from datetime import datetime, timezone
 from itertools import repeat
-from operator import add, mul
+from operator import add, floordiv, mul
 from typing import Any, Callable, NamedTuple
 
 import pynmea2
@@ -72,10 +72,10 @@ def instrument_time(text: str, fmt: str) -> int:
 
 
 class Samples(NamedTuple):
-    """Samples of a bulk parser: times (ns) and a row of values per sample."""
+    """Samples of a bulk parser: times (ns) and a list of values per field."""
 
     t_ns: list[int]
-    values: list[tuple[float, ...]]
+    columns: list[list[float]]
     time_source: str
 
 
@@ -96,14 +96,14 @@ def unix_times(cells: list[bytes]) -> list[int] | None:
     if point < 0:
         if joined.translate(None, _DIGITS):
             return None
-        t = [s * 1_000_000_000 for s in map(int, cells)]
+        t = list(map(mul, map(int, cells), repeat(1_000_000_000)))
     else:  # a point in each cell, at the same place, and nothing but digits around it
         if joined.translate(None, _DIGITS) != b"." * n or joined[point::width] != b"." * n:
             return None
         frac = width - point - 1
         digits = map(int, map(bytes.replace, cells, repeat(b"."), repeat(b"")))
-        t = ([d * 10 ** (9 - frac) for d in digits] if frac <= 9
-             else [d // 10 ** (frac - 9) for d in digits])  # beyond the ns: cut
+        t = (list(map(mul, digits, repeat(10 ** (9 - frac)))) if frac <= 9
+             else list(map(floordiv, digits, repeat(10 ** (frac - 9)))))  # beyond ns: cut
     return t if max(t) < _T_MAX else None
 
 
@@ -139,7 +139,7 @@ def delimited_bulk(cfg: SourceConfig) -> Callable[[list[bytes], int], Samples | 
                 t = [instrument_time(c.decode(), time_format) for c in cells[time_column::m]]
         except ValueError:  # Rejected is a ValueError
             return None
-        return None if t is None else Samples(t, list(zip(*cols)), "instrument")
+        return None if t is None else Samples(t, cols, "instrument")
 
     return parse_many
 
