@@ -55,13 +55,21 @@ _LOG_EVERY_S = 60.0
 _UNTIL_S = 0.05
 # Between blocks a source's lines only wait for their block, so their bytes may wait in the
 # kernel's buffers too: after a read the loop pauses up to _GATHER_S and the next read takes
-# every line of every source at once (a wake-up costs ~10 times a line: bench/bench_bridge.py).
-# From _NEAR_S before a block's close (its first line's arrival + block_s; that arrival itself
-# up to _GATHER_S late) every read is immediate, so the closing line is not delayed. Receive
-# times are taken at the read, so a source timed by the bridge (not the instrument) means no
-# pause at all. 20 ms is 1.8 kB at 921,600 Bd, well inside a tty's 4-kB buffer.
-_GATHER_S = 0.02
-_NEAR_S = 2 * _GATHER_S + 0.01
+# every line of every source at once (a wake-up and a small read cost ~50 us, 20 lines in
+# bulk ~35 us: bench/bench_bridge.py). Reads are immediate from _NEAR_S before the arrival
+# of a block's closing line, so it is not delayed: expected at its sensor time plus the
+# source's lag (the least of read time - sensor time of a read's last line over this block and
+# the last; before that is known, from its first line's arrival + block_s - _FIRST_NEAR_S,
+# that arrival itself up to _GATHER_S late). Receive times are taken at the read, so a source
+# timed by the bridge (not the instrument) means no pause at all. The kernel keeps what
+# waits: 100 ms are 9 kB at 921,600 Bd (a tty buffers 64 kB), and a UDP source pauses the
+# reads for at most _GATHER_GRAMS datagrams (a socket's default 208 kB hold ~200 small ones).
+_GATHER_S = 0.1
+# a flood: bytes coming so fast that this long a pause would gather ``FLOOD`` of them (a
+# pause would only slow the reading down)
+_FLOOD_S = 0.02
+_NEAR_S = 0.01
+_FIRST_NEAR_S = 2 * _GATHER_S + 0.01
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
@@ -96,6 +104,10 @@ class SourceState:
     t: list[int] = field(default_factory=list)
     columns: list[list[float]] = field(default_factory=list)
     block_opened_mono: float = 0.0
+    # read time - sensor time (s) of a read's last sample: the least over the open block and
+    # over the block before (``_GATHER_S`` comment)
+    lag_s: float = math.inf
+    lag_before_s: float = math.inf
     logged: dict[str, float] = field(default_factory=dict)
 
     block_ns: int = 0  # block_s in ns (set from cfg)
@@ -103,6 +115,14 @@ class SourceState:
     def __post_init__(self) -> None:
         self.block_ns = int(self.cfg.block_s * 1e9)
         self.columns = [[] for _ in SENSOR_FIELDS[self.cfg.sensor]]
+
+    def near_s(self) -> float:
+        """When reads turn immediate for the open block's closing line (monotonic s)."""
+        lag = min(self.lag_s, self.lag_before_s)
+        if lag == math.inf:
+            return self.block_opened_mono + self.cfg.block_s - _FIRST_NEAR_S
+        assert self.first_t is not None
+        return (self.first_t + self.block_ns) * 1e-9 + lag - _NEAR_S
 
     def current_state(self, now_mono: float) -> str:
         """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
@@ -240,14 +260,15 @@ class Bridge:
         with a source timed by the bridge, with more waiting than a read takes, in a flood
         (data coming so fast that a gathered read would hold ``FLOOD`` bytes: a pause would
         only slow the reading down), or with a duty due."""
-        if self._links is None or self._links.full or self._links.rate_Bps * _GATHER_S >= FLOOD:
+        links = self._links
+        if links is None or links.full or links.rate_Bps * _FLOOD_S >= FLOOD:
             return 0.0
-        pause = min(_GATHER_S, self._due - now)
+        pause = min(_GATHER_S, self._due - now, links.pause_limit_s)
         for src in self.sources:
             if src.connected and src.time_source != "instrument":
                 return 0.0
             if src.first_t is not None:
-                pause = min(pause, src.block_opened_mono + src.cfg.block_s - _NEAR_S - now)
+                pause = min(pause, src.near_s() - now)
         return pause
 
     def _update_states(self, now_mono: float) -> None:
@@ -289,6 +310,8 @@ class Bridge:
             return
         for line in data:  # one by one: each rejection counted by its reason
             self._line(src, line, recv_ns, now)
+        if src.last_t_ns is not None:
+            src.lag_s = min(src.lag_s, now - src.last_t_ns * 1e-9)
 
     def _samples(self, src: SourceState, many: Samples, now_mono: float) -> None:
         """Samples of the bulk parser (times increasing, after the last) into blocks, as
@@ -305,6 +328,7 @@ class Bridge:
                 self._flush(src)
             i = end
         src.last_t_ns = t[-1]
+        src.lag_s = min(src.lag_s, now_mono - t[-1] * 1e-9)
         src.time_source = many.time_source
         src.samples += n
         src.last_sample_mono = now_mono
@@ -364,6 +388,7 @@ class Bridge:
         block = SampleBlock(self.cfg.buoy_id, src.cfg.sensor, np.array(src.t, np.int64), fields)
         src.t, src.first_t = [], None
         src.columns = [[] for _ in src.columns]
+        src.lag_before_s, src.lag_s = src.lag_s, math.inf
         self.publisher.publish_block(block)
         src.blocks += 1
 

@@ -34,7 +34,8 @@ from monitor.bridge.config import SourceConfig
 MAX_LINE = 4096
 _READ = 65536
 FLOOD = 8192  # a read this long: more is waiting (1 kHz lines bring ~1 kB per 20 ms)
-_RATE_S = 0.1  # the bytes read per second are counted over windows this long
+_RATE_S = 0.1  # the bytes (datagrams) read per second are counted over windows this long
+_GATHER_GRAMS = 64
 _FILE_READ = 1 << 20  # per turn: a long file is read over several turns, the others served
 _IDLE_S = 0.2  # no byte for this long with nothing buffered: the instrument is between lines
 # a followed file has no readiness to wait on: looked at this often (appends, rotation,
@@ -146,6 +147,12 @@ class Link:
 
     def close(self) -> None:
         """Release the descriptors (never raises)."""
+
+    def pause_limit_s(self, window_s: float) -> float:
+        """The longest pause before a read that loses nothing (``inf``: the kernel keeps
+        more than a pause brings), from what came in the last ``window_s`` (asked once per
+        window)."""
+        return math.inf
 
     # --- shared -------------------------------------------------------------------------
     def up(self, synced: bool) -> None:
@@ -292,6 +299,15 @@ class TcpServerLink(Link):
 
 
 class UdpLink(Link):
+    grams = 0  # datagrams read
+    _grams_before = 0  # ... before the last window (:meth:`pause_limit_s`)
+
+    def pause_limit_s(self, window_s: float) -> float:
+        # a socket's buffer counts a small datagram as ~1 kB: pause for _GATHER_GRAMS at most
+        rate = (self.grams - self._grams_before) / window_s
+        self._grams_before = self.grams
+        return _GATHER_GRAMS / rate if rate > 0 else math.inf
+
     def open(self) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -315,6 +331,7 @@ class UdpLink(Link):
             grams.append(data if data.endswith(b"\n") else data + b"\n")
         if not grams:
             return
+        self.grams += len(grams)
         self.lines.reset(synced=True)  # each datagram holds whole lines
         # all in one piece, parsed at once; a source timed at the read keeps a time for each
         for piece in grams if self.cfg.timed_at_read else [b"".join(grams)]:
@@ -401,6 +418,7 @@ class Links:
         self.full = False  # a read in the last pump was a flood's: more is waiting
         self.rate_Bps = 0.0  # bytes read per second in the last whole window of ``_RATE_S``
         self._window = (time.monotonic(), 0)  # its start and the bytes read before it
+        self.pause_limit_s = math.inf  # the longest pause before a read that loses nothing
         # stop() from another thread or a signal handler: a byte here ends the wait at once
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -482,6 +500,8 @@ class Links:
         if now - self._window[0] >= _RATE_S:
             nread = sum(link.nread for link in self.links)
             self.rate_Bps = (nread - self._window[1]) / (now - self._window[0])
+            self.pause_limit_s = min(link.pause_limit_s(now - self._window[0])
+                                     for link in self.links)
             self._window = (now, nread)
 
     def _drain_wake(self) -> None:
