@@ -126,3 +126,39 @@ def test_unix_time_cells_in_bulk_are_exact_or_left_to_the_line_parser():
     for cell, fmt in (("9223372036.854775808", "unix"), ("9999-12-31", "%Y-%m-%d")):
         with pytest.raises(Rejected, match="bad_time"):  # beyond the ns a block can hold
             instrument_time(cell, fmt)
+
+
+def test_a_udp_flood_loses_no_datagram_while_reads_gather(tmp_path):
+    """4,000 datagrams of two Maine lines each (Unix times), 200 at a time every 20 ms
+    (10,000 a second): the bridge pauses its reads between blocks, yet every line arrives,
+    in blocks, as sent."""
+    import socket
+    import time
+
+    from daemon_harness import free_port
+    from test_bridge import run_bridge
+
+    raw = maine_lines(8000)
+    lines = [_unix(ln) for ln in raw]
+    udp_port, port = free_port(), free_port()
+
+    def feed() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as u:
+            for k in range(0, len(lines), 400):
+                for j in range(k, k + 400, 2):
+                    u.sendto(f"{lines[j]}\n{lines[j + 1]}\n".encode(), ("127.0.0.1", udp_port))
+                time.sleep(0.02)
+
+    cfg = {"buoy": {"id": "t1"}, "bridge": {"connect": [f"tcp/127.0.0.1:{port}"]},
+           "source": [{"name": "lc", "sensor": "tension", "transport": "udp", "port": udp_port,
+                       "columns": {"tension_N": 2}, "time_column": 0, "block_s": 60.0}]}
+    bridge, col = run_bridge(cfg, feed, port, lambda b: b.sources[0].lines >= len(lines))
+    try:
+        src = bridge.sources[0]
+        assert (src.lines, src.samples, dict(src.rejected)) == (len(lines), len(lines), {})
+        blocks = col.blocks()
+        assert len(blocks) >= 40  # 8,000 samples at ~3 Hz in 60-s blocks
+        v = np.concatenate([b.fields["tension_N"] for b in blocks])
+        assert v.tolist() == [round(float(ln.split(",")[2]), 1) for ln in lines]
+    finally:
+        col.close()

@@ -36,6 +36,8 @@ _READ = 65536
 FLOOD = 8192  # a read this long: more is waiting (1 kHz lines bring ~1 kB per 20 ms)
 _RATE_S = 0.1  # the bytes (datagrams) read per second are counted over windows this long
 _GATHER_GRAMS = 64
+_TTY_GATHER = 2048
+_UDP_BUFFER = 1 << 20
 _FILE_READ = 1 << 20  # per turn: a long file is read over several turns, the others served
 _IDLE_S = 0.2  # no byte for this long with nothing buffered: the instrument is between lines
 # a followed file has no readiness to wait on: looked at this often (appends, rotation,
@@ -112,6 +114,7 @@ class Link:
     """One source's transport: opened, read when ready, closed and reopened on failure."""
 
     poll_s: float | None = None  # :meth:`poll` is called this often while open (None: never)
+    flood = FLOOD  # a read this long: more is waiting, read again at once
 
     def __init__(self, cfg: SourceConfig, lines: LineSplitter, event: Event,
                  connected: Callable[[bool], None]) -> None:
@@ -182,7 +185,7 @@ class Link:
         self.retry_mono = time.monotonic() + self.cfg.reconnect_s
 
     def got(self, data: bytes) -> None:
-        self.full = len(data) >= FLOOD
+        self.full = len(data) >= self.flood
         self.nread += len(data)
         self.last_data_mono = time.monotonic()
         self.lines.feed(data)
@@ -197,6 +200,16 @@ def _close(obj: Any) -> None:
 
 
 class SerialLink(Link):
+    # a tty holds 4 kB for its reader (more waits in the driver, and a pty's writer waits,
+    # or the tail of a burst stays there until the next byte comes): pauses keep under half
+    flood = _TTY_GATHER
+    _nread_before = 0
+
+    def pause_limit_s(self, window_s: float) -> float:
+        rate = (self.nread - self._nread_before) / window_s
+        self._nread_before = self.nread
+        return _TTY_GATHER / rate if rate > 0 else math.inf
+
     def open(self) -> None:
         import serial  # noqa: PLC0415 (pyserial only where a serial source is configured)
 
@@ -310,6 +323,9 @@ class UdpLink(Link):
 
     def open(self) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # room for the datagrams of a pause at its start, before their rate is known (the
+        # kernel caps this at net.core.rmem_max)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _UDP_BUFFER)
         try:
             self.sock.bind((self.cfg.host, self.cfg.port))
         except OSError:
