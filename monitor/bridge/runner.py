@@ -55,15 +55,15 @@ _LOG_EVERY_S = 60.0
 _UNTIL_S = 0.05
 # Between blocks a source's lines only wait for their block, so their bytes may wait in the
 # kernel's buffers too: after a read the loop pauses up to _GATHER_S and the next read takes
-# every line of every source at once (a wake-up and a small read cost ~50 us, 20 lines in
-# bulk ~35 us: bench/bench_bridge.py). Reads are immediate from _NEAR_S before the arrival
-# of a block's closing line, so it is not delayed: expected at its sensor time plus the
-# source's lag (the least of read time - sensor time of a read's last line over this block and
-# the last; before that is known, from its first line's arrival + block_s - _FIRST_NEAR_S,
-# that arrival itself up to _GATHER_S late). Receive times are taken at the read, so a source
-# timed by the bridge (not the instrument) means no pause at all. The kernel keeps what
-# waits: 100 ms are 9 kB at 921,600 Bd (a tty buffers 64 kB), and a UDP source pauses the
-# reads for at most _GATHER_GRAMS datagrams (a socket's default 208 kB hold ~200 small ones).
+# every line of every source at once (a wake-up with a small read costs ~50 us, as much as
+# 30 lines in bulk: bench/bench_bridge.py). Reads are immediate from _NEAR_S before the
+# arrival of a block's closing line, so it is not delayed: expected at its sensor time plus
+# the source's lag (the least of read time - sensor time of a read's last line over this
+# block and the last; before that is known, from its first line's arrival + block_s -
+# _FIRST_NEAR_S, that arrival itself up to _GATHER_S late). Receive times are taken at the
+# read, so a source timed by the bridge (not the instrument) means no pause at all. A pause
+# never outgrows what the kernel keeps for a link (Link.pause_limit_s: a tty's 4 kB, a UDP
+# socket's datagrams).
 _GATHER_S = 0.1
 # a flood: bytes coming so fast that this long a pause would gather ``FLOOD`` of them (a
 # pause would only slow the reading down)

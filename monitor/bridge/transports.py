@@ -201,8 +201,9 @@ def _close(obj: Any) -> None:
 
 class SerialLink(Link):
     # a tty holds 4 kB for its reader (more waits in the driver, and a pty's writer waits,
-    # or the tail of a burst stays there until the next byte comes): pauses keep under half
-    flood = _TTY_GATHER
+    # or the tail of a burst stays there until the next byte comes): pauses gather at most
+    # half of it, and a read of three quarters (a burst) is followed by another at once
+    flood = 3 * _TTY_GATHER // 2
     _nread_before = 0
 
     def pause_limit_s(self, window_s: float) -> float:
