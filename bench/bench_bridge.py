@@ -8,40 +8,51 @@
    of the line that closes the block (the first sample past ``block_s``: the bridge's own
    delay) and from the send of the block's last sample (that plus the wait for the next one).
 2. Flat out: ``--burst`` lines on one TCP connection as fast as the bridge takes them
-   (TCP flow control: nothing is lost), until the bridge's status counts them all: lines per
-   second and CPU per 1000 lines at saturation.
+   (TCP flow control: nothing is lost), timed until the block holding the last one arrives
+   (a line 1 s later closes it): lines per second and CPU per 1000 lines at saturation.
+Also the bridge's resident memory (after part 1) and the load average (other work on the
+machine shares its 2 cores: compare runs interleaved, and CPU per 1000 lines).
 
-Measured 2026-11-25 on the 2-core development machine (AMD EPYC), 14:10-14:31 UTC while
-it was quiet (load average 0.4-1.1; earlier figures had 6-7). Issue 16's targets: 5 x 1 kHz
-under 5 % of one core, under 5 ms of latency per block.
+Issue 16's targets: 5 x 1 kHz under 5 % of one core, under 5 ms of latency per block.
 
-=============================  ======================  ====================  ==================
-                               one thread, a turn      event-driven: wakes   + between blocks
-                               every >= 4 ms (before;  on readable or the    reads gather up
-                               one run at load 0.8)    next due duty         to 20 ms (shipped;
-                                                       (15-s run)            two runs)
-=============================  ======================  ====================  ==================
-5 x 1 kHz: bridge CPU          6.9 % of one core       11.2 % of one core    6.2 and 5.5 %
-  per 1000 lines               13.9 ms                 22.4 ms               12.4 and 11.0 ms
-  latency, closing line        p50 6.6, p99 10.8 ms    p50 2.7, p99 7.7 ms   p50 3.1 and 2.3,
-                                                                             p99 8.5 and 5.6 ms
-  latency, last sample         p50 8.7 ms              p50 5.2 ms            p50 5.5 and 4.6 ms
-flat out, one TCP source       202,800 lines/s,        214,100 lines/s,      153,800 and
-                               3.0 ms per 1000 lines   4.0 ms per 1000       159,700 lines/s,
-                                                                             4.0 and 3.6 ms
-idle (5 sources, no data;      0.7 %                   -                     0.4 %
-  status every 0.2 s; 10 s)
-=============================  ======================  ====================  ==================
+Measured 2026-11-25 on the 2-core development machine (AMD EPYC), 16:48-16:52 UTC, load
+average 2.8-3.9 (other sessions' tests): three 15-s runs of this version interleaved with
+three of the version before it (b85378b), the same script, from left to right in time.
 
-Latency target met (p50 2-3 ms from the closing line, against 6.6 ms with the 4-ms turns:
-a read no longer waits for a turn). CPU target NOT met: 5.5-6.2 % of one core. A wake-up per
-read (2,500 a second here) cost 11 % (first event-driven version: ~40 us each, against ~3 us
-a line); reading immediately only within 50 ms of a block's close and gathering 20 ms
-otherwise (monitor.bridge.runner._GATHER_S) brings it back to 5.5-6.2 %. What is left is not
-profiled yet (flat out the lines cost 3.6-4 ms per 1000, i.e. 2 % at 5,000 lines/s). Flat
-out is slower than before (154-160k lines/s against 203k): a read under 8 kB during the
-burst is followed by a gather pause. A pure wake-up-per-read loop (no gathering) measured
-15.5 % of a core, p50 2.8 ms (15-s run) before the duties got their own due time.
+=============================  ===========================  ===========================
+                               before (b85378b: gathers     shipped
+                               20 ms, parses line by line,
+                               numba codec)
+=============================  ===========================  ===========================
+5 x 1 kHz: bridge CPU          4.87, 4.40, 4.33 %           2.87, 2.53, 2.67 %
+  per 1000 lines               9.7, 8.8, 8.7 ms             5.7, 5.1, 5.3 ms
+  latency, closing line p50    2.27, 1.74, 2.24 ms          2.14, 1.25, 1.85 ms
+                        p99    8.3, 4.0, 6.8 ms             19.0, 7.4, 7.1 ms
+  latency, last sample p50     4.32, 3.79, 4.28 ms          4.29, 3.25, 4.31 ms
+flat out, one TCP source       304k, 319k, 256k lines/s     577k, 652k, 644k lines/s
+  CPU per 1000 lines           2.9, 2.9, 3.3 ms             1.6, 1.4, 1.4 ms
+bridge resident memory         186 MB                       73 MB
+=============================  ===========================  ===========================
+
+An earlier interleaved set (16:41-16:45, load 1.6-3.8, the shipped version but for the
+serial burst threshold): before 4.60, 5.87, 5.80 %, after 3.20, 2.80, 3.33 %. Before this
+work, on a quiet machine (14:10-14:31, load 0.4-1.1), the version before measured 5.5-6.2 %
+and, timed by the status's line count instead of the last block, 154-160k lines/s flat out.
+
+Where the CPU went (thread-CPU cProfile, perf and a/b runs of one knob at a time): at 20 ms
+gathers a wake-up with its small reads cost ~50 us, about as much as the lines it brought
+(~3 us each line by one); 2,500 immediate reads a second cost 14 % of a core. So: (1) a
+read's lines are parsed at once by builtins over all its cells (bulk parser,
+monitor.bridge.formats; a read with any faulty line goes line by line), UDP datagrams of one
+wake-up are one piece, the line splitter has no Python loop for a clean read, and a block's
+values are kept as a list per field (rows of tuples cost as much again at the flush); (2)
+reads gather up to 100 ms between blocks, immediate only from 10 ms before the closing line
+is due by its sensor time and the source's measured lag (gathering 50 or 100 ms with the old
+50-ms window measured 2.7 and 2.4 %); (3) no pause in a flood (read rate), which gives the
+flat-out rate back. The status every 0.2 s (this benchmark's; 1 s by default) cost ~0.5 %
+(one a/b pair).
+Not re-measured: idle (0.4 % before). p99 latency is scheduling under load: the closing
+line is read in the immediate window in every block traced (15-s run with prints).
 
 Usage: PYTHONPATH=. python bench/bench_bridge.py [--seconds 20] [--burst 200000]
 """
@@ -175,7 +186,6 @@ def feed(name: str, write, seconds: float, sent: dict[tuple[str, int], float],
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0)
-    # the first block loads numba's cached codec kernels (seconds): the warm-up covers it
     ap.add_argument("--warmup", type=float, default=5.0)
     ap.add_argument("--burst", type=int, default=200_000)
     args = ap.parse_args()
