@@ -59,7 +59,8 @@ def _faulty(lines: list[str]) -> list[bytes]:
 
 
 def _run(lines: list[bytes], time_format: str, bulk: bool, cuts: list[int]):
-    cfg = parse_bridge_config({"buoy": {"id": "t1"}, "bridge": {"connect": ["tcp/127.0.0.1:7447"]}, "source": [{
+    connect = {"connect": ["tcp/127.0.0.1:7447"]}  # never opened: handle() alone is driven
+    cfg = parse_bridge_config({"buoy": {"id": "t1"}, "bridge": connect, "source": [{
         "name": "lc", "sensor": "tension", "transport": "stdin", "columns": {"tension_N": 2},
         "scale": {"tension_N": LBF}, "offset": {"tension_N": -3.0}, "time_column": 0,
         "time_format": time_format, "block_s": 20.0}]})

@@ -4,7 +4,8 @@ One thread reads every source (:class:`monitor.bridge.transports.Links`), parses
 blocks, publishes and reports. It sleeps until a source is readable or the next timed duty
 is due (a block to close on the wall clock, a state to change, the status, a transport's
 own); near a block's close every read is immediate, so the block goes out as soon as its
-closing line arrives (between blocks reads gather: ``_GATHER_S``). A block closes when a
+closing line arrives (between blocks reads gather: ``_GATHER_S``), and the lines of a read
+are parsed at once (:func:`monitor.bridge.formats.bulk_parser`). A block closes when a
 sample lies ``block_s`` after its first one, or when ``block_s`` of wall-clock time has
 passed since its first sample arrived (a quiet instrument still gets its samples out).
 Times must increase strictly within a source: a sample at or before the last one is counted
@@ -58,18 +59,17 @@ _UNTIL_S = 0.05
 # every line of every source at once (a wake-up with a small read costs ~50 us, as much as
 # 30 lines in bulk: bench/bench_bridge.py). Reads are immediate from _NEAR_S before the
 # arrival of a block's closing line, so it is not delayed: expected at its sensor time plus
-# the source's lag (the least of read time - sensor time of a read's last line over this
-# block and the last; before that is known, from its first line's arrival + block_s -
-# _FIRST_NEAR_S, that arrival itself up to _GATHER_S late). Receive times are taken at the
-# read, so a source timed by the bridge (not the instrument) means no pause at all. A pause
-# never outgrows what the kernel keeps for a link (Link.pause_limit_s: a tty's 4 kB, a UDP
-# socket's datagrams).
+# the source's lag (the least of read time - sensor time of a read's last sample over this
+# block and the last: a gathered read's last line came just before it, so the least is the
+# instrument's own lag; the read that opened the block gave one). Receive times are taken at
+# the read, so a source timed by the bridge (not the instrument) means no pause at all. A
+# pause never outgrows what the kernel keeps for a link (Link.pause_limit_s: a tty's 4 kB, a
+# UDP socket's datagrams).
 _GATHER_S = 0.1
 # a flood: bytes coming so fast that this long a pause would gather ``FLOOD`` of them (a
 # pause would only slow the reading down)
 _FLOOD_S = 0.02
 _NEAR_S = 0.01
-_FIRST_NEAR_S = 2 * _GATHER_S + 0.01
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
@@ -118,11 +118,9 @@ class SourceState:
 
     def near_s(self) -> float:
         """When reads turn immediate for the open block's closing line (monotonic s)."""
-        lag = min(self.lag_s, self.lag_before_s)
-        if lag == math.inf:
-            return self.block_opened_mono + self.cfg.block_s - _FIRST_NEAR_S
-        assert self.first_t is not None
-        return (self.first_t + self.block_ns) * 1e-9 + lag - _NEAR_S
+        assert self.first_t is not None, "no block open"
+        return (self.first_t + self.block_ns) * 1e-9 + min(self.lag_s, self.lag_before_s) \
+            - _NEAR_S
 
     def current_state(self, now_mono: float) -> str:
         """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
@@ -318,9 +316,10 @@ class Bridge:
         :meth:`_line` puts them one by one."""
         t, n, i = many.t_ns, len(many.t_ns), 0
         while i < n:
-            if src.first_t is None:
-                self._open_block(src, t[i], now_mono)
-            end = bisect_left(t, src.first_t + src.block_ns, i)
+            first_t = src.first_t
+            if first_t is None:
+                first_t = self._open_block(src, t[i], now_mono)
+            end = bisect_left(t, first_t + src.block_ns, i)
             src.t.extend(t[i:end])
             for column, values in zip(src.columns, many.columns):
                 column.extend(values[i:end])
@@ -333,10 +332,12 @@ class Bridge:
         src.samples += n
         src.last_sample_mono = now_mono
 
-    def _open_block(self, src: SourceState, t_ns: int, now_mono: float) -> None:
+    def _open_block(self, src: SourceState, t_ns: int, now_mono: float) -> int:
+        """Open a block at sample time ``t_ns``; returns it."""
         src.first_t = t_ns
         src.block_opened_mono = now_mono
         self._due = min(self._due, now_mono + src.cfg.block_s)
+        return t_ns
 
     def _line(self, src: SourceState, data: bytes, recv_ns: int, now_mono: float) -> None:
         try:
