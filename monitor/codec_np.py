@@ -69,6 +69,8 @@ def quantize(v: np.ndarray, q: float) -> tuple[np.ndarray, np.ndarray]:
         ok = np.abs(x) < EXACT  # NaN fails too
         k = np.rint(np.where(ok, x, 0.0))
         half = 0.5 * q
+        if np.all(ok & (np.abs(k * q - v) <= half)):  # the usual block: every k is the first
+            return k.astype(np.int64), ok
         chosen = np.zeros_like(k)
         found = np.zeros(v.shape, bool)
         for c in (k, k - 1.0, k + 1.0):  # the first candidate within q / 2, in this order
@@ -81,8 +83,11 @@ def quantize(v: np.ndarray, q: float) -> tuple[np.ndarray, np.ndarray]:
 def quantized(v: np.ndarray, q: float) -> bytes:
     """One field's samples as a length-prefixed ``Quantized`` message body."""
     k, ok = quantize(v, q)
-    z = np.zeros(v.shape, np.uint64)
-    z[ok] = zigzag(np.diff(k[ok], prepend=np.int64(0)))  # a raw sample's delta is 0
+    if np.all(ok):
+        z = zigzag(np.diff(k, prepend=np.int64(0)))
+    else:
+        z = np.zeros(v.shape, np.uint64)
+        z[ok] = zigzag(np.diff(k[ok], prepend=np.int64(0)))  # a raw sample's delta is 0
     deltas = varints(z).tobytes()
     body = [bytes(((Q_QUANTUM << 3) | 1,)), np.array(q, "<f8").tobytes(),
             bytes(((Q_DELTA << 3) | 2,)), varint(len(deltas)), deltas]
