@@ -101,10 +101,12 @@ class AlertEngine:
             return [cls(rc, rc.component or CABLE_COMPONENT)]
         if target_kind == "stream":
             if rc.component is not None and rc.component not in SENSOR_FIELDS:
-                raise unknown(rc.where, "component", rc.component, SENSOR_FIELDS, "sensor stream")
+                raise unknown(rc.where, "component", rc.component, SENSOR_FIELDS, "sensor stream",
+                              rc.component)
             return [cls(rc, s) for s in ([rc.component] if rc.component else SENSOR_FIELDS)]
         if rc.component is not None and rc.component not in self.endurance_Pa:
-            raise unknown(rc.where, "component", rc.component, self.endurance_Pa, "component")
+            raise unknown(rc.where, "component", rc.component, self.endurance_Pa, "component",
+                          rc.component)
         names = [rc.component] if rc.component else list(self.endurance_Pa)
         if cls not in (ConductorStress, ConductorYield):
             return [cls(rc, n) for n in names]
