@@ -43,9 +43,9 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from monitor.config import FieldLimits
 
 PASS, NOT_EVALUATED, SUSPECT, FAIL, MISSING = 1, 2, 3, 4, 9
@@ -72,12 +72,12 @@ _SLOT = np.array([0, 0, 0, 0, 1, 0, 0, 0, 0, 2], np.int64)
 _RANK = np.array([0, 1, 0, 3, 4, 0, 0, 0, 0, 5], np.int64)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@kernel(nogil=True, inline="always")
 def _worst(a, b):  # pragma: no cover - compiled
     return a if _RANK[a] >= _RANK[b] else b
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@kernel(nogil=True, inline="always")
 def _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f):  # pragma: no cover - compiled
     """One older value ``w`` (NaN skipped) of the flat-line scan widens [lo, hi]; once that
     spans ``tol`` the line is not flat in the windows (suspect ``sw``, fail ``fw``) reaching
@@ -90,7 +90,7 @@ def _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f):  # pragma: no cove
     return lo, hi, flat_s, flat_f, False
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ring_head, ring_n, first_t):  # pragma: no cover - compiled
     """Flags ``(len(TESTS), n)`` of the samples ``t, x`` (``x``: fields x samples) and the
     spike flag of each sample's PREDECESSOR (0 = none). State arrays are updated in place;
@@ -248,7 +248,7 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
 
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t):
     # pragma: no cover - compiled
     """The usual block, test by test in branch-free loops the compiler vectorises: every value
