@@ -47,7 +47,7 @@ come from the cache crashes numba: tried). ``check-config`` and ``--help`` run n
 and never import numba; rerun (0.44 s) and scipy.linalg (0.16 s, which numba's target
 would import to offer BLAS no kernel uses) are no longer imported by a replay.
 
-Usage: PYTHONPATH=. python bench/bench_startup.py [--runs 5] [--compile]
+Usage: PYTHONPATH=. python bench/bench_startup.py [--runs 5] [--compile | --plain-sweep]
 """
 
 from __future__ import annotations
@@ -124,6 +124,46 @@ def daemon_ready(repo: Path, tmp: Path, model_cache: Path) -> tuple[float, float
     return wall, cpu
 
 
+PLAIN_CHILD = """
+import sys
+from monitor.config import default_config
+from replay.runner import replay_logs
+replay_logs(default_config(), [sys.argv[1]], show_progress=False, plain=sys.argv[2] == "plain")
+"""
+
+
+def plain_sweep(repo: Path, tmp: Path, runs: int) -> None:
+    """CPU of a replay run as plain Python and compiled (fresh processes, numba's load
+    included), by the log's inflated size: where PLAIN_PYTHON_BYTES (replay.runner) sits."""
+    env = child_env(repo)
+    print(f"{'log':>8s} {'inflated':>10s} {'plain CPU':>10s} {'compiled CPU':>13s}")
+    for minutes in (0.6, 1, 2, 3, 5, 10):
+        log = tmp / f"sweep-{minutes}.mcap"
+        timed(["simulate", "-o", str(log), "--hours", f"{minutes / 60:.5f}", "--hs", "2",
+               "--tp", "8", "--seed", "1"], env, tmp)
+        size = subprocess.run(
+            [sys.executable, "-c", "import sys; from replay.log_files import inflated_size; "
+             "print(inflated_size([sys.argv[1]]))", str(log)], env=env, cwd=tmp,
+            capture_output=True, text=True, check=True).stdout.strip()
+        cpu = {}
+        for mode in ("plain", "compiled"):
+            cpu[mode] = min(timed_python([PLAIN_CHILD, str(log), mode], env, tmp)[1]
+                            for _ in range(runs))
+        print(f"{minutes:6.1f} min {int(size) / 1e3:7.0f} kB {cpu['plain']:8.2f} s "
+              f"{cpu['compiled']:11.2f} s")
+
+
+def timed_python(argv: list[str], env: dict[str, str], cwd: Path) -> tuple[float, float]:
+    """(wall s, CPU s) of ``python -c argv[0] argv[1:]``."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-c", *argv], cwd=cwd, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(proc.stderr.read().decode() if proc.stderr else "child failed")
+    return time.perf_counter() - t0, usage.ru_utime + usage.ru_stime
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=5)
@@ -132,6 +172,8 @@ def main() -> None:
                          "warmup` fills its cache by running the commands once")
     ap.add_argument("--compile", action="store_true",
                     help="also time a warm-up into an empty numba cache (a minute or more)")
+    ap.add_argument("--plain-sweep", action="store_true",
+                    help="only replays of 0.6-10 min logs, as plain Python and compiled")
     args = ap.parse_args()
     repo = args.repo.resolve()
     compileall.compile_dir(repo, quiet=1, rx=re.compile(r"[/\\](\.venv|out)[/\\]"))
@@ -143,6 +185,9 @@ def main() -> None:
                "--seed", "1"], env, tmp)
         if (repo / "replay" / "cmd_warmup.py").exists():
             timed(["warmup"], env, tmp)
+            if args.plain_sweep:
+                plain_sweep(repo, tmp, args.runs)
+                return
         else:
             timed(["replay", str(log), "--no-progress"], env, tmp)
         print(f"{os.cpu_count()} cores, load average "

@@ -30,8 +30,11 @@ log = logging.getLogger(__name__)
 
 # Logs whose chunks inflate to at most this many bytes replay with every kernel run as plain
 # Python, never importing numba: loading numba and its CPU target for the cached kernels
-# costs about 0.55 s of CPU, more than such a log's loops take uncompiled. Measured
-# 2026-11-25 (2-core Xeon, bench/bench_startup.py): MEASURED.
+# costs about 0.55 s of CPU, more than such a log's loops take uncompiled. A whole replay in
+# a fresh process, CPU s plain / compiled, by inflated size (simulated logs of the default
+# streams; 2026-11-25, 2-core Xeon, `bench/bench_startup.py --plain-sweep`): 20 kB (36 s of
+# log) 0.43 / 1.21, 57 kB (2 min) 0.57 / 1.13, 84 kB (3 min) 0.69 / 1.16, 137 kB (5 min)
+# 1.01 / 1.11, 269 kB (10 min) 1.71 / 1.13: even at 137 kB; 100 kB keeps a margin.
 PLAIN_PYTHON_BYTES = 100_000
 
 

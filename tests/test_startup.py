@@ -122,7 +122,8 @@ def test_after_warmup_no_command_compiles(tmp_path):
                    "--seed", "3", "--load-model", "wavfor")
     assert sim.returncode == 0, sim.stderr
     rep = _python(_IMPORTED_AFTER.format(
-        argv=["replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress"]))
+        argv=["replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress"]),
+        BUOYMON_CACHE_DIR=str(models))  # the estimator's table as warmup left it
     out = json.loads(rep.stdout.splitlines()[-1])
     assert out["status"] == 0
     assert NOTICE_START not in sim.stderr + rep.stderr
