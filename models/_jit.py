@@ -82,7 +82,10 @@ class Kernel:
 
     def __call__(self, *args: Any) -> Any:
         if _Dispatch.depth or not HAVE_NUMBA:
-            return self.py_func(*args)
+            # compiled code raises no floating-point warnings (x / 0 is inf, int64 wraps):
+            # neither do numpy's scalars here
+            with np.errstate(all="ignore"):
+                return self.py_func(*args)
         return (self._compiled or self.compiled)(*args)
 
 

@@ -15,7 +15,7 @@ import pytest
 
 from models import _jit
 from monitor.cli import main
-from monitor.config import default_config
+from monitor.config import config_with, default_config
 from replay import runner
 from replay.log_files import inflated_size
 from replay.report import write_report
@@ -30,13 +30,14 @@ MAINE = SHARED / "maine_endline_loadcell" / "17348481-2018.11.30-09.58.27-15.csv
 LBF = 4.4482216152605  # N per pound-force (the load cell logs lbf)
 
 
-def _report_bytes(log: Path, out: Path, plain: bool) -> bytes:
-    result = replay_logs(default_config(), [log], show_progress=False, plain=plain)
+def _report_bytes(log: Path, out: Path, plain: bool, config) -> bytes:
+    result = replay_logs(config, [log], show_progress=False, plain=plain)
     write_report(out, result.report)
     return out.read_bytes()
 
 
-def _both_ways(log: Path, tmp_path: Path) -> dict:
+def _both_ways(log: Path, tmp_path: Path, config=None) -> dict:
+    config = config or default_config()
     calls = {"plain": 0}
     py_call = _jit.Kernel.__call__
 
@@ -46,10 +47,10 @@ def _both_ways(log: Path, tmp_path: Path) -> dict:
 
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(_jit.Kernel, "__call__", counting)
-        plain = _report_bytes(log, tmp_path / "plain.json", plain=True)
+        plain = _report_bytes(log, tmp_path / "plain.json", True, config)
         assert calls["plain"] > 50  # the reader, decoder, validation, fatigue loops...
         ran_plain = calls["plain"]
-        compiled = _report_bytes(log, tmp_path / "compiled.json", plain=False)
+        compiled = _report_bytes(log, tmp_path / "compiled.json", False, config)
         assert calls["plain"] == ran_plain  # nothing ran uncompiled the second time
     assert plain == compiled
     return json.loads(plain)
@@ -64,6 +65,23 @@ def test_a_simulated_36_s_log_gives_the_same_report_bytes_plain_and_compiled(tmp
         == {"tension": 720, "imu": 360, "motion": 360, "gnss": 36}
     damage = [c["damage"] for c in report["components"].values()]
     assert len(damage) == 2 and all(d > 0 for d in damage)
+
+
+def test_a_faulty_log_with_the_load_estimated_from_motion_gives_the_same_report_bytes(tmp_path):
+    # dropouts, spikes and NaN on every stream (rejections, QC flags, gaps), and the fatigue
+    # load taken from the motion estimator instead of the load cell (which forms its first
+    # estimates after a minute: a 3-minute log, still one that replays as plain Python)
+    log = tmp_path / "faulty.mcap"
+    simulate(SimConfig(hours=0.05, hs_m=3.0, tp_s=6.0, seed=5, dropouts=0.02, spikes=0.01,
+                       nans=0.01), log)
+    assert inflated_size([log]) <= PLAIN_PYTHON_BYTES
+    config = config_with(default_config(), load={**default_config().section("load"),
+                                                 "source": "estimated"})
+    report = _both_ways(log, tmp_path, config)
+    rejected = report["samples"]["tension"]["rejected"]
+    assert sum(rejected.values()) > 10 and rejected["nan"] > 0 and rejected["spike"] > 0
+    assert report["tension_N"]["samples_estimated"] > 300
+    assert report["tension_N"]["samples_measured"] == 0
 
 
 @pytest.mark.skipif(not MAINE.exists(), reason="shared/realdata not beside the project")
