@@ -15,37 +15,52 @@ of a tiny (36 s) log under 0.5 s warm, a cold daemon start under 5 s.
   is built at the first motion block);
 - with ``--compile``: ``warmup`` into an empty numba cache (what the first install pays).
 
-Measured 2026-11-25 on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz), load average 6-8
+Measured 2026-11-25 on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz), load average 3-6
 from other work (wall times wait for a core: CPU is the fair figure), best of 5, wall / CPU
-in s; "before" is main at 98e57db measured in the same session (``--repo``):
+in s. "before" is main at e1a1500 (``--repo`` on an export of it), "after" this checkout,
+in the same session:
 
     command                            before          after
-    buoymon --help                     1.20 / 0.60     0.05 / 0.04
-    buoymon check-config               0.92 / 0.47     0.18 / 0.18
-    buoymon replay (36 s log)          1.79 / 1.53     0.96 / 0.84
-    buoymon warmup --config (filled)      -            1.40 / 0.98
-    daemon start, cold (exec->READY)   0.57 / 0.61     0.59 / 0.58
-    daemon start, warm model cache     0.59 / 0.64     0.59 / 0.63
-    warmup into an empty numba cache      -            80.4 / 34.6 (--compile)
-    daemon start, empty numba cache       -            47.3 / 13.7 (one run, by hand)
+    buoymon --help                     0.04 / 0.04     0.04 / 0.03
+    buoymon check-config               0.22 / 0.21     0.24 / 0.18
+    buoymon replay (36 s log)          0.96 / 0.99     0.46 / 0.41
+    buoymon warmup --config (filled)   1.94 / 1.20     1.31 / 1.10
+    daemon start, cold (exec->READY)   1.56 / 0.67     1.37 / 0.65
+    daemon start, warm model cache     1.50 / 0.65     1.64 / 0.65
 
-After merging main (best of 3, load average 5-6): --help 0.04 / 0.04, check-config
-0.16 / 0.20, replay 0.78 / 0.77, warmup --config 1.05 / 1.02, daemon 0.55 / 0.62.
+A second "after" run minutes later (load average 4-5) gave replay 0.89 / 0.44: the wall
+time of a tiny replay under 0.5 s needs a free core; its CPU time is 0.41-0.44 s.
 
-The daemon's start (0.6 s to READY=1) is far under the 5 s target once the kernels are
-cached: the 11-12 s the issue measured was compilation (47 s wall, 13.7 s CPU here with
-an empty numba cache), which the unit's ExecStartPre (``buoymon warmup --config``) now
-does before ``buoymon run`` (about 1 s when the cache is filled).
+Earlier (98e57db, before ``buoymon warmup`` and the lazy imports): --help 1.20 / 0.60,
+check-config 0.92 / 0.47, replay 1.79 / 1.53; a warm-up into an empty numba cache 80.4 s
+wall / 34.6 s CPU (``--compile``), a daemon start with an empty numba cache 47.3 / 13.7.
+The daemon's start (0.65 s of CPU to READY=1) is far under the 5 s target once the kernels
+are cached: the 11-12 s the issue measured was compilation, which the unit's
+ExecStartPre (``buoymon warmup --config``) now does before ``buoymon run``.
 
-Where replay's time goes (cProfile, after): Python and numpy 0.15 s, numba's import
-0.25 s and its CPU target (every type and lowering registry, loaded with the first
-cached kernel: imports some 560 modules) about 0.3 s, then the kernels' loads and the
-work. numba's part is a floor for any command that runs a compiled kernel, and the log
-reader and decoder are compiled kernels: 0.5 s for a tiny replay is out of reach on this
-machine without doing away with numba at start-up (skipping the target load when kernels
-come from the cache crashes numba: tried). ``check-config`` and ``--help`` run no kernel
-and never import numba; rerun (0.44 s) and scipy.linalg (0.16 s, which numba's target
-would import to offer BLAS no kernel uses) are no longer imported by a replay.
+A replay of a small log never imports numba: numba's import and its CPU target (every
+type and lowering registry, loaded with the first cached kernel: some 560 modules) cost
+about 0.55 s of CPU, more than such a log's loops take as plain Python. Every kernel is
+one function that runs compiled or uncompiled with the same bits (models._jit.Kernel);
+``buoymon replay`` runs them uncompiled when the logs inflate to at most
+``replay.runner.PLAIN_PYTHON_BYTES`` (100 kB, about 3.5 minutes of the default streams; the
+size is read from the files' summaries before anything else) in a process that has not
+loaded numba. ``--plain-sweep`` times whole replays in fresh processes both ways (CPU s,
+same session, load average 5-6):
+
+    log      inflated   plain   compiled
+    0.6 min     20 kB    0.43       1.21
+    1 min       31 kB    0.45       1.05
+    2 min       57 kB    0.57       1.13
+    3 min       84 kB    0.69       1.16
+    5 min      137 kB    1.01       1.11
+    10 min     269 kB    1.71       1.13
+
+The 0.41 s left of a 36 s replay (cProfile): Python and numpy about 0.15 s, buoymon's
+modules (configuration, pipeline, alerts, models) about 0.15 s, the reader, decoder,
+validation, QARTOD, estimator and fatigue loops as plain Python about 0.1 s. Neither rerun
+(0.44 s), scipy, zenoh, dask, matplotlib nor fleet's process pool is imported by a replay;
+``check-config`` and ``--help`` run no kernel and never import numba.
 
 Usage: PYTHONPATH=. python bench/bench_startup.py [--runs 5] [--compile | --plain-sweep]
 """
