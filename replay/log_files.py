@@ -74,17 +74,19 @@ def inflated_size(paths: Sequence[str | PathLike]) -> int | None:
         try:
             with open(path, "rb") as f:
                 size = f.seek(0, 2)
-                statistics = False
+                chunks, indexed = None, 0
                 for op, content in summary_records(f, size):
-                    statistics |= op == OP_STATISTICS
-                    if op == OP_CHUNK_INDEX and len(content) >= 16:
+                    if op == OP_STATISTICS and len(content) >= 26:
+                        chunks = struct.unpack_from("<I", content, 22)[0]  # chunk_count
+                    elif op == OP_CHUNK_INDEX and len(content) >= 16:
                         # the record ends with compressed_size, uncompressed_size (u64)
                         compressed, uncompressed = struct.unpack_from("<QQ", content,
                                                                       len(content) - 16)
                         size += uncompressed - compressed
+                        indexed += 1
         except OSError:
             return None
-        if not statistics:
+        if chunks is None or indexed != chunks:  # no statistics, or chunks not indexed
             return None
         total += size
     return total

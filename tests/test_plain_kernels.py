@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 import mcap.reader
+from mcap.writer import IndexType, Writer
 import numpy as np
 import pytest
 
@@ -108,6 +109,25 @@ def test_inflated_size_is_the_chunks_uncompressed_as_the_mcap_library_reads_them
     assert expected > 1.5 * log.stat().st_size  # the chunks are compressed
     assert inflated_size([log]) == expected
     assert inflated_size([log, log]) == 2 * expected
+    # another writer (the mcap package's, chunks of 4 kB): the same sum; a summary that does
+    # not index every chunk (MCAP allows it) or has no statistics tells no size
+    for index, stats, expected_size in ((IndexType.ALL, True, True),
+                                        (IndexType.MESSAGE, True, False),
+                                        (IndexType.ALL, False, False)):
+        other = tmp_path / "other.mcap"
+        with open(other, "wb") as f:
+            w = Writer(f, chunk_size=4096, index_types=index, use_statistics=stats)
+            w.start()
+            ch = w.register_channel("buoy/x/sensor/tension", "protobuf",
+                                    w.register_schema("x", "protobuf", b""))
+            for i in range(400):
+                w.add_message(ch, log_time=i, data=bytes(100), publish_time=i)
+            w.finish()
+        with open(other, "rb") as f:
+            chunks = mcap.reader.make_reader(f).get_summary().chunk_indexes
+        size = other.stat().st_size + sum(c.uncompressed_size - c.compressed_size for c in chunks)
+        assert inflated_size([other]) == (size if expected_size else None)
+        assert len(chunks) > 5 or not expected_size
     # a file cut short has no summary: its size is not known up front, so it is compiled
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(log.read_bytes()[: log.stat().st_size // 2])
