@@ -210,7 +210,9 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
                     p1, p2 = np.radians(prev[0]), np.radians(lat)
                     h = (np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2)
                          * np.sin(np.radians(lon - prev[1]) / 2) ** 2)
-                    if 2 * _EARTH_RADIUS_M * np.arcsin(np.sqrt(min(h, 1.0))) > location_max_m:
+                    # math.asin: libm's, compiled or not (numpy's own arcsin differs in the
+                    # last bit from it, so a kernel run as plain Python would too)
+                    if 2 * _EARTH_RADIUS_M * math.asin(np.sqrt(min(h, 1.0))) > location_max_m:
                         loc = 3
                 if abs(lat) > 90 or abs(lon) > 180:
                     loc = 4

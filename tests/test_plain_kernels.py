@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 from pathlib import Path
 
 import mcap.reader
@@ -171,3 +172,61 @@ def test_kernels_call_kernels_compiled_and_plain():
             assert block.t_ns.tolist() == t.tolist()
             assert block.fields["tension_N"][[0, 1, 3, 5]].tolist() == [1.0, 2.5, -4.0, 0.2]
             assert np.isnan(block.fields["tension_N"][2]) and block.fields["tension_N"][4] == 1e300
+
+
+def test_catenary_solves_give_the_same_bits_compiled_and_plain():
+    # the seed's mooring (suspended, grounded, slack) and a chain + clump + rope line with
+    # seabed friction: Newton on asinh, sinh, log1p, hypot... all libm's both ways
+    from models.catenary import Joint, Line, Segment, solve, vaps_mooring
+
+    rng = np.random.default_rng(3)
+    lines = {"vaps": (vaps_mooring(), rng.uniform(0.0, 31.5, 40), rng.uniform(21.0, 25.0, 40)),
+             "clump": (Line((Segment(86.7, 10.7), Segment(41.2, 1.03, 2e8)), (Joint(467.0),),
+                            True, 0.9), rng.uniform(60.0, 120.0, 40), rng.uniform(30.0, 45.0, 40))}
+    for name, (line, x, z) in lines.items():
+        out = []
+        for plain in (False, True):
+            with _jit.uncompiled() if plain else contextlib.nullcontext():
+                sol = solve(line, x, z)
+            out.append(np.stack([sol.h, sol.v_top, sol.h_anchor, sol.grounded_length]))
+        assert np.isfinite(out[0]).sum() > 100, name
+        assert out[0].tobytes() == out[1].tobytes(), name
+
+
+def test_gnss_location_qc_gives_the_same_flags_compiled_and_plain():
+    # fixes wandering by ~450 m a step around the anchor against a 300 m location limit: the
+    # haversine distance (sin, cos, asin) on both sides of it, and NaN fixes
+    from monitor.config import FieldLimits
+    from monitor.qartod import StreamQC
+
+    rng = np.random.default_rng(4)
+    n = 400
+    t = (np.arange(n) * 1_000_000_000 + 10**18).astype(np.int64)
+    lat = 41.85 + np.cumsum(rng.normal(0.0, 0.004, n))
+    lon = -82.4 + np.cumsum(rng.normal(0.0, 0.004, n))
+    lat[::50] = np.nan
+    fields = (FieldLimits(-90.0, 90.0, math.inf), FieldLimits(-180.0, 180.0, math.inf))
+    flags = []
+    for plain in (False, True):
+        qc = StreamQC(fields, location_range_max_m=300.0)
+        with _jit.uncompiled() if plain else contextlib.nullcontext():
+            flags.append(qc.check(t, np.stack([lat, lon])))
+    location = flags[0][0][4]
+    assert (location == 3).sum() > 10 and (location == 1).sum() > 10 and (location == 4).sum() > 3
+    assert all(np.array_equal(a, b) for a, b in zip(flags[0], flags[1]))
+
+
+def test_catenary_building_blocks_give_the_same_bits_compiled_and_plain():
+    # _quotients (hypot(1, a), asinh, log1p of slopes) over many slope pairs: Python's own
+    # math.hypot differs from libm's in the last bit for some of these, numpy's does not
+    from models.catenary import kernel
+
+    rng = np.random.default_rng(5)
+    pairs = rng.normal(0.0, 3.0, (3000, 2)) * rng.choice([1e-3, 1.0, 1e3], (3000, 1))
+    pairs[:1000, 1] = pairs[:1000, 0] * (1.0 + rng.normal(0.0, 1e-9, 1000))  # a -> b
+    out = []
+    for plain in (False, True):
+        with _jit.uncompiled() if plain else contextlib.nullcontext():
+            out.append(np.array([kernel._quotients(a, b) for a, b in pairs.tolist()]))
+    assert np.isfinite(out[0]).all()
+    assert out[0].tobytes() == out[1].tobytes()

@@ -35,14 +35,17 @@ NOT_CONVERGED = 1
 OFF_SEABED_MODEL = 2  # equilibrium found, but it would need seabed contact not modelled
 
 _SMALL = 1e-6
+# np.hypot, not math.hypot, in the kernels: compiled both are libm's hypot, but Python's own
+# math.hypot differs from it in the last bit (0.1 % of inputs), so run as plain Python a
+# kernel would not give the compiled bits; numpy's is libm's
 
 
 @kernel()
 def _quotients(a: float, b: float):
     """Difference quotients g1 = (asinh a - asinh b)/(a-b), g2 = (Sa-Sb)/(a-b),
     e1 = (a/Sa - b/Sb)/(a-b), e2 = (1/Sa - 1/Sb)/(a-b), stable for a -> b."""
-    sa = math.hypot(1.0, a)
-    sb = math.hypot(1.0, b)
+    sa = np.hypot(1.0, a)
+    sb = np.hypot(1.0, b)
     g2 = (a + b) / (sa + sb)
     e2 = -g2 / (sa * sb)
     if a * b > 0.0:
@@ -132,7 +135,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
         if seabed and w > 0.0 and vt > 0.0 and vb < 0.0:
             # lowest point of a mid-line sag: it must stay above the seabed
             a = vt / h
-            sa = math.hypot(1.0, a)
+            sa = np.hypot(1.0, a)
             z_low = z - sz - (vt * a / (w * (sa + 1.0)) + 0.5 * seg_c[k] * vt * vt / w)
             if z_low < -1e-9 * (abs(z) + seg_l[k]):
                 valid = False
@@ -157,7 +160,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
     c = seg_c[k_td]
     if l_susp > 0.0:
         a = vt / h
-        sa = math.hypot(1.0, a)
+        sa = np.hypot(1.0, a)
         ash = math.asinh(a)
         sx += h / w * ash + c * h * l_susp
         sz += vt * a / (w * (sa + 1.0)) + 0.5 * c * vt * l_susp
@@ -387,7 +390,7 @@ def _guess(x, z, seg_l, seg_w, seg_c, joint_p, attempt):
         wabs += abs(joint_p[k])
     if wabs == 0.0:
         wabs = 1.0
-    d = math.hypot(x, z)
+    d = np.hypot(x, z)
     if ltot > d:
         # inextensible homogeneous catenary through both ends (exact for such a line):
         # sinh(phi)/phi = sqrt(L^2 - z^2)/x = 1 + q
