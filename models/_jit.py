@@ -1,5 +1,6 @@
-"""Optional numba compilation for the fatigue hot loops (numba is a declared dependency;
-every compiled loop also runs as plain Python/numpy so the models work without it).
+"""numba compilation of the numerical kernels, or none: every kernel also runs as plain
+Python/numpy with the same bits (numba is a declared dependency; the models work without it,
+and a small job runs uncompiled rather than pay for loading numba).
 
 - ``HAVE_NUMBA``: numba is installed (found without importing it).
 - ``kernel(**options)``: decorator making a loop a :class:`Kernel`, numba's ``njit`` with
@@ -24,11 +25,14 @@ of ``buoymon check-config``, which builds the cable and S-N curves but runs no l
 
 Compiled or not, a kernel is the same function, so it gives the same bits: the loops use
 IEEE-754 arithmetic without fast-math (no contraction, no reassociation), integer steps on
-int64 (buffers are read as ``np.int64(buf[p])``) and no numpy transcendental on a scalar
-where glibc's would differ. Loading numba and its CPU target for a cached kernel costs about
-0.55 s of CPU (measured 2026-11-25, 2-core Xeon), more than a replay of a log of a minute
-spends in all its loops as plain Python; ``replay.runner`` chooses per process from the
-log's sample count (:func:`uncompiled` around the whole run, read-ahead thread included:
+int64 (buffers are read as ``np.int64(buf[p])``), and elementary functions that are libm's
+both ways: compiled, numba calls libm; as plain Python, ``math`` does too except for
+``math.hypot`` (Python's own: use ``np.hypot``), and numpy's scalar ``arcsin`` is numpy's
+own (use ``math.asin``); ``np.sin``/``np.cos``/``np.sqrt`` agree (tests/test_plain_kernels.py).
+Loading numba and its CPU target for a cached kernel costs about 0.55 s of CPU (measured
+2026-11-25, 2-core Xeon), more than a replay of a log of a few minutes spends in all its
+loops as plain Python; ``replay.runner.plain_python_pays`` chooses per process from the
+logs' inflated size (:func:`uncompiled` around the whole run, read-ahead thread included:
 the choice is process-wide because loading numba is).
 
 numba's disk cache only tracks the source file of the compiled function, so a ``jitable``
