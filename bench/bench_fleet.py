@@ -18,8 +18,15 @@ judged. It also prints where the CPU goes: the CPU time of reading the archive a
 decode, reorder and coalesce, all threads) against the serial run's.
 
 Measured on the 2-core machine shared with other jobs, 2026-11-25, ``--buoys 4 --days 15``
-(compact logs): serial 71.8 s wall, 32.4 CPU-s; 2 workers 54.9 s wall, workers 17.0 + 16.8
-CPU-s; 197 CPU-s per buoy-year, reading 32 % of it. Details in docs/FLEET.md. Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep] [--repeat R]
+(compact logs). Earlier that day, load average 2.1, the build before issue 22 part 5: serial
+71.8 s wall, 32.4 CPU-s; 2 workers 54.9 s wall, workers 17.0 + 16.8 CPU-s; 197 CPU-s per buoy-year,
+reading 32 % of it. 16:45-16:49 UTC, load average 1.8-3.0, this build then main of the same
+hour (which has grown: QC check factor, duplicates in validation) on the same archive: serial
+38.9 / 57.3 s wall, 42.8 / 49.6 CPU-s; 2 workers 24.0 / 55.9 s wall, workers 19.8 + 19.8 /
+26.0 + 26.0 CPU-s; 260 / 302 CPU-s per buoy-year; reading alone 7.3 / 11.1 CPU-s (one-pass
+decode of regular payloads). Target under 60: not reached. Details in docs/FLEET.md.
+
+Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep] [--repeat R]
 [--measured-only]
 """
 

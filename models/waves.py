@@ -74,6 +74,16 @@ def wavelength(period: ArrayLike, depth: float, g: float = G_STANDARD) -> NDArra
     return 2.0 * np.pi / wavenumber(2.0 * np.pi / t, depth, g)
 
 
+def breaking_height(period: ArrayLike, depth: float, g: float = G_STANDARD) -> NDArray[np.float64]:
+    """Height (m) above which a wave of ``period`` (s) breaks in water ``depth`` (m): Miche's
+    (1944) limit H_b = L/7 tanh(2 pi h/L), L from the dispersion relation (seed 004 App. 6).
+    In deep water it is Michell's steepness limit H/L = 1/7, in shallow water about 0.9 h."""
+    length = wavelength(period, depth, g)
+    h = _depth(depth)
+    depth_factor = 1.0 if math.isinf(h) else np.tanh(2.0 * np.pi * h / length)
+    return length / 7.0 * depth_factor
+
+
 def _depth_ratios(k: NDArray[np.float64], z: NDArray[np.float64], depth: float):
     """cosh(k(z+h))/sinh(kh) and sinh(k(z+h))/sinh(kh), overflow-free for large k h."""
     if math.isinf(depth):

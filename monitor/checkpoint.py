@@ -108,13 +108,18 @@ class CheckpointStore:
         parent = os.path.dirname(os.path.abspath(self.path))
         os.makedirs(parent, exist_ok=True)
         self._db = sqlite3.connect(self.path, isolation_level=None)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=FULL")
-        self._db.execute(
-            "CREATE TABLE IF NOT EXISTS checkpoint ("
-            " id INTEGER PRIMARY KEY CHECK (id = 1), seq INTEGER NOT NULL,"
-            " saved_ns INTEGER NOT NULL, state BLOB NOT NULL)"
-        )
+        try:
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute(
+                "CREATE TABLE IF NOT EXISTS checkpoint ("
+                " id INTEGER PRIMARY KEY CHECK (id = 1), seq INTEGER NOT NULL,"
+                " saved_ns INTEGER NOT NULL, state BLOB NOT NULL)"
+            )
+        except sqlite3.DatabaseError as exc:  # another file, or a damaged one: never overwritten
+            self._db.close()
+            raise ValueError(f"{self.path}: not a checkpoint database ({exc}); the file is "
+                             "left as it is: move it aside to start afresh") from None
 
     def load(self) -> Checkpoint | None:
         """The latest checkpoint, or None if nothing was saved yet."""

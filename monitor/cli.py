@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from typing import Sequence
 
@@ -87,6 +88,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             announce_compiles()
         try:
             return int(args.func(args) or 0)
+        except BrokenPipeError:
+            # the reader of stdout went away (`| head`, a pager quit): not a failure; stdout
+            # to /dev/null so the interpreter's final flush does not raise again
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 0
         except OSError as exc:
             # a file the command cannot read or write (missing folder, disk full, no access):
             # the operating system's message names the file; a traceback would add nothing

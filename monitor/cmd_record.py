@@ -15,14 +15,14 @@ import queue
 import signal
 import threading
 import time
-import tomllib
-from dataclasses import replace
 from typing import Any
 
+import msgspec
+
 from monitor.blocks import parse_sensor_topic, validate_buoy_id
-from monitor.cmd_run import load_daemon_config
-from monitor.daemon_config import ZenohConfig
+from monitor.daemon_config import ZenohConfig, parse_daemon_sections
 from monitor.recorder import JSON_OBJECT, McapRecorder
+from monitor.schema import ConfigError, read_toml
 from monitor.sequence import SequenceTracker
 from monitor import zenoh_io
 
@@ -44,7 +44,7 @@ def client_side(zc: ZenohConfig) -> ZenohConfig:
     nothing. A client because a Zenoh peer does not forward between other peers: as a peer
     the recorder would miss what peer publishers (``buoymon simulate --publish``, sensor
     drivers) send to the daemon."""
-    return replace(zc, mode="client", listen=(), connect=zc.connect or zc.listen)
+    return msgspec.structs.replace(zc, mode="client", listen=(), connect=zc.connect or zc.listen)
 
 
 def recorder_token_key(buoy_id: str) -> str:
@@ -59,7 +59,7 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
     (:class:`monitor.sequence.SequenceTracker`, in memory): when a sensor publisher appears
     (at start too) its whole cache is recorded, and a gap in the numbers is filled from the
     cache first, so a recorder restarted within the cache window loses nothing (what it
-    recorded before is recorded again; readers drop exact duplicates)."""
+    recorded before is recorded again; a replay rejects the duplicate samples)."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     seqs = SequenceTracker()
     with zenoh_io.open_session(zc) as session:
@@ -147,17 +147,24 @@ def _write(recorder: McapRecorder, codec: zenoh_io.BlockCodec, key: str, payload
 
 def run(args: argparse.Namespace) -> int:
     try:
-        dcfg = load_daemon_config(args.config)
-        with open(args.config, "rb") as f:
-            buoy_id = validate_buoy_id(tomllib.load(f).get("buoy", {}).get("id", ""))
-    except (ValueError, OSError) as exc:
-        log.error(f"config error: {args.config}: {exc}" if "config error" not in str(exc)
-                  else str(exc))
+        raw = read_toml(args.config)
+        dcfg = parse_daemon_sections(raw)
+        buoy = raw.get("buoy", {})
+        buoy_id = validate_buoy_id(buoy.get("id", "") if isinstance(buoy, dict) else "")
+    except (ValueError, OSError) as exc:  # the buoy id's error, an OSError: name the file
+        log.error(str(exc) if isinstance(exc, ConfigError) else f"config error: {args.config}: {exc}")
         return 2
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, frame: stop.set())
     recorder = McapRecorder(args.output, dcfg.record.rotate_s, dcfg.record.flush_interval_s)
-    n = record(buoy_id, client_side(dcfg.zenoh), recorder, stop, zenoh_io.default_codec())
+    zc = client_side(dcfg.zenoh)
+    try:
+        n = record(buoy_id, zc, recorder, stop, zenoh_io.default_codec())
+    except zenoh_io.zenoh.ZError as exc:  # the session did not open: nothing to record from
+        recorder.close()
+        log.error(f"cannot reach the daemon of buoy {buoy_id!r} at {list(zc.connect)} "
+                  f"([zenoh] of {args.config}): is `buoymon run` running? ({exc})")
+        return 1
     log.info("recording stopped", extra={"fields": {"messages": n, "files": recorder.files}})
     return 0

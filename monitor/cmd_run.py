@@ -6,11 +6,9 @@ import argparse
 import logging
 import signal
 import sys
-import tomllib
 from typing import Any
 
 from monitor.daemon import Daemon
-from monitor.daemon_config import DaemonConfig, parse_daemon_sections
 
 log = logging.getLogger("buoymon.run")
 
@@ -23,28 +21,15 @@ def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None
     p.set_defaults(func=run)
 
 
-def load_daemon_config(path: str) -> DaemonConfig:
-    """The daemon's sections of the configuration file (ValueError naming key and value)."""
-    with open(path, "rb") as f:
-        try:
-            raw = tomllib.load(f)
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"config error: {path}: {exc}") from None
-    return parse_daemon_sections(raw)
-
-
 def build_daemon(path: str) -> Daemon:
     """Load and validate the whole configuration, then build (not start) the daemon."""
-    from monitor.bridge.config import parse_bridge_config  # noqa: PLC0415
     from monitor.bridge.watch import BridgeWatch  # noqa: PLC0415
     from monitor.config import load_config  # noqa: PLC0415 (heavy: models, numba)
     from monitor.pipeline import Pipeline  # noqa: PLC0415
     from monitor.zenoh_io import default_codec  # noqa: PLC0415
 
     cfg = load_config(path)
-    dcfg = load_daemon_config(path)
-    # [[source]]: the bridge runs inside the daemon (monitor.bridge.embedded)
-    bridge_cfg = parse_bridge_config(cfg.raw) if "source" in cfg.raw else None
+    bridge_cfg = cfg.bridge  # [[source]]: the bridge runs inside the daemon (bridge.embedded)
 
     visual: list[Any] = []
 
@@ -60,17 +45,16 @@ def build_daemon(path: str) -> Daemon:
 
             out.append(EmbeddedBridge(session, bridge_cfg))
         if hasattr(pipeline.alerts, "apply_command"):  # an alert rules engine is installed
-            out.append(AlertDelivery(session, pipeline, cfg.raw.get("alerts", {})))
+            out.append(AlertDelivery(session, pipeline, cfg.alerts))
         return out
 
-    return Daemon(cfg.buoy.id, dcfg, make_pipeline, default_codec(), attach=attach)
+    return Daemon(cfg.buoy.id, cfg.daemon, make_pipeline, default_codec(), attach=attach)
 
 
 def rerun_sinks(cfg: Any) -> list[Any]:
     """The live Rerun sink when ``[rerun]`` asks for an output (rrd, connect, serve_web); none
     otherwise. A viewer that cannot be reached costs the dashboard, never the monitoring."""
-    section = cfg.raw.get("rerun") or {}
-    if not any(section.get(k) for k in ("rrd", "connect", "serve_web")):
+    if not (cfg.rerun.rrd or cfg.rerun.connect or cfg.rerun.serve_web):
         return []  # not configured: rerun is not even imported
     from monitor.viz.pipeline_sinks import open_rerun  # noqa: PLC0415
 
@@ -102,14 +86,12 @@ class AlertDelivery:
     """Alert transitions to Zenoh (and webhook/e-mail via the outbox); operator commands
     (``buoymon alerts ack|reset``) applied on the daemon's thread between blocks."""
 
-    def __init__(self, session: Any, pipeline: Any, alerts_raw: Any) -> None:
-        from monitor.alerts.config import AlertsConfig  # noqa: PLC0415
+    def __init__(self, session: Any, pipeline: Any, alerts: Any) -> None:
         from monitor.alerts.delivery import OutboxSink, ZenohAlertSink  # noqa: PLC0415
 
         self.engine = pipeline.alerts
         self.zenoh = ZenohAlertSink(session, pipeline.buoy_id, active=self.engine.active())
-        self.outbox = OutboxSink.from_config(AlertsConfig.from_dict(alerts_raw, "alerts"),
-                                             active=self.engine.active())
+        self.outbox = OutboxSink.from_config(alerts, active=self.engine.active())
         # the daemon hands these the pipeline's alert transitions (monitor.daemon.Attach)
         self.alert_channels = [s for s in (self.zenoh, self.outbox) if s is not None]
 
@@ -153,5 +135,13 @@ def run(args: argparse.Namespace) -> int:
         return 2
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, frame: daemon.stop())
-    daemon.run()
+    from monitor.zenoh_io import zenoh  # noqa: PLC0415 (loaded by the daemon anyway)
+
+    try:
+        daemon.run()
+    except zenoh.ZError as exc:  # the session did not open: a port in use, a bad endpoint
+        zc = daemon.config.zenoh
+        log.error(f"[zenoh] cannot open the session (listen {list(zc.listen)}, connect "
+                  f"{list(zc.connect)}): {exc}")
+        return 2
     return 0

@@ -18,7 +18,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, load_target
+from monitor.daemon_target import DEFAULT_CONFIG, DaemonTarget, endpoint_arg, load_target
 from monitor.viz.human import remaining_life_text
 
 
@@ -28,7 +28,7 @@ def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None
     p.add_argument("--config", default=DEFAULT_CONFIG, metavar="CFG.toml",
                    help=f"the daemon's configuration (default {DEFAULT_CONFIG})")
     p.add_argument("--buoy", help="buoy id (default: [buoy] id of the configuration)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+    p.add_argument("--connect", action="append", metavar="ENDPOINT", type=endpoint_arg,
                    help="Zenoh endpoint of the daemon (default: its [zenoh] listen endpoints)")
     p.add_argument("--timeout", type=float, default=1.0,
                    help="seconds to wait for the daemon before reading the state file "
@@ -49,16 +49,26 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
         while True:
             source, doc = fetch(target, args.timeout)
-            text = (json.dumps({"source": source, "status": doc}, indent=2, allow_nan=False)
+            text = (json.dumps(_json_doc(source, doc), indent=2, allow_nan=False)
                     if args.json else render(source, doc))
             if not args.watch:
                 print(text)
                 return 0
             print("\x1b[H\x1b[2J" + text, flush=True)  # home and clear: one screen
             time.sleep(1.0)
+    except BrokenPipeError:
+        raise  # stdout's reader went away: monitor.cli ends quietly
     except (ValueError, OSError) as exc:
         print(f"buoymon status: {exc}", file=sys.stderr)
         return 1
+
+
+def _json_doc(source: str, doc: Mapping[str, Any]) -> dict[str, Any]:
+    """``--json``: whether the daemon answered, and when a stopped one was last seen."""
+    if source == "daemon":
+        return {"source": source, "running": True, "status": doc}
+    return {"source": source, "running": False, "last_seen": _iso(doc["saved_ns"]),
+            "last_seen_age_s": doc["checkpoint"]["age_s"], "status": doc}
 
 
 def fetch(target: DaemonTarget, timeout: float) -> tuple[str, dict[str, Any]]:
@@ -113,9 +123,13 @@ def read_state_file(path: str) -> dict[str, Any]:
     if not doc:
         raise ValueError(f"{path}: checkpoint {row[0]} holds no status (written before any "
                          "status, or by an older version)")
-    doc["checkpoint"] = {**doc.get("checkpoint", {}), "seq": row[0],
-                         "age_s": (time.time_ns() - row[1]) / 1e9}
+    age_s = (time.time_ns() - row[1]) / 1e9
+    doc["checkpoint"] = {**doc.get("checkpoint", {}), "seq": row[0], "age_s": age_s}
     doc["saved_ns"] = row[1]
+    # the saved health is how the daemon was then; a daemon that does not answer is not ok
+    doc["health"] = {"ok": False, "reasons": [
+        f"daemon not running: last seen {_t(row[1])} (its last checkpoint), {age_s:.0f} s ago"],
+        "at_last_checkpoint": doc.get("health")}
     return doc
 
 
@@ -123,6 +137,10 @@ def _t(ns: Any) -> str:
     if not ns:
         return "-"
     return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def _iso(ns: int) -> str:
+    return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def _n(x: Any, fmt: str = "{:.4g}", unit: str = "") -> str:
@@ -144,13 +162,24 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
                    f"{_t(doc.get('wall_time_ns'))}")
     else:
         age = _n(doc["checkpoint"]["age_s"], "{:.0f}", " s")
-        out.append(f"buoy {buoy}: daemon NOT RUNNING (no answer); last checkpoint saved "
-                   f"{_t(doc.get('saved_ns'))}, {age} ago")
+        out.append(f"buoy {buoy}: daemon NOT RUNNING (no answer); last seen "
+                   f"{_t(doc.get('saved_ns'))} (its last checkpoint), {age} ago; the figures "
+                   "below are as of then")
     health = doc.get("health") or {}
-    out.append(f"health: {'ok' if health.get('ok', True) else 'FAILING'}"
-               + "".join(f"\n  {r}" for r in health.get("reasons", [])))
+    if "at_last_checkpoint" in health:  # a stopped daemon: its saved health is history
+        then = health["at_last_checkpoint"] or {}
+        out.append("health: NOT RUNNING (at the last checkpoint: "
+                   f"{'ok' if then.get('ok', True) else 'FAILING'})"
+                   + "".join(f"\n  {r}" for r in then.get("reasons", [])))
+    else:
+        out.append(f"health: {'ok' if health.get('ok', True) else 'FAILING'}"
+                   + "".join(f"\n  {r}" for r in health.get("reasons", [])))
+    age = _n(doc.get("fatigue_feed_age_s"), "{:.1f}", " s")
+    # the age counts from the start while nothing has fed fatigue (the fatigue_blind rule)
+    fed = (f"fatigue not fed yet ({age} since the start)"
+           if "load_t_ns" in doc and doc["load_t_ns"] is None else f"fatigue fed {age} ago")
     out.append(f"sensor time {_t(doc.get('now_ns'))}; load source {doc.get('load_source')}; "
-               f"fatigue fed {_n(doc.get('fatigue_feed_age_s'), '{:.1f}', ' s')} ago")
+               + fed)
     rows: list[tuple[str, ...]] = [
         ("STREAM", "AGE", "RATE", "ACCEPTED", "REJECTED", "MISSED", "CLOCK")]
     for name, s in sorted((doc.get("streams") or {}).items()):
@@ -192,7 +221,8 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
                          str(b.get("lines", 0)), str(b.get("samples", 0)), rej or "0"))
         out += ["bridge:", *_table(rows)]
     active = (doc.get("alerts") or {}).get("active", [])
-    out.append(f"active alerts: {len(active)}")
+    out.append(f"active alerts{'' if source == 'daemon' else ' at the last checkpoint'}: "
+               f"{len(active)}")
     if active:
         out += _table([("SEVERITY", "RULE", "COMPONENT", "SOURCE", "SUMMARY")] + [
             (a["severity"], a["rule"], a["component"], a["source"], a["summary"])

@@ -21,14 +21,14 @@ part of the saved state; figures read between ticks include them.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 from typing import Any, Mapping
 
 import numpy as np
 
 from models import fatigue, helix, termination
-from monitor.config import ComponentConfig, Config, ConfigError, FatigueConfig
+from monitor.config import ComponentConfig, Config, FatigueConfig
+from monitor.schema import ConfigError, check_keys
 
 
 def build_sn_curve(cfg: ComponentConfig) -> Any:
@@ -81,8 +81,9 @@ def yield_stress_Pa(cfg: ComponentConfig, cable: Any) -> float | None:
 
 
 def build_bend(cfg: ComponentConfig) -> Any:
-    """The termination bend of a ``location = "termination"`` component, else None."""
-    if cfg.location != "termination":
+    """The termination bend of a ``location = "termination"`` component with its bend
+    configured, else None (no bend strain: the free span's stress)."""
+    if cfg.location != "termination" or cfg.bend_radius_m is None:
         return None
     return termination.TerminationBend(cfg.bend_radius_m, math.radians(cfg.bend_angle_deg),
                                        cfg.bend_gauge_length_m)
@@ -94,12 +95,8 @@ def build_cable(config: Config) -> Any:
         raise ConfigError(f"config error: cable.preset = {config.cable.preset!r}: "
                           "not a models.helix.HelixCable preset")
     base = factory()
-    known = [f.name for f in dataclasses.fields(base)]
-    unknown = sorted(set(config.cable.overrides) - set(known))
-    if unknown:  # a misspelt key: name it and the nearest field, not a Python signature
-        hints = [f"cable.{k}: unknown key" + (f" (did you mean {m[0]!r}?)" if (
-            m := difflib.get_close_matches(k, known, n=1)) else "") for k in unknown]
-        raise ConfigError("config error: " + "; ".join(hints) + f"; expected one of {known}")
+    # a misspelt key: name it and the nearest field, not a Python signature
+    check_keys("cable", config.cable.overrides, [f.name for f in dataclasses.fields(base)])
     try:
         return dataclasses.replace(base, **config.cable.overrides)
     except (TypeError, ValueError) as exc:  # a value the model refuses

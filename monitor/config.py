@@ -1,58 +1,50 @@
-"""The one TOML configuration file: loading, validation, and the core sections.
+"""The one TOML configuration file: loaded once, parsed once into typed sections.
 
 Every model parameter lives in one file (see docs/ARCHITECTURE.md for the layout and
-``monitor/vaps_seed004.toml`` for the shipped example, which is also the default). Errors are
-:class:`ConfigError` (a ValueError) whose message names the key path and the bad value::
+``monitor/vaps_seed004.toml`` for the shipped example, which is also the default).
+:func:`load_config` reads it and :func:`parse_config` turns every section into its typed
+object, which the modules receive from :class:`Config`: the core sections (``buoy``,
+``mooring``, ``cable``, ``component``, ``fatigue``, ``load``, ``validate``, ``ordering``)
+here, and the service's sections declared by their owners (``alerts``: monitor.alerts.config;
+``zenoh``, ``state``, ``record``, ``health``, ``metrics``: monitor.daemon_config; ``rerun``:
+monitor.viz.rerun_options; ``bridge``/``[[source]]``: monitor.bridge.config; ``forecast``:
+monitor.forecast_config). Errors are :class:`ConfigError` (a ValueError) whose message names
+the key path and the bad value, with the nearest known name for a misspelt key or section::
 
     config error: component[1].lay = 'up': must be one of ['left', 'right']
-
-This module parses the sections the pipeline core needs (``buoy``, ``mooring``, ``cable``,
-``component``, ``fatigue``, ``load``, ``validate``, ``ordering`` and the ``alerts`` timing keys).
-Sections owned by other modules (``zenoh``, ``state``, ``record``, ``health``, ``rerun``, the
-alert rules) are kept as raw tables (:meth:`Config.section`) for their owners to parse
-(:class:`SectionReader` helps), and ``buoymon check-config`` runs every parser listed in
-:data:`SECTION_PARSERS`, so one command validates the whole file.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import math
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Annotated, Any, Literal, Mapping
 
+import msgspec
+from msgspec import Meta
+
+from monitor.alerts.config import AlertsConfig
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
+from monitor.bridge.config import BridgeConfig, parse_bridge_config
+from monitor.daemon_config import DaemonConfig, parse_daemon_sections
+from monitor.forecast_config import ForecastConfig
+from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, error, parse_struct,
+                            read_toml, unknown)
+from monitor.viz.rerun_options import RerunOptions
+
 
 DEFAULT_CONFIG_RESOURCE = "vaps_seed004.toml"
-# longest time span a duration key may give: time is int64 ns, and a span in ns must fit with
-# room to add it to a time stamp (1e9 s is about 32 years)
-MAX_DURATION_S = 1e9
-
-# Top-level sections parsed by other modules: name -> "module:attribute.path", a callable
-# taking the section's raw table and raising ValueError on a bad value. A module that is not
-# installed yet leaves its section unchecked (check-config says so).
-SECTION_PARSERS: dict[str, str] = {
-    "alerts": "monitor.alerts.config:AlertsConfig.from_dict",
-    "zenoh": "monitor.daemon_config:ZenohConfig.from_dict",
-    "state": "monitor.daemon_config:StateConfig.from_dict",
-    "record": "monitor.daemon_config:RecordConfig.from_dict",
-    "health": "monitor.daemon_config:HealthConfig.from_dict",
-    "metrics": "monitor.daemon_config:MetricsConfig.from_dict",
-    "rerun": "monitor.viz.rerun_options:RerunOptions.from_toml",
-    "bridge": "monitor.bridge.config:parse_bridge_section",
-    "source": "monitor.bridge.config:parse_sources",
-    "forecast": "monitor.forecast_config:ForecastConfig.from_dict",
-}
-# external sections that are arrays of tables ([[source]]), not tables
-LIST_SECTIONS = ("source",)
 
 CORE_SECTIONS = (
     "buoy", "mooring", "cable", "component", "fatigue", "load", "validate", "ordering", "alerts",
 )
+# the sections of the live service, each declared by its owner; check-config lists them
+SERVICE_SECTIONS = ("zenoh", "state", "record", "health", "metrics", "rerun", "bridge", "source",
+                    "forecast")
 
 # Default physical limits and spike rates per sensor field; [validate.<sensor>] overrides them.
 # Rates are generous on purpose: a spike check must never reject real wave loading.
@@ -71,116 +63,20 @@ DEFAULT_STALE_S: Mapping[str, float] = {
 }
 
 
-class ConfigError(ValueError):
-    """A configuration value is missing, of the wrong type or out of range."""
+Positive = Annotated[float, Meta(gt=0)]
+Seconds = Annotated[float, Meta(gt=0, le=MAX_DURATION_S)]  # a span becomes int64 ns
 
 
-def _fmt(value: Any) -> str:
-    return repr(value)
-
-
-class SectionReader:
-    """Typed, path-aware access to one TOML table; unknown keys are errors.
-
-    ``r = SectionReader(table, "alerts.rule[2]")``; ``r.float("threshold", gt=0)``;
-    ``r.done()`` raises if the table holds a key nobody read (a typo, usually).
-    """
-
-    def __init__(self, table: Any, path: str) -> None:
-        if not isinstance(table, Mapping):
-            raise ConfigError(f"config error: {path} = {_fmt(table)}: must be a table")
-        self.table = table
-        self.path = path
-        self._seen: set[str] = set()
-
-    def _key(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def error(self, key: str, value: Any, why: str) -> ConfigError:
-        return ConfigError(f"config error: {self._key(key)} = {_fmt(value)}: {why}")
-
-    def has(self, key: str) -> bool:
-        return key in self.table
-
-    def raw(self, key: str, default: Any = None) -> Any:
-        self._seen.add(key)
-        return self.table.get(key, default)
-
-    def _required(self, key: str) -> Any:
-        self._seen.add(key)
-        if key not in self.table:
-            raise ConfigError(f"config error: {self._key(key)} is missing")
-        return self.table[key]
-
-    def str(self, key: str, default: str | None = None, choices: Sequence[str] | None = None) -> str:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, str):
-            raise self.error(key, value, "must be a string")
-        if choices is not None and value not in choices:
-            raise self.error(key, value, f"must be one of {list(choices)}")
-        return value
-
-    def float(self, key: str, default: float | None = None, *, gt: float | None = None,
-              ge: float | None = None, le: float | None = None, allow_inf: bool = False) -> float:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(key, value, "must be a number")
-        value = float(value)
-        if math.isnan(value) or (math.isinf(value) and not allow_inf):
-            raise self.error(key, value, "must be a finite number")
-        if gt is not None and not value > gt:
-            raise self.error(key, value, f"must be > {gt:g}")
-        if ge is not None and not value >= ge:
-            raise self.error(key, value, f"must be >= {ge:g}")
-        if le is not None and not value <= le:
-            raise self.error(key, value, f"must be <= {le:g}")
-        return value
-
-    def int(self, key: str, default: int | None = None, *, ge: int | None = None) -> int:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(key, value, "must be an integer")
-        if ge is not None and value < ge:
-            raise self.error(key, value, f"must be >= {ge}")
-        return value
-
-    def bool(self, key: str, default: bool | None = None) -> bool:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, bool):
-            raise self.error(key, value, "must be true or false")
-        return value
-
-    def floats(self, key: str, default: Sequence[float] | None = None, *,
-               increasing: bool = False, min_len: int = 1) -> tuple[float, ...]:
-        value = self._required(key) if default is None else self.raw(key, default)
-        if not isinstance(value, (list, tuple)) or len(value) < min_len or any(
-            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-            for v in value
-        ):
-            raise self.error(key, value, f"must be a list of at least {min_len} finite numbers")
-        out = tuple(float(v) for v in value)
-        if increasing and any(b <= a for a, b in zip(out, out[1:])):
-            raise self.error(key, value, "must be strictly increasing")
-        return out
-
-    def table_list(self, key: str) -> list[Mapping[str, Any]]:
-        value = self.raw(key, [])
-        if not isinstance(value, list):
-            raise self.error(key, value, "must be an array of tables ([[...]])")
-        return value
-
-    def done(self) -> None:
-        extra = sorted(set(self.table) - self._seen)
-        if extra:
-            raise ConfigError(
-                f"config error: {self.path or 'top level'}: unknown key(s) {extra}"
-            )
-
-
-@dataclass(frozen=True)
-class BuoyConfig:
+class BuoyConfig(msgspec.Struct, frozen=True):
     id: str
-    design_life_years: float
+    design_life_years: Positive = 20.0
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "BuoyConfig":
+        try:
+            validate_buoy_id(self.id)
+        except ValueError as exc:
+            raise error(where, "id", self.id, str(exc)) from None
+        return self
 
 
 @dataclass(frozen=True)
@@ -248,30 +144,49 @@ class ComponentConfig:
     dff: float
     hysteresis_Pa: float
     # where along a conductor: "free_span" (the helix far from the ends) or "termination"
-    # (where a moulding fixes the conductors: models.termination, with this bend geometry)
+    # (where a moulding fixes the conductors: models.termination, with this bend geometry;
+    # without one the bend is not configured and the stress is the free span's)
     location: str = "free_span"
     bend_radius_m: float | None = None
     bend_angle_deg: float | None = None
     bend_gauge_length_m: float | None = None  # None: conductors locked at the bend
 
 
-@dataclass(frozen=True)
-class FatigueConfig:
-    rate_window_s: float
-    histogram_edges_Pa: tuple[float, ...]
-    reference_cycles: float
+class FatigueConfig(msgspec.Struct, frozen=True):
+    rate_window_s: Seconds = 3600.0
+    histogram_edges_Pa: Annotated[tuple[float, ...], Meta(
+        min_length=2, description="a list of at least 2 finite numbers")] = tuple(
+            i * 5.0e6 for i in range(41))
+    reference_cycles: Positive = 1.0e7
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "FatigueConfig":
+        edges = self.histogram_edges_Pa
+        if not all(math.isfinite(e) for e in edges):
+            raise error(where, "histogram_edges_Pa", raw.get("histogram_edges_Pa"),
+                        "must be a list of at least 2 finite numbers")
+        if any(b <= a for a, b in zip(edges, edges[1:])):
+            raise error(where, "histogram_edges_Pa", raw.get("histogram_edges_Pa"),
+                        "must be strictly increasing")
+        return self
 
 
-@dataclass(frozen=True)
-class LoadConfig:
-    source: str  # "auto" | "measured" | "estimated"
-    stale_after_s: float
+class LoadConfig(msgspec.Struct, frozen=True):
+    source: Literal["auto", "measured", "estimated"] = "auto"
+    stale_after_s: Seconds = 5.0
     # stream that feeds the motion estimator: "imu", "motion", or "auto" (the first of the two
     # that delivers an accepted sample, see monitor.load_source)
-    motion_sensor: str
-    motion_rate_hz: float  # its nominal sample rate (the estimator works on a fixed step)
-    breaking_load_N: float = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
+    motion_sensor: Literal["auto", "imu", "motion"] = "auto"
+    # its sample rate (Hz) for the estimator's fixed step, or "auto": the stream's own spacing
+    # (monitor.motion_rate)
+    motion_rate_hz: Positive | Literal["auto"] = "auto"
+    breaking_load_N: Positive = 45_000.0  # the line's breaking strength (seed 004 BIW cable)
     slack_limit_N: float = 0.0  # below this the line is slack: QC suspect
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "LoadConfig":
+        if not self.slack_limit_N < self.breaking_load_N:
+            raise error(where, "slack_limit_N", self.slack_limit_N,
+                        f"must be < breaking_load_N ({self.breaking_load_N:g})")
+        return self
 
 
 @dataclass(frozen=True)
@@ -302,22 +217,20 @@ class SensorLimits:
     # motion: the watch circle (span_m, stretched line length m, depth m): a position the
     # line cannot reach is a location fail (None = off)
     watch_circle: tuple[float, float, float] | None = None
+    # motion: the check-factor test (depth m, longest wave period s), None = off
+    check_factor: tuple[float, float] | None = None
 
 
-@dataclass(frozen=True)
-class OrderingConfig:
-    horizon_s: float  # live: how far a stream may lag the newest data before it is passed by
-    replay_horizon_s: float  # replay: same, sized for coalesced log blocks
-
-
-@dataclass(frozen=True)
-class AlertsTiming:
-    eval_interval_s: float
-    resend_interval_s: float
+class OrderingConfig(msgspec.Struct, frozen=True):
+    horizon_s: Seconds = 10.0  # live: how far a stream may lag the newest data before it is
+    #                            passed by
+    replay_horizon_s: Seconds = 3600.0  # replay: same, sized for coalesced log blocks
 
 
 @dataclass(frozen=True)
 class Config:
+    """The whole file, parsed: every section as its owner's typed object."""
+
     buoy: BuoyConfig
     mooring: MooringConfig
     cable: CableConfig
@@ -326,29 +239,18 @@ class Config:
     load: LoadConfig
     validate: Mapping[str, SensorLimits]
     ordering: OrderingConfig
-    alerts: AlertsTiming
-    raw: Mapping[str, Any] = field(repr=False)
+    alerts: AlertsConfig
+    forecast: ForecastConfig
+    daemon: DaemonConfig
+    rerun: RerunOptions
+    bridge: BridgeConfig | None  # the [[source]] tables: the bridge runs inside the daemon
+    raw: Mapping[str, Any] = field(repr=False)  # the document, for config_with's edits
     source: str = "<dict>"
 
-    def section(self, name: str) -> Any:
-        """The raw table of a top-level section ({} when absent; the list of tables of a
-        :data:`LIST_SECTIONS` one), for the module that owns it."""
-        value = self.raw.get(name, {})
-        if not isinstance(value, Mapping) and not (name in LIST_SECTIONS
-                                                   and isinstance(value, list)):
-            raise ConfigError(f"config error: {name} = {_fmt(value)}: must be a table")
-        return value
+    def section(self, name: str) -> Mapping[str, Any]:
+        """The raw table of a top-level section ({} when absent), to edit with config_with."""
+        return self.raw.get(name, {})
 
-
-def _parse_buoy(r: SectionReader) -> BuoyConfig:
-    buoy_id = r.str("id")
-    try:
-        validate_buoy_id(buoy_id)
-    except ValueError as exc:
-        raise r.error("id", buoy_id, str(exc)) from None
-    out = BuoyConfig(buoy_id, r.float("design_life_years", 20.0, gt=0))
-    r.done()
-    return out
 
 
 def _parse_mooring(r: SectionReader) -> MooringConfig:
@@ -428,10 +330,8 @@ def _parse_sn(value: Any, path: str) -> SNCurveConfig:
     cycles = s.floats("cycles", min_len=2)
     s.done()
     if len(ranges) != len(cycles) or any(v <= 0 for v in ranges + cycles):
-        raise ConfigError(
-            f"config error: {path} = {_fmt(value)}: stress_range_Pa and cycles must be "
-            "positive lists of the same length"
-        )
+        raise error("", path, value,
+                    "stress_range_Pa and cycles must be positive lists of the same length")
     return SNCurveConfig(None, ranges, cycles)
 
 
@@ -473,6 +373,10 @@ def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
             if r.has(key):
                 raise r.error(key, r.raw(key), 'only with location = "termination"')
         return {"location": location}
+    if not any(r.has(key) for key in _BEND_KEYS):
+        # bend not measured: no bend strain (an assumed one would put the locked copper
+        # beyond yield at rest, docs/CONDUCTOR.md), said by check-config
+        return {"location": location}
     return {
         "location": location,
         "bend_radius_m": r.float("bend_radius_m", gt=0),
@@ -482,35 +386,8 @@ def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
     }
 
 
-def _parse_fatigue(r: SectionReader) -> FatigueConfig:
-    edges = r.floats("histogram_edges_Pa", [i * 5.0e6 for i in range(41)], increasing=True,
-                     min_len=2)
-    out = FatigueConfig(
-        rate_window_s=r.float("rate_window_s", 3600.0, gt=0, le=MAX_DURATION_S),
-        histogram_edges_Pa=edges,
-        reference_cycles=r.float("reference_cycles", 1.0e7, gt=0),
-    )
-    r.done()
-    return out
-
-
-def _parse_load(r: SectionReader) -> LoadConfig:
-    out = LoadConfig(
-        source=r.str("source", "auto", choices=("auto", "measured", "estimated")),
-        stale_after_s=r.float("stale_after_s", 5.0, gt=0, le=MAX_DURATION_S),
-        motion_sensor=r.str("motion_sensor", "auto", choices=("auto", "imu", "motion")),
-        motion_rate_hz=r.float("motion_rate_hz", 10.0, gt=0),
-        breaking_load_N=r.float("breaking_load_N", 45_000.0, gt=0),
-        slack_limit_N=r.float("slack_limit_N", 0.0),
-    )
-    if not out.slack_limit_N < out.breaking_load_N:
-        raise r.error("slack_limit_N", out.slack_limit_N,
-                      f"must be < breaking_load_N ({out.breaking_load_N:g})")
-    r.done()
-    return out
-
-
 _G = 9.81
+LONGEST_WAVE_S = 25.0  # the longest wave period (s) the QC takes for a sea (waves tp_s, motion)
 
 
 def qc_defaults(mooring: MooringConfig, load: LoadConfig) -> dict[str, dict[str, dict[str, float]]]:
@@ -530,7 +407,7 @@ def qc_defaults(mooring: MooringConfig, load: LoadConfig) -> dict[str, dict[str,
         "imu": {},
         "gnss": {},
         "waves": {"hs_m": {"suspect_max": 0.78 * d}, "tp_s": {"suspect_min": 1.0,
-                                                             "suspect_max": 25.0}},
+                                                             "suspect_max": LONGEST_WAVE_S}},
     }
     for name in SENSOR_FIELDS["motion"]:
         span = d if name == "heave_m" else length
@@ -596,36 +473,21 @@ def _parse_validate(r: SectionReader, load: LoadConfig,
         if sensor == "motion" and s.bool("watch_circle", True):
             # 2 % stretch: about a steel-cored cable's elongation near its breaking load
             watch = (mooring.span_m, 1.02 * mooring.length_m, mooring.depth_m)
+        check = None
+        if sensor == "motion" and s.bool("check_factor", True):
+            check = (mooring.depth_m, LONGEST_WAVE_S)
         s.done()
-        out[sensor] = SensorLimits(fields, stale, location, watch)
+        out[sensor] = SensorLimits(fields, stale, location, watch, check)
     return out
-
-
-def _parse_ordering(r: SectionReader) -> OrderingConfig:
-    out = OrderingConfig(r.float("horizon_s", 10.0, gt=0, le=MAX_DURATION_S),
-                         r.float("replay_horizon_s", 3600.0, gt=0, le=MAX_DURATION_S))
-    r.done()
-    return out
-
-
-def _parse_alert_timing(raw: Any) -> AlertsTiming:
-    # Only the timing keys are core; rules and delivery belong to monitor.alerts.
-    r = SectionReader(raw, "alerts")
-    interval = r.float("eval_interval_s", 10.0, gt=0, le=MAX_DURATION_S)
-    if interval * 1e9 != round(interval * 1e9):
-        raise r.error("eval_interval_s", interval, "must be a whole number of nanoseconds")
-    return AlertsTiming(interval, r.float("resend_interval_s", 3600.0, ge=0,  # 0 = never
-                                          le=MAX_DURATION_S))
 
 
 def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
     """Validate a parsed TOML document and return the typed configuration."""
     top = SectionReader(data, "")
-    known = set(CORE_SECTIONS) | set(SECTION_PARSERS)
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ConfigError(f"config error: unknown section(s) {unknown}; expected {sorted(known)}")
-    load = _parse_load(SectionReader(top.raw("load", {}), "load"))
+    for name in data:
+        if name not in CORE_SECTIONS + SERVICE_SECTIONS:
+            raise unknown("", name, data[name], CORE_SECTIONS + SERVICE_SECTIONS, "section")
+    load = parse_struct(LoadConfig, data.get("load"), "load")
     tables = top.table_list("component")
     if not tables:
         raise ConfigError("config error: component: at least one [[component]] is required")
@@ -639,16 +501,20 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
     mooring = _parse_mooring(SectionReader(top.raw("mooring", {"preset": "vaps_seed004"}),
                                            "mooring"))
     return Config(
-        buoy=_parse_buoy(SectionReader(top.raw("buoy", {}), "buoy")),
+        buoy=parse_struct(BuoyConfig, data.get("buoy"), "buoy"),
         mooring=mooring,
         cable=_parse_cable(SectionReader(top.raw("cable", {}), "cable")),
         components=components,
-        fatigue=_parse_fatigue(SectionReader(top.raw("fatigue", {}), "fatigue")),
+        fatigue=parse_struct(FatigueConfig, data.get("fatigue"), "fatigue"),
         load=load,
         validate=_parse_validate(SectionReader(top.raw("validate", {}), "validate"), load,
                                  mooring),
-        ordering=_parse_ordering(SectionReader(top.raw("ordering", {}), "ordering")),
-        alerts=_parse_alert_timing(top.raw("alerts", {})),
+        ordering=parse_struct(OrderingConfig, data.get("ordering"), "ordering"),
+        alerts=AlertsConfig.from_dict(data.get("alerts")),
+        forecast=parse_struct(ForecastConfig, data.get("forecast"), "forecast"),
+        daemon=parse_daemon_sections(data),
+        rerun=parse_struct(RerunOptions, data.get("rerun"), "rerun"),
+        bridge=parse_bridge_config(data) if "source" in data else None,
         raw=data,
         source=source,
     )
@@ -656,17 +522,7 @@ def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
 
 def load_config(path: str | Path) -> Config:
     """Read and validate a TOML configuration file."""
-    path = Path(path)
-    try:
-        with path.open("rb") as f:
-            data = tomllib.load(f)
-    except FileNotFoundError:
-        raise ConfigError(f"config error: file {str(path)!r} not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"config error: {path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"config error: {path}: not valid TOML (not UTF-8 text)") from None
-    return parse_config(data, source=str(path))
+    return parse_config(read_toml(path), source=str(path))
 
 
 def default_config() -> Config:
@@ -683,38 +539,3 @@ def config_with(config: Config, **sections: Any) -> Config:
     data = dict(config.raw)
     data.update(sections)
     return parse_config(data, source=config.source)
-
-
-def run_section_parsers(config: Config) -> dict[str, str]:
-    """Run every external section parser; return ``{section: "ok" | "not checked: ..."}``.
-
-    A ConfigError from a parser propagates.
-    """
-    results: dict[str, str] = {}
-    for name, target in SECTION_PARSERS.items():
-        if name not in config.raw:
-            continue
-        module_name, func_name = target.split(":")
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            missing = exc.name or ""
-            if module_name == missing or module_name.startswith(missing + "."):
-                results[name] = f"not checked: {module_name} is not installed"
-                continue
-            raise
-        parser: Any = module
-        for attr in func_name.split("."):
-            parser = getattr(parser, attr, None)
-        if not callable(parser):
-            results[name] = f"not checked: {module_name} has no {func_name}"
-            continue
-        try:
-            parser(config.section(name))
-        except ConfigError:
-            raise
-        except ValueError as exc:
-            msg = str(exc)
-            raise ConfigError(msg if msg.startswith("config error") else f"config error: {msg}") from None
-        results[name] = "ok"
-    return results

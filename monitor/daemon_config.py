@@ -1,10 +1,10 @@
 """Configuration sections of the live daemon: ``[zenoh]``, ``[state]``, ``[record]``, ``[health]``.
 
-Each section is a frozen dataclass with ``from_dict(d, where)``; ``where`` is the section's
-dotted name used in error messages, which always name the bad key and value, e.g.
+Each section is declared as a frozen ``msgspec.Struct`` and parsed by
+:func:`monitor.schema.parse_struct`; errors name the bad key and value, e.g.
 ``config error: zenoh.mode = 'router': must be one of ['client', 'peer']``.
-:func:`parse_daemon_sections` reads all four from a whole-file TOML mapping (missing
-sections take their defaults), so ``monitor.config`` can include them as they are.
+:func:`parse_daemon_sections` reads them all from a whole-file TOML mapping (missing
+sections take their defaults).
 
 Example::
 
@@ -49,244 +49,161 @@ Example::
 
 from __future__ import annotations
 
-import math
 import re
-from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Annotated, Any, Literal, Mapping
+
+import msgspec
+from msgspec import Meta
 
 from monitor.blocks import SENSOR_FIELDS
+from monitor.schema import error, parse_struct
 
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
 
-
-def _err(where: str, key: str, value: Any, why: str) -> ValueError:
-    return ValueError(f"config error: {where}.{key} = {value!r}: {why}")
-
-
-def _check_keys(d: Any, where: str, allowed: set[str]) -> Mapping[str, Any]:
-    if not isinstance(d, Mapping):
-        raise ValueError(f"config error: [{where}] must be a table, got {d!r}")
-    unknown = sorted(set(d) - allowed)
-    if unknown:
-        raise _err(where, unknown[0], d[unknown[0]], f"unknown key; allowed: {sorted(allowed)}")
-    return d
+Positive = Annotated[float, Meta(gt=0)]
+NonEmpty = Annotated[str, Meta(min_length=1)]
+Endpoints = Annotated[tuple[str, ...], Meta(
+    description="a list of endpoint strings like 'tcp/127.0.0.1:7447'")]
 
 
-def _positive(d: Mapping[str, Any], where: str, key: str, default: float) -> float:
-    v = d.get(key, default)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-        raise _err(where, key, v, "must be a finite number > 0")
-    return float(v)
+def _pair(where: str, given: Mapping[str, Any], a: str, b: str) -> None:
+    """Keys ``a`` and ``b`` must be given together."""
+    if (a in given) != (b in given):
+        raise error(where, a if b in given else b, None, f"{a} and {b} must be given together")
 
 
-def _bool(d: Mapping[str, Any], where: str, key: str, default: bool) -> bool:
-    v = d.get(key, default)
-    if not isinstance(v, bool):
-        raise _err(where, key, v, "must be true or false")
-    return v
-
-
-def _opt_str(d: Mapping[str, Any], where: str, key: str) -> str | None:
-    v = d.get(key)
-    if v is not None and (not isinstance(v, str) or not v):
-        raise _err(where, key, v, "must be a non-empty string")
-    return v
-
-
-def _endpoints(d: Mapping[str, Any], where: str, key: str, default: list[str]) -> tuple[str, ...]:
-    v = d.get(key, default)
-    if not isinstance(v, list):
-        raise _err(where, key, v, "must be a list of endpoint strings like 'tcp/127.0.0.1:7447'")
-    for e in v:
-        if not isinstance(e, str) or not _ENDPOINT.match(e):
-            raise _err(where, key, v, f"endpoint {e!r} is not of the form '<proto>/<address>'")
-    return tuple(v)
-
-
-@dataclass(frozen=True)
-class TlsConfig:
+class TlsConfig(msgspec.Struct, frozen=True):
     """File paths for zenoh's ``transport.link.tls`` (PEM). Any unset field stays unset."""
 
-    root_ca_certificate: str | None = None
-    listen_certificate: str | None = None
-    listen_private_key: str | None = None
-    connect_certificate: str | None = None
-    connect_private_key: str | None = None
+    root_ca_certificate: NonEmpty | None = None
+    listen_certificate: NonEmpty | None = None
+    listen_private_key: NonEmpty | None = None
+    connect_certificate: NonEmpty | None = None
+    connect_private_key: NonEmpty | None = None
     enable_mtls: bool = False
 
-    @classmethod
-    def from_dict(cls, d: Any, where: str) -> "TlsConfig":
-        names = {f for f in cls.__dataclass_fields__}
-        d = _check_keys(d, where, names)
-        paths = {k: _opt_str(d, where, k) for k in names - {"enable_mtls"}}
-        mtls = _bool(d, where, "enable_mtls", False)
-        for a, b in (("listen_certificate", "listen_private_key"),
-                     ("connect_certificate", "connect_private_key")):
-            if (paths[a] is None) != (paths[b] is None):
-                raise _err(where, a if paths[a] is None else b, None,
-                           f"{a} and {b} must be given together")
-        return cls(enable_mtls=mtls, **paths)
+    def check(self, where: str, raw: Mapping[str, Any]) -> "TlsConfig":
+        _pair(where, raw, "listen_certificate", "listen_private_key")
+        _pair(where, raw, "connect_certificate", "connect_private_key")
+        return self
 
 
-@dataclass(frozen=True)
-class AuthConfig:
+class AuthConfig(msgspec.Struct, frozen=True):
     """zenoh user/password authentication (``transport.auth.usrpwd``)."""
 
-    user: str | None = None
-    password: str | None = None
-    dictionary_file: str | None = None
+    user: NonEmpty | None = None
+    password: NonEmpty | None = None
+    dictionary_file: NonEmpty | None = None
 
-    @classmethod
-    def from_dict(cls, d: Any, where: str) -> "AuthConfig":
-        d = _check_keys(d, where, {"user", "password", "dictionary_file"})
-        user, pw = _opt_str(d, where, "user"), _opt_str(d, where, "password")
-        if (user is None) != (pw is None):
-            raise _err(where, "user" if user is None else "password", None,
-                       "user and password must be given together")
-        return cls(user, pw, _opt_str(d, where, "dictionary_file"))
+    def check(self, where: str, raw: Mapping[str, Any]) -> "AuthConfig":
+        _pair(where, raw, "user", "password")
+        return self
 
 
-@dataclass(frozen=True)
-class ZenohConfig:
+class ZenohConfig(msgspec.Struct, frozen=True):
     """How the daemon joins the Zenoh network (default: loopback-only embedded peer)."""
 
-    mode: str = "peer"
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
-    connect: tuple[str, ...] = ()
+    mode: Literal["peer", "client"] = "peer"
+    listen: Endpoints = ("tcp/127.0.0.1:7447",)  # default: none in client mode
+    connect: Endpoints = ()
     multicast_scouting: bool = False
-    status_interval_s: float = 1.0
+    status_interval_s: Annotated[float, Meta(gt=0, le=1)] = 1.0  # status at >= 1 Hz
     tls: TlsConfig | None = None
     auth: AuthConfig | None = None
 
-    @classmethod
-    def from_dict(cls, d: Any, where: str = "zenoh") -> "ZenohConfig":
-        d = _check_keys(d, where, {"mode", "listen", "connect", "multicast_scouting",
-                                   "status_interval_s", "tls", "auth"})
-        mode = d.get("mode", "peer")
-        if mode not in ("peer", "client"):
-            raise _err(where, "mode", mode, "must be one of ['client', 'peer']")
-        default_listen = [] if mode == "client" else list(cls.listen)
-        listen = _endpoints(d, where, "listen", default_listen)
-        connect = _endpoints(d, where, "connect", [])
-        if mode == "client" and not connect:
-            raise _err(where, "connect", list(connect), "client mode needs at least one endpoint")
-        interval = _positive(d, where, "status_interval_s", 1.0)
-        if interval > 1.0:
-            raise _err(where, "status_interval_s", interval, "must be <= 1 (status at >= 1 Hz)")
-        tls = TlsConfig.from_dict(d["tls"], f"{where}.tls") if "tls" in d else None
-        auth = AuthConfig.from_dict(d["auth"], f"{where}.auth") if "auth" in d else None
-        return cls(mode, listen, connect, _bool(d, where, "multicast_scouting", False),
-                   interval, tls, auth)
+    def check(self, where: str, raw: Mapping[str, Any]) -> "ZenohConfig":
+        for key in ("listen", "connect"):
+            for e in getattr(self, key):
+                if not _ENDPOINT.match(e):
+                    raise error(where, key, list(getattr(self, key)),
+                                f"endpoint {e!r} is not of the form '<proto>/<address>'")
+        if self.mode == "client" and not self.connect:
+            raise error(where, "connect", [], "client mode needs at least one endpoint")
+        if self.mode == "client" and "listen" not in raw:
+            return msgspec.structs.replace(self, listen=())
+        return self
 
 
-@dataclass(frozen=True)
-class StateConfig:
+class StateConfig(msgspec.Struct, frozen=True):
     """Where and how often the crash-safe checkpoint is written."""
 
-    path: str = "buoymon-state.sqlite"
-    checkpoint_interval_s: float = 10.0
-
-    @classmethod
-    def from_dict(cls, d: Any, where: str = "state") -> "StateConfig":
-        d = _check_keys(d, where, {"path", "checkpoint_interval_s"})
-        path = d.get("path", cls.path)
-        if not isinstance(path, str) or not path:
-            raise _err(where, "path", path, "must be a non-empty string")
-        return cls(path, _positive(d, where, "checkpoint_interval_s", cls.checkpoint_interval_s))
+    path: NonEmpty = "buoymon-state.sqlite"
+    checkpoint_interval_s: Positive = 10.0
 
 
-@dataclass(frozen=True)
-class RecordConfig:
+class RecordConfig(msgspec.Struct, frozen=True):
     """MCAP recording of every received and published message by the daemon."""
 
-    enabled: bool = False
-    dir: str = "record"
-    rotate_s: float = 3600.0
-    flush_interval_s: float = 5.0
+    enabled: bool = False  # default: on when ``dir`` is given
+    dir: NonEmpty = "record"
+    rotate_s: Positive = 3600.0
+    flush_interval_s: Positive = 5.0
 
-    @classmethod
-    def from_dict(cls, d: Any, where: str = "record") -> "RecordConfig":
-        d = _check_keys(d, where, {"enabled", "dir", "rotate_s", "flush_interval_s"})
-        directory = d.get("dir", cls.dir)
-        if not isinstance(directory, str) or not directory:
-            raise _err(where, "dir", directory, "must be a non-empty string")
-        return cls(_bool(d, where, "enabled", "dir" in d), directory,
-                   _positive(d, where, "rotate_s", cls.rotate_s),
-                   _positive(d, where, "flush_interval_s", cls.flush_interval_s))
+    def check(self, where: str, raw: Mapping[str, Any]) -> "RecordConfig":
+        if "enabled" not in raw and "dir" in raw:
+            return msgspec.structs.replace(self, enabled=True)
+        return self
 
 
-_DEFAULT_AGE = {"tension": 5.0, "motion": 5.0, "imu": 5.0, "gnss": 10.0, "waves": 3600.0}
+class StreamAges(msgspec.Struct, frozen=True):
+    """Data-age timeout (s) per sensor stream; ``ages["gnss"]`` reads one by name."""
+
+    tension: Positive = 5.0
+    motion: Positive = 5.0
+    imu: Positive = 5.0
+    gnss: Positive = 10.0
+    waves: Positive = 3600.0
+
+    def __getitem__(self, stream: str) -> float:
+        return float(getattr(self, stream))
 
 
-@dataclass(frozen=True)
-class HealthConfig:
+assert set(StreamAges.__struct_fields__) == set(SENSOR_FIELDS)  # one timeout per stream
+
+
+class HealthConfig(msgspec.Struct, frozen=True):
     """Wall-clock liveness: data-age timeouts per sensor stream (seconds since the last block
     arrived) and the live (wall-clock) alert rules of :mod:`monitor.alerts.live`."""
 
-    data_age_timeout_s: Mapping[str, float] = field(default_factory=lambda: dict(_DEFAULT_AGE))
+    data_age_timeout_s: StreamAges = msgspec.field(default_factory=StreamAges)
     live_rules: bool = True              # off switch for every wall-clock alert rule
-    required_streams: tuple[str, ...] = ()  # alert on these even if never seen (age from start)
-    fatigue_blind_timeout_s: float = 60.0   # no load sample fed fatigue for this long
-    clock_skew_max_s: float = 600.0         # |sensor time - logger clock| allowed per block
-    time_restart_min_s: float = 1.0         # a stream going back by more is a time restart
-    hold_s: float = 600.0                   # counter-increase alerts stay on this long
+    # alert on these even if never seen (age from start)
+    required_streams: Annotated[tuple[str, ...], Meta(
+        description=f"a list of sensor streams from {sorted(SENSOR_FIELDS)}")] = ()
+    fatigue_blind_timeout_s: Positive = 60.0   # no load sample fed fatigue for this long
+    clock_skew_max_s: Positive = 600.0         # |sensor time - logger clock| allowed per block
+    time_restart_min_s: Positive = 1.0         # a stream going back by more is a time restart
+    hold_s: Positive = 600.0                   # counter-increase alerts stay on this long
 
-    @classmethod
-    def from_dict(cls, d: Any, where: str = "health") -> "HealthConfig":
-        d = _check_keys(d, where, {"data_age_timeout_s", "live_rules", "required_streams",
-                                   "fatigue_blind_timeout_s", "clock_skew_max_s",
-                                   "time_restart_min_s", "hold_s"})
-        given = d.get("data_age_timeout_s", {})
-        sub = f"{where}.data_age_timeout_s"
-        given = _check_keys(given, sub, set(SENSOR_FIELDS))
-        ages = dict(_DEFAULT_AGE)
-        ages.update({k: _positive(given, sub, k, 1.0) for k in given})
-        required = d.get("required_streams", [])
-        if not isinstance(required, list) or any(s not in SENSOR_FIELDS for s in required):
-            raise _err(where, "required_streams", required,
-                       f"must be a list of sensor streams from {sorted(SENSOR_FIELDS)}")
-        return cls(ages, _bool(d, where, "live_rules", True), tuple(required),
-                   *(_positive(d, where, k, getattr(cls, k)) for k in (
-                       "fatigue_blind_timeout_s", "clock_skew_max_s", "time_restart_min_s",
-                       "hold_s")))
+    def check(self, where: str, raw: Mapping[str, Any]) -> "HealthConfig":
+        if any(s not in SENSOR_FIELDS for s in self.required_streams):
+            raise error(where, "required_streams", list(self.required_streams),
+                        f"must be a list of sensor streams from {sorted(SENSOR_FIELDS)}")
+        return self
 
 
-@dataclass(frozen=True)
-class MetricsConfig:
+class MetricsConfig(msgspec.Struct, frozen=True):
     """Prometheus exposition (``/metrics``) and ``/healthz`` over HTTP (loopback by default)."""
 
     enabled: bool = True
-    listen: str = "127.0.0.1"
-    port: int = 9464
-
-    @classmethod
-    def from_dict(cls, d: Any, where: str = "metrics") -> "MetricsConfig":
-        d = _check_keys(d, where, {"enabled", "listen", "port"})
-        listen = d.get("listen", cls.listen)
-        if not isinstance(listen, str) or not listen:
-            raise _err(where, "listen", listen, "must be a non-empty host address string")
-        port = d.get("port", cls.port)
-        if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port < 65536:
-            raise _err(where, "port", port, "must be an integer port 0..65535 (0: any free)")
-        return cls(_bool(d, where, "enabled", True), listen, port)
+    listen: Annotated[str, Meta(min_length=1, description="a non-empty host address string")
+                      ] = "127.0.0.1"
+    port: Annotated[int, Meta(ge=0, le=65535, description="an integer port 0..65535 (0: any free)")
+                    ] = 9464
 
 
-@dataclass(frozen=True)
-class DaemonConfig:
+class DaemonConfig(msgspec.Struct, frozen=True):
     """All daemon sections together."""
 
-    zenoh: ZenohConfig = field(default_factory=ZenohConfig)
-    state: StateConfig = field(default_factory=StateConfig)
-    record: RecordConfig = field(default_factory=RecordConfig)
-    health: HealthConfig = field(default_factory=HealthConfig)
-    metrics: MetricsConfig = field(default_factory=MetricsConfig)
-
-
-SECTIONS = {"zenoh": ZenohConfig, "state": StateConfig, "record": RecordConfig,
-            "health": HealthConfig, "metrics": MetricsConfig}
+    zenoh: ZenohConfig = msgspec.field(default_factory=ZenohConfig)
+    state: StateConfig = msgspec.field(default_factory=StateConfig)
+    record: RecordConfig = msgspec.field(default_factory=RecordConfig)
+    health: HealthConfig = msgspec.field(default_factory=HealthConfig)
+    metrics: MetricsConfig = msgspec.field(default_factory=MetricsConfig)
 
 
 def parse_daemon_sections(raw: Mapping[str, Any]) -> DaemonConfig:
     """Parse the daemon's sections out of a whole TOML document (absent ones get defaults)."""
-    return DaemonConfig(**{name: cls.from_dict(raw.get(name, {}), name)
-                           for name, cls in SECTIONS.items()})
+    return DaemonConfig(**{name: parse_struct(field.type, raw.get(name), name)
+                           for name, field in ((f.name, f) for f in
+                                               msgspec.structs.fields(DaemonConfig))})

@@ -6,14 +6,28 @@ the pipeline, so ``buoymon status`` and ``buoymon alerts`` start fast.
 
 from __future__ import annotations
 
-import tomllib
+import argparse
 from dataclasses import dataclass
+from pathlib import Path
 
 from monitor.blocks import validate_buoy_id
-from monitor.daemon_config import StateConfig, ZenohConfig
+from monitor.daemon_config import parse_daemon_sections
+from monitor.schema import read_toml
 
 DEFAULT_CONFIG = "/etc/buoymon/buoymon.toml"  # the path of packaging/systemd/buoymon.service
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+def endpoint_arg(value: str) -> str:
+    """The argparse type of an ``ENDPOINT`` option: checked as a ``[zenoh] connect`` entry
+    is, so a malformed one is a usage error, not a Zenoh traceback or "not running"."""
+    try:
+        parse_daemon_sections({"zenoh": {"connect": [value]}})
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is not a Zenoh endpoint: expected <proto>/<address>, e.g. "
+            f"{DEFAULT_CONNECT}") from None
+    return value
 
 
 @dataclass(frozen=True)
@@ -34,19 +48,14 @@ def _reachable(endpoint: str) -> str:
 
 def load_target(path: str) -> DaemonTarget:
     """The daemon of configuration file ``path`` (ValueError naming key and value)."""
-    try:
-        with open(path, "rb") as f:
-            raw = tomllib.load(f)
-    except FileNotFoundError:
+    if not Path(path).exists():
         hint = " (the systemd unit's default; pass --config CFG.toml)" \
             if path == DEFAULT_CONFIG else ""
-        raise ValueError(f"config error: {path}: no such file{hint}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"config error: {path}: {exc}") from None
+        raise ValueError(f"config error: {path}: no such file{hint}")
+    raw = read_toml(path)
     buoy = raw.get("buoy", {}).get("id") if isinstance(raw.get("buoy"), dict) else None
     if not isinstance(buoy, str):
         raise ValueError(f"config error: {path}: buoy.id = {buoy!r}: must be a string")
-    zc = ZenohConfig.from_dict(raw.get("zenoh", {}))
-    connect = tuple(_reachable(e) for e in zc.listen) + zc.connect
-    return DaemonTarget(validate_buoy_id(buoy), connect or (DEFAULT_CONNECT,),
-                        StateConfig.from_dict(raw.get("state", {})).path)
+    daemon = parse_daemon_sections(raw)
+    connect = tuple(_reachable(e) for e in daemon.zenoh.listen) + daemon.zenoh.connect
+    return DaemonTarget(validate_buoy_id(buoy), connect or (DEFAULT_CONNECT,), daemon.state.path)

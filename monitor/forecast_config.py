@@ -3,17 +3,16 @@ the per-window spectral cross-check (docs/FORECAST.md)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Literal
 
-from monitor.config import SectionReader
+import msgspec
+from msgspec import Meta
 
-SEVERITIES = ("info", "warning", "critical")
+Positive = Annotated[float, Meta(gt=0)]
 
 
-@dataclass(frozen=True)
-class ForecastConfig:
-    """``[forecast]``.
+class ForecastConfig(msgspec.Struct, frozen=True):
+    """``[forecast]`` (parsed by :func:`monitor.schema.parse_struct`).
 
     Attributes:
         enabled: learn the table, accept forecasts, run the cross-check.
@@ -32,31 +31,12 @@ class ForecastConfig:
     """
 
     enabled: bool = True
-    window_s: float = 1800.0
-    min_coverage: float = 0.5
-    waves_max_age_s: float = 3600.0
-    min_hours: float = 1.0
-    table: str | None = None
-    alert_damage: float = 0.5
-    alert_severity: str = "warning"
-    spectral_flag_factor: float = 3.0
-
-    @classmethod
-    def from_dict(cls, d: Any, where: str = "forecast") -> "ForecastConfig":
-        r = SectionReader(d, where)
-        table = r.raw("table", None)
-        if table is not None and (not isinstance(table, str) or not table):
-            raise r.error("table", table, "must be the path of a saved table (JSON)")
-        out = cls(
-            enabled=r.bool("enabled", cls.enabled),
-            window_s=r.float("window_s", cls.window_s, gt=0),
-            min_coverage=r.float("min_coverage", cls.min_coverage, gt=0, le=1),
-            waves_max_age_s=r.float("waves_max_age_s", cls.waves_max_age_s, ge=0),
-            min_hours=r.float("min_hours", cls.min_hours, gt=0),
-            table=table,
-            alert_damage=r.float("alert_damage", cls.alert_damage, gt=0),
-            alert_severity=r.str("alert_severity", cls.alert_severity, SEVERITIES),
-            spectral_flag_factor=r.float("spectral_flag_factor", cls.spectral_flag_factor, gt=1),
-        )
-        r.done()
-        return out
+    window_s: Positive = 1800.0
+    min_coverage: Annotated[float, Meta(gt=0, le=1)] = 0.5
+    waves_max_age_s: Annotated[float, Meta(ge=0)] = 3600.0
+    min_hours: Positive = 1.0
+    table: Annotated[str, Meta(min_length=1,
+                               description="the path of a saved table (JSON)")] | None = None
+    alert_damage: Positive = 0.5
+    alert_severity: Literal["info", "warning", "critical"] = "warning"
+    spectral_flag_factor: Annotated[float, Meta(gt=1)] = 3.0

@@ -17,6 +17,7 @@ same for any split of the data into blocks.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Any, Mapping, Protocol
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from monitor import model_cache
 from monitor.config import Config, LoadConfig, MooringConfig
+from monitor.motion_rate import GAP, RESUME, STEP, WITHHOLD, MotionRate
 
 MEASURED, ESTIMATED = 1, 2
 SOURCE_NAMES = {0: "none", MEASURED: "measured", ESTIMATED: "estimated"}
@@ -42,13 +44,25 @@ class MotionEstimator(Protocol):
 
     def state(self) -> dict[str, Any]: ...
 
+    def rate_figures(self) -> dict[str, Any]:
+        """The step in use and the spacing mismatches (monitor.motion_rate.MotionRate.figures)."""
+        ...
+
 
 @functools.lru_cache(maxsize=8)
-def _estimator_model(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
-    """(EstimatorConfig, quasi-static model): pure and costly (a catenary tension table, about
-    a second), so built once per mooring and step, shared by every estimator and kept in the
-    on-disk model cache for the next process."""
-    return model_cache.cached("estimator", (mooring, dt), lambda: _build_model(mooring, dt))
+def _estimator_model(mooring: MooringConfig) -> tuple[Any, Any]:
+    """(EstimatorConfig, quasi-static model) of the mooring, at a placeholder step (the stream
+    sets it: :func:`_at_step`): pure and costly (a catenary tension table, about a second), so
+    built once per mooring, shared by every estimator and kept in the on-disk model cache
+    for the next process."""
+    return model_cache.cached("estimator", (mooring,), lambda: _build_model(mooring, 1.0))
+
+
+def _at_step(mooring: MooringConfig, dt: float) -> tuple[Any, Any]:
+    """The mooring's estimator configuration at the step ``dt`` (s) and its quasi-static model
+    (nothing in either but ``dt`` depends on the step)."""
+    est_cfg, quasi_static = _estimator_model(mooring)
+    return dataclasses.replace(est_cfg, dt=dt), quasi_static
 
 
 def _build_model(m: MooringConfig, dt: float) -> tuple[Any, Any]:
@@ -64,11 +78,17 @@ def _build_model(m: MooringConfig, dt: float) -> tuple[Any, Any]:
         drag_diameter=m.segments[-1].diameter_m)
 
 
+_EMPTY = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool))
+
+
 class _ModelsEstimator:
     """Adapter over ``models.estimator.MotionTensionEstimator`` for one motion stream.
 
-    The model works on a fixed time step (``[load] motion_rate_hz``); samples it flags as
-    SETTLING (the IMU integrator warming up, a stream's first samples) give no estimate.
+    The model works on a fixed time step, the stream's own (:mod:`monitor.motion_rate`: under
+    ``[load] motion_rate_hz = "auto"`` measured from its first samples, which wait for it;
+    under a configured rate the samples of a stream spaced otherwise are withheld, counted);
+    the model is built once the step is known, and afresh when it changes. Samples it flags
+    as SETTLING (the IMU integrator warming up, a stream's first samples) give no estimate.
     Samples it flags OUT_OF_RANGE (a position outside its tension table) keep the tension at
     the table's edge, marked ``clamped``: in a storm these are the buoy's largest excursions,
     the line near taut, and leaving them out would understate fatigue; the
@@ -81,69 +101,116 @@ class _ModelsEstimator:
     differenced as one step, 445 kN). The two samples after the gap settle (no estimate).
     """
 
-    def __init__(self, est_module: Any, model: Any, sensor: str, gap_ns: float,
-                 last_t_ns: int | None) -> None:
-        self._flags = est_module.Flag
-        self.model, self.sensor = model, sensor
-        self.gap_ns, self.last_t_ns = gap_ns, last_t_ns
+    def __init__(self, mooring: MooringConfig, sensor: str, rate: MotionRate,
+                 state: Mapping[str, Any] | None) -> None:
+        from models import estimator
+
+        self._est, self.mooring, self.sensor, self.rate = estimator, mooring, sensor, rate
+        self._fields = _FIELDS[sensor]
+        st = dict(state or {})
+        # samples that arrived before the step was known ("auto"): rows of their fields
+        self.pending: list[list[float]] = [list(r) for r in st.pop("pending", [])]
+        st.pop("rate", None)
+        st.pop("last_t_ns", None)
+        self.model: Any = None
+        self.waiting = rate.dt is None
+        if rate.dt is not None and not rate.withholding:
+            saved = estimator.EstimatorState.from_dict(st) if st else None
+            self.model = estimator.MotionTensionEstimator(*_at_step(mooring, rate.dt), saved)
 
     def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
-             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+             want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n = t_ns.shape[0]
+        events = self.rate.plan(t_ns)
+        bounds = sorted({0, n, *(i for i, _, _ in events)})
+        parts = []
+        k = 0
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            while k < len(events) and events[k][0] == a:  # in order: they apply from sample a
+                self._event(events[k][1], events[k][2])
+                k += 1
+            part = self._run(t_ns[a:b], {f: fields[f][a:b] for f in self._fields},
+                             None if want is None else want[a:b])
+            if part[0].shape[0]:
+                parts.append(part)
+        if len(parts) <= 1:
+            return parts[0] if parts else _EMPTY
+        return tuple(np.concatenate(x) for x in zip(*parts))  # type: ignore[return-value]
+
+    def _event(self, kind: str, dt: float | None) -> None:
+        if kind == GAP:
+            if self.model is None:
+                self.pending = []  # the spacing so far was another stretch's (the rate forgot it)
+            elif self.sensor == "motion":
+                self.model.restart()
+        elif (kind == STEP or kind == RESUME) and dt is not None:
+            self.waiting = False
+            self.model = self._est.MotionTensionEstimator(*_at_step(self.mooring, dt))
+            if self.pending:  # a stream's first samples: they only settle the model
+                rows = np.asarray(self.pending, dtype=np.float64).T
+                self.pending = []
+                self._update(dict(zip(self._fields, rows)), None)
+        elif kind == WITHHOLD:
+            self.model = None
+
+    def _run(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
+             want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.model is None:
+            if self.waiting:  # the step is not known yet: the samples wait for it
+                self.pending += np.column_stack([fields[k] for k in self._fields]).tolist()
+            return _EMPTY  # (else withheld: the stream is not at the configured rate)
+        flags, tension = self._update(fields, want)
+        ok = (flags & np.uint8(self._est.Flag.SETTLING)) == 0
+        clamped = (flags & np.uint8(self._est.Flag.OUT_OF_RANGE)) != 0
+        return t_ns[ok], np.asarray(tension, dtype=np.float64)[ok], clamped[ok]
+
+    def _update(self, fields: Mapping[str, np.ndarray],
+                want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         if self.sensor == "imu":
             e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
                                         fields["accel_z_mps2"], want=want)
-            flags, tension = e.flags, e.tension
         else:
-            flags, tension = self._displacements(t_ns, fields, want)
-        if t_ns.shape[0]:
-            self.last_t_ns = int(t_ns[-1])
-        ok = (flags & np.uint8(self._flags.SETTLING)) == 0
-        clamped = (flags & np.uint8(self._flags.OUT_OF_RANGE)) != 0
-        return t_ns[ok], np.asarray(tension, dtype=np.float64)[ok], clamped[ok]
+            e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"],
+                                  want=want)
+        return e.flags, e.tension
 
-    def _displacements(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
-                       want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """The model over the stretches between gaps, restarted at each gap."""
-        n = t_ns.shape[0]
-        last = self.last_t_ns if self.last_t_ns is not None else (int(t_ns[0]) if n else 0)
-        cuts = np.flatnonzero(np.diff(t_ns, prepend=np.int64(last)) > self.gap_ns).tolist()
-        bounds = sorted({0, *cuts, n})
-        flags, tension = [], []
-        for a, b in zip(bounds[:-1], bounds[1:]) if n else [(0, 0)]:
-            if cuts and a == cuts[0]:
-                cuts.pop(0)
-                self.model.restart()
-            e = self.model.update(fields["heave_m"][a:b], fields["surge_m"][a:b],
-                                  fields["sway_m"][a:b], want=None if want is None else want[a:b])
-            flags.append(e.flags)
-            tension.append(e.tension)
-        if len(flags) == 1:
-            return flags[0], tension[0]
-        return np.concatenate(flags), np.concatenate(tension)
+    def rate_figures(self) -> dict[str, Any]:
+        return self.rate.figures()
 
     def state(self) -> dict[str, Any]:
-        return {**self.model.state.to_dict(), "last_t_ns": self.last_t_ns}
+        model = {} if self.model is None else self.model.state.to_dict()
+        return {**model, "pending": [list(r) for r in self.pending],
+                "rate": self.rate.state()}
+
+
+_FIELDS = {"imu": ("accel_x_mps2", "accel_y_mps2", "accel_z_mps2"),
+           "motion": ("heave_m", "surge_m", "sway_m")}
 
 
 def build_estimator(config: Config, state: Mapping[str, Any] | None = None,
                     sensor: str | None = None) -> MotionEstimator:
     """The motion estimator of ``config``'s mooring for the motion stream ``sensor`` ("imu" or
-    "motion"; default ``[load] motion_sensor``, imu for "auto"), continuing from ``state``.
+    "motion"; default ``[load] motion_sensor``, imu for "auto"), continuing from ``state``,
+    on the stream's time step (``[load] motion_rate_hz``, :mod:`monitor.motion_rate`).
 
     The seed 004 preset uses ``models.estimator.seed004_estimator``; a line given as segments
     uses ``catenary_estimator`` with drag on its top segment's diameter (C_D 1.2) and an in-air
     mass per metre estimated from the submerged weight of steel-like line (weight / g x 1.15).
+    The tension table is built now (it does not depend on the step).
     """
-    from models import estimator
-
-    est_cfg, quasi_static = _estimator_model(config.mooring, 1.0 / config.load.motion_rate_hz)
-    saved = None if not state else estimator.EstimatorState.from_dict(dict(state))
-    model = estimator.MotionTensionEstimator(est_cfg, quasi_static, saved)
+    _estimator_model(config.mooring)
     configured = config.load.motion_sensor
     sensor = sensor or ("imu" if configured == "auto" else configured)
-    last = None if not state or state.get("last_t_ns") is None else int(state["last_t_ns"])
-    return _ModelsEstimator(estimator, model, sensor,
-                            config.validate[sensor].stale_after_s * 1e9, last)
+    setting = config.load.motion_rate_hz
+    st = dict(state or {})
+    rate_state = st.get("rate")
+    if rate_state is None and st:  # a checkpoint from before the rate was tracked
+        # its model ran at motion_rate_hz, 10 Hz when that was the default
+        rate_state = {"dt": 1.0 / float(setting) if setting != "auto" else 0.1,
+                      "last_t_ns": st.get("last_t_ns")}
+    rate = MotionRate(None if setting == "auto" else float(setting),
+                      config.validate[sensor].stale_after_s * 1e9, rate_state)
+    return _ModelsEstimator(config.mooring, sensor, rate, st)
 
 
 class LoadSelector:

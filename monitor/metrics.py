@@ -51,6 +51,7 @@ class StatusCollector:
         yield from _stream_metrics(buoy, doc.get("streams") or {})
         yield from _component_metrics(buoy, doc.get("components") or {})
         yield from _daemon_metrics(buoy, doc)
+        yield from _motion_rate_metrics(buoy, doc.get("motion_rate"))
         yield from _alert_metrics(buoy, doc)
         yield from _bridge_metrics(buoy, (doc.get("bridge") or {}).get("sources") or {})
 
@@ -160,6 +161,24 @@ def _daemon_metrics(buoy: str, doc: Mapping[str, Any]) -> Iterator[Metric]:
     g = _gauge("buoymon_healthy", "1 when /healthz answers 200", ["buoy"])
     g.add_metric([buoy], 1.0 if health.get("ok", True) else 0.0)
     yield g
+
+
+def _motion_rate_metrics(buoy: str, rate: Mapping[str, Any] | None) -> Iterator[Metric]:
+    """The motion estimator's step (monitor.motion_rate); nothing without an estimator."""
+    if not rate:
+        return
+    g = _gauge("buoymon_motion_rate_hz", "Sample rate the motion estimator steps at (NaN "
+               "until known)", ["buoy", "setting"])
+    g.add_metric([buoy, str(rate["setting"])], _f(rate["hz"]))
+    yield g
+    for key, name, help_ in (
+            ("samples_rate_mismatch", "buoymon_motion_rate_mismatch_samples",
+             "Motion samples withheld from the estimator: spaced unlike [load] motion_rate_hz"),
+            ("rate_changes", "buoymon_motion_rate_changes",
+             "Times the motion stream's rate changed (the estimator restarted on it)")):
+        c = CounterMetricFamily(name, help_, labels=["buoy"])
+        c.add_metric([buoy], _f(rate[key]))
+        yield c
 
 
 _CHANNEL = {

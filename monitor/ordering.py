@@ -9,7 +9,10 @@ Each stream has a watermark::
 
 and ``W = min(wm(s) for s in gating streams)``. All buffered samples of ALL streams with
 ``t <= W`` are released as one slab, each stream's samples sorted by time (stable, so a
-duplicate stays behind its original and is the copy rejected). Everything downstream is a
+duplicate stays behind its original and is the copy rejected). A copy met here, the same time
+and values as the sample before it (a message delivered twice, a recording's re-recorded
+messages), is dropped and counted (:attr:`Slab.copies`, reported with the validation's
+``duplicate`` rejections): it is no measurement, so no rejection in a tick's counts either. Everything downstream is a
 function of the samples in time order, so the results do not depend on how samples were cut
 into blocks or interleaved, as long as no stream lags the newest data by more than
 ``horizon``: a silent stream (a dead sensor) is passed by after the horizon instead of stalling
@@ -38,7 +41,12 @@ _NEVER = np.iinfo(np.int64).min
 
 
 class Slab(dict):
-    """``{sensor: (t_ns int64 (n,), values float64 (n_fields, n))}``, samples sorted by time."""
+    """``{sensor: (t_ns int64 (n,), values float64 (n_fields, n))}``, samples sorted by time;
+    ``copies``: per sensor, the exact copies dropped while sorting."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.copies: dict[str, int] = {}
 
 
 class ReorderBuffer:
@@ -111,7 +119,14 @@ class ReorderBuffer:
                 t = np.concatenate([p[0] for p in parts])
                 values = np.concatenate([p[1] for p in parts], axis=1)
                 order = np.argsort(t, kind="stable")
-                parts = [(t[order], values[:, order])]
+                t, values = t[order], values[:, order]
+                copy = (t[1:] == t[:-1]) & ((values[:, 1:] == values[:, :-1]) | (
+                    np.isnan(values[:, 1:]) & np.isnan(values[:, :-1]))).all(axis=0)
+                if copy.any():
+                    keep = np.r_[True, ~copy]
+                    t, values = t[keep], values[:, keep]
+                    slab.copies[sensor] = int(np.count_nonzero(copy))
+                parts = [(t, values)]
                 self._in_order[sensor] = True
             # parts are sorted and in order: the samples taken are a prefix of them
             taken, rest = [], []

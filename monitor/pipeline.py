@@ -36,11 +36,12 @@ from monitor.config import Config, ConfigError
 from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
 from monitor.forecast import ForecastAlerts, parse_forecast
-from monitor.forecast_config import ForecastConfig
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
+from monitor.motion_rate import rate_problems
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
 from monitor.sea_state_learner import SeaStateLearner
+from monitor.stats_kernel import load_stats_pass
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
@@ -74,15 +75,8 @@ def build_alert_engine(config: Config, buoy_id: str, endurance_Pa: Mapping[str, 
     components = {name: {"endurance_stress_Pa": e, "yield_stress_Pa": (yield_Pa or {}).get(name)}
                   for name, e in endurance_Pa.items()}
     if state:
-        return AlertEngine.from_state(state, config.section("alerts"), buoy_id, components)
-    try:
-        return AlertEngine.from_config(config.section("alerts"), buoy_id, components)
-    except ConfigError:
-        raise
-    except ValueError as exc:  # a rule naming a component or stream the config lacks
-        msg = str(exc)
-        raise ConfigError(msg if msg.startswith("config error") else f"config error: {msg}"
-                          ) from None
+        return AlertEngine.from_state(state, config.alerts, buoy_id, components)
+    return AlertEngine.from_config(config.alerts, buoy_id, components)
 
 
 def alert_to_dict(record: Any) -> dict[str, Any]:
@@ -174,6 +168,15 @@ class _TensionStats:
 
     def add(self, v: np.ndarray, src: np.ndarray) -> None:
         if v.shape[0] == 0:
+            return
+        finite, n_meas, total, vmin, vmax = load_stats_pass(v, src, MEASURED, self.lo,
+                                                            self.width, self.hist)
+        if finite:  # the usual case, in one compiled pass
+            self.n["measured"] += n_meas
+            self.n["estimated"] += v.shape[0] - n_meas
+            self.total_mN += int(total)
+            self.min = min(self.min, float(vmin))
+            self.max = max(self.max, float(vmax))
             return
         bins = np.clip(((v - self.lo) / self.width).astype(np.int64), 0, self.BINS - 1)
         first = int(bins.min())  # count over the occupied range only: blocks are small
@@ -475,6 +478,8 @@ class Pipeline:
                 out.append("no motion samples (imu or motion) for the estimator" + (
                     ": nothing stands in for the load cell if it stops" if "tension" in seen
                     else ""))
+        if self.estimator is not None:
+            out += rate_problems(self.estimator.rate_figures())
         if self.stats.n["measured"] + self.stats.n["estimated"] == 0 and seen:
             out.append("no load could be formed: fatigue damage is not being computed")
         return out
@@ -551,6 +556,9 @@ class Pipeline:
                     getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
             self.sea_states.load(t, stresses)
         closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
+        for s, n in slab.copies.items():  # counted after the ticks: not in their counts
+            self.validators[s].rejected["duplicate"] += n
+            rejected["duplicate"] += n
         if t.shape[0]:
             self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
         if upto is not None:
@@ -837,6 +845,7 @@ class Pipeline:
             "estimates_clamped": self.selector.estimates_clamped,
             "samples_above_break": dict(self.selector.above_break),
             "motion_sensor": self.motion_sensor,
+            "motion_rate": self.estimator.rate_figures() if self.estimator is not None else None,
             "load_problems": self.load_problems(),
             "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
                                "damage_by_source": self.damage_split.figures(
@@ -874,6 +883,7 @@ class Pipeline:
                           "samples_estimate_above_break": self.selector.above_break["estimated"]},
             "load_source": self.last["source"],
             "motion_sensor": self.motion_sensor,
+            "motion_rate": self.estimator.rate_figures() if self.estimator is not None else None,
             "load_problems": self.load_problems(),
             "components": {n: {**{k: _finite_or_none(x) for k, x in c.figures().items()},
                                "damage_by_source": self.damage_split.figures(
@@ -918,15 +928,12 @@ def _build_forecasting(config: Config, components: Mapping[str, Component], tick
                        st: Mapping[str, Any]) -> tuple[SeaStateLearner | None,
                                                        ForecastAlerts | None]:
     """The ``[forecast]`` learner and forecast alerts (None, None when switched off)."""
-    try:
-        cfg = ForecastConfig.from_dict(config.section("forecast"))
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
+    cfg = config.forecast
     if not cfg.enabled:
         return None, None
     prior = None
     if cfg.table is not None and not st.get("sea_states"):
-        prior = _load_table(config, cfg.table)
+        prior = load_forecast_table(config, cfg.table)
     curves = {n: c.sn_curve for n, c in components.items()}
     try:
         learner = SeaStateLearner(cfg, curves, tick_s, prior, st.get("sea_states"))
@@ -935,7 +942,7 @@ def _build_forecasting(config: Config, components: Mapping[str, Component], tick
     return learner, ForecastAlerts(cfg, config.buoy.id, tuple(curves), st.get("forecasts"))
 
 
-def _load_table(config: Config, path: str) -> DamageRateTable:
+def load_forecast_table(config: Config, path: str) -> DamageRateTable:
     """A saved table, its path relative to the configuration file's directory."""
     p = Path(path)
     if not p.is_absolute() and config.source and not config.source.startswith("<"):
@@ -943,4 +950,6 @@ def _load_table(config: Config, path: str) -> DamageRateTable:
     try:
         return DamageRateTable.from_state(json.loads(p.read_text()))
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ConfigError(f"config error: forecast.table = {path!r}: {exc}") from None
+        detail = (f"no {exc}: not a table written by buoymon forecast --save-table"
+                  if isinstance(exc, KeyError) else exc)
+        raise ConfigError(f"config error: forecast.table = {path!r}: {detail}") from None

@@ -17,6 +17,8 @@ semantics of ``ioos_qc.qartod`` (the test oracle, tests/test_qartod.py)::
                     samples pass
 ``location``        (GNSS) distance from the previous fix above ``location_range_max_m`` ->
                     suspect; only one of lat/lon missing, or |lat| > 90, |lon| > 180 -> fail
+``check_factor``    (motion) horizontal motion in a window no linear wave makes -> fail
+                    (:mod:`monitor.check_factor`; not an ioos_qc test)
 
 A stream with several fields gets one flag per test and sample: the worst over its fields
 (missing > fail > suspect > pass > not evaluated). A test switched off for a field (threshold
@@ -46,11 +48,13 @@ from typing import Any, Mapping
 import numpy as np
 
 from models._jit import kernel
+from monitor.check_factor import CheckFactor
 from monitor.config import FieldLimits
 
 PASS, NOT_EVALUATED, SUSPECT, FAIL, MISSING = 1, 2, 3, 4, 9
-TESTS: tuple[str, ...] = ("gross_range", "spike", "rate_of_change", "flat_line", "location")
-GROSS, SPIKE, RATE, FLAT, LOCATION = range(len(TESTS))
+TESTS: tuple[str, ...] = ("gross_range", "spike", "rate_of_change", "flat_line", "location",
+                          "check_factor")
+GROSS, SPIKE, RATE, FLAT, LOCATION, CHECK = range(len(TESTS))
 FLAT_MEMORY = 4096
 _EARTH_RADIUS_M = 6_371_008.8  # mean radius (IUGG): haversine distance between fixes
 
@@ -63,7 +67,7 @@ def _params(fields: tuple[FieldLimits, ...]) -> np.ndarray:
                       f.flat_suspect_s, f.flat_fail_s] for f in fields], dtype=np.float64)
 
 
-_N_TESTS = 5
+_N_TESTS = 6  # the kernels leave the check factor's row at 2 (not evaluated): CheckFactor fills it
 # counts column of a flag: suspect 0, fail 1, missing 2
 _SLOT = np.array([0, 0, 0, 0, 1, 0, 0, 0, 0, 2], np.int64)
 
@@ -393,8 +397,13 @@ class StreamQC:
     """The QARTOD tests of one stream, with counts per test and the memory across blocks."""
 
     def __init__(self, fields: tuple[FieldLimits, ...], location_range_max_m: float = 0.0,
-                 state: Mapping[str, Any] | None = None) -> None:
+                 state: Mapping[str, Any] | None = None,
+                 check_factor: tuple[float, float, float] | None = None) -> None:
+        """``check_factor``: (depth m, longest wave period s, gap s) of a motion stream's
+        (heave, surge, sway) check-factor test (:class:`CheckFactor`), None = off."""
         self.fields = fields
+        self._cf = None if check_factor is None else CheckFactor(
+            *check_factor, state=None if state is None else state.get("check_factor"))
         self._p = _params(fields)
         self._loc = float(location_range_max_m)
         # the flat-line test needs the samples of its longest window; others two samples
@@ -423,8 +432,10 @@ class StreamQC:
                 self.counts.setdefault(name, {"suspect": 0, "fail": 0, "missing": 0}).update(c)
 
     def tests(self) -> tuple[str, ...]:
-        """The tests this stream runs (location only for a stream given a range)."""
-        return TESTS if self._loc > 0 else TESTS[:LOCATION]
+        """The tests this stream runs (location only for a stream given a range, the check
+        factor only for a motion stream given one)."""
+        return TESTS[:LOCATION] + ("location",) * (self._loc > 0) + (
+            ("check_factor",) if self._cf is not None else ())
 
     def check(self, t_ns: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(flags, spike_prev)`` of samples in time order, each later than every earlier one:
@@ -450,10 +461,14 @@ class StreamQC:
                 np.int64(self.ring_head), np.int64(self.ring_n), np.int64(self.first_t))
             self.prev_t, self.n_seen, self.first_t = int(prev_t), int(n_seen), int(first_t)
             self.ring_head, self.ring_n = int(head), int(ring_n)
+        if self._cf is not None:
+            flags[CHECK] = self._cf.check(t_ns, values[0], values[1], values[2])
+            counts[CHECK] = [0, np.count_nonzero(flags[CHECK] == FAIL),
+                             np.count_nonzero(flags[CHECK] == MISSING)]
         if t_ns.shape[0]:
             flags[SPIKE] = NOT_EVALUATED  # a sample's own spike flag is not known yet
-            for k, name in enumerate(self.tests()):
-                suspect, fail, missing = counts[k].tolist()
+            for name in self.tests():
+                suspect, fail, missing = counts[TESTS.index(name)].tolist()
                 if suspect or fail or missing:
                     c = self.counts[name]
                     c["suspect"] += suspect
@@ -473,7 +488,8 @@ class StreamQC:
                 "prev": _json_floats(self.prev), "prev2": _json_floats(self.prev2),
                 "ring_t": self.ring_t[order].tolist(),
                 "ring_x": _json_floats(self.ring_x[:, order].ravel()),
-                "counts": {k: dict(v) for k, v in self.counts.items()}}
+                "counts": {k: dict(v) for k, v in self.counts.items()},
+                **({} if self._cf is None else {"check_factor": self._cf.state()})}
 
 
 def _json_floats(a: np.ndarray) -> list[float | str | None]:

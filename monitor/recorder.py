@@ -7,7 +7,9 @@ the open chunk and fsyncs the file every ``flush_interval_s`` of log time, so a 
 readable by a streaming MCAP reader (``replay.reader`` salvages such files).
 
 Payloads are recorded byte for byte as they travelled over Zenoh; ``log_time`` is the receive
-(or publish) wall-clock time and ``publish_time`` the sensor time, as in the log format.
+(or publish) wall-clock time and ``publish_time`` the sensor time, as in the log format. The
+files are written by :class:`monitor.mcap_file.McapFile`, the writer of the logs too (one
+layout: channels at top level, no Message Index records).
 """
 
 from __future__ import annotations
@@ -15,10 +17,8 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, BinaryIO
 
-if TYPE_CHECKING:
-    from mcap.writer import Writer
+from monitor.mcap_file import McapFile
 
 
 @dataclass(frozen=True)
@@ -48,11 +48,8 @@ class McapRecorder:
         self._rotate_ns = int(rotate_s * 1e9)
         self._flush_ns = int(flush_interval_s * 1e9)
         self._prefix = prefix
-        self._file: BinaryIO | None = None
-        self._writer: Writer | None = None
+        self._file: McapFile | None = None
         self._window = -1
-        self._channels: dict[str, int] = {}
-        self._schemas: dict[ChannelSpec, int] = {}
         self._last_flush_ns = 0
         self._dirty = False
         self.files: list[str] = []
@@ -65,13 +62,11 @@ class McapRecorder:
         window = log_time_ns // self._rotate_ns
         if window != self._window:
             self._open(window)
-        assert self._writer is not None
-        channel = self._channels.get(topic)
-        if channel is None:
-            channel = self._register(topic, spec)
+        assert self._file is not None
+        channel = self._file.channel(topic, spec.schema_name, spec.schema_encoding,
+                                     spec.schema_data, spec.message_encoding)
         # MCAP readers treat 0 as "unset": never write it (a block may lack a sensor time)
-        self._writer.add_message(channel, log_time=log_time_ns,
-                                 publish_time=publish_time_ns or log_time_ns, data=payload)
+        self._file.add_message(channel, log_time_ns, publish_time_ns or log_time_ns, payload)
         self.messages += 1
         self._dirty = True
         self.maybe_flush(log_time_ns)
@@ -86,22 +81,18 @@ class McapRecorder:
 
     def flush(self, now_ns: int | None = None) -> None:
         """Close the open chunk, write it out and fsync: survives a power cut from here."""
-        if self._writer is not None and self._file is not None:
-            self._writer.flush()
-            os.fsync(self._file.fileno())
+        if self._file is not None:
+            self._file.flush(fsync=True)
         self._last_flush_ns = time.time_ns() if now_ns is None else now_ns
         self._dirty = False
         self.flushes += 1
 
     def close(self) -> None:
         """Finish the current file (footer + index) and fsync it."""
-        if self._writer is not None and self._file is not None:
-            self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
+        if self._file is not None:
             self._file.close()
             self.flushes += 1
-        self._writer, self._file = None, None
+        self._file = None
         self._window = -1
 
     def _open(self, window: int) -> None:
@@ -112,28 +103,6 @@ class McapRecorder:
         while os.path.exists(path):  # a restart within the same window: never overwrite
             n += 1
             path = os.path.join(self.directory, f"{self._prefix}-{stamp}-{n}.mcap")
-        # mcap (with zstd, lz4, importlib.metadata) is loaded by the first file only: the
-        # daemon imports this module whether or not it records
-        from mcap.writer import CompressionType, IndexType, Writer  # noqa: PLC0415
-
-        self._file = open(path, "wb")
-        # no Message Index records: 16 bytes a message plus 15 a channel per chunk, which with
-        # a chunk per flush cost a third of the compact samples (docs/LOG_FORMAT.md)
-        self._writer = Writer(self._file, compression=CompressionType.ZSTD,
-                              index_types=IndexType.ALL & ~IndexType.MESSAGE)
-        self._writer.start(profile="", library="buoymon")
-        self._channels.clear()
-        self._schemas.clear()
+        self._file = McapFile(path)
         self._window = window
         self.files.append(path)
-
-    def _register(self, topic: str, spec: ChannelSpec) -> int:
-        assert self._writer is not None
-        schema = self._schemas.get(spec)
-        if schema is None:
-            schema = self._writer.register_schema(spec.schema_name, spec.schema_encoding,
-                                                  spec.schema_data)
-            self._schemas[spec] = schema
-        channel = self._writer.register_channel(topic, spec.message_encoding, schema)
-        self._channels[topic] = channel
-        return channel

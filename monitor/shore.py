@@ -334,24 +334,27 @@ def register(sub: Any) -> None:
 
 def run_command(args: Any) -> int:
     import signal  # noqa: PLC0415
-    import tomllib  # noqa: PLC0415
 
     from monitor.config import default_config, load_config  # noqa: PLC0415
-    from monitor.daemon_config import parse_daemon_sections  # noqa: PLC0415
 
     try:
         config = load_config(args.config) if args.config else default_config()
-        zenoh_section = config.section("zenoh") if args.config else {}
-        zc = (parse_daemon_sections({"zenoh": zenoh_section}).zenoh if zenoh_section
-              else ShoreConfig().zenoh)
+        zc = config.daemon.zenoh if "zenoh" in config.raw else ShoreConfig().zenoh
         shore = ShoreConfig(args.name, zc, data_age_timeout_s=args.data_age_timeout_s,
                             max_pending_blocks=args.max_pending_blocks, max_buoys=args.max_buoys,
                             status_interval_s=zc.status_interval_s)
-    except (ValueError, OSError, tomllib.TOMLDecodeError) as exc:
+    except (ValueError, OSError) as exc:
         log.error(str(exc))
         return 2
     monitor = ShoreMonitor(config, shore)
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda signum, frame: monitor.stop())
-    monitor.run()
+    from monitor import zenoh_io  # noqa: PLC0415 (zenoh only when actually serving)
+
+    try:
+        monitor.run()
+    except zenoh_io.zenoh.ZError as exc:  # the session did not open: no router or daemon there
+        log.error(f"cannot join the Zenoh network as a {zc.mode} of {list(zc.connect)}: is a "
+                  f"router or `buoymon run` listening there? ({exc})")
+        return 1
     return 0

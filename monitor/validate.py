@@ -6,11 +6,18 @@ Rules, applied to each sample in time order, first match wins:
 ``time_backwards``  its time is earlier than the last accepted sample, or not later than the
                     point the pipeline has already processed this stream to (a sample that
                     arrived after the reorder horizon, see :mod:`monitor.ordering`);
+``duplicate``       its time equals that of the newest sample seen before it (accepted or
+                    not): one verdict per sample time, so a second copy of a rejected sample
+                    is not judged again;
 ``nan``             any field is NaN or infinite;
 ``out_of_range``    any field is outside ``[min, max]`` of ``[validate.<sensor>.<field>]``;
 ``spike``           any field changed faster than ``max_rate_per_s`` since the last accepted
                     sample: ``|v - v_last| > max_rate_per_s * (t - t_last)``;
-``flat_line``       the QARTOD flat-line test fails (monitor.qartod): a stuck sensor.
+``flat_line``       the QARTOD flat-line test fails (monitor.qartod): a stuck sensor;
+``check_factor``    (motion) the check-factor test fails (monitor.check_factor): horizontal
+                    motion no wave makes, e.g. a GNSS multipath excursion. The whole sample
+                    goes, heave too (the estimator needs all three displacements), and the
+                    fail lasts a window (50 s), so the estimator sees a gap and restarts.
 
 A displacement (``motion``) sample whose position the line cannot reach is ``out_of_range``
 and a QARTOD ``location`` fail: its horizontal distance from the anchor,
@@ -28,6 +35,11 @@ saved in the state, so any split of a stream into blocks gives the same verdicts
 re-delivered sample after a restart a ``duplicate``/``time_backwards`` and never counted twice.
 A genuine step in the signal is accepted once ``max_rate_per_s * elapsed`` covers it.
 
+Duplicates are removed and counted in the pipeline only, live and in replay alike (the log
+reader delivers every copy it reads): the ordering (:mod:`monitor.ordering`, stable) drops an
+exact copy it finds right behind its original, this rule rejects any other sample at a time
+already seen; both land in the one ``duplicate`` count.
+
 Rejected samples are simply absent downstream: the fatigue series is the accepted samples in
 time order. A run of rejections therefore joins the accepted samples either side; if the run is
 longer than the stream's ``stale_after_s`` the load cell counts as stale and the load source
@@ -44,17 +56,17 @@ import numpy as np
 from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
-from monitor.qartod import FAIL, FLAT, StreamQC
+from monitor.qartod import CHECK, FAIL, FLAT, StreamQC
 
 ACCEPTED = 0
 REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
-                            "flat_line")
-_NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT = 1, 2, 3, 4, 5, 6
+                            "flat_line", "check_factor")
+_NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 
 
 @kernel(nogil=True)
 def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
-              qc_code):  # pragma: no cover
+              qc_code, repeat):  # pragma: no cover
     # Sequential by nature: each verdict depends on the last ACCEPTED sample before it.
     n = t.shape[0]
     nf = values.shape[0]
@@ -69,6 +81,10 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
         if (has_last and ti < last_t) or ti <= floor_t:
             codes[i] = _BACK
             counts[_BACK] += 1
+            continue
+        if repeat[i]:
+            codes[i] = _DUP
+            counts[_DUP] += 1
             continue
         code = 0
         for f in range(nf):
@@ -115,9 +131,11 @@ class StreamValidator:
         self.last_values = np.zeros(len(self.fields))
         self.accepted = 0
         self.rejected = {r: 0 for r in REASONS}
+        check = limits.check_factor if sensor == "motion" else None
         self.qc = StreamQC(
             tuple(limits.fields[f] for f in self.fields),
-            limits.location_range_max_m, None if state is None else state.get("qc"))
+            limits.location_range_max_m, None if state is None else state.get("qc"),
+            None if check is None else (*check, limits.stale_after_s))
         if state is not None:
             self.has_last = bool(state["has_last"])
             self.last_t_ns = int(state["last_t_ns"])
@@ -137,7 +155,8 @@ class StreamValidator:
                              f"and {len(self.fields)} fields")
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
-        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT or _RANGE
+        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT, _CHECK or _RANGE
+        repeat = np.zeros(n, np.bool_)  # the time of the newest sample seen before it
         qc_values = values
         if n and not np.isfinite(values).all():
             # an infinite value is missing here, as it is once saved (strict JSON state) and
@@ -146,13 +165,17 @@ class StreamValidator:
         if n and int(t_ns[0]) > max(seen, floor_ns) and (n == 1 or bool(np.all(t_ns[1:] > t_ns[:-1]))):
             new = None  # the usual case: every sample is new
             flags, _ = self.qc.check(t_ns, qc_values)
+            qc_code[flags[CHECK] == FAIL] = _CHECK
             qc_code[flags[FLAT] == FAIL] = _FLAT
         elif n:
-            before = np.maximum.accumulate(np.concatenate(([max(seen, floor_ns)], t_ns[:-1])))
-            new = t_ns > before
+            newest = np.maximum.accumulate(np.concatenate(([seen], t_ns[:-1])))
+            repeat = t_ns == newest
+            new = t_ns > np.maximum(newest, floor_ns)
             if new.any():
                 flags, _ = self.qc.check(t_ns[new], qc_values[:, new])
-                qc_code[np.flatnonzero(new)[flags[FLAT] == FAIL]] = _FLAT
+                idx = np.flatnonzero(new)
+                qc_code[idx[flags[CHECK] == FAIL]] = _CHECK
+                qc_code[idx[flags[FLAT] == FAIL]] = _FLAT
         if self._watch is not None and n:
             outside = self._outside_watch_circle(qc_values)
             qc_code[outside] = _RANGE
@@ -161,7 +184,7 @@ class StreamValidator:
         codes, counts, last_t, has_last = _validate(
             t_ns, values, self._lo, self._hi, self._rate,
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),
-            qc_code,
+            qc_code, repeat,
         )
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
         counts = counts.tolist()

@@ -22,6 +22,7 @@ import queue
 import time
 from typing import Any, Mapping, NamedTuple, Protocol
 
+import msgspec
 import zenoh
 import zenoh.ext
 
@@ -51,11 +52,10 @@ def session_config_dict(zc: ZenohConfig) -> dict[str, Any]:
     }
     transport: dict[str, Any] = {}
     if zc.tls is not None:
-        tls = {k: v for k, v in vars(zc.tls).items() if v is not None and k != "enable_mtls"}
-        tls["enable_mtls"] = zc.tls.enable_mtls
+        tls = {k: v for k, v in msgspec.structs.asdict(zc.tls).items() if v is not None}
         transport["link"] = {"tls": tls}
     if zc.auth is not None:
-        usrpwd = {k: v for k, v in vars(zc.auth).items() if v is not None}
+        usrpwd = {k: v for k, v in msgspec.structs.asdict(zc.auth).items() if v is not None}
         transport["auth"] = {"usrpwd": usrpwd}
     if transport:
         conf["transport"] = transport

@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 import zstandard
 
-from replay.writer import OP_CHUNK, OP_MESSAGE_INDEX
+from monitor.mcap_file import OP_CHUNK, OP_MESSAGE_INDEX
 
 
 @dataclass(slots=True)

@@ -35,13 +35,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+# an illustrative strain-relief bend for the termination, locked (the seed gives none; the
+# shipped configuration leaves it unset, docs/CONDUCTOR.md)
+DEMO_BEND = {"bend_radius_m": 0.6, "bend_angle_deg": 30.0}
+
+
 def demo_config() -> Config:
-    """The default (seed 004) configuration plus the opposite-lay twin of its conductor and
-    the as-built conductor with the seed's field derating."""
+    """The default (seed 004) configuration with an illustrative termination bend
+    (``DEMO_BEND``), plus the opposite-lay twin of its conductor and the as-built conductor
+    with the seed's field derating."""
     base = default_config()
     as_built = next(c for c in base.raw["component"] if c["name"] == AS_BUILT)
+    shipped = [{**c, **DEMO_BEND} if c["name"] == TERMINATION else c
+               for c in base.raw["component"]]
     return config_with(base, component=[
-        *base.raw["component"], {**as_built, "name": OPPOSITE, "lay": "right"},
+        *shipped, {**as_built, "name": OPPOSITE, "lay": "right"},
         {**as_built, "name": FIELD, "derating": FIELD_DERATING},
     ])
 
@@ -88,9 +96,10 @@ def comparison(report: dict) -> str:
                      + "; the seed reports failure after 8-10 h.")
     term = comps.get(TERMINATION)
     if term is not None and term.get("samples_beyond_yield"):
-        lines.append("  In the termination moulding the locked conductors' bend puts the copper "
-                     "beyond yield: elastic model beyond yield, damage underestimated there, "
-                     "where the seed's conductors broke.")
+        lines.append("  In the termination moulding the locked conductors' bend (an assumed "
+                     f"{DEMO_BEND['bend_radius_m']:g} m, {DEMO_BEND['bend_angle_deg']:g} deg) "
+                     "puts the copper beyond yield: elastic model beyond yield, damage "
+                     "underestimated there, where the seed's conductors broke.")
     return "\n".join(lines)
 
 

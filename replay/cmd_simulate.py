@@ -17,9 +17,10 @@ import time
 from pathlib import Path
 
 from monitor.cli_paths import check_output
+from monitor.config import default_config
 from monitor.quanta import add_quantum_option, parse_quanta
 from replay.cmd_replay import MIN_SPEED
-from replay.simulate import LOAD_MODELS, SimConfig, simulate
+from replay.simulate import LOAD_MODELS, SimConfig, sea_state_warnings, simulate
 
 
 def default_start(publish: str | None) -> str:
@@ -112,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"buoymon simulate: {e}", file=sys.stderr)
         return 2
+    for warning in sea_state_warnings(cfg):
+        print(f"buoymon simulate: warning: {warning}", file=sys.stderr)
     with tempfile.TemporaryDirectory(prefix="buoymon-sim-") as tmp:
         path = args.output or Path(tmp) / "simulated.mcap"
         try:
@@ -120,6 +123,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"buoymon simulate: {e}", file=sys.stderr)
             return 2
         print(summary.text(), flush=True)
+        # the simulated mooring is seed 004's, so its break is the shipped configuration's
+        breaking_N = default_config().load.breaking_load_N
+        if summary.tension_N[2] > breaking_N:
+            print(f"buoymon simulate: warning: the line tension reaches "
+                  f"{summary.tension_N[2]:,.0f} N, above the cable's {breaking_N:,.0f} N "
+                  "breaking load: the line would have parted", file=sys.stderr)
         if args.publish is not None:
             from monitor.publisher import publisher_config
             from replay.publish import publish_logs

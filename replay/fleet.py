@@ -316,6 +316,12 @@ def fleet_summary_text(fleet: Mapping[str, Any]) -> str:
                 # null: nothing accrues (docs/REPORT_FORMAT.md); in words, as the report's page
                 f"{remaining_life_text(math.inf if life is None else life):>11s}  "
                 f"{', '.join(c['active_alerts']) or '-'}")
+        # alerts on a sensor stream or the line (stale, rejected_rate, tension_high): no
+        # component's row would show them
+        other = [a for a in b["alerts"] if a["component"] not in b["components"]]
+        if other:
+            lines.append(f"  {'':>4} {'':16s} also active: " + ", ".join(
+                f"{a['rule']}:{a['severity']} ({a['component']})" for a in other))
     return "\n".join(lines)
 
 

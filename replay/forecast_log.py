@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
+from mcap.reader import NonSeekingReader, make_reader
 
 log = logging.getLogger(__name__)
 
@@ -30,16 +30,23 @@ def read_forecasts(files: Sequence[str | Path]) -> list[tuple[str, Any, int]]:
     files)."""
     out: list[tuple[str, Any, int]] = []
     for path in files:
+        before = len(out)
         try:
             with open(path, "rb") as fh:
-                reader = make_reader(fh)
-                summary = reader.get_summary()
-                # with a summary, only the forecast channels' chunks are read
-                topics = None if summary is None else [
-                    c.topic for c in summary.channels.values() if FORECAST_TOPIC.fullmatch(c.topic)]
-                if topics == []:
-                    continue
-                for _, channel, msg in reader.iter_messages(topics=topics):
+                try:
+                    summary = make_reader(fh).get_summary()
+                except (McapError, ValueError, EOFError, struct.error):
+                    summary = None  # no footer, or a damaged one: a recording cut short
+                fh.seek(0)
+                if summary is None:  # read on from the start as far as the file is whole
+                    messages = NonSeekingReader(fh).iter_messages(log_time_order=False)
+                else:  # only the forecast channels' chunks are read
+                    topics = [c.topic for c in summary.channels.values()
+                              if FORECAST_TOPIC.fullmatch(c.topic)]
+                    if not topics:
+                        continue
+                    messages = make_reader(fh).iter_messages(topics=topics)
+                for _, channel, msg in messages:
                     m = FORECAST_TOPIC.fullmatch(channel.topic)
                     if m is None:
                         continue
@@ -48,5 +55,7 @@ def read_forecasts(files: Sequence[str | Path]) -> list[tuple[str, Any, int]]:
                     except (ValueError, RecursionError) as exc:
                         log.warning("%s: unreadable forecast message: %s", path, exc)
         except (OSError, McapError, ValueError, EOFError, struct.error) as exc:
-            log.warning("%s: forecasts not read: %s", path, exc)
+            # a recording cut by a power loss ends mid-record: what came before is kept
+            log.warning("%s: damaged or not MCAP (%s): forecasts past the damage not read, "
+                        "%d read before it", path, exc, len(out) - before)
     return sorted(out, key=lambda x: x[2])

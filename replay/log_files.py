@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from replay.mcap_scan import summary_records
-from replay.writer import MAGIC, OP_CHUNK, OP_CHUNK_INDEX, OP_MESSAGE, OP_STATISTICS
+from monitor.mcap_file import MAGIC, OP_CHUNK, OP_CHUNK_INDEX, OP_MESSAGE, OP_STATISTICS
 
 log = logging.getLogger(__name__)
 
@@ -25,7 +25,11 @@ def expand_paths(paths: Iterable[str | PathLike], *, recursive: bool = False,
     out: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
-            out.extend(sorted(p.rglob("*.mcap") if recursive else p.glob("*.mcap")))
+            found = sorted(p.rglob("*.mcap") if recursive else p.glob("*.mcap"))
+            if not found:  # a mistyped folder among others would otherwise pass unnoticed
+                log.warning("%s: no *.mcap file in this folder%s", p,
+                            "" if recursive else " (its sub-folders not searched)")
+            out.extend(found)
         elif p.exists() or missing == "keep":
             out.append(p)
         elif missing == "raise":

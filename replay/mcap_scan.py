@@ -17,7 +17,7 @@ import numpy as np
 
 from models._jit import kernel
 from monitor import codec
-from replay.writer import MAGIC, OP_CHUNK, OP_FOOTER
+from monitor.mcap_file import MAGIC, OP_CHUNK, OP_FOOTER
 
 @kernel(nogil=True)  # runs in the read-ahead thread
 def scan_records(buf):

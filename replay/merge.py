@@ -1,6 +1,8 @@
 """The cross-file merge of the reader: messages of all files through one reorder window,
-released in sensor-time order, duplicates dropped, coalesced into blocks (the ordering
-guarantees in :mod:`replay.reader`)."""
+released in sensor-time order and coalesced into blocks (the ordering guarantees in
+:mod:`replay.reader`). Every copy of a message is delivered: duplicates are the pipeline's
+to drop and count (:mod:`monitor.ordering`, :mod:`monitor.validate`), live and in replay
+alike."""
 
 from __future__ import annotations
 
@@ -61,7 +63,7 @@ def _take(t: np.ndarray, v: np.ndarray, start: np.ndarray, n: np.ndarray
     return t[idx], v[:, idx]
 
 
-_COLS = ("stream", "pub", "log", "start", "n", "seq", "file")
+_COLS = ("stream", "pub", "log", "start", "n", "seq")
 # Longest stretch of sensor time (by publish time) one coalesced block covers. The replay's
 # ordering passes by a stream lagging the newest data by more than [ordering]
 # replay_horizon_s (1 h) and rejects what then arrives as late: a chunk of compact samples
@@ -74,13 +76,11 @@ COALESCE_NS = COALESCE_S * 1_000_000_000
 
 class StreamMerge:
     """Pending messages of every sensor topic across files (a :class:`replay.salvage.RecordSink`)
-    and their release in order (:meth:`release`). ``stats`` are the files' statistics, by
-    file index (duplicates are counted on the file they were read from)."""
+    and their release in order (:meth:`release`)."""
 
-    def __init__(self, window_ns: int, coalesce: bool, stats: list[FileStats]) -> None:
+    def __init__(self, window_ns: int, coalesce: bool) -> None:
         self.window_ns = window_ns
         self.coalesce = coalesce
-        self.stats = stats
         self._streams: list[_Stream] = []
         self._stream_of: dict[str, int] = {}
         self._pending: list[dict[str, np.ndarray]] = []
@@ -126,8 +126,7 @@ class StreamMerge:
                 st.first_ns = lo if st.first_ns is None else min(st.first_ns, lo)
                 st.last_ns = hi if st.last_ns is None else max(st.last_ns, hi)
             parts.append({"stream": np.full(sel.shape[0], sidx, np.int64), "pub": pub[sel],
-                          "log": log[sel], "start": start, "n": n, "seq": seq[sel],
-                          "file": np.full(sel.shape[0], ctx.fidx, np.int64)})
+                          "log": log[sel], "start": start, "n": n, "seq": seq[sel]})
         for p in parts:
             late = p["pub"] <= self._released_to
             if late.any():
@@ -169,7 +168,6 @@ class StreamMerge:
         order = np.lexsort((rel["seq"], rank[rel["stream"]], rel["pub"]))
         rel = {k: v[order] for k, v in rel.items()}
         stores = {int(s): self._streams[s].store() for s in np.unique(tab["stream"])}
-        rel = self._drop_duplicates(rel, stores)
         # a release is as long as a chunk: cut it into spans of at most COALESCE_S of sensor
         # time, so no coalesced block runs ahead of the other streams by more than that
         span = (rel["pub"] - rel["pub"][0]) // COALESCE_NS if rel["pub"].shape[0] else rel["pub"]
@@ -186,33 +184,6 @@ class StreamMerge:
             keep["start"][mine] = np.cumsum(keep["n"][mine]) - keep["n"][mine]
         self._pending = [keep] if keep["pub"].shape[0] else []
         yield from blocks
-
-    def _drop_duplicates(self, rel: dict, stores: dict) -> dict:
-        same = ((rel["pub"][1:] == rel["pub"][:-1]) & (rel["stream"][1:] == rel["stream"][:-1]))
-        if not same.any():
-            return rel
-        drop = np.zeros(rel["pub"].shape[0], bool)
-        # runs of equal (pub, stream): compare each message with the earlier kept ones
-        for j in (np.flatnonzero(same) + 1).tolist():
-            i = j - 1
-            while (i >= 0 and rel["pub"][i] == rel["pub"][j]
-                   and rel["stream"][i] == rel["stream"][j]):
-                if not drop[i] and self._same_samples(rel, stores, i, j):
-                    drop[j] = True
-                    break
-                i -= 1
-        for f in rel["file"][drop].tolist():
-            self.stats[f].duplicates += 1
-        return {k: v[~drop] for k, v in rel.items()}
-
-    @staticmethod
-    def _same_samples(rel: dict, stores: dict, i: int, j: int) -> bool:
-        if rel["n"][i] != rel["n"][j]:
-            return False
-        t, v = stores[int(rel["stream"][i])]
-        a, b, n = int(rel["start"][i]), int(rel["start"][j]), int(rel["n"][i])
-        return bool(np.array_equal(t[a:a + n], t[b:b + n])
-                    and np.array_equal(v[:, a:a + n], v[:, b:b + n], equal_nan=True))
 
     def _blocks(self, rel: dict, stores: dict, rank: np.ndarray) -> list[SampleBlock]:
         out: list[tuple[int, int, int, SampleBlock]] = []

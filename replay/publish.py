@@ -13,6 +13,7 @@ from typing import Sequence
 
 from monitor import zenoh_io
 from monitor.daemon_config import ZenohConfig
+from monitor.daemon_target import endpoint_arg
 from monitor.publisher import play, publisher_config
 from monitor.sensors import DEFAULT_CACHE_BLOCKS, PublisherOptions
 from replay.reader import iter_blocks
@@ -29,7 +30,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m replay.publish",
                                 description="Play MCAP logs over Zenoh as a live buoy.")
     p.add_argument("logs", nargs="+", help="MCAP log files")
-    p.add_argument("--connect", action="append", default=[],
+    p.add_argument("--connect", action="append", default=[], type=endpoint_arg,
                    help="zenoh endpoint of the daemon, e.g. tcp/127.0.0.1:7447 (repeatable)")
     p.add_argument("--speed", type=float, default=None,
                    help="times real time (default: as fast as possible)")
@@ -48,6 +49,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     n = publish_logs(args.logs, publisher_config(args.connect), args.speed, None, options,
                      args.linger_s)
     print(n, flush=True)
+    if n == 0:  # missing, unreadable or empty logs: nothing went to the daemon
+        print(f"python -m replay.publish: no sensor block could be read from {args.logs}",
+              file=sys.stderr)
+        return 1
     return 0
 
 

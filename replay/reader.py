@@ -14,7 +14,7 @@ few hundred thousand.
 
 The jobs, one module each: which files (:mod:`replay.log_files`), locating records in the
 bytes (:mod:`replay.mcap_scan`), reading a file with salvage (:mod:`replay.salvage`), the
-cross-file merge, duplicate removal and coalescing (:mod:`replay.merge`); this module joins
+cross-file merge and coalescing (:mod:`replay.merge`); this module joins
 them.
 
 Salvage (what is recovered, what is reported lost, see :class:`replay.salvage.FileStats`):
@@ -43,8 +43,10 @@ Ordering guarantees (deterministic for the same files in the same order):
 3. A message read after messages more than the window newer than it (``publish_time`` at or
    before an already released one) is *late*: it is counted in ``late`` and delivered with the
    next release, i.e. out of order; the pipeline's validation then rejects its samples.
-4. Duplicates (same topic, same publish time, identical samples) met within the window are
-   delivered once and counted in ``duplicates``.
+4. Every copy of a message is delivered (a recording's re-recorded messages, overlapping
+   files): the pipeline drops and counts duplicate samples, live and in replay alike
+   (:mod:`monitor.ordering`, :mod:`monitor.validate`; ``samples.<stream>.rejected.duplicate``
+   in the report). The order of 2 puts each copy right behind the first.
 5. With ``coalesce=True`` the messages of one topic in one release are concatenated, in the
    order of 2, into ONE :class:`SampleBlock` (tens of thousands of samples); the blocks of one
    release are ordered by (first publish time, topic). The samples of each topic are exactly
@@ -89,7 +91,7 @@ class LogReader:
         self.read_ahead = read_ahead
         self.window_ns = int(round(reorder_window_s * 1e9))
         self.stats: list[FileStats] = []
-        self._merge = StreamMerge(self.window_ns, coalesce, self.stats)
+        self._merge = StreamMerge(self.window_ns, coalesce)
         self._files = FileSalvage(self._merge, read_ahead)
 
     @property
@@ -98,10 +100,10 @@ class LogReader:
         return any(s.messages > 0 for s in self.stats)
 
     def __iter__(self) -> Iterator[SampleBlock]:
-        for i, path in enumerate(self.paths):
+        for path in self.paths:
             st = FileStats(path=str(path))
             self.stats.append(st)
-            for _ in self._files.read_file(i, path, st):
+            for _ in self._files.read_file(path, st):
                 yield from self._merge.release(final=False)
         yield from self._merge.release(final=True)
 

@@ -10,6 +10,9 @@ Stable fields (``report_version`` 1; new fields may be added, these keep their m
                                      flat_line}, ``qc`` = QARTOD flags {test: {suspect, fail}}
 ``motion_sensor`` / ``load_problems`` the motion stream feeding the estimator (null if none);
                                      why no load could be formed, in words ([] if none)
+``motion_rate``                      the estimator's step: ``setting`` (``[load]
+                                     motion_rate_hz``), ``hz``, ``samples_rate_mismatch``,
+                                     ``rate_changes`` (monitor.motion_rate; null if no estimator)
 ``tension_N``                        the fatigue load series: ``min``, ``mean``, ``max``, ``p99``
                                      (p99 on a fixed histogram, ~3 N bins), and how many samples
                                      were ``samples_measured`` / ``samples_estimated``, and
@@ -100,6 +103,7 @@ def build_report(config: Config, pipeline_report: Mapping[str, Any], inputs: Seq
                       "breaking_load_N": config.load.breaking_load_N},
         "load_source_at_end": pipeline_report["load_source"],
         "motion_sensor": pipeline_report.get("motion_sensor"),
+        "motion_rate": pipeline_report.get("motion_rate"),
         "load_problems": list(pipeline_report.get("load_problems", [])),
         "components": comps,
         "alerts": pipeline_report["alerts"],
@@ -162,6 +166,11 @@ def summary_text(report: Mapping[str, Any]) -> str:
                  f"({t['samples_measured']:,d} measured, {t['samples_estimated']:,d} estimated"
                  + (f", {t['samples_estimate_clamped']:,d} of them outside the estimator's range"
                     if t.get("samples_estimate_clamped") else "") + ")")
+    rate = report.get("motion_rate")
+    if rate and rate["hz"] is not None:
+        lines.append(f"  motion estimator stepped at {rate['hz']:.4g} Hz ("
+                     + ("the stream's own spacing" if rate["setting"] == "auto"
+                        else "[load] motion_rate_hz") + ")")
     for problem in report.get("load_problems") or []:
         lines.append(f"  LOAD: {problem}")
     lines.append(f"  {'component':24s} {'damage':>11s} {'committed':>11s} {'cycles':>10s} "
@@ -215,7 +224,7 @@ def summary_text(report: Mapping[str, Any]) -> str:
         lines.append(f"    ... and {len(episodes) - MAX_EPISODE_LINES} more (see the report)")
     read = report["inputs"]["read"]
     damage = {k: read.get(k) for k in ("lost_ranges", "lost_messages_known", "bad_chunks",
-                                       "bad_payloads", "late", "duplicates")}
+                                       "bad_payloads", "late")}
     parts = [f"{k.replace('_', ' ')} {v}" for k, v in damage.items() if v]
     unreadable = read.get("unreadable_files") or []
     cut = [f for f in read.get("incomplete_files") or [] if f not in unreadable]

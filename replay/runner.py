@@ -231,7 +231,6 @@ def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
     return {
         "messages": sum(st.messages for st in stats),
         "samples": sum(st.samples for st in stats),
-        "duplicates": sum(st.duplicates for st in stats),
         "late": sum(st.late for st in stats),
         "bad_chunks": sum(st.bad_chunks for st in stats),
         "bad_payloads": sum(st.bad_payloads for st in stats),

@@ -16,12 +16,12 @@ from typing import BinaryIO, Iterator, Protocol
 import zstandard
 
 from monitor import codec
-from replay.chunks import Inflated, ReadAhead, inflate
-from replay.mcap_scan import MAX_CUT_CHUNK, Digest, digest, find_chunk, str_at, summary_records
-from replay.writer import (
+from monitor.mcap_file import (
     MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, OP_MESSAGE_INDEX,
     OP_SCHEMA,
 )
+from replay.chunks import Inflated, ReadAhead, inflate
+from replay.mcap_scan import MAX_CUT_CHUNK, Digest, digest, find_chunk, str_at, summary_records
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,6 @@ class FileStats:
     chunks: int = 0
     bad_chunks: int = 0
     complete: bool = False  # data section ended properly (DataEnd record reached)
-    duplicates: int = 0
     late: int = 0
     bad_payloads: int = 0
     skipped: dict[str, int] = field(default_factory=dict)  # non-sensor / undecodable channels
@@ -73,8 +72,7 @@ class FileStats:
 class FileContext:
     """Schemas and channels of one file: channel id -> (stream, field numbers) or a skip reason."""
 
-    def __init__(self, fidx: int):
-        self.fidx = fidx
+    def __init__(self) -> None:
         self.schemas: dict[int, tuple[str, str, bytes]] = {}
         self.channels: dict[int, tuple[int, tuple] | str] = {}
         self.last_log = 0
@@ -132,9 +130,8 @@ class FileSalvage:
         self.read_ahead = read_ahead
         self._dctx = zstandard.ZstdDecompressor()
 
-    def read_file(self, fidx: int, path: Path, st: FileStats) -> Iterator[None]:
-        """Read one file (the ``fidx``-th) record by record; yield after each batch of
-        messages."""
+    def read_file(self, path: Path, st: FileStats) -> Iterator[None]:
+        """Read one file record by record; yield after each batch of messages."""
         try:
             f = open(path, "rb")
         except OSError as e:
@@ -147,7 +144,7 @@ class FileSalvage:
             if f.read(8) != MAGIC:
                 st.error = "not an MCAP file (bad or missing magic bytes)"
                 return
-            ctx = FileContext(fidx)
+            ctx = FileContext()
             self._summary_definitions(f, size, ctx)
             f.seek(8)
             ahead = ReadAhead(f.fileno(), size, digest) if self.read_ahead else None
@@ -159,9 +156,9 @@ class FileSalvage:
 
     def _summary_definitions(self, f: BinaryIO, size: int, ctx: FileContext) -> None:
         """Take the schemas and channels repeated in the summary section, when the file ends
-        in an intact footer. mcap's own writer (``buoymon record``) defines a channel inside
-        the first chunk that uses it: should that chunk be damaged, the channel's messages in
-        the other chunks are then still decoded. The definitions are the same as in the data
+        in an intact footer. Other writers (mcap's own, which made buoymon's recordings before
+        monitor.mcap_file did) may define a channel inside the first chunk that uses it: should
+        that chunk be damaged, the channel's messages in the other chunks are then still decoded. The definitions are the same as in the data
         section (the first one read wins), so an intact file reads exactly as before."""
         scratch = FileStats(path="")  # a damaged summary loses no data: not reported as loss
         for op, content in summary_records(f, size):

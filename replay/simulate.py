@@ -126,6 +126,29 @@ class SimConfig:
                              "after 2262-04-11, the last nanosecond time stamp")
 
 
+def sea_state_warnings(cfg: SimConfig) -> list[str]:
+    """Why ``cfg``'s sea state is not physical or not covered (empty when it is plausible):
+    a significant height above the breaking height of its peak period in the mooring's depth
+    (:func:`models.waves.breaking_height`), or a sea state beyond the damage-rate table that
+    forecasts and design studies use (:data:`models.sea_state_table.HS_EDGES_M`, ``TP_EDGES_S``)."""
+    from models.sea_state_table import HS_EDGES_M, TP_EDGES_S
+    from models.waves import breaking_height
+
+    out = []
+    h_b = float(breaking_height(cfg.tp_s, cfg.depth_m))
+    if cfg.hs_m > h_b:
+        out.append(f"Hs {cfg.hs_m:g} m is not a possible sea at Tp {cfg.tp_s:g} s in "
+                   f"{cfg.depth_m:g} m of water: waves of that period break above "
+                   f"{h_b:.3g} m (steepness H/L = 1/7, Miche); the linear wave models are far "
+                   "outside their range and the loads are not physical")
+    if not (HS_EDGES_M[0] <= cfg.hs_m <= HS_EDGES_M[-1]
+            and TP_EDGES_S[0] <= cfg.tp_s <= TP_EDGES_S[-1]):
+        out.append(f"Hs {cfg.hs_m:g} m, Tp {cfg.tp_s:g} s is beyond the sea-state table of "
+                   f"forecasts and design studies (Hs {HS_EDGES_M[0]:g} to {HS_EDGES_M[-1]:g} "
+                   f"m, Tp {TP_EDGES_S[0]:g} to {TP_EDGES_S[-1]:g} s)")
+    return out
+
+
 @dataclass
 class SimSummary:
     """What was written."""

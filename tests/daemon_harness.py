@@ -59,13 +59,14 @@ class FakePipeline:
 
     def __init__(self, state: Any = None, delay_s: float = 0.0, state_delay_s: float = 0.0,
                  alerts_raw: Any = None, sinks: Any = ()) -> None:
+        from monitor.alerts.config import AlertsConfig
         from monitor.alerts.engine import AlertEngine
 
         state = state or {}
         self.buoy_id = BUOY
         # an alert engine without sensor-time rules, so the daemon attaches alert delivery
         # (Zenoh keys, outbox channels) exactly as `buoymon run` does
-        self.alerts = AlertEngine.from_config(alerts_raw or {}, BUOY, {})
+        self.alerts = AlertEngine.from_config(alerts_raw or AlertsConfig(), BUOY, {})
         self.delay_s = delay_s  # simulated processing time per block
         self.state_delay_s = state_delay_s  # simulated time to take a checkpoint
         self.sinks = tuple(sinks)  # the daemon's, fixed at construction as the real pipeline's
@@ -139,25 +140,25 @@ def expected_total(blocks: list[SampleBlock]) -> float:
 
 
 def main(argv: list[str]) -> int:
-    from monitor.cmd_run import load_daemon_config
     from monitor.daemon import Daemon
+    from monitor.daemon_config import parse_daemon_sections
     from monitor.logs import setup_logging
 
     setup_logging("warning")
     if argv[0] == "run":
-        import tomllib
-
+        from monitor.alerts.config import AlertsConfig
         from monitor.cmd_run import AlertDelivery
+        from monitor.schema import read_toml
 
         delay = float(argv[2]) if len(argv) > 2 else 0.0
         state_delay = float(argv[3]) if len(argv) > 3 else 0.0
-        with open(argv[1], "rb") as f:
-            alerts_raw = tomllib.load(f).get("alerts", {})
-        daemon = Daemon(BUOY, load_daemon_config(argv[1]),
-                        lambda state, sinks: FakePipeline(state, delay, state_delay, alerts_raw,
+        raw = read_toml(argv[1])  # the daemon's sections and the alert rules, parsed once
+        alerts = AlertsConfig.from_dict(raw.get("alerts"))
+        daemon = Daemon(BUOY, parse_daemon_sections(raw),
+                        lambda state, sinks: FakePipeline(state, delay, state_delay, alerts,
                                                              sinks),
                         FakeCodec(),
-                        attach=lambda session, pipe: [AlertDelivery(session, pipe, alerts_raw)])
+                        attach=lambda session, pipe: [AlertDelivery(session, pipe, alerts)])
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda *_: daemon.stop())
         daemon.run()

@@ -26,7 +26,7 @@ def _generic_values(field) -> np.ndarray:
 
 def reference_blocks(paths: Sequence[str | PathLike] | str | PathLike) -> list[SampleBlock]:
     """Slow reference: ``mcap``'s own reader and the generic protobuf runtime, one block per
-    message, sorted by (publish time, topic, read order) with exact duplicates dropped.
+    message, sorted by (publish time, topic, read order), every copy kept.
 
     Independent of :mod:`monitor.codec`'s decoder and of this module's record parsing; used by
     tests to check the fast path. Undamaged files only.
@@ -60,10 +60,4 @@ def reference_blocks(paths: Sequence[str | PathLike] | str | PathLike) -> list[S
                                   msg.log_time)
                 rows.append((msg.publish_time, channel.topic, len(rows), msg.data, blk))
     rows.sort(key=lambda r: r[:3])
-    out, seen = [], set()
-    for pub, topic, _, data, blk in rows:
-        if (pub, topic, data) in seen:
-            continue
-        seen.add((pub, topic, data))
-        out.append(blk)
-    return out
+    return [blk for *_, blk in rows]

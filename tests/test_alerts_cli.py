@@ -186,6 +186,25 @@ def test_daemon_checkpoint_list_and_reset(tmp_path, capsys):
     assert "neither a daemon checkpoint nor a JSON state file" in capsys.readouterr().err
 
 
+def test_checkpoint_of_a_daemon_without_alert_rules_lists_none(tmp_path, capsys):
+    """A configuration without [[alerts.rule]] keeps no engine state: `alerts list` says
+    there is no active alert (was "state has no "alerts" entry", status 1); ack and reset
+    still refuse, naming the file."""
+    from monitor.checkpoint import CheckpointStore
+
+    path = tmp_path / "checkpoint.sqlite"
+    store = CheckpointStore(path)
+    store.save({"pipeline": {"x": 1}, "daemon": {"last_status": {"buoy_id": "b9"},
+                                                  "live": {"firing": []}}})
+    store.close()
+    assert main(["alerts", "list", "--state", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == {"buoy": "b9", "alerts": []}
+    assert main(["alerts", "list", "--state", str(path)]) == 0
+    assert capsys.readouterr().out.strip() == "no active alerts"
+    assert main(["alerts", "ack", "f", "--who", "a", "--why", "b", "--state", str(path)]) == 1
+    assert f'{path}: state has no "alerts" entry' in capsys.readouterr().err
+
+
 def test_alert_table_marks_logger_clock_times():
     from monitor.alerts.cmd_alerts import format_table
 

@@ -12,6 +12,7 @@ import pytest
 from monitor.alerts.config import AlertsConfig
 from monitor.alerts.engine import AlertEngine
 from monitor.events import ComponentObs, Observation, StreamObs
+from monitor.schema import ConfigError
 
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
@@ -129,7 +130,7 @@ def test_operator_commands_validate():
 @pytest.mark.parametrize("section, message", [
     ({"rule": [{"kind": "damage_rate", "threshold": 1}, {"kind": "stale"},
                {"kind": "damage_fraction", "threshold": -1}]},
-     "alerts.rule[2].threshold = -1: must be > 0"),
+     "alerts.rule[2].threshold = -1: must be a finite number > 0"),
     ({"rule": [{"kind": "damage_fraction"}]},
      "alerts.rule[0].threshold: missing; rule kind 'damage_fraction' requires it"),
     ({"rule": [{"kind": "fatigue"}]}, 'alerts.rule[0].kind = "fatigue": unknown rule kind'),
@@ -138,13 +139,13 @@ def test_operator_commands_validate():
     ({"rule": [{"kind": "stale", "threshold": 3}]},
      "alerts.rule[0].threshold = 3: unknown key"),
     ({"rule": [{"kind": "rejected_rate", "threshold": 1.5}]},
-     "alerts.rule[0].threshold = 1.5: must be <= 1"),
+     "alerts.rule[0].threshold = 1.5: must be a finite number > 0 and <= 1"),
     ({"rule": [{"kind": "damage_rate", "threshold": True}]},
-     "alerts.rule[0].threshold = True: must be a number"),
+     "alerts.rule[0].threshold = True: must be a finite number > 0"),
     ({"rule": [{"kind": "damage_rate", "threshold": float("nan")}]},
-     "alerts.rule[0].threshold = nan: must be a number, not NaN"),
+     "alerts.rule[0].threshold = nan: must be a finite number > 0"),
     ({"rule": [{"kind": "damage_rate", "threshold": 1, "on_delay_s": -5}]},
-     "alerts.rule[0].on_delay_s = -5: must be >= 0"),
+     "alerts.rule[0].on_delay_s = -5: must be a finite number >= 0 and <= 1e+09"),
     ({"rule": [{"kind": "tension_high", "threshold": 0.5, "breaking_strength_N": 45e3,
                 "deadband": 0.6}]},
      "alerts.rule[0].deadband = 0.6: must be < threshold (0.5)"),
@@ -153,8 +154,8 @@ def test_operator_commands_validate():
     ({"rule": [{"kind": "damage_fraction", "threshold": 0.1},
                {"kind": "damage_fraction", "threshold": 0.5}]},
      'alerts.rule[1].name = "damage_fraction": duplicate of alerts.rule[0]'),
-    ({"eval_interval_s": 0}, "alerts.eval_interval_s = 0: must be > 0"),
-    ({"resend_interval_s": "1h"}, 'alerts.resend_interval_s = "1h": must be a number'),
+    ({"eval_interval_s": 0}, "alerts.eval_interval_s = 0: must be a finite number > 0 and <= 1e+09"),
+    ({"resend_interval_s": "1h"}, "alerts.resend_interval_s = '1h': must be a finite number >= 0"),
     ({"rule": {"kind": "stale"}}, "alerts.rule = {'kind': 'stale'}: must be an array"),
     ({"webhook": {"url": "ftp://x"}}, 'alerts.webhook.url = "ftp://x": must be an http'),
     ({"email": {"host": "h", "from": "a@b", "to": []}}, "alerts.email.to = []: must be"),
@@ -163,9 +164,9 @@ def test_operator_commands_validate():
     ({"evaluate_s": 3}, "alerts.evaluate_s = 3: unknown key"),
 ])
 def test_config_errors_name_key_and_value(section, message):
-    with pytest.raises(ValueError) as exc:
+    with pytest.raises(ConfigError) as exc:
         AlertsConfig.from_dict(section)
-    assert str(exc.value).startswith(message), str(exc.value)
+    assert str(exc.value).startswith("config error: " + message), str(exc.value)
 
 
 def test_engine_errors_for_unknown_components():

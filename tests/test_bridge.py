@@ -24,10 +24,11 @@ import zenoh
 from daemon_harness import ENV, DaemonProcess, free_port, wait_until_state
 from monitor import zenoh_io
 from monitor.blocks import SampleBlock
-from monitor.bridge.config import ConfigError, parse_bridge_config
+from monitor.bridge.config import parse_bridge_config
 from monitor.bridge.runner import Bridge
 from monitor.config import load_config
 from monitor.daemon_config import ZenohConfig
+from monitor.schema import ConfigError
 from monitor.sensors import SensorPublisher
 from test_daemon_e2e import committed, flushed_figures, replayed_figures
 

@@ -64,6 +64,25 @@ def test_store_keeps_only_the_latest_and_counts(tmp_path):
     again.close()
 
 
+@pytest.mark.integration  # starts the daemon process
+def test_a_file_that_is_not_a_checkpoint_is_refused_and_left_alone(tmp_path):
+    bad = tmp_path / "state.sqlite"
+    bad.write_bytes(b"garbage, not SQLite" * 10)
+    with pytest.raises(ValueError, match=f"{bad}: not a checkpoint database .*move it aside"):
+        CheckpointStore(bad)
+    assert bad.read_bytes() == b"garbage, not SQLite" * 10
+    # the daemon (a real process): a clear error and exit status 2, no traceback
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text((Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml")
+                   .read_text() + f'\n[state]\npath = "{bad}"\n[metrics]\nenabled = false\n')
+    p = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
+                       capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "not a checkpoint database (file is not a database)" in p.stderr
+    assert bad.read_bytes() == b"garbage, not SQLite" * 10
+
+
 def test_periodic_checkpointer_respects_interval():
     now = [100.0]
     saved = []

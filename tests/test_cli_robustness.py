@@ -229,11 +229,11 @@ def test_view_refuses_a_file_that_is_not_a_recording(tmp_path, capsys):
 
 @pytest.mark.parametrize("old, new, message", [
     ("replay_horizon_s = 3600.0", "replay_horizon_s = 1e300",
-     "ordering.replay_horizon_s = 1e+300: must be <= 1e+09"),
+     "ordering.replay_horizon_s = 1e+300: must be a finite number > 0 and <= 1e+09"),
     ("eval_interval_s = 10.0", "eval_interval_s = 1e12",
-     "alerts.eval_interval_s = 1000000000000.0: must be <= 1e+09"),
-    ("on_delay_s = 60.0", "on_delay_s = 1e300", "on_delay_s = 1e+300: must be <= 1e+09"),
-    ("window_s = 600.0", "window_s = 1e300", "window_s = 1e+300: must be <= 1e+09"),
+     "alerts.eval_interval_s = 1000000000000.0: must be a finite number > 0 and <= 1e+09"),
+    ("on_delay_s = 60.0", "on_delay_s = 1e300", "alerts.rule[2].on_delay_s = 1e+300: must be a finite number >= 0 and <= 1e+09"),
+    ("window_s = 600.0", "window_s = 1e300", "window_s = 1e+300: must be a finite number > 0 and <= 1e+09"),
 ])
 def test_config_durations_have_a_ceiling(tmp_path, capsys, old, new, message):
     # durations become int64 nanoseconds: 1e300 s passed check-config and then the replay
@@ -305,4 +305,96 @@ def test_replay_exits_2_for_config_errors_found_when_the_pipeline_is_built(tmp_p
     log = tiny_log(tmp_path / "a.mcap")
     capsys.readouterr()
     assert main(["replay", str(log), "--config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [
+    ["status", "--connect", "garbage"],
+    ["alerts", "list", "--buoy", "vaps", "--connect", "garbage"],
+    ["forecast", "--sea-states", "x.csv", "--publish", "garbage"],
+])
+def test_a_malformed_endpoint_is_a_usage_error(args, capsys):
+    """Was a zenoh.ZError traceback (alerts, forecast) or "daemon NOT RUNNING" (status)."""
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    assert exc.value.code == 2
+    assert ("'garbage' is not a Zenoh endpoint: expected <proto>/<address>, e.g. "
+            "tcp/127.0.0.1:7447") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("content, message", [
+    (None, "forecast.table = 't.json': [Errno 2] No such file or directory"),
+    ("{}", "forecast.table = 't.json': no 'components': not a table written by buoymon "
+           "forecast --save-table"),
+    ("[1,", "forecast.table = 't.json': Expecting value"),
+])
+def test_check_config_reads_the_forecast_table_as_the_replay_does(tmp_path, capsys, content,
+                                                                  message):
+    """A [forecast] table the pipeline cannot read: check-config said "[forecast] ok"."""
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    old = '# table = "table.json"'
+    assert old in text
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace(old, 'table = "t.json"', 1))
+    if content is not None:
+        (tmp_path / "t.json").write_text(content)
+    assert main(["check-config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+    log = tiny_log(tmp_path / "a.mcap")
+    assert main(["replay", str(log), "--config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_check_config_refuses_what_the_pipeline_refuses(tmp_path, capsys):
+    """A [forecast] window that is not whole alert ticks: check-config said ok, the replay
+    and the daemon then refused the file."""
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    old = "window_s = 1800.0 "
+    assert text.count(old) == 1
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace(old, "window_s = 15.0 ", 1))
+    message = ("config error: forecast.window_s = 15: must be a whole number of alert ticks "
+               "(alerts.eval_interval_s = 10)")
+    assert main(["check-config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+    assert main(["replay", str(tiny_log(tmp_path / "a.mcap")), "--config", str(cfg)]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
+    from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
+    from monitor.config import default_config
+
+    names = [c.name for c in default_config().components]
+    (tmp_path / "t.json").write_text(json.dumps(
+        DamageRateTable(names, HS_EDGES_M, TP_EDGES_S).to_state()))
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text.replace('# table = "table.json"', 'table = "t.json"', 1))
+    assert main(["check-config", str(cfg)]) == 0
+    assert "[forecast] ok" in capsys.readouterr().out
+    # a table of other components: refused as the pipeline refuses it
+    (tmp_path / "t.json").write_text(json.dumps(
+        DamageRateTable(["wire"], HS_EDGES_M, TP_EDGES_S).to_state()))
+    assert main(["check-config", str(cfg)]) == 2
+    assert ("config error: forecast.table: components ['wire'] != the configuration's "
+            f"{names}") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("rule, message", [
+    ('kind = "damage_fraction"\nname = "x"\ncomponent = "conductr"\nthreshold = 0.2\n',
+     'alerts.rule[8].component = "conductr": unknown component; expected one of '
+     "['conductor', 'conductor_termination']"),
+    ('kind = "stale"\nname = "y"\ncomponent = "tensoin"\n',
+     'alerts.rule[8].component = "tensoin": unknown sensor stream'),
+])
+def test_check_config_refuses_a_rule_for_a_component_the_config_lacks(tmp_path, capsys, rule,
+                                                                        message):
+    """check-config said ok; the replay then refused the file."""
+    text = (Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml").read_text()
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(text + "\n[[alerts.rule]]\n" + rule)
+    assert main(["check-config", str(cfg)]) == 2
+    assert f"config error: {message}" in capsys.readouterr().err
+    assert main(["replay", str(tiny_log(tmp_path / "a.mcap")), "--config", str(cfg)]) in (1, 2)
     assert message in capsys.readouterr().err

@@ -4,6 +4,8 @@ fatigue test fed through the pipeline as a synthetic load-cell log."""
 import dataclasses
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +30,14 @@ def _with_cable(**cable):
 
 def _comp(config, name):
     return next(c for c in config.components if c.name == name)
+
+
+def _bent(radius_m=0.6, angle_deg=30.0):
+    """The shipped configuration with a locked termination bend configured."""
+    c = default_config()
+    return config_with(c, component=[
+        {**t, "bend_radius_m": radius_m, "bend_angle_deg": angle_deg}
+        if t["name"] == "conductor_termination" else t for t in c.raw["component"]])
 
 
 def test_twist_keys():
@@ -67,11 +77,16 @@ def test_location_keys():
 
 
 def test_termination_component_stress_and_yield_count():
-    config = default_config()
-    cable = build_cable(config)
+    t = np.array([0.0, 4450.0, 8900.0, 11000.0])
+    shipped = default_config()
+    cable = build_cable(shipped)
+    # shipped: the bend not configured, so no bend strain: the free span's stress and yield
+    plain = Component(_comp(shipped, "conductor_termination"), cable, shipped.fatigue)
+    np.testing.assert_array_equal(plain.stress(t), conductor_stress(t, cable, "left"))
+    assert plain.samples_beyond_yield == 1  # 11 kN only (70.8 MPa, below)
+    config = _bent()
     term = Component(_comp(config, "conductor_termination"), cable, config.fatigue)
     free = Component(_comp(config, "conductor"), cable, config.fatigue)
-    t = np.array([0.0, 4450.0, 8900.0, 11000.0])
     bend = TerminationBend(0.6, math.radians(30.0))
     np.testing.assert_array_equal(term.stress(t), termination_stress(t, cable, "left", bend))
     # the locked bend alone: 19.5 GPa x 9.2 mm / 0.6 m = 299 MPa > 68.9 MPa yield: all four
@@ -97,7 +112,7 @@ def _storm_blocks(config, peak_N):
 
 
 def test_yield_in_report_status_and_alerts():
-    config = default_config()
+    config = _bent()
     pipeline, _ = run_blocks(config, _storm_blocks(config, 11000.0))
     rep = pipeline.report()
     comps = rep["components"]
@@ -120,6 +135,50 @@ def test_yield_in_report_status_and_alerts():
     rep2 = p2.report()
     assert rep2["components"]["conductor"]["samples_beyond_yield"] == 0
     assert not [a for a in rep2["alerts"] if a["rule"] == "conductor_yield" and a["labels"]["component"] == "conductor"]
+
+
+@pytest.mark.integration  # processes: simulate, check-config, replay
+def test_calm_sea_raises_no_yield_alert_unless_a_tight_bend_is_configured(tmp_path):
+    """A flat calm (Hs 0.3 m, Tp 4 s: the line at 0.37 to 0.50 kN, 3 MPa in the free span)
+    replayed with the shipped configuration raises no conductor_yield alert and counts no
+    sample beyond yield (an assumed locked bend of 0.6 m did, at every sample: 19.5 GPa x
+    9.2 mm / 0.6 m = 299 MPa at rest). With a tight bend configured (0.3 m, locked: 598 MPa
+    at rest) every sample is beyond the 68.9 MPa yield and the alert fires."""
+    def cli(*args):
+        p = subprocess.run([sys.executable, "-m", "monitor.cli", *args], capture_output=True,
+                           text=True, timeout=300, cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+        return p.stdout
+
+    log = tmp_path / "calm.mcap"
+    cli("simulate", "-o", str(log), "--hours", "0.05", "--hs", "0.3", "--tp", "4", "--seed", "2")
+    shipped = Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml"
+    tight = tmp_path / "tight.toml"
+    text = shipped.read_text()
+    assert text.count('location = "termination"\n') == 1
+    tight.write_text(text.replace('location = "termination"\n', 'location = "termination"\n'
+                                  'bend_radius_m = 0.3\nbend_angle_deg = 45.0\n'))
+    assert "termination bend not configured" in cli("check-config", str(shipped))
+    assert "termination bend not configured" not in cli("check-config", str(tight))
+    results = {}
+    for name, cfg in (("shipped", shipped), ("tight", tight)):
+        report = tmp_path / f"{name}.json"
+        cli("replay", str(log), "--config", str(cfg), "--report", str(report), "--no-progress")
+        results[name] = json.loads(report.read_text())
+    n = results["shipped"]["samples"]["tension"]["accepted"]
+    assert n == 3600 and results["shipped"]["tension_N"]["max"] < 600.0
+    for name, rep in results.items():
+        fired = {a["labels"]["component"] for a in rep["alerts"]
+                 if a["rule"] == "conductor_yield" and a["event"] == "fire"}
+        term = rep["components"]["conductor_termination"]
+        if name == "shipped":
+            assert fired == set() and term["samples_beyond_yield"] == 0
+            assert term["max_stress_Pa"] < 5e6
+            assert not [a for a in rep["alerts"] if a["rule"] == "conductor_stress"]
+        else:
+            assert fired == {"conductor_termination"} and term["samples_beyond_yield"] == n
+            assert term["max_stress_Pa"] > 19.5e9 * 9.2e-3 / 0.3
+        assert rep["components"]["conductor"]["samples_beyond_yield"] == 0
 
 
 def test_lab_test_through_the_pipeline():

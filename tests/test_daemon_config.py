@@ -6,6 +6,7 @@ from monitor.daemon_config import (
     AuthConfig, HealthConfig, RecordConfig, StateConfig, TlsConfig, ZenohConfig,
     parse_daemon_sections,
 )
+from monitor.schema import parse_struct
 from monitor.zenoh_io import session_config_dict
 
 
@@ -30,12 +31,12 @@ def test_defaults_are_a_loopback_only_peer():
 
 
 def test_client_mode_tls_and_auth_reach_the_zenoh_config():
-    zc = ZenohConfig.from_dict({
+    zc = parse_struct(ZenohConfig, {
         "mode": "client", "connect": ["tls/shore.example:7447"],
         "tls": {"root_ca_certificate": "/ca.pem", "connect_certificate": "/c.pem",
                 "connect_private_key": "/k.pem", "enable_mtls": True},
         "auth": {"user": "buoy", "password": "pw"},
-    })
+    }, "zenoh")
     assert zc.listen == ()  # a client listens on nothing unless told to
     conf = session_config_dict(zc)
     assert conf["mode"] == "client"
@@ -67,7 +68,7 @@ def test_sections_parse_given_values():
     ("zenoh", {"connect": [7447]}, "zenoh.connect = [7447]"),
     ("zenoh", {"mode": "client"}, "zenoh.connect = []: client mode needs at least one endpoint"),
     ("zenoh", {"multicast_scouting": "no"}, "zenoh.multicast_scouting = 'no': must be true or false"),
-    ("zenoh", {"status_interval_s": 5}, "zenoh.status_interval_s = 5.0: must be <= 1"),
+    ("zenoh", {"status_interval_s": 5}, "zenoh.status_interval_s = 5: must be a finite number > 0 and <= 1"),
     ("zenoh", {"status_interval_s": 0}, "zenoh.status_interval_s = 0: must be a finite number > 0"),
     ("zenoh", {"port": 7447}, "zenoh.port = 7447: unknown key"),
     ("zenoh", {"tls": {"listen_certificate": "/c.pem"}},
@@ -76,7 +77,7 @@ def test_sections_parse_given_values():
     ("zenoh", {"tls": {"enable_mtls": 1}}, "zenoh.tls.enable_mtls = 1: must be true or false"),
     ("zenoh", {"auth": {"user": "u"}}, "zenoh.auth.password = None: user and password"),
     ("zenoh", {"auth": {"token": "x"}}, "zenoh.auth.token = 'x': unknown key"),
-    ("zenoh", "peer", "[zenoh] must be a table"),
+    ("zenoh", "peer", "zenoh = 'peer': must be a table"),
     ("state", {"path": ""}, "state.path = '': must be a non-empty string"),
     ("state", {"checkpoint_interval_s": -1}, "state.checkpoint_interval_s = -1: must be a finite number > 0"),
     ("state", {"checkpoint_interval_s": float("nan")}, "state.checkpoint_interval_s = nan"),
@@ -109,6 +110,7 @@ def test_invalid_config_names_key_and_value(section, d, message):
 
 
 def test_section_classes_parse_alone():
-    assert TlsConfig.from_dict({}, "zenoh.tls") == TlsConfig()
-    assert AuthConfig.from_dict({"dictionary_file": "/u.txt"}, "zenoh.auth").dictionary_file == "/u.txt"
-    assert HealthConfig.from_dict({}, "health").data_age_timeout_s["gnss"] == 10.0
+    assert parse_struct(TlsConfig, {}, "zenoh.tls") == TlsConfig()
+    assert parse_struct(AuthConfig, {"dictionary_file": "/u.txt"}, "zenoh.auth"
+                        ).dictionary_file == "/u.txt"
+    assert parse_struct(HealthConfig, {}, "health").data_age_timeout_s["gnss"] == 10.0

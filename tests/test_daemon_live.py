@@ -9,6 +9,7 @@ are scraped over HTTP and parsed with prometheus_client's parser, then compared 
 import json
 import os
 import queue
+import re
 import socket
 import sqlite3
 import subprocess
@@ -16,6 +17,7 @@ import sys
 import time
 import urllib.error
 import urllib.request
+from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
@@ -355,6 +357,23 @@ def test_metrics_port_in_use_is_a_clear_error_at_start(tmp_path):
     assert "Traceback" not in out.stderr
 
 
+def test_zenoh_port_in_use_is_a_clear_error_at_start(tmp_path):
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        taken = busy.getsockname()[1]
+        cfg = tmp_path / "cfg.toml"
+        cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
+                       + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{taken}"]\n'
+                       f'[state]\npath = "{tmp_path / "state.sqlite"}"\n'
+                       f'[metrics]\nport = {free_port()}\n')
+        out = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
+                             env=ENV, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert f"[zenoh] cannot open the session (listen ['tcp/127.0.0.1:{taken}'], connect [])" \
+        in out.stderr and "Address already in use" in out.stderr
+
+
 def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     port = free_port()
     cfg = write_config(tmp_path / "cfg.toml", port, tmp_path / "state.sqlite")
@@ -363,14 +382,58 @@ def test_status_of_a_stopped_daemon_reads_the_state_file(tmp_path):
     subprocess.run([sys.executable, HARNESS, "publish", f"tcp/127.0.0.1:{port}", "5", "0"],
                    env=ENV, check=True, capture_output=True, timeout=60)
     wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 5)
+    js = status_cli(cfg)
+    assert js["source"] == "daemon" and js["running"] is True
     assert d.terminate() == 0
+    stopped = time.time_ns()
+    time.sleep(1.0)  # the status's age must count from the daemon's last checkpoint
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config", str(cfg)],
                          env=ENV, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    assert "daemon NOT RUNNING" in out.stdout
     assert "tension" in out.stdout and "100" in out.stdout  # 5 blocks of 20 samples
+    # not running, when last seen, and the checkpoint's health only as history: never "ok"
+    with sqlite3.connect(tmp_path / "state.sqlite") as db:
+        saved_ns = db.execute("SELECT saved_ns FROM checkpoint WHERE id = 1").fetchone()[0]
+    assert saved_ns <= stopped
+    seen = datetime.fromtimestamp(saved_ns / 1e9, tz=timezone.utc)
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith(f"buoy {BUOY}: daemon NOT RUNNING (no answer); last seen "
+                               f"{seen:%Y-%m-%d %H:%M:%S} UTC (its last checkpoint), ")
+    assert re.fullmatch(r"health: NOT RUNNING \(at the last checkpoint: (ok|FAILING)\)", lines[1])
+    assert "health: ok" not in out.stdout
     js = status_cli(cfg)
     assert js["source"] == "state file" and js["status"]["streams"]["tension"]["accepted"] == 100
+    assert js["running"] is False and js["status"]["health"]["ok"] is False
+    assert js["last_seen"] == f"{seen:%Y-%m-%dT%H:%M:%S.%f}Z"
+    assert js["last_seen_age_s"] >= 1.0
+    assert "daemon not running" in js["status"]["health"]["reasons"][0]
+    assert set(js["status"]["health"]["at_last_checkpoint"]) >= {"ok", "reasons"}
+    # `alerts list` of the stopped daemon's configuration: its checkpoint's alerts, said so
+    # (was "no answer from buoy" and status 1); ack/reset name --state instead of guessing.
+    # This daemon has no alert rules (no engine state), and perhaps no live alert: listed
+    # as none (was "state has no "alerts" entry", status 1), its buoy id from the status
+    out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "list", "--config",
+                          str(cfg), "--timeout", "1", "--json"], env=ENV, capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert f"the alerts of its last checkpoint ({tmp_path / 'state.sqlite'}) follow" in out.stderr
+    listed = json.loads(out.stdout)
+    assert listed["buoy"] == BUOY and isinstance(listed["alerts"], list)
+    out = subprocess.run([sys.executable, "-m", "monitor.cli", "alerts", "ack", "x", "--who", "a",
+                          "--why", "b", "--config", str(cfg), "--timeout", "1"], env=ENV,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1
+    assert f"--state {tmp_path / 'state.sqlite'} acts on its checkpoint" in out.stderr
+    # `status --watch | head -1`: the reader goes away; the command ends quietly, status 0
+    # (was "buoymon status: [Errno 32] Broken pipe", status 1)
+    watch = subprocess.Popen([sys.executable, "-m", "monitor.cli", "status", "--config",
+                              str(cfg), "--watch"], env=ENV, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    assert "daemon NOT RUNNING" in watch.stdout.readline()
+    watch.stdout.close()
+    assert watch.wait(timeout=60) == 0
+    err = watch.stderr.read()
+    assert "Broken pipe" not in err and "Traceback" not in err and "Exception" not in err
     # no state file either: a clear error naming it
     (tmp_path / "state.sqlite").unlink()
     out = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config", str(cfg)],

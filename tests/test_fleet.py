@@ -142,6 +142,25 @@ def test_no_buoy_without_a_rate_outranks_one_with_a_rate():
     assert [b["buoy_id"] for b in fleet["buoys"]] == ["young", "old", "quiet"]
 
 
+def test_summary_shows_alerts_on_streams_and_the_line():
+    """A buoy whose only active alert is on its tension stream (rejected_rate): the table
+    said "-" for every row while fleet.json counted the alert."""
+    from replay.fleet import fleet_summary_text  # noqa: PLC0415
+
+    def alert(rule, component):
+        return {"fingerprint": rule + component, "state": "firing", "rule": rule,
+                "severity": "warning", "labels": {"component": component}, "starts_at_ns": 0}
+    rep = {"buoy_id": "b1", "time_start": None, "time_end": None, "inputs": {"files": []},
+           "alerts": [alert("rejected_rate", "tension"), alert("conductor_stress", "c")],
+           "components": {"c": {"damage": 0.1, "damage_committed": 0.1,
+                                "damage_rate_per_day": 0.01, "remaining_life_days": 90.0,
+                                "max_stress_Pa": 1.0}}}
+    lines = fleet_summary_text(fleet_report([rep])).splitlines()
+    assert lines[2].endswith("  conductor_stress:warning")
+    assert lines[3].split() == ["also", "active:", "rejected_rate:warning", "(tension)"]
+    assert len(lines) == 4
+
+
 def test_a_file_shared_by_two_buoys_is_replayed_for_each(tmp_path):
     import numpy as np
 

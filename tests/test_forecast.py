@@ -135,6 +135,102 @@ def test_forecast_command_of_the_seed_storm(tmp_path):
 
 
 @pytest.mark.integration  # the CLI end to end
+def test_forecast_prints_rate_and_remaining_life_of_a_hand_calculation(tmp_path):
+    """docs/FORECAST.md promises the damage rate and the remaining life at the end, printed
+    and in the JSON. A table rating every bin 0.02 / h (conductor) and 0.01 / h (termination),
+    ten hourly steps, the conductor at 0.3 already: by hand the conductor ends at
+    0.3 + 10 x 0.02 = 0.5 at 0.2 / (10/24) = 0.48 per day, so (1 - 0.5) / 0.48 = 1.0417 days
+    remain; the termination ends at 0.1 at 0.24 per day, 0.9 / 0.24 = 3.75 days."""
+    names = [c.name for c in default_config().components]
+    assert names == ["conductor", "conductor_termination"]
+    from models.sea_state_table import HS_EDGES_M, TP_EDGES_S  # noqa: PLC0415
+    table = DamageRateTable(names, HS_EDGES_M, TP_EDGES_S)
+    rate = np.ones_like(table.model_rate)
+    rate[0] *= 0.02
+    rate[1] *= 0.01
+    table.set_model_rate(rate)
+    (tmp_path / "t.json").write_text(json.dumps(table.to_state()))
+    (tmp_path / "r.json").write_text(json.dumps(
+        {"components": {"conductor": {"damage": 0.3}, "conductor_termination": {"damage": 0.0}}}))
+    fc = tmp_path / "f.csv"
+    fc.write_text("time_s,hs_m,tp_s\n" + "".join(f"{3600 * h},2.0,8.0\n" for h in range(10)))
+    p = _buoymon("forecast", "--sea-states", str(fc), "--table", str(tmp_path / "t.json"),
+                 "--report", str(tmp_path / "r.json"), "--json", str(tmp_path / "o.json"),
+                 cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    comps = json.loads((tmp_path / "o.json").read_text())["components"]
+    for name, end, per_day, life in (("conductor", 0.5, 0.48, 0.5 / 0.48),
+                                     ("conductor_termination", 0.1, 0.24, 3.75)):
+        c = comps[name]
+        assert c["damage_end"] == pytest.approx(end, rel=1e-12)
+        assert c["damage_rate_per_day"] == pytest.approx(per_day, rel=1e-12)
+        assert c["remaining_life_days_at_end"] == pytest.approx(life, rel=1e-12)
+    lines = p.stdout.splitlines()
+    cond = lines.index(next(ln for ln in lines if ln.startswith("  conductor:")))
+    assert lines[cond + 1] == ("    damage rate 0.48 per day (the forecast's mean); remaining "
+                               "life at the end 1.04 days at that rate (25 h)")
+    term = lines.index(next(ln for ln in lines if ln.startswith("  conductor_termination:")))
+    assert lines[term + 1] == ("    damage rate 0.24 per day (the forecast's mean); remaining "
+                               "life at the end 3.75 days at that rate")
+    # calm seas: nothing accrues, the life is unlimited, and the JSON stays strict (null)
+    table.set_model_rate(np.zeros_like(table.model_rate))
+    (tmp_path / "t.json").write_text(json.dumps(table.to_state()))
+    p = _buoymon("forecast", "--sea-states", str(fc), "--table", str(tmp_path / "t.json"),
+                 "--json", str(tmp_path / "o.json"), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "remaining life at the end unlimited (no damage accrues)" in p.stdout
+    text = (tmp_path / "o.json").read_text()
+    assert "Infinity" not in text
+    assert json.loads(text)["components"]["conductor"]["remaining_life_days_at_end"] is None
+
+
+def _flat_table(path: Path, rate_per_hour: float) -> Path:
+    """A table rating every bin of the shipped components ``rate_per_hour``."""
+    from models.sea_state_table import HS_EDGES_M, TP_EDGES_S  # noqa: PLC0415
+    table = DamageRateTable([c.name for c in default_config().components], HS_EDGES_M, TP_EDGES_S)
+    table.set_model_rate(np.full_like(table.model_rate, rate_per_hour))
+    path.write_text(json.dumps(table.to_state()))
+    return path
+
+
+def test_forecast_names_wrong_files_and_counts_skipped_and_impossible_rows(tmp_path, capsys):
+    """A report given as --table, a CSV as --report, a report with a NaN damage: each named
+    with the file and what it should be (was a bare KeyError: "buoymon forecast: 'hs_edges_m'").
+    Rows skipped and sea states that cannot exist are said in the output's first line."""
+    from monitor.cli import main  # noqa: PLC0415
+    fc = tmp_path / "f.csv"
+    fc.write_text("time,hs_m,tp_s\n2026-11-25T00:00:00Z,nan,5\n2026-11-25T01:00:00Z,1.5,5.25\n"
+                  "2026-11-25T00:30:00Z,1.5,5.25\n2026-11-25T02:00:00Z,9,5.25\n")
+    report = tmp_path / "r.json"
+    report.write_text(json.dumps({"report_version": 1, "components": {}}))
+    table = _flat_table(tmp_path / "t.json", 0.01)
+    for args, message in (
+            (["--table", str(report)], f"{report}: not a damage-rate table (buoymon forecast "
+                                       "--save-table): no 'hs_edges_m'"),
+            (["--table", str(fc)], f"{fc}: not JSON, expected a damage-rate table"),
+            (["--table", str(table), "--report", str(fc)], f"{fc}: not JSON, expected a replay "
+                                                           "report"),
+            (["--table", str(table), "--report", str(table)], f"{table}: not a replay report "
+                                                              "(buoymon replay --report)"),
+            (["--table", str(table), "--report", str(report)], f"{report}: no component "
+                                                               "'conductor' in the report")):
+        assert main(["forecast", "--sea-states", str(fc), *args]) == 2
+        assert message in capsys.readouterr().err
+    report.write_text(json.dumps({"components": {"conductor": {"damage": "nan"},
+                                                 "conductor_termination": {"damage": 0.0}}}))
+    assert main(["forecast", "--sea-states", str(fc), "--table", str(table),
+                 "--report", str(report)]) == 2
+    assert "component 'conductor': damage = 'nan': must be a finite number >= 0" in \
+        capsys.readouterr().err
+    # Hs 9 m at 5.25 s breaks above 6.1 m in 23 m (tests/test_waves.py): not a possible sea
+    assert main(["forecast", "--sea-states", str(fc), "--table", str(table)]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first == ("forecast 2026-11-25T01:00:00Z to 2026-11-25T03:00:00Z (2 steps, 1 not a "
+                     "possible sea (Hs above the breaking height of its Tp); rows skipped: 1 "
+                     "missing or impossible Hs/Tp; 1 time not increasing)")
+
+
+@pytest.mark.integration  # the CLI end to end
 def test_forecast_refuses_bad_input(tmp_path):
     bad = tmp_path / "x.csv"
     bad.write_text("time,hs_m,tp_s\n2026-01-01T00:00:00Z,-1,5\n")

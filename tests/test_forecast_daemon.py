@@ -196,3 +196,22 @@ def _empty_table() -> dict:
 
     names = [c.name for c in default_config().components]
     return DamageRateTable(names, HS_EDGES_M, TP_EDGES_S).to_state()
+
+
+@pytest.mark.integration  # a Zenoh session on loopback
+def test_a_forecast_nobody_subscribes_to_is_not_reported_as_sent(tmp_path):
+    """No daemon on the endpoint: an error (the CLI exits 1), not "sent to ..." with the
+    forecast put into the void. (The wait for a subscriber tested the MatchingStatus object,
+    always true, not its ``matching``: it never waited, with a daemon either.)"""
+    from replay.cmd_forecast import publish_forecast  # noqa: PLC0415
+
+    fc = tmp_path / "f.csv"
+    fc.write_text("time_s,hs_m,tp_s\n0,1.5,5.25\n3600,1.5,5.25\n")
+    port = free_port()
+    t0 = time.monotonic()
+    with pytest.raises(OSError, match=f"no daemon of buoy 'vaps' subscribed to "
+                                      f"buoy/vaps/forecast/waves via \\['tcp/127.0.0.1:{port}'\\] "
+                                      "within 1 s: the forecast was not sent"):
+        publish_forecast("vaps", read_sea_states(fc), [f"tcp/127.0.0.1:{port}"],
+                         wait_for_subscriber_s=1.0)
+    assert time.monotonic() - t0 >= 1.0

@@ -71,3 +71,19 @@ def test_publish_refuses_non_loopback_endpoints(tmp_path, capsys, endpoint, mess
 def test_output_or_publish_is_required(capsys):
     assert main(["simulate", "--hours", "0.01", "--hs", "1.5", "--tp", "5.25", "--seed", "3"]) == 2
     assert "-o/--output is required" in capsys.readouterr().err
+
+
+def test_publish_module_says_when_nothing_could_be_sent(tmp_path, capsys):
+    """A missing or unreadable log: exit status 1 and a message (was "0", status 0); a
+    malformed endpoint is a usage error (was a zenoh.ZError traceback)."""
+    from replay.publish import main as publish_main  # noqa: PLC0415
+
+    garbage = tmp_path / "g.mcap"
+    garbage.write_bytes(b"not an mcap file")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    for log in (tmp_path / "nothere.mcap", garbage):
+        assert publish_main([str(log), "--connect", endpoint]) == 1
+        assert f"no sensor block could be read from ['{log}']" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        publish_main([str(garbage), "--connect", "garbage"])
+    assert exc.value.code == 2 and "'garbage' is not a Zenoh endpoint" in capsys.readouterr().err

@@ -1,7 +1,6 @@
 """monitor.load_source.LoadSelector: which estimated samples feed fatigue."""
 
-import dataclasses
-
+import msgspec
 import numpy as np
 import pytest
 
@@ -27,7 +26,7 @@ def reference_use(m_t, e_t, prev, stale_ns):
 @pytest.mark.parametrize("seed", range(40))
 def test_needed_matches_the_rule_and_select_uses_exactly_those(seed):
     rng = np.random.default_rng(seed)
-    cfg = dataclasses.replace(default_config().load, source="auto", stale_after_s=5.0)
+    cfg = msgspec.structs.replace(default_config().load, source="auto", stale_after_s=5.0)
     sel = LoadSelector(cfg)
     stale_ns = sel.stale_ns
     t0 = 0
@@ -53,7 +52,7 @@ def test_needed_matches_the_rule_and_select_uses_exactly_those(seed):
 def test_clamped_estimates_that_feed_fatigue_are_counted(source):
     """Estimates of motion outside the model's range (held at its edge) are used, and the
     ones used are counted; the count is saved with the state."""
-    cfg = dataclasses.replace(default_config().load, source=source, stale_after_s=5.0)
+    cfg = msgspec.structs.replace(default_config().load, source=source, stale_after_s=5.0)
     sel = LoadSelector(cfg, {"last_measured_ns": None})  # a state from before the count
     e_t = np.arange(1, 41, dtype=np.int64) * (S // 10)  # 4 s of estimates, no tension
     e_v = np.full(e_t.shape, 800.0)

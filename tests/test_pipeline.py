@@ -28,6 +28,9 @@ class FakeEstimator:
     def state(self):
         return {}
 
+    def rate_figures(self):
+        return {"setting": "auto", "hz": 10.0, "samples_rate_mismatch": 0, "rate_changes": 0}
+
 
 class RecordingEngine:
     """Alert engine stand-in that records every Observation it is given."""

@@ -121,26 +121,44 @@ def _spotter(rows: slice):
     return d[:, 0] - d[0, 0], d[:, 1:] / 1000.0  # s from the first row; x, y, z in m
 
 
-def test_spotter_motion_glitches_are_counted_as_clamped_estimates(tmp_path, capsys):
-    # the shipped configuration, the load estimated from the Spotter's 2.5 Hz displacements
+def _spotter_config(tmp_path, rate: str | None):
+    """The shipped configuration, the load estimated from the Spotter's displacements, the
+    check-factor test off (so that the glitches, which it rejects, reach the estimator), and
+    ``motion_rate_hz`` as shipped ("auto") or set to ``rate``."""
     text = (Path(__file__).resolve().parents[1] / "monitor/vaps_seed004.toml").read_text()
-    for old, new in (('source = "auto"', 'source = "estimated"'),
-                     ('motion_sensor = "auto"', 'motion_sensor = "motion"'),
-                     ("motion_rate_hz = 10.0", "motion_rate_hz = 2.5")):
+    edits = [('source = "auto"', 'source = "estimated"'),
+             ('motion_sensor = "auto"', 'motion_sensor = "motion"'),
+             ("[validate.imu]\n", "[validate.motion]\ncheck_factor = false\n\n[validate.imu]\n")]
+    if rate is not None:
+        edits.append(('motion_rate_hz = "auto"', f"motion_rate_hz = {rate}"))
+    for old, new in edits:
         assert old in text
         text = text.replace(old, new)
-    config = tmp_path / "motion.toml"
+    config = tmp_path / f"motion-{rate}.toml"
     config.write_text(text)
+    return config
+
+
+def _spotter_replay(tmp_path, name, rows, config):
+    s, xyz = _spotter(rows)
+    out = tmp_path / name
+    out.mkdir()
+    return s, xyz, _replay_csv(out, "time_s,surge_m,sway_m,heave_m",
+                               [f"{a!r},{x!r},{y!r},{z!r}"
+                                for a, (x, y, z) in zip(s.tolist(), xyz.tolist())],
+                               "--config", str(config))
+
+
+def test_spotter_motion_glitches_are_counted_as_clamped_estimates(tmp_path, capsys):
+    # the load estimated from the Spotter's 2.5 Hz displacements, the estimator's step taken
+    # from the stream itself (motion_rate_hz = "auto", as shipped)
+    config = _spotter_config(tmp_path, None)
     reports = {}
     for name, rows in (("clean", slice(466, 9466)), ("glitches", slice(180_000, 190_000))):
-        s, xyz = _spotter(rows)
-        out = tmp_path / name
-        out.mkdir()
-        reports[name] = _replay_csv(out, "time_s,surge_m,sway_m,heave_m",
-                                    [f"{a!r},{x!r},{y!r},{z!r}"
-                                     for a, (x, y, z) in zip(s.tolist(), xyz.tolist())],
-                                    "--config", str(config))
+        s, xyz, reports[name] = _spotter_replay(tmp_path, name, rows, config)
         capsys.readouterr()
+        assert reports[name]["motion_rate"] == {"setting": "auto", "hz": 2.5,
+                                                "samples_rate_mismatch": 0, "rate_changes": 0}
         motion = reports[name]["samples"]["motion"]
         rejected = sum(motion["rejected"].values())  # QARTOD fails (issue 17): glitch jumps
         assert motion["accepted"] + rejected == s.shape[0]
@@ -158,3 +176,38 @@ def test_spotter_motion_glitches_are_counted_as_clamped_estimates(tmp_path, caps
     calm = reports["clean"]["tension_N"]
     assert 150.0 < calm["mean"] < 300.0 and calm["max"] < 2_000.0  # the ~220 N static tension
     assert reports["glitches"]["tension_N"]["max"] > 10 * calm["max"]
+    # these figures from before the step was measured, with motion_rate_hz = 2.5 configured:
+    # the same step (0.4 s), the same numbers to the bit
+    assert calm["max"] == 391.2895059703259 and calm["mean"] == 218.7193252945099
+    assert reports["glitches"]["tension_N"]["max"] == 54693.17641660233
+    assert reports["glitches"]["components"]["conductor"]["damage"] == 0.43572055051176856
+
+
+def test_spotter_auto_rate_equals_the_configured_rate_and_a_wrong_rate_is_reported(
+        tmp_path, capsys):
+    """The shipped "auto" gives the report of motion_rate_hz = 2.5 to the bit; the old
+    default, 10 Hz, withholds every sample after the first from the estimator and says so."""
+    rows = slice(466, 9466)
+    _, _, auto = _spotter_replay(tmp_path, "auto", rows, _spotter_config(tmp_path, None))
+    assert ("  motion estimator stepped at 2.5 Hz (the stream's own spacing)\n"
+            in capsys.readouterr().out)
+    _, _, fixed = _spotter_replay(tmp_path, "fixed", rows, _spotter_config(tmp_path, "2.5"))
+    capsys.readouterr()
+    s, _, wrong = _spotter_replay(tmp_path, "wrong", rows, _spotter_config(tmp_path, "10.0"))
+    summary = capsys.readouterr().out
+    assert "  motion estimator stepped at 10 Hz ([load] motion_rate_hz)\n" in summary
+    assert "  LOAD: 8,999 motion samples gave no load estimate: their spacing is not" in summary
+    assert fixed["motion_rate"] == {"setting": 2.5, "hz": 2.5, "samples_rate_mismatch": 0,
+                                    "rate_changes": 0}
+    for key in ("config", "motion_rate", "inputs"):
+        del auto[key], fixed[key]
+    assert auto == fixed
+    n = s.shape[0]
+    assert wrong["motion_rate"] == {"setting": 10.0, "hz": 10.0,
+                                    "samples_rate_mismatch": n - 1, "rate_changes": 0}
+    assert wrong["tension_N"]["samples_estimated"] == 0
+    assert wrong["samples"]["motion"]["accepted"] == n
+    assert (f"{n - 1:,d} motion samples gave no load estimate: their spacing is not [load] "
+            "motion_rate_hz = 10 Hz (rate_mismatch; set motion_rate_hz = \"auto\" to take the "
+            "stream's own)") in wrong["load_problems"]
+    assert "no load could be formed: fatigue damage is not being computed" in wrong["load_problems"]

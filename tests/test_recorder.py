@@ -7,10 +7,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 
+from monitor import codec
+from monitor.blocks import SampleBlock
 from monitor.recorder import JSON_OBJECT, ChannelSpec, McapRecorder
+from replay.reader import LogReader
 
 REPO = Path(__file__).resolve().parents[1]
 H = 3_600_000_000_000  # one hour in ns
@@ -129,3 +133,55 @@ def test_record_command_stamps_documents_with_their_sensor_time():
         ("buoy/b1/monitor/other", recv, recv),
         ("buoy/b1/monitor/status", recv, recv),
         ("buoy/b1/monitor/broken", recv, recv)]
+
+
+def test_a_killed_recording_with_a_damaged_first_chunk_decodes_the_later_ones(tmp_path):
+    """The recorder writes the logs' layout (monitor.mcap_file): channel definitions at top
+    level, so losing the chunk with a channel's first messages, in a file without summary
+    (killed), costs those messages only. (mcap's Writer put the definition inside that chunk:
+    every later message of the channel was then undecodable.)"""
+    spec = ChannelSpec(codec.schema_name("tension"), "protobuf",
+                       codec.file_descriptor_set("tension"), "protobuf")
+    rec = McapRecorder(tmp_path, flush_interval_s=10)
+    s = 1_000_000_000
+    for k in range(60):  # a chunk per 10 s
+        t = T0 + k * s + np.arange(20, dtype=np.int64) * (s // 20)
+        block = SampleBlock("b1", "tension", t, {"tension_N": k * 20 + np.arange(20.0)})
+        rec.write("buoy/b1/sensor/tension", codec.encode_block(block), spec, T0 + (k + 1) * s,
+                  int(t[0]))
+    rec.close()
+    (path,) = rec.files
+    with open(path, "rb") as f:
+        chunks = sorted(make_reader(f).get_summary().chunk_indexes,
+                        key=lambda c: c.chunk_start_offset)
+    first, last = chunks[0], chunks[-1]
+    data = bytearray(Path(path).read_bytes()[:last.chunk_start_offset + last.chunk_length])
+    data[first.chunk_start_offset + first.chunk_length - 5] ^= 0xFF  # its compressed records
+    killed = tmp_path / "killed.mcap"  # no DataEnd, summary or footer
+    killed.write_bytes(bytes(data))
+    reader = LogReader(killed, coalesce=True)
+    values = np.concatenate([b.fields["tension_N"] for b in reader])
+    st = reader.stats[0]
+    lost = st.lost[0].end_ns - T0  # the first chunk's log times: seconds 1 .. n
+    n_first = lost // s
+    assert 0 < n_first < 60 and not st.skipped and not st.complete
+    assert np.array_equal(values, np.arange(n_first * 20, 60 * 20.0))
+
+
+def test_record_command_without_a_daemon_is_a_clear_error(tmp_path):
+    """Nothing listens on the daemon's endpoint: exit status 1 and a message naming the buoy,
+    the endpoint and the likely cause (was a zenoh.ZError traceback)."""
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
+                   + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n')
+    p = subprocess.run([sys.executable, "-m", "monitor.cli", "record", "--config", str(cfg),
+                        "-o", str(tmp_path / "rec")], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    assert (f"cannot reach the daemon of buoy 'vaps' at ['tcp/127.0.0.1:{port}'] ([zenoh] of "
+            f"{cfg}): is `buoymon run` running?") in p.stderr

@@ -57,7 +57,8 @@ def test_report_contract_and_summary(tmp_path):
     assert report["time_start"] == "2023-11-14T22:13:20.000Z"  # T0 = 1.7e9 s
     assert set(report["samples"]) == {"tension", "imu", "gnss"}
     assert set(report["samples"]["tension"]["rejected"]) == {
-        "nan", "out_of_range", "spike", "duplicate", "time_backwards", "flat_line"}
+        "nan", "out_of_range", "spike", "duplicate", "time_backwards", "flat_line",
+        "check_factor"}
     assert set(report["samples"]["tension"]["qc"]) == {
         "gross_range", "spike", "rate_of_change", "flat_line"}
     assert set(report["samples"]["gnss"]["qc"]) >= {"location"}
@@ -208,3 +209,9 @@ def test_logs_are_replayed_in_time_order_from_folders_and_sub_folders(tmp_path, 
     twice = json.loads((tmp_path / "twice.json").read_text())
     assert twice["samples"] == arch["samples"] and len(twice["inputs"]["files"]) == 3
     capsys.readouterr()
+    # a folder without logs among others is named (was silent)
+    (tmp_path / "empty").mkdir()
+    assert main(["replay", str(tmp_path / "one.mcap"), str(tmp_path / "empty"),
+                 "--report", str(tmp_path / "e.json")]) == 0
+    assert f"{tmp_path / 'empty'}: no *.mcap file in this folder" in capsys.readouterr().err
+    assert json.loads((tmp_path / "e.json").read_text())["samples"] == one["samples"]

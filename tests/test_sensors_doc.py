@@ -51,7 +51,7 @@ def test_the_reference_names_every_source_key():
     ref = DOC.split("### `[[source]]`")[1].split("## Time")[0]
     documented = set(re.findall(r"^\| `(\w+)`(?:, `(\w+)`)?", ref, re.M))
     names = {n for pair in documented for n in pair if n}
-    assert names == set(SourceConfig.__dataclass_fields__)
+    assert names == set(SourceConfig.__struct_fields__)
 
 
 def test_the_custom_driver_as_printed_publishes_a_polled_load_cell(tmp_path):

@@ -247,3 +247,18 @@ def test_shore_command_rejects_a_bad_configuration(tmp_path):
     bad.write_text('[buoy]\nid = "x"\n[[component]]\nname = "c"\nlay = "up"\n')
     assert main(["shore", "--config", str(bad)]) == 2
     assert main(["shore", "--max-buoys", "0"]) == 2
+
+
+def test_shore_command_with_nothing_to_connect_to_is_a_clear_error(tmp_path):
+    """No router or daemon on the configured endpoint: exit status 1 and a message naming
+    it (was a zenoh.ZError traceback)."""
+    port = free_port()
+    cfg = tmp_path / "fleet.toml"
+    cfg.write_text((ROOT / "monitor" / "vaps_seed004.toml").read_text()
+                   + f'\n[zenoh]\nmode = "client"\nconnect = ["tcp/127.0.0.1:{port}"]\n')
+    p = subprocess.run([sys.executable, "-m", "monitor.cli", "shore", "--config", str(cfg)],
+                       env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr
+    assert (f"cannot join the Zenoh network as a client of ['tcp/127.0.0.1:{port}']: is a "
+            "router or `buoymon run` listening there?") in p.stderr

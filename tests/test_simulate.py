@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -152,6 +154,41 @@ def test_cli(tmp_path, capsys):
     assert main(["simulate", "-o", str(out), "--hours", "1", "--hs", "1", "--tp", "6",
                  "--seed", "3", "--mean-span", "33"]) == 2
     assert "cannot reach" in capsys.readouterr().err
+
+
+def test_cli_warns_of_an_impossible_sea_and_refuses_a_meaningless_one(tmp_path, capsys):
+    """Hs 50 m at Tp 8 s in the mooring's 23 m: waves of 8 s break above 12.0 m (Miche,
+    tests/test_waves.py), and 50 m is beyond the 10 m sea-state table; the loads it produces
+    are above the 45 kN break. A real process says all three on stderr and still writes the
+    log (a design study may want it); a plausible sea says nothing."""
+    out = tmp_path / "x.mcap"
+    p = subprocess.run([sys.executable, "-m", "monitor.cli", "simulate", "-o", str(out),
+                        "--hours", "0.01", "--hs", "50", "--tp", "8", "--seed", "1"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    warnings = [ln for ln in p.stderr.splitlines() if "warning:" in ln]
+    assert len(warnings) == 3, p.stderr
+    assert "Hs 50 m is not a possible sea at Tp 8 s in 23 m of water: waves of that period " \
+           "break above 12 m" in warnings[0]
+    assert "beyond the sea-state table" in warnings[1] and "Hs 0 to 10 m" in warnings[1]
+    assert "above the cable's 45,000 N breaking load" in warnings[2]
+    assert out.exists()
+    # Hs beyond the table at a long period breaks nothing: only the table warning
+    assert main(["simulate", "-o", str(out), "--hours", "0.01", "--hs", "1", "--tp", "26",
+                 "--seed", "1"]) == 0
+    err = capsys.readouterr().err
+    assert "beyond the sea-state table" in err and "not a possible sea" not in err
+    assert main(["simulate", "-o", str(out), "--hours", "0.01", "--hs", "1.5", "--tp", "5.25",
+                 "--seed", "1"]) == 0
+    assert "warning" not in capsys.readouterr().err
+    for hs, message in (("0", "hs_m = 0.0: must be a finite number > 0"),
+                        ("-2", "hs_m = -2.0: must be"), ("nan", "hs_m = nan: must be")):
+        assert main(["simulate", "-o", str(out), "--hours", "0.01", "--hs", hs, "--tp", "8",
+                     "--seed", "1"]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["simulate", "-o", str(out), "--hours", "0.01", "--hs", "1", "--tp", "inf",
+                 "--seed", "1"]) == 2
+    assert "tp_s = inf: must be a finite number > 0" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("kw, message", [

@@ -29,7 +29,7 @@ def test_each_reason_is_detected_and_counted():
                    "ok", "ok"]
     assert val.accepted == 4
     assert val.rejected == {"nan": 1, "out_of_range": 1, "spike": 1, "duplicate": 1,
-                            "time_backwards": 1, "flat_line": 0}
+                            "time_backwards": 1, "flat_line": 0, "check_factor": 0}
     assert val.last_t_ns == int(0.6 * S) and val.last_values[0] == 1120
 
 

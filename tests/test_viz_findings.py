@@ -194,3 +194,13 @@ def test_status_screen_shows_remaining_life_in_words():
     assert rows["conductor"].endswith("  6.5 h")
     assert rows["right"].endswith("  more than 1,000 years") and "e+107" not in text
     assert rows["spent"].endswith("  none (failed)")
+
+
+def test_status_screen_says_when_fatigue_was_never_fed():
+    """A daemon that has had no load sample since its start: not "fatigue fed 9.3 s ago"."""
+    from monitor.cmd_status import render
+
+    doc = {"buoy_id": "vaps", "load_t_ns": None, "fatigue_feed_age_s": 9.3}
+    assert "fatigue not fed yet (9.3 s since the start)" in render("daemon", doc)
+    doc["load_t_ns"] = 946684800 * 10**9
+    assert "fatigue fed 9.3 s ago" in render("daemon", doc)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from monitor.blocks import SampleBlock
+from monitor.schema import ConfigError, parse_struct
 from monitor.viz.rerun_options import RerunOptions
 from monitor.viz.rerun_outputs import analytics_disabled, analytics_disabled_env, open_recording
 from monitor.viz.rerun_sink import RerunSink, entity_part, local_east_north
@@ -229,23 +230,30 @@ def test_local_east_north_against_haversine():
 
 
 def test_options_errors_name_the_key():
-    with pytest.raises(ValueError, match=r"rerun.envelope_s = -1"):
-        RerunOptions(envelope_s=-1)
-    with pytest.raises(ValueError, match=r"rerun.range_edges_Pa"):
-        RerunOptions.from_toml({"range_edges_Pa": [1.0, 1.0]})
-    with pytest.raises(ValueError, match=r"rerun.mean_edges_Pa"):
-        RerunOptions.from_toml({"mean_edges_Pa": ["a", "b"]})
-    with pytest.raises(ValueError, match=r"rerun.colour: unknown key"):
-        RerunOptions.from_toml({"colour": "red"})
-    with pytest.raises(ValueError, match=r"rerun.anchor_lat_deg = 91"):
-        RerunOptions(anchor_lat_deg=91.0)
-    with pytest.raises(ValueError, match=r"rerun.rrd = 5"):
-        RerunOptions.from_toml({"rrd": 5})
-    with pytest.raises(ValueError, match=r"rerun.connect"):
-        RerunOptions(connect="http://0.0.0.0:9876")
+    def parse(table):
+        return parse_struct(RerunOptions, table, "rerun")
+
+    with pytest.raises(ConfigError, match=r"rerun.envelope_s = -1: must be a finite number >= 0"):
+        parse({"envelope_s": -1})
+    with pytest.raises(ConfigError, match=r"rerun.range_edges_Pa = \[1.0, 1.0\]: must be at least"):
+        parse({"range_edges_Pa": [1.0, 1.0]})
+    with pytest.raises(ConfigError, match=r"rerun.mean_edges_Pa = \['a', 'b'\]"):
+        parse({"mean_edges_Pa": ["a", "b"]})
+    with pytest.raises(ConfigError, match=r"rerun.colour = 'red': unknown key"):
+        parse({"colour": "red"})
+    with pytest.raises(ConfigError, match=r"rerun.anchor_lat_deg = 91.0: must be a finite number "
+                       ">= -90 and <= 90"):
+        parse({"anchor_lat_deg": 91.0})
+    with pytest.raises(ConfigError, match=r"rerun.rrd = 5: must be a string"):
+        parse({"rrd": 5})
+    with pytest.raises(ConfigError, match=r"rerun.web_port = 70000: must be a port 0-65535"):
+        parse({"web_port": 70000})
+    with pytest.raises(ConfigError, match=r"rerun.connect"):
+        parse({"connect": "http://0.0.0.0:9876"})
     with pytest.raises(ValueError, match="rerun output"):
         open_recording("B1", RerunOptions())
-    assert RerunOptions.from_toml({"slow_interval_s": 2}).for_replay().slow_interval_s == 10.0
+    assert parse({"slow_interval_s": 2}).for_replay().slow_interval_s == 10.0
+    assert parse({"range_edges_Pa": [0, 1e6]}).range_edges_Pa == (0.0, 1e6)
 
 
 def test_rrd_verifies_with_rerun_cli_and_has_blueprint(tmp_path):

@@ -50,6 +50,28 @@ def test_dispersion_reproduces_wavfor_wavelengths():
     np.testing.assert_allclose(got[:-1], rows[:-1, 2], atol=0.06)
 
 
+def test_breaking_height_limits_and_the_seed_design_waves():
+    """Miche: L/7 tanh(kh). Deep water, T = 8 s: L0 = g 64/(2 pi) = 99.893 m, / 7 = 14.270 m;
+    in 23 m: L = 91.696 m (the SPM-checked dispersion above), tanh(2 pi 23/91.696) = 0.91797,
+    H_b = 13.099 x 0.91797 = 12.025 m; shallow water (h = 1 m, T = 30 s): kh -> 0, so
+    H_b -> 2 pi h / 7 = 0.8976 h."""
+    assert waves.breaking_height(8.0, math.inf) == pytest.approx(14.2704, abs=1e-3)
+    assert waves.breaking_height(8.0, 23.0) == pytest.approx(12.025, abs=2e-3)
+    assert waves.breaking_height(30.0, 1.0) == pytest.approx(2 * math.pi / 7, rel=2e-3)
+    with pytest.raises(ValueError, match="period"):
+        waves.breaking_height(0.0, 23.0)
+
+
+@needs_shared
+def test_seed_design_waves_are_below_breaking():
+    """Seed 004 App. 6's design waves (site rule T = H + 2.5 s, 22 m) are physical: each
+    below its breaking height, the largest (3.96 m, 9.65 s) at 28 % of it."""
+    ref = json.loads((SHARED / "reference/seed004_vaps_cable.json").read_text())
+    rows = np.array(ref["wavfor_cases_height_period_wavelength"][1:])
+    ratio = rows[:, 0] / waves.breaking_height(rows[:, 1], 22.0, g=9.806)
+    assert np.all(ratio < 0.3) and ratio[-1] == pytest.approx(3.96 / 13.984, rel=1e-3)
+
+
 def test_bad_inputs_raise():
     with pytest.raises(ValueError, match="omega"):
         waves.wavenumber([1.0, float("nan")], 10.0)

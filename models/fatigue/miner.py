@@ -143,15 +143,34 @@ class MinerAccumulator:
                 raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
         return time_s
 
-    def _take_kernel_totals(self, committed: float, cycles: float, time_s: float | None) -> float:
+    def _take_kernel_ticks(self, committed: np.ndarray, cycles: np.ndarray,
+                           times_s: np.ndarray) -> np.ndarray:
         """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
-        ``_table`` (``models.fatigue.ticks``); return the damage added."""
-        added = committed - self._committed
-        self._committed = committed
-        self._cycles += cycles
-        if time_s is not None:
-            self._date(added, time_s)
-        return added
+        ``_table`` (``models.fatigue.ticks``) for consecutive ticks (committed total, cycles
+        and time of each), dating each tick's damage as :meth:`add_cycles` does; returns the
+        damage rate after each tick. The loop is a replay's per-tick hot path, so it runs on
+        locals (the same float operations in the same order as one call per tick)."""
+        rates = np.empty(len(committed))
+        width = self.rate_window_s / self.rate_buckets
+        keep = self.rate_buckets + 1
+        buckets = self._buckets
+        prev, total_cycles = self._committed, self._cycles
+        for i, (c, n, t) in enumerate(zip(committed.tolist(), cycles.tolist(), times_s.tolist())):
+            added = c - prev
+            prev = c
+            total_cycles += n
+            if self._t_first is None:
+                self._t_first = t
+            self._t_last = t
+            b = math.floor(t / width)
+            buckets[b] = buckets.get(b, 0.0) + added
+            if len(buckets) > keep:
+                oldest = b - self.rate_buckets
+                buckets = self._buckets = {k: v for k, v in buckets.items() if k > oldest}
+            self._rate = None
+            rates[i] = self.damage_rate_per_day
+        self._committed, self._cycles = prev, total_cycles
+        return rates
 
     def set_provisional(self, ranges_Pa, means_Pa, counts) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""

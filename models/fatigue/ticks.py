@@ -64,8 +64,6 @@ def commit_ticks(rainflow: StreamingRainflow, miner: MinerAccumulator, stress_Pa
         if k < n_ticks:
             rainflow._grow()  # the next tick may not fit the stack storage
     rainflow._samples += x.shape[0]
-    rates = np.empty(n_ticks)
-    for i in range(n_ticks):  # date each tick's damage in order, as add_cycles does
-        miner._take_kernel_totals(float(committed[i]), float(cycles[i]), float(times_s[i]))
-        rates[i] = miner.damage_rate_per_day
+    # date each tick's damage in order, as add_cycles does
+    rates = miner._take_kernel_ticks(committed, cycles, np.asarray(times_s, np.float64))
     return TickCommits(committed, rates, res, out_r[:nc], out_m[:nc])

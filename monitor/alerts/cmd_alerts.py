@@ -6,6 +6,8 @@ Two targets:
   and endpoints of ``--config``, itself by default ``/etc/buoymon/buoymon.toml``): ``list`` queries
   ``buoy/<id>/monitor/alerts``; ``ack``/``reset`` send the command as the payload of a query on
   ``buoy/<id>/monitor/alerts/operator`` and print the daemon's answer once it has applied it;
+  when the configuration's daemon does not answer, ``list`` reads its checkpoint (``[state]
+  path``) and says so, ``ack``/``reset`` name the ``--state`` that would act on it;
 * a saved state for when the daemon is stopped (``--state PATH``): the daemon's checkpoint
   (SQLite, ``[state] path``) or a replay's JSON state file (``buoymon replay --state``), whose
   ``"alerts"`` key holds the alert engine state; ``ack``/``reset`` rewrite it atomically, and a
@@ -35,7 +37,7 @@ from typing import Any
 
 from monitor.alerts.engine import AlertEngine
 from monitor.atomic_file import atomic_write_text
-from monitor.daemon_target import DEFAULT_CONFIG, DEFAULT_CONNECT, load_target
+from monitor.daemon_target import DEFAULT_CONFIG, DEFAULT_CONNECT, endpoint_arg, load_target
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        help="the running daemon's configuration: its [buoy] id and [zenoh] "
                             f"endpoints (the default, {DEFAULT_CONFIG}, when neither --state "
                             "nor --buoy is given)")
-        sp.add_argument("--connect", action="append", metavar="ENDPOINT",
+        sp.add_argument("--connect", action="append", metavar="ENDPOINT", type=endpoint_arg,
                         help=f"Zenoh endpoint of the daemon (default {DEFAULT_CONNECT}, or the "
                              "configuration's); repeatable")
         sp.add_argument("--timeout", type=float, default=10.0,
@@ -123,16 +125,11 @@ def run_outbox(args: argparse.Namespace) -> int:
 
 
 def _outbox_path(config: str | None) -> Path:
-    import tomllib  # noqa: PLC0415
-
     from monitor.alerts.config import AlertsConfig  # noqa: PLC0415
+    from monitor.schema import read_toml  # noqa: PLC0415
 
     path = Path(config or DEFAULT_CONFIG)
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"config error: {path}: {exc}") from None
-    out = Path(AlertsConfig.from_dict(raw.get("alerts"), "alerts").outbox.path)
+    out = Path(AlertsConfig.from_dict(read_toml(path).get("alerts")).outbox.path)
     return out if out.is_absolute() else Path.cwd() / out
 
 
@@ -153,11 +150,23 @@ def run(args: argparse.Namespace) -> int:
         else:
             if not 0 < args.timeout < math.inf:
                 raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
-            buoy, connect = args.buoy, [DEFAULT_CONNECT]
+            buoy, connect, state_path = args.buoy, [DEFAULT_CONNECT], None
             if buoy is None:  # the buoy (and endpoints) of the daemon's configuration
                 target = load_target(args.config or DEFAULT_CONFIG)
                 buoy, connect = target.buoy_id, list(target.connect)
-            result = _on_daemon(buoy, args.connect or connect, args.timeout, _command(args))
+                state_path = Path(target.state_path)
+            try:
+                result = _on_daemon(buoy, args.connect or connect, args.timeout, _command(args))
+            except TimeoutError as exc:
+                if state_path is None or not state_path.exists():
+                    raise
+                if args.alerts_command != "list":  # a stopped daemon's checkpoint, on request
+                    raise TimeoutError(f"{exc}; if the daemon is stopped, --state "
+                                       f"{state_path} acts on its checkpoint") from None
+                # listing reads, as `buoymon status` does: the stopped daemon's checkpoint
+                print(f"buoymon alerts: {exc}: daemon NOT RUNNING? the alerts of its last "
+                      f"checkpoint ({state_path}) follow", file=sys.stderr)
+                result = _on_state_file(state_path, None)
     except (ValueError, OSError, TimeoutError) as exc:
         print(f"buoymon alerts: {exc}", file=sys.stderr)
         return 1
@@ -204,11 +213,13 @@ def _on_state_file(path: Path, command: dict[str, Any] | None) -> dict[str, Any]
                     or not isinstance(saved.state.get("pipeline"), dict):
                 raise ValueError(f"{path}: the daemon checkpoint holds no pipeline state yet")
             outer = saved.state
-            live = ((outer.get("daemon") or {}).get("live") or {}).get("firing") or []
-            if command is None and live:  # the live (logger-clock) rules' alerts are kept too
+            daemon = outer.get("daemon") or {}
+            live = (daemon.get("live") or {}).get("firing") or []
+            if command is None:  # the live (logger-clock) rules' alerts are listed too
+                # a configuration without alert rules keeps no engine: live alerts only
                 result = _apply(outer["pipeline"], path, None)[0] \
-                    if "alerts" in outer["pipeline"] else {"buoy": live[0].get("buoy"),
-                                                           "alerts": []}
+                    if "alerts" in outer["pipeline"] else {
+                        "buoy": (daemon.get("last_status") or {}).get("buoy_id"), "alerts": []}
                 result["alerts"] += [a for a in live if isinstance(a, dict)]
                 return result
             result, changed = _apply(outer["pipeline"], path, command)

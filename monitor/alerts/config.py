@@ -27,46 +27,37 @@ Layout (every key optional unless marked)::
     [alerts.outbox]             # durable queue for webhook/email
     path = "alerts_outbox.sqlite", retry_base_s = 5, retry_max_s = 600
 
-Errors raise ValueError naming the key and the value, e.g.
+Errors raise ConfigError naming the key and the value, e.g.
 ``alerts.rule[2].threshold = -1: must be > 0`` (rule indices count from 0, as in the file's
 array of tables).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Annotated, Any, Mapping
+
+import msgspec
+from msgspec import Meta
 
 from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth, check_url,
                                          parse_auth)
 from monitor.alerts.records import SEVERITIES
-from monitor.config import MAX_DURATION_S
+from monitor.schema import MAX_DURATION_S, ConfigError, convert, did_you_mean, parse_struct, unknown
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
 
 
-@dataclass(frozen=True)
-class ParamSpec:
-    """One numeric rule parameter: default (None = required), bounds and unit for messages."""
+Positive = Annotated[float, Meta(gt=0)]
+Seconds = Annotated[float, Meta(gt=0, le=MAX_DURATION_S)]  # a span becomes int64 ns
+Delay = Annotated[float, Meta(ge=0, le=MAX_DURATION_S)]
+AtLeastZero = Annotated[float, Meta(ge=0)]
+_DELAYS: Mapping[str, tuple[Any, float | None]] = {"on_delay_s": (Delay, 0.0),
+                                                   "off_delay_s": (Delay, 0.0)}
 
-    default: float | None
-    low: float
-    low_inclusive: bool = False
-    high: float = math.inf
-    unit: str = ""
-
-
-def _p(default, low, low_inclusive=False, high=None, unit=""):
-    if high is None:  # a duration becomes int64 ns, so it has a ceiling too
-        high = MAX_DURATION_S if unit == "s" else math.inf
-    return ParamSpec(default, low, low_inclusive, high, unit)
-
-
-_DELAYS = {"on_delay_s": _p(0.0, 0.0, True, unit="s"), "off_delay_s": _p(0.0, 0.0, True, unit="s")}
-
-# kind -> (what the component names: "component" | "stream" | "cable", numeric parameters).
+# kind -> (what the component names: "component" | "stream" | "cable", numeric parameters as
+# name -> (type with bounds, default; None = required)).
 # threshold units: damage_fraction Miner sum; damage_rate Miner sum per day; remaining_life
 # days; tension_high fraction of breaking strength; conductor_stress multiple of the component's
 # (derated) endurance stress; conductor_yield multiple of the stress at which the conductor's
@@ -74,27 +65,27 @@ _DELAYS = {"on_delay_s": _p(0.0, 0.0, True, unit="s"), "off_delay_s": _p(0.0, 0.
 # received samples over window_s; model_residual |measured - estimated| in N (tick means; with
 # this rule the pipeline estimates every motion sample, not only where the estimate feeds
 # fatigue, which costs replay a tenth to a fifth more CPU).
-KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, ParamSpec]]] = {
-    "damage_fraction": ("component", {"threshold": _p(None, 0.0)}),
-    "damage_rate": ("component", {"threshold": _p(None, 0.0, unit="1/d"), **_DELAYS}),
-    "remaining_life": ("component", {"threshold": _p(None, 0.0, unit="d"), **_DELAYS}),
+KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, tuple[Any, float | None]]]] = {
+    "damage_fraction": ("component", {"threshold": (Positive, None)}),
+    "damage_rate": ("component", {"threshold": (Positive, None), **_DELAYS}),
+    "remaining_life": ("component", {"threshold": (Positive, None), **_DELAYS}),
     "tension_high": ("cable", {
-        "threshold": _p(None, 0.0), "breaking_strength_N": _p(None, 0.0, unit="N"),
-        "deadband": _p(0.0, 0.0, True), **_DELAYS,
+        "threshold": (Positive, None), "breaking_strength_N": (Positive, None),
+        "deadband": (AtLeastZero, 0.0), **_DELAYS,
     }),
-    "conductor_stress": ("component", {"threshold": _p(1.0, 0.0), **_DELAYS}),
-    "conductor_yield": ("component", {"threshold": _p(1.0, 0.0), **_DELAYS}),
+    "conductor_stress": ("component", {"threshold": (Positive, 1.0), **_DELAYS}),
+    "conductor_yield": ("component", {"threshold": (Positive, 1.0), **_DELAYS}),
     "slack_snap": ("cable", {
-        "threshold": _p(None, 0.0, unit="N"), "floor_N": _p(None, 0.0, True, unit="N"),
-        "window_s": _p(2.0, 0.0, unit="s"), "off_delay_s": _p(60.0, 0.0, True, unit="s"),
+        "threshold": (Positive, None), "floor_N": (AtLeastZero, None),
+        "window_s": (Seconds, 2.0), "off_delay_s": (Delay, 60.0),
     }),
     "stale": ("stream", dict(_DELAYS)),
     "rejected_rate": ("stream", {
-        "threshold": _p(None, 0.0, high=1.0), "window_s": _p(600.0, 0.0, unit="s"), **_DELAYS,
+        "threshold": (Annotated[float, Meta(gt=0, le=1)], None), "window_s": (Seconds, 600.0),
+        **_DELAYS,
     }),
     "model_residual": ("cable", {
-        "threshold": _p(None, 0.0, unit="N"), "on_delay_s": _p(60.0, 0.0, True, unit="s"),
-        "off_delay_s": _p(0.0, 0.0, True, unit="s"),
+        "threshold": (Positive, None), "on_delay_s": (Delay, 60.0), "off_delay_s": (Delay, 0.0),
     }),
 }
 
@@ -105,25 +96,12 @@ def _show(value: Any) -> str:
     return repr(value)
 
 
-def _err(where: str, value: Any, msg: str) -> ValueError:
-    return ValueError(f"{where} = {_show(value)}: {msg}")
+def _err(where: str, value: Any, msg: str) -> ConfigError:
+    return ConfigError(f"config error: {where} = {_show(value)}: {msg}")
 
 
-def _number(where: str, value: Any, spec: ParamSpec) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _err(where, value, "must be a number")
-    x = float(value)
-    if math.isnan(x):
-        raise _err(where, value, "must be a number, not NaN")
-    if spec.low_inclusive and x < spec.low:
-        raise _err(where, value, f"must be >= {spec.low:g}")
-    if not spec.low_inclusive and x <= spec.low:
-        raise _err(where, value, f"must be > {spec.low:g}")
-    if x > spec.high:
-        raise _err(where, value, f"must be <= {spec.high:g}")
-    if math.isinf(x):
-        raise _err(where, value, "must be finite")
-    return x
+def _get(where: str, d: Mapping[str, Any], key: str, tp: Any, default: Any) -> Any:
+    return convert(where, key, d.get(key, default), tp)
 
 
 def _string(where: str, value: Any, pattern_ok=lambda s: True, what="a non-empty string") -> str:
@@ -140,7 +118,7 @@ def _chunk_ok(s: str) -> bool:
 def _check_keys(where: str, d: Mapping[str, Any], allowed: set[str]) -> None:
     for key in d:
         if key not in allowed:
-            raise _err(f"{where}.{key}", d[key], f"unknown key; expected one of {sorted(allowed)}")
+            raise unknown(where, key, d[key], allowed)
 
 
 @dataclass(frozen=True)
@@ -175,24 +153,41 @@ class WebhookConfig:
     auth: HttpAuth = HttpAuth()
 
 
-@dataclass(frozen=True)
-class EmailConfig:
-    host: str
-    port: int
-    sender: str
-    to: tuple[str, ...]
+class EmailConfig(msgspec.Struct, frozen=True):
+    """``[alerts.email]``: SMTP."""
+
+    host: Annotated[str, Meta(min_length=1)]
+    sender: Annotated[str, Meta(pattern="@", description="an e-mail address")
+                      ] = msgspec.field(name="from")
+    to: Annotated[str | tuple[str, ...], Meta(
+        description="an address or a non-empty list of addresses")] = ()
+    port: Annotated[int, Meta(ge=1, le=65535)] = 25
     starttls: bool = False
     username: str = ""
-    password_env: str = ""
-    timeout_s: float = 10.0
+    password_env: str = ""  # the environment variable holding the password
+    timeout_s: Positive = 10.0
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "EmailConfig":
+        to = (self.to,) if isinstance(self.to, str) else self.to
+        if not to or not all("@" in a for a in to):
+            raise _err(f"{where}.to", raw.get("to"),
+                       "must be an address or a non-empty list of addresses")
+        return msgspec.structs.replace(self, to=to)
 
 
-@dataclass(frozen=True)
-class OutboxConfig:
-    path: str = "alerts_outbox.sqlite"
-    retry_base_s: float = 5.0
-    retry_max_s: float = 600.0
-    max_pending: int = 10000
+class OutboxConfig(msgspec.Struct, frozen=True):
+    """``[alerts.outbox]``: the durable queue of webhook, e-mail and Alertmanager messages."""
+
+    path: Annotated[str, Meta(min_length=1)] = "alerts_outbox.sqlite"
+    retry_base_s: Positive = 5.0
+    retry_max_s: Positive = 600.0  # backoff doubles from retry_base_s up to this
+    max_pending: Annotated[int, Meta(ge=1)] = 10000  # per channel
+
+    def check(self, where: str, raw: Mapping[str, Any]) -> "OutboxConfig":
+        if self.retry_max_s < self.retry_base_s:
+            raise _err(f"{where}.retry_max_s", raw.get("retry_max_s"),
+                       f"must be >= retry_base_s ({self.retry_base_s:g})")
+        return self
 
 
 @dataclass(frozen=True)
@@ -214,12 +209,12 @@ class AlertsConfig:
             raise _err(where, d, "must be a table")
         _check_keys(where, d, {"eval_interval_s", "resend_interval_s", "history_limit", "rule",
                                "webhook", "email", "alertmanager", "outbox"})
-        eval_s = _number(f"{where}.eval_interval_s", d.get("eval_interval_s", 10.0), _p(0, 0.0))
-        resend = _number(f"{where}.resend_interval_s", d.get("resend_interval_s", 3600.0),
-                         _p(0, 0.0, True))
-        hist = d.get("history_limit", 10000)
-        if isinstance(hist, bool) or not isinstance(hist, int) or hist < 1:
-            raise _err(f"{where}.history_limit", hist, "must be an integer >= 1")
+        eval_s = _get(where, d, "eval_interval_s", Seconds, 10.0)
+        if eval_s * 1e9 != round(eval_s * 1e9):  # the alert tick grid is in int64 ns
+            raise _err(f"{where}.eval_interval_s", eval_s,
+                       "must be a whole number of nanoseconds")
+        resend = _get(where, d, "resend_interval_s", Delay, 3600.0)  # 0 = never
+        hist = _get(where, d, "history_limit", Annotated[int, Meta(ge=1)], 10000)
         raw_rules = d.get("rule", [])
         if not isinstance(raw_rules, list):
             raise _err(f"{where}.rule", raw_rules, "must be an array of tables ([[alerts.rule]])")
@@ -235,10 +230,10 @@ class AlertsConfig:
         return cls(
             eval_interval_s=eval_s, resend_interval_s=resend, history_limit=hist, rules=rules,
             webhook=_webhook(f"{where}.webhook", d["webhook"]) if "webhook" in d else None,
-            email=_email(f"{where}.email", d["email"]) if "email" in d else None,
+            email=parse_struct(EmailConfig, d["email"], f"{where}.email") if "email" in d else None,
             alertmanager=(_alertmanager(f"{where}.alertmanager", d["alertmanager"])
                           if "alertmanager" in d else None),
-            outbox=_outbox(f"{where}.outbox", d.get("outbox", {})),
+            outbox=parse_struct(OutboxConfig, d.get("outbox"), f"{where}.outbox"),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -272,10 +267,12 @@ def _rule(where: str, r: Any) -> RuleConfig:
     if not isinstance(r, Mapping):
         raise _err(where, r, "must be a table")
     if "kind" not in r:
-        raise ValueError(f"{where}.kind: missing; expected one of {sorted(KIND_PARAMS)}")
+        raise ConfigError(f"config error: {where}.kind: missing; expected one of "
+                          f"{sorted(KIND_PARAMS)}")
     kind = r["kind"]
     if kind not in KIND_PARAMS:
-        raise _err(f"{where}.kind", kind, f"unknown rule kind; expected one of {sorted(KIND_PARAMS)}")
+        raise _err(f"{where}.kind", kind, f"unknown rule kind{did_you_mean(str(kind), KIND_PARAMS)}; "
+                   f"expected one of {sorted(KIND_PARAMS)}")
     _, specs = KIND_PARAMS[kind]
     _check_keys(where, r, {"kind", "name", "component", "severity", *specs})
     name = _string(f"{where}.name", r.get("name", kind), _chunk_ok,
@@ -288,13 +285,11 @@ def _rule(where: str, r: Any) -> RuleConfig:
     if severity not in SEVERITIES:
         raise _err(f"{where}.severity", severity, f"must be one of {list(SEVERITIES)}")
     params: dict[str, float] = {}
-    for key, spec in specs.items():
-        if key not in r:
-            if spec.default is None:
-                raise ValueError(f"{where}.{key}: missing; rule kind {kind!r} requires it")
-            params[key] = float(spec.default)
-        else:
-            params[key] = _number(f"{where}.{key}", r[key], spec)
+    for key, (tp, default) in specs.items():
+        if key not in r and default is None:
+            raise ConfigError(f"config error: {where}.{key}: missing; rule kind {kind!r} "
+                              "requires it")
+        params[key] = _get(where, r, key, tp, default)
     if kind == "tension_high" and params["deadband"] >= params["threshold"]:
         raise _err(f"{where}.deadband", r.get("deadband"),
                    f"must be < threshold ({params['threshold']:g})")
@@ -311,7 +306,7 @@ def _webhook(where: str, d: Any) -> WebhookConfig:
     _check_keys(where, d, {"url", "timeout_s", "receiver", *AUTH_KEYS})
     url = check_url(f"{where}.url", d.get("url"), _err)
     return WebhookConfig(
-        url=url, timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
+        url=url, timeout_s=_get(where, d, "timeout_s", Positive, 10.0),
         receiver=_string(f"{where}.receiver", d.get("receiver", "buoymon")),
         auth=parse_auth(where, d, _err),
     )
@@ -333,55 +328,10 @@ def _alertmanager(where: str, d: Any) -> AlertmanagerConfig:
             raise _err(f"{where}.{k}", v, "must be a string")
     return AlertmanagerConfig(
         urls=tuple(urls),
-        resend_interval_s=_number(f"{where}.resend_interval_s", d.get("resend_interval_s", 60.0),
-                                  _p(0, 0.0)),
-        ends_at_intervals=_number(f"{where}.ends_at_intervals", d.get("ends_at_intervals", 4.0),
-                                  _p(0, 2.0, True)),
-        timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
+        resend_interval_s=_get(where, d, "resend_interval_s", Positive, 60.0),
+        ends_at_intervals=_get(where, d, "ends_at_intervals", Annotated[float, Meta(ge=2)], 4.0),
+        timeout_s=_get(where, d, "timeout_s", Positive, 10.0),
         job=_string(f"{where}.job", d.get("job", "buoymon")),
         instance=text["instance"], runbook_url=text["runbook_url"],
         generator_url=text["generator_url"], auth=parse_auth(where, d, _err),
     )
-
-
-def _email(where: str, d: Any) -> EmailConfig:
-    if not isinstance(d, Mapping):
-        raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"host", "port", "from", "to", "starttls", "username", "password_env",
-                           "timeout_s"})
-    port = d.get("port", 25)
-    if isinstance(port, bool) or not isinstance(port, int) or not 0 < port < 65536:
-        raise _err(f"{where}.port", port, "must be an integer 1-65535")
-    to = d.get("to")
-    if isinstance(to, str):
-        to = [to]
-    if not isinstance(to, list) or not to or not all(isinstance(a, str) and "@" in a for a in to):
-        raise _err(f"{where}.to", to, "must be an address or a non-empty list of addresses")
-    starttls = d.get("starttls", False)
-    if not isinstance(starttls, bool):
-        raise _err(f"{where}.starttls", starttls, "must be true or false")
-    username, password_env = d.get("username", ""), d.get("password_env", "")
-    for key, val in (("username", username), ("password_env", password_env)):
-        if not isinstance(val, str):
-            raise _err(f"{where}.{key}", val, "must be a string")
-    return EmailConfig(
-        host=_string(f"{where}.host", d.get("host")), port=port,
-        sender=_string(f"{where}.from", d.get("from"), lambda s: "@" in s, "an e-mail address"),
-        to=tuple(to), starttls=starttls, username=username, password_env=password_env,
-        timeout_s=_number(f"{where}.timeout_s", d.get("timeout_s", 10.0), _p(0, 0.0)),
-    )
-
-
-def _outbox(where: str, d: Any) -> OutboxConfig:
-    if not isinstance(d, Mapping):
-        raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"path", "retry_base_s", "retry_max_s", "max_pending"})
-    base = _number(f"{where}.retry_base_s", d.get("retry_base_s", 5.0), _p(0, 0.0))
-    top = _number(f"{where}.retry_max_s", d.get("retry_max_s", 600.0), _p(0, 0.0))
-    if top < base:
-        raise _err(f"{where}.retry_max_s", d.get("retry_max_s"), f"must be >= retry_base_s ({base:g})")
-    cap = d.get("max_pending", 10000)
-    if isinstance(cap, bool) or not isinstance(cap, int) or cap < 1:
-        raise _err(f"{where}.max_pending", cap, "must be an integer >= 1")
-    return OutboxConfig(path=_string(f"{where}.path", d.get("path", "alerts_outbox.sqlite")),
-                        retry_base_s=base, retry_max_s=top, max_pending=cap)

@@ -26,6 +26,7 @@ from monitor.alerts.records import AlertRecord
 from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, ConductorYield, Rule, TickStats
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.events import Observation
+from monitor.schema import ConfigError, did_you_mean
 
 STATE_VERSION = 1
 
@@ -71,9 +72,9 @@ class AlertEngine:
         for r in self._rules:
             fp = self._record(r, "fire", 0).fingerprint
             if fp in self._by_fp:
-                raise ValueError(
-                    f"{r.cfg.where}.name = \"{r.name}\": rule {r.name!r} for component "
-                    f"{r.target!r} is also defined by {self._by_fp[fp].cfg.where}; "
+                raise ConfigError(
+                    f"config error: {r.cfg.where}.name = \"{r.name}\": rule {r.name!r} for "
+                    f"component {r.target!r} is also defined by {self._by_fp[fp].cfg.where}; "
                     "give each rule a distinct name"
                 )
             self._by_fp[fp] = r
@@ -102,20 +103,24 @@ class AlertEngine:
             return [cls(rc, rc.component or CABLE_COMPONENT)]
         if target_kind == "stream":
             if rc.component is not None and rc.component not in SENSOR_FIELDS:
-                raise ValueError(f"{rc.where}.component = \"{rc.component}\": unknown sensor "
-                                 f"stream; expected one of {sorted(SENSOR_FIELDS)}")
+                raise ConfigError(
+                    f"config error: {rc.where}.component = \"{rc.component}\": unknown sensor "
+                    f"stream{did_you_mean(rc.component, SENSOR_FIELDS)}; expected one of "
+                    f"{sorted(SENSOR_FIELDS)}")
             return [cls(rc, s) for s in ([rc.component] if rc.component else SENSOR_FIELDS)]
         if rc.component is not None and rc.component not in self.endurance_Pa:
-            raise ValueError(f"{rc.where}.component = \"{rc.component}\": unknown component; "
-                             f"expected one of {sorted(self.endurance_Pa)}")
+            raise ConfigError(
+                f"config error: {rc.where}.component = \"{rc.component}\": unknown component"
+                f"{did_you_mean(rc.component, self.endurance_Pa)}; expected one of "
+                f"{sorted(self.endurance_Pa)}")
         names = [rc.component] if rc.component else list(self.endurance_Pa)
         if cls not in (ConductorStress, ConductorYield):
             return [cls(rc, n) for n in names]
         levels, what = ((self.endurance_Pa, "endurance") if cls is ConductorStress
                         else (self.yield_Pa, "yield"))
         if rc.component is not None and levels[rc.component] is None:
-            raise ValueError(f"{rc.where}.component = \"{rc.component}\": component has no "
-                             f"{what} stress (not a conductor)")
+            raise ConfigError(f"config error: {rc.where}.component = \"{rc.component}\": "
+                              f"component has no {what} stress (not a conductor)")
         return [cls(rc, n, levels[n]) for n in names if levels[n] is not None]
 
     # --- evaluation ------------------------------------------------------------------------

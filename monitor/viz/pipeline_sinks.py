@@ -10,10 +10,10 @@ component's S-N curve (:func:`report_plot_fields`).
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Any, Mapping
 
+import msgspec
 import numpy as np
 
 from monitor.config import Config
@@ -54,9 +54,7 @@ def shape_provider(config: Config) -> ShapeProvider:
 def rerun_options(config: Config) -> RerunOptions:
     """``[rerun]`` of the configuration, the mooring's anchor and bearing filled in, and a
     watch circle of the line's horizontal reach (sqrt(length^2 - depth^2)) unless set."""
-    section: Mapping[str, Any] = config.raw.get("rerun", {}) or {}
-    opts = RerunOptions.from_toml(section)
-    m = config.mooring
+    section, opts, m = config.section("rerun"), config.rerun, config.mooring
     fill: dict[str, Any] = {}
     if "anchor_lat_deg" not in section and math.isfinite(m.anchor_lat_deg):
         fill["anchor_lat_deg"] = m.anchor_lat_deg
@@ -66,7 +64,7 @@ def rerun_options(config: Config) -> RerunOptions:
         fill["bearing_deg"] = m.bearing_deg
     if "watch_circle_m" not in section and m.length_m > m.depth_m:
         fill["watch_circle_m"] = math.sqrt(m.length_m ** 2 - m.depth_m ** 2)
-    return replace(opts, **fill)
+    return msgspec.structs.replace(opts, **fill)
 
 
 class ViewerSink:

@@ -12,14 +12,20 @@ defaults give a 1 Hz dashboard; :meth:`RerunOptions.for_replay` is the coarser p
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
-from typing import Any, Mapping
+from typing import Annotated, Any, Mapping
 
+import msgspec
+from msgspec import Meta
+
+from monitor.schema import error
 from monitor.viz.cycle_histogram import DEFAULT_MEAN_EDGES_Pa, DEFAULT_RANGE_EDGES_Pa, check_edges
 
+Spacing = Annotated[float, Meta(ge=0)]
+Port = Annotated[int, Meta(ge=0, le=65535, description="a port 0-65535")]
+_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 
-@dataclass(frozen=True)
-class RerunOptions:
+
+class RerunOptions(msgspec.Struct, frozen=True):
     """Settings of :class:`monitor.viz.rerun_sink.RerunSink` and its outputs.
 
     Attributes:
@@ -35,7 +41,7 @@ class RerunOptions:
         range_edges_Pa: bin edges of the rainflow histogram (stress range); ranges above the
             last edge are counted in the last bin.
         mean_edges_Pa: bin edges of the mean axis of the range-mean matrix (clipped likewise).
-        anchor_lat_deg / anchor_lon_deg: origin of the position view (NaN: first GNSS fix).
+        anchor_lat_deg / anchor_lon_deg: origin of the position view (unset: first GNSS fix).
         watch_circle_m: radius of the watch circle drawn around the anchor (0: none).
         bearing_deg: compass bearing anchor -> buoy of the mooring, orients the 3D line.
         rrd: path of a recording file ("" for none).
@@ -45,80 +51,42 @@ class RerunOptions:
         server_memory_limit: memory cap of the served viewer's buffer (oldest data dropped).
     """
 
-    envelope_s: float = 1.0
-    slow_interval_s: float = 1.0
-    snapshot_interval_s: float = 1.0
-    shape_interval_s: float = 1.0
-    flush_samples: int = 200_000
-    flush_interval_s: float = 1.0
+    envelope_s: Spacing = 1.0
+    slow_interval_s: Spacing = 1.0
+    snapshot_interval_s: Spacing = 1.0
+    shape_interval_s: Spacing = 1.0
+    flush_samples: Annotated[int, Meta(ge=1)] = 200_000
+    flush_interval_s: Spacing = 1.0
     range_edges_Pa: tuple[float, ...] = DEFAULT_RANGE_EDGES_Pa
     mean_edges_Pa: tuple[float, ...] = DEFAULT_MEAN_EDGES_Pa
-    anchor_lat_deg: float = math.nan
-    anchor_lon_deg: float = math.nan
-    watch_circle_m: float = 0.0
-    bearing_deg: float = 0.0
+    anchor_lat_deg: Annotated[float, Meta(ge=-90, le=90)] = math.nan
+    anchor_lon_deg: Annotated[float, Meta(ge=-180, le=180)] = math.nan
+    watch_circle_m: Spacing = 0.0
+    bearing_deg: Annotated[float, Meta(ge=-360, le=360)] = 0.0
     rrd: str = ""
     connect: str = ""
     serve_web: bool = False
-    web_port: int = 9090
-    grpc_port: int = 9876
+    web_port: Port = 9090
+    grpc_port: Port = 9876
     server_memory_limit: str = "256MiB"
 
-    def __post_init__(self) -> None:
-        for name in ("envelope_s", "slow_interval_s", "snapshot_interval_s", "shape_interval_s",
-                     "flush_interval_s", "watch_circle_m"):
-            v = getattr(self, name)
-            if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-                    or v < 0):
-                raise ValueError(
-                    f"config error: rerun.{name} = {v!r}: must be a finite number >= 0")
-        for name, limit in (("anchor_lat_deg", 90.0), ("anchor_lon_deg", 180.0),
-                            ("bearing_deg", 360.0)):
-            v = getattr(self, name)
-            nan_ok = name != "bearing_deg"  # NaN anchor: use the first GNSS fix
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (
-                    abs(v) <= limit or (nan_ok and math.isnan(v))):
-                raise ValueError(f"config error: rerun.{name} = {v!r}: must be within "
-                                 f"[-{limit:g}, {limit:g}]")
-        if not isinstance(self.flush_samples, int) or self.flush_samples < 1:
-            raise ValueError(
-                f"config error: rerun.flush_samples = {self.flush_samples!r}: "
-                "must be an integer >= 1"
-            )
+    def check(self, where: str, raw: Mapping[str, Any]) -> "RerunOptions":
+        """Edges at least two, finite and increasing; a viewer URL of rerun's schemes."""
+        edges = {}
         for name in ("range_edges_Pa", "mean_edges_Pa"):
-            edges = check_edges(getattr(self, name), f"config error: rerun.{name}")
-            object.__setattr__(self, name, tuple(edges.tolist()))  # frozen: normalise once
-        for name in ("web_port", "grpc_port"):
-            p = getattr(self, name)
-            if not isinstance(p, int) or not 0 <= p <= 65535:
-                raise ValueError(f"config error: rerun.{name} = {p!r}: must be a port 0-65535")
-        for name in ("rrd", "connect", "server_memory_limit"):
-            if not isinstance(getattr(self, name), str):
-                raise ValueError(
-                    f"config error: rerun.{name} = {getattr(self, name)!r}: must be a string")
-        if not isinstance(self.serve_web, bool):
-            raise ValueError(
-                f"config error: rerun.serve_web = {self.serve_web!r}: must be true/false")
-        schemes = ("rerun://", "rerun+http://", "rerun+https://")
-        if self.connect and not self.connect.startswith(schemes):
-            raise ValueError(
-                f"config error: rerun.connect = {self.connect!r}: must be a rerun:// or "
-                "rerun+http(s):// URL, e.g. rerun+http://127.0.0.1:9876/proxy"
-            )
-
-    @classmethod
-    def from_toml(cls, section: Mapping[str, Any]) -> "RerunOptions":
-        """Build from the ``[rerun]`` table of the config file; unknown keys are errors."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(section) - known)
-        if unknown:
-            raise ValueError(
-                f"config error: rerun.{unknown[0]}: unknown key (known: {sorted(known)})")
-        return cls(**section)
+            try:
+                edges[name] = tuple(check_edges(getattr(self, name), "").tolist())
+            except ValueError:  # check_edges serves the report too, its message names no key
+                raise error(where, name, raw.get(name), "must be at least two finite, "
+                            "strictly increasing values") from None
+        if self.connect and not self.connect.startswith(_SCHEMES):
+            raise error(where, "connect", self.connect, "must be a rerun:// or rerun+http(s):// "
+                        "URL, e.g. rerun+http://127.0.0.1:9876/proxy")
+        return msgspec.structs.replace(self, **edges)
 
     def for_replay(self) -> "RerunOptions":
         """Coarser sampling for bulk replay of long logs (same entities as live)."""
-        return replace(
+        return msgspec.structs.replace(
             self,
             slow_interval_s=max(self.slow_interval_s, 10.0),
             snapshot_interval_s=max(self.snapshot_interval_s, 3600.0),
