@@ -15,21 +15,23 @@ of a tiny (36 s) log under 0.5 s warm, a cold daemon start under 5 s.
   is built at the first motion block);
 - with ``--compile``: ``warmup`` into an empty numba cache (what the first install pays).
 
-Measured 2026-11-25 on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz), load average 3-6
-from other work (wall times wait for a core: CPU is the fair figure), best of 5, wall / CPU
-in s. "before" is main at e1a1500 (``--repo`` on an export of it), "after" this checkout,
-in the same session:
+Measured 2026-11-25 17:00 UTC on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz), load
+average 3-4 from other work (wall times wait for a core: CPU is the fair figure; a
+replay's wall can be under its CPU, the read-ahead thread decodes on the other core), best
+of 5, wall / CPU in s. "before" is main at 6054245 (``--repo`` on an export of it),
+"after" this branch merged with it, in the same session:
 
     command                            before          after
-    buoymon --help                     0.04 / 0.04     0.04 / 0.03
-    buoymon check-config               0.22 / 0.21     0.24 / 0.18
-    buoymon replay (36 s log)          0.96 / 0.99     0.46 / 0.41
-    buoymon warmup --config (filled)   1.94 / 1.20     1.31 / 1.10
-    daemon start, cold (exec->READY)   1.56 / 0.67     1.37 / 0.65
-    daemon start, warm model cache     1.50 / 0.65     1.64 / 0.65
+    buoymon --help                     0.04 / 0.04     0.03 / 0.03
+    buoymon check-config               0.31 / 0.21     0.16 / 0.22
+    buoymon replay (36 s log)          1.23 / 0.90     0.36 / 0.46
+    buoymon warmup --config (filled)   1.57 / 1.14     1.03 / 1.13
+    daemon start, cold (exec->READY)   0.68 / 0.65     0.56 / 0.65
+    daemon start, warm model cache     0.66 / 0.64     0.61 / 0.63
 
-A second "after" run minutes later (load average 4-5) gave replay 0.89 / 0.44: the wall
-time of a tiny replay under 0.5 s needs a free core; its CPU time is 0.41-0.44 s.
+An hour earlier, against main at e1a1500 (load average 5-6): replay 0.96 / 0.99 before,
+0.46 / 0.41 after; a second run at load 4-5 gave 0.89 / 0.44 after: under 0.5 s of wall
+time needs a free core, the CPU time is 0.41-0.46 s.
 
 Earlier (98e57db, before ``buoymon warmup`` and the lazy imports): --help 1.20 / 0.60,
 check-config 0.92 / 0.47, replay 1.79 / 1.53; a warm-up into an empty numba cache 80.4 s
@@ -46,17 +48,17 @@ one function that runs compiled or uncompiled with the same bits (models._jit.Ke
 ``replay.runner.PLAIN_PYTHON_BYTES`` (100 kB, about 3.5 minutes of the default streams; the
 size is read from the files' summaries before anything else) in a process that has not
 loaded numba. ``--plain-sweep`` times whole replays in fresh processes both ways (CPU s,
-same session, load average 5-6):
+best of 3, after the merge, 17:08 UTC):
 
     log      inflated   plain   compiled
-    0.6 min     20 kB    0.43       1.21
-    1 min       31 kB    0.45       1.05
-    2 min       57 kB    0.57       1.13
-    3 min       84 kB    0.69       1.16
-    5 min      137 kB    1.01       1.11
-    10 min     269 kB    1.71       1.13
+    0.6 min     20 kB    0.43       1.10
+    1 min       31 kB    0.48       1.12
+    2 min       57 kB    0.68       1.10
+    3 min       84 kB    0.82       1.14
+    5 min      137 kB    1.06       1.14
+    10 min     269 kB    2.01       1.08
 
-The 0.41 s left of a 36 s replay (cProfile): Python and numpy about 0.15 s, buoymon's
+The 0.4-0.45 s left of a 36 s replay (cProfile): Python and numpy about 0.15 s, buoymon's
 modules (configuration, pipeline, alerts, models) about 0.15 s, the reader, decoder,
 validation, QARTOD, estimator and fatigue loops as plain Python about 0.1 s. Neither rerun
 (0.44 s), scipy, zenoh, dask, matplotlib nor fleet's process pool is imported by a replay;

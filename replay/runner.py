@@ -33,8 +33,8 @@ log = logging.getLogger(__name__)
 # costs about 0.55 s of CPU, more than such a log's loops take uncompiled. A whole replay in
 # a fresh process, CPU s plain / compiled, by inflated size (simulated logs of the default
 # streams; 2026-11-25, 2-core Xeon, `bench/bench_startup.py --plain-sweep`): 20 kB (36 s of
-# log) 0.43 / 1.21, 57 kB (2 min) 0.57 / 1.13, 84 kB (3 min) 0.69 / 1.16, 137 kB (5 min)
-# 1.01 / 1.11, 269 kB (10 min) 1.71 / 1.13: even at 137 kB; 100 kB keeps a margin.
+# log) 0.43 / 1.10, 57 kB (2 min) 0.68 / 1.10, 84 kB (3 min) 0.82 / 1.14, 137 kB (5 min)
+# 1.06 / 1.14, 269 kB (10 min) 2.01 / 1.08: even near 130 kB; 100 kB keeps a margin.
 PLAIN_PYTHON_BYTES = 100_000
 
 
