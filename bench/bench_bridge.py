@@ -8,40 +8,55 @@
    of the line that closes the block (the first sample past ``block_s``: the bridge's own
    delay) and from the send of the block's last sample (that plus the wait for the next one).
 2. Flat out: ``--burst`` lines on one TCP connection as fast as the bridge takes them
-   (TCP flow control: nothing is lost), until the bridge's status counts them all: lines per
-   second and CPU per 1000 lines at saturation.
+   (TCP flow control: nothing is lost), timed until the block holding the last one arrives
+   (a line 1 s later closes it): lines per second and CPU per 1000 lines at saturation.
+Also the bridge's resident memory (after part 1) and the load average (other work on the
+machine shares its 2 cores: compare runs interleaved, and CPU per 1000 lines).
 
-Measured 2026-11-25 on the 2-core development machine (AMD EPYC), 14:10-14:31 UTC while
-it was quiet (load average 0.4-1.1; earlier figures had 6-7). Issue 16's targets: 5 x 1 kHz
-under 5 % of one core, under 5 ms of latency per block.
+Issue 16's targets: 5 x 1 kHz under 5 % of one core, under 5 ms of latency per block.
 
-=============================  ======================  ====================  ==================
-                               one thread, a turn      event-driven: wakes   + between blocks
-                               every >= 4 ms (before;  on readable or the    reads gather up
-                               one run at load 0.8)    next due duty         to 20 ms (shipped;
-                                                       (15-s run)            two runs)
-=============================  ======================  ====================  ==================
-5 x 1 kHz: bridge CPU          6.9 % of one core       11.2 % of one core    6.2 and 5.5 %
-  per 1000 lines               13.9 ms                 22.4 ms               12.4 and 11.0 ms
-  latency, closing line        p50 6.6, p99 10.8 ms    p50 2.7, p99 7.7 ms   p50 3.1 and 2.3,
-                                                                             p99 8.5 and 5.6 ms
-  latency, last sample         p50 8.7 ms              p50 5.2 ms            p50 5.5 and 4.6 ms
-flat out, one TCP source       202,800 lines/s,        214,100 lines/s,      153,800 and
-                               3.0 ms per 1000 lines   4.0 ms per 1000       159,700 lines/s,
-                                                                             4.0 and 3.6 ms
-idle (5 sources, no data;      0.7 %                   -                     0.4 %
-  status every 0.2 s; 10 s)
-=============================  ======================  ====================  ==================
+Measured 2026-11-25 on the 2-core development machine (AMD EPYC), 16:48-16:52 UTC, load
+average 2.8-3.9 (other sessions' tests): three 15-s runs of this version interleaved with
+three of the version before it (b85378b), the same script, from left to right in time.
 
-Latency target met (p50 2-3 ms from the closing line, against 6.6 ms with the 4-ms turns:
-a read no longer waits for a turn). CPU target NOT met: 5.5-6.2 % of one core. A wake-up per
-read (2,500 a second here) cost 11 % (first event-driven version: ~40 us each, against ~3 us
-a line); reading immediately only within 50 ms of a block's close and gathering 20 ms
-otherwise (monitor.bridge.runner._GATHER_S) brings it back to 5.5-6.2 %. What is left is not
-profiled yet (flat out the lines cost 3.6-4 ms per 1000, i.e. 2 % at 5,000 lines/s). Flat
-out is slower than before (154-160k lines/s against 203k): a read under 8 kB during the
-burst is followed by a gather pause. A pure wake-up-per-read loop (no gathering) measured
-15.5 % of a core, p50 2.8 ms (15-s run) before the duties got their own due time.
+=============================  ===========================  ===========================
+                               before (b85378b: gathers     shipped
+                               20 ms, parses line by line,
+                               numba codec)
+=============================  ===========================  ===========================
+5 x 1 kHz: bridge CPU          4.87, 4.40, 4.33 %           2.87, 2.53, 2.67 %
+  per 1000 lines               9.7, 8.8, 8.7 ms             5.7, 5.1, 5.3 ms
+  latency, closing line p50    2.27, 1.74, 2.24 ms          2.14, 1.25, 1.85 ms
+                        p99    8.3, 4.0, 6.8 ms             19.0, 7.4, 7.1 ms
+  latency, last sample p50     4.32, 3.79, 4.28 ms          4.29, 3.25, 4.31 ms
+flat out, one TCP source       304k, 319k, 256k lines/s     577k, 652k, 644k lines/s
+  CPU per 1000 lines           2.9, 2.9, 3.3 ms             1.6, 1.4, 1.4 ms
+bridge resident memory         186 MB                       73 MB
+=============================  ===========================  ===========================
+
+An earlier interleaved set (16:41-16:45, load 1.6-3.8, the shipped version but for the
+serial burst threshold): before 4.60, 5.87, 5.80 %, after 3.20, 2.80, 3.33 %. Before this
+work, on a quiet machine (14:10-14:31, load 0.4-1.1), the version before measured 5.5-6.2 %
+and, timed by the status's line count instead of the last block, 154-160k lines/s flat out.
+
+Where the CPU went (thread-CPU cProfile, perf and a/b runs of one knob at a time): at 20 ms
+gathers a wake-up with its small reads cost ~50 us, about as much as the lines it brought
+(~3 us each line by one); 2,500 immediate reads a second cost 14 % of a core. So: (1) a
+read's lines are parsed at once by builtins over all its cells (bulk parser,
+monitor.bridge.formats; a read with any faulty line goes line by line), UDP datagrams of one
+wake-up are one piece, the line splitter has no Python loop for a clean read, and a block's
+values are kept as a list per field (rows of tuples cost as much again at the flush); (2)
+reads gather up to 100 ms between blocks, immediate only from 10 ms before the closing line
+is due by its sensor time and the source's measured lag (gathering 50 or 100 ms with the old
+50-ms window measured 2.7 and 2.4 %); (3) no pause in a flood (read rate), which gives the
+flat-out rate back. The status every 0.2 s (this benchmark's; 1 s by default) cost ~0.5 %
+(one a/b pair).
+Not re-measured: idle (0.4 % before). Latency split (one 15-s run at 16:59, load ~2, the
+bridge printing its publish times on the shared monotonic clock): median 1.9 ms = 0.75 ms
+from the send of the closing line to the flush + 0.74 ms to encode (numpy: ~0.3 ms a 3-field
+block of 1000 samples, where numba took 0.02 ms) and put + 0.04 ms to the subscriber; the
+worst block (23.6 ms) was read 22.6 ms after its closing line was sent: a wake-up late on the
+loaded machine (the closing line was read in the immediate window in every block traced).
 
 Usage: PYTHONPATH=. python bench/bench_bridge.py [--seconds 20] [--burst 200000]
 """
@@ -50,6 +65,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import socket
 import subprocess
@@ -72,6 +88,7 @@ RATE_HZ = 1000
 BATCH = 2  # lines per write: one write every 2 ms
 BUOY = "bench"
 T0_S = 1_750_000_000
+BURST_K0 = 10**8  # the burst's sensor times start 10^5 s after the real-time streams
 # source name -> (stream, transport, number of fields)
 SOURCES = {"tension": ("tension", "udp", 1), "motion": ("motion", "udp", 3),
            "imu": ("imu", "tcp_server", 3), "gnss": ("gnss", "tcp_server", 2),
@@ -91,6 +108,13 @@ def cpu_s(pid: int) -> float:
     """User + system CPU seconds of a process."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def rss_mb(pid: int) -> float:
+    for row in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if row.startswith("VmRSS:"):
+            return int(row.split()[1]) / 1024
+    return float("nan")
 
 
 def line(k: int, n_fields: int) -> bytes:
@@ -166,7 +190,6 @@ def feed(name: str, write, seconds: float, sent: dict[tuple[str, int], float],
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0)
-    # the first block loads numba's cached codec kernels (seconds): the warm-up covers it
     ap.add_argument("--warmup", type=float, default=5.0)
     ap.add_argument("--burst", type=int, default=200_000)
     args = ap.parse_args()
@@ -180,6 +203,7 @@ def main() -> None:
     burst_port = free_port()
     master, slave = os.openpty()
     tty.setraw(slave)
+    load0 = os.getloadavg()
     sub = Subscriber(zport)
     with tempfile.TemporaryDirectory() as tmp:
         cfg = Path(tmp) / "bridge.toml"
@@ -218,17 +242,23 @@ def main() -> None:
                     lat_close.append(at - closing)
                     lat_last.append(at - sent[(stream, t_last)])
                     worst[stream] = max(worst.get(stream, 0.0), at - closing)
-            # 2. flat out on one TCP connection
+            rss = rss_mb(proc.pid)
+            # 2. flat out on one TCP connection (its own sensor times, on the tension stream):
+            # done when the block of its last line arrives (a line 1 s later closes it)
+            data = b"".join(line(BURST_K0 + k, 1) for k in range(args.burst))
+            last_ns = (T0_S * 1000 + BURST_K0 + args.burst - 1) * 1_000_000
             with socket.create_connection(("127.0.0.1", burst_port)) as b:
                 time.sleep(0.5)
-                chunk = 2000
                 c0, t0 = cpu_s(proc.pid), time.monotonic()
-                for k in range(0, args.burst, chunk):
-                    b.sendall(b"".join(line(k + i, 1) for i in range(chunk)))
-                while sub.lines("burst") < args.burst and time.monotonic() < t0 + 300:
-                    time.sleep(0.01)
-                burst_s, burst_cpu = time.monotonic() - t0, cpu_s(proc.pid) - c0
-                got = sub.lines("burst")
+                b.sendall(data + line(BURST_K0 + args.burst - 1 + 1000, 1))
+                done = []
+                while not done and time.monotonic() < t0 + 300:
+                    time.sleep(0.002)
+                    done = [at for s, _, t_last, at in list(sub.arrived)
+                            if s == "tension" and t_last == last_ns]
+                burst_s, burst_cpu = (done or [math.nan])[0] - t0, cpu_s(proc.pid) - c0
+                time.sleep(0.5)  # the status counts the lines
+                got = sub.lines("burst") - 1
             for s in tcp.values():
                 s.close()
             udp.close()
@@ -252,9 +282,12 @@ def main() -> None:
           f"p99 {np.percentile(ml, 99):.2f} ms, max {ml.max():.2f} ms")
     print("  worst per stream: " + ", ".join(f"{k} {1e3 * v:.1f} ms"
                                              for k, v in sorted(worst.items())))
+    print(f"  bridge RSS: {rss:.0f} MB")
     print(f"flat out (one TCP source): {got:,} of {args.burst:,} lines in {burst_s:.2f} s: "
           f"{got / burst_s:,.0f} lines/s, CPU {1e3 * burst_cpu / max(got, 1) * 1000:.1f} ms "
           "per 1000 lines")
+    print("load average (1 min) at the start and the end: "
+          f"{load0[0]:.2f}, {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,9 @@ Exactly one time base is used: ``t_offset_ns`` (one entry per sample) when prese
 
 Logs of the first format (``buoymon.v1``: ``repeated double`` value fields) still decode: the
 format of a channel is read from the schema stored with it (:func:`field_numbers_from_schema`).
-Encoding is a numba kernel (:func:`put_payload`) shared by the live path and the bulk writer.
+Encoding is a numba kernel (:func:`put_payload`) shared by the replay tools and the bulk
+writer; processes that only publish (the bridge, :mod:`monitor.sensors`) encode the same bytes
+with numpy alone (:mod:`monitor.codec_np`), without loading numba.
 Decoding of many messages at once is a numba kernel over the raw bytes (:func:`decode_many`);
 it accepts anything a conforming encoder may produce (packed or unpacked repeated fields, any
 field order, unknown fields skipped) and flags malformed payloads instead of raising.
@@ -45,18 +47,14 @@ from google.protobuf import descriptor_pb2
 
 from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.codec_np import (EXACT as _EXACT, FIELD_OFFSETS, FIELD_PERIOD, FIELD_T0,
+                              FIRST_VALUE_FIELD, Q_DELTA, Q_QUANTUM, Q_RAW_INDEX, Q_RAW_VALUE)
 from monitor.codec_regular import decode_regular
 from monitor.quanta import quanta
 
 PACKAGE = "buoymon.v2"
 QUANTIZED = "Quantized"
 QUANTIZED_FILE = "buoymon/v2/quantized.proto"
-FIELD_T0 = 1
-FIELD_PERIOD = 2
-FIELD_OFFSETS = 3
-FIRST_VALUE_FIELD = 4
-# fields of Quantized
-Q_QUANTUM, Q_DELTA, Q_RAW_INDEX, Q_RAW_VALUE = 1, 2, 3, 4
 QUANTIZED_FIELDS = ("quantum", "delta", "raw_index", "raw_value")
 
 # decode status codes (one per message)
@@ -208,8 +206,6 @@ DEFAULT_FIELD_NUMBERS = {
 
 
 # ----------------------------------------------------------------------------------- encode
-
-_EXACT = 2.0 ** 52  # beyond this many quanta a float64 no longer holds every integer
 
 
 @kernel()

@@ -70,11 +70,13 @@ def did_you_mean(name: str, known: Iterable[str]) -> str:
     return f" (did you mean {near[0]!r}?)" if near else ""
 
 
-def unknown(where: str, key: str, value: Any, known: Iterable[str], what: str = "key"
-            ) -> ConfigError:
-    """A key (or section) nobody reads, with the nearest known name: a typo, usually."""
+def unknown(where: str, key: str, value: Any, known: Iterable[str], what: str = "key",
+            name: str | None = None) -> ConfigError:
+    """A key (or section) nobody reads, with the nearest known name: a typo, usually.
+    ``name`` is the unknown name when it is the value, not the key (a rule's component)."""
     known = sorted(known)
-    why = f"unknown {what}{did_you_mean(key, known)}; expected one of {known}"
+    why = f"unknown {what}{did_you_mean(key if name is None else name, known)}; " \
+          f"expected one of {known}"
     if what == "section":  # its whole table would say nothing more
         return ConfigError(f"config error: [{key}]: {why}")
     return error(where, key, value, why)

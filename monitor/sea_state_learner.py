@@ -12,7 +12,7 @@ of each window, per component:
   one), the window is added to :class:`models.sea_state_table.DamageRateTable` with the
   covered hours;
 * the **Dirlik damage** of the window's stress (Welch PSD of Hann-windowed, non-overlapping
-  segments of ``SEGMENT`` load samples, :func:`models.fatigue.spectral.segment_psd`; a
+  segments of ``SEGMENT`` load samples, :func:`models.fatigue.spectral.segment_psds`; a
   segment's rate is taken from its samples' times, and a segment whose rate differs from the
   window's first by more than 2 % spans a gap and is left out) times the covered seconds is
   set beside the rainflow damage; a window where they differ by more than

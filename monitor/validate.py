@@ -86,29 +86,29 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
             codes[i] = _DUP
             counts[_DUP] += 1
             continue
-        code = 0
+        code = ACCEPTED
         for f in range(nf):
             v = values[f, i]
             if not np.isfinite(v):
                 code = _NAN
                 break
-        if code == 0:
+        if code == ACCEPTED:
             for f in range(nf):
                 v = values[f, i]
                 if v < lo[f] or v > hi[f]:
                     code = _RANGE
                     break
-        if code == 0 and has_last:
+        if code == ACCEPTED and has_last:
             dt = (ti - last_t) * 1e-9
             for f in range(nf):
                 if abs(values[f, i] - last_v[f]) > rate[f] * dt:
                     code = _SPIKE
                     break
-        if code == 0 and qc_code[i]:
+        if code == ACCEPTED and qc_code[i]:
             code = qc_code[i]
         codes[i] = code
         counts[code] += 1
-        if code == 0:
+        if code == ACCEPTED:
             last_t = ti
             has_last = True
             for f in range(nf):

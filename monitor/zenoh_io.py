@@ -249,24 +249,29 @@ class ProtobufCodec:
     """
 
     def __init__(self, quanta: Mapping[str, float] | None = None) -> None:
-        from monitor import codec  # noqa: PLC0415 (lazy: numba compile only when used)
         from monitor.quanta import quanta as sensor_quanta  # noqa: PLC0415
 
-        self._codec = codec
         self._quanta = dict(quanta or {})
         for sensor in SENSOR_FIELDS:
             sensor_quanta(sensor, self._quanta)
 
     def encode(self, block: SampleBlock) -> bytes:
-        return self._codec.encode_block(block, self._quanta)
+        # numpy alone: a process that only publishes (the bridge) never loads numba
+        from monitor import codec_np  # noqa: PLC0415
+
+        return codec_np.encode_block(block, self._quanta)
 
     def decode(self, topic: str, payload: bytes, recv_ns: int) -> SampleBlock:
+        from monitor import codec  # noqa: PLC0415 (lazy: numba only where blocks are read)
+
         buoy_id, sensor = parse_sensor_topic(topic)
-        return self._codec.decode_block(buoy_id, sensor, payload, recv_ns)
+        return codec.decode_block(buoy_id, sensor, payload, recv_ns)
 
     def channel_spec(self, sensor: str) -> ChannelSpec:
-        return ChannelSpec(self._codec.schema_name(sensor), "protobuf",
-                           self._codec.file_descriptor_set(sensor), "protobuf")
+        from monitor import codec  # noqa: PLC0415
+
+        return ChannelSpec(codec.schema_name(sensor), "protobuf",
+                           codec.file_descriptor_set(sensor), "protobuf")
 
 
 def default_codec() -> BlockCodec:

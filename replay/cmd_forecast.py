@@ -2,9 +2,9 @@
 
 Each forecast step's (Hs, Tp) is looked up in a damage-rate table over (Hs, Tp) bins
 (:class:`models.sea_state_table.DamageRateTable`): the rates learned from the buoy's own data
-where a table is given (``--table``, saved by an earlier run with ``--save-table`` or by
-:func:`learn_table`), the physics model's elsewhere (:mod:`replay.sea_state_damage`, run
-once per bin the forecast visits). The projection starts from the damage a replay report
+where a table is given (``--table``, saved by an earlier run with ``--save-table``), the
+physics model's elsewhere (:mod:`replay.sea_state_damage`, run once per bin the forecast
+visits). The projection starts from the damage a replay report
 gives (``--report``; else 0) and says, per component: the damage at the end with its band,
 when each damage alert threshold of the configuration would be crossed, and the remaining
 life at the end. A forecast never changes the committed damage: it is a separate figure.

@@ -33,7 +33,6 @@ from monitor.blocks import SENSOR_FIELDS
 
 DEFAULT_START = "2000-01-01T00:00:00Z"
 _FIELD_SENSOR = {f: s for s, fields in SENSOR_FIELDS.items() for f in fields}
-_UNIT_SUFFIX = {f: "_" + f.rsplit("_", 1)[1] for f in _FIELD_SENSOR}
 _ISO = re.compile(
     r"^(\d{4}-\d\d-\d\d[T ]\d\d:\d\d(?::\d\d)?)(?:\.(\d+))?(Z|z|[+-]\d\d:?\d\d)?$"
 )

@@ -89,7 +89,7 @@ class SimConfig:
     mean_span_m: float = 31.0  # mean horizontal anchor -> buoy distance (steady drift)
     load_model: str = "catenary"  # "catenary" | "wavfor" (see the module docstring)
     wavfor_min_wavelength_m: float = 17.0  # shorter wave components exert no net force
-    # quantum per field name of the log's samples (monitor.codec.DEFAULT_QUANTA otherwise)
+    # quantum per field name of the log's samples (monitor.quanta.DEFAULT_QUANTA otherwise)
     quanta: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

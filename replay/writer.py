@@ -132,7 +132,7 @@ class LogWriter(McapFile):
         zstd_level: zstd compression level of the chunks (3: the quantized samples compress
             by a third more than at level 1, at a cost the writer does not notice).
         quanta: quantum per field name (see :func:`monitor.codec.quanta`), overriding
-            :data:`monitor.codec.DEFAULT_QUANTA`; every sample is stored to within half of it.
+            :data:`monitor.quanta.DEFAULT_QUANTA`; every sample is stored to within half of it.
         message_index: also write MCAP Message Index records after each chunk (see
             :class:`monitor.mcap_file.McapFile`).
 

@@ -22,6 +22,7 @@ import time
 import urllib.request
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+from typing import Callable
 
 import pytest
 
@@ -55,14 +56,6 @@ class Notifications:
         self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
         self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/notify"
         threading.Thread(target=self.httpd.serve_forever, daemon=True).start()
-
-    def drain(self) -> list[dict]:
-        out = []
-        while True:
-            try:
-                out.append(self.got.get_nowait())
-            except queue.Empty:
-                return out
 
     def close(self) -> None:
         self.httpd.shutdown()
@@ -136,6 +129,43 @@ def _feed(client: Client, stop: threading.Event, first_s: int) -> None:
         k += 1
 
 
+def _group_notes(rx: Notifications, last: Callable[[dict], bool], timeout: float = 30.0
+                 ) -> list[dict]:
+    """The receiver's notifications of the data_age group, in order, up to and including the
+    first one for which ``last`` holds (AssertionError after ``timeout`` s without it)."""
+    notes: list[dict] = []
+    deadline = time.monotonic() + timeout
+    while not notes or not last(notes[-1]):
+        try:
+            n = rx.got.get(timeout=max(0.0, deadline - time.monotonic()))
+        except queue.Empty:
+            raise AssertionError(f"no closing notification within {timeout:g} s; got {notes}")
+        if n["groupLabels"].get("alertname") == "data_age":
+            notes.append(n)
+    return notes
+
+
+def _nothing_more_after_resolved(manager: Alertmanager, rx: Notifications) -> None:
+    """One firing and one resolved notification of the data_age group, and nothing after them.
+
+    "Nothing after" is shown by an event, not a wait: once the resolved notification is in,
+    a sentinel alert is posted into the same Alertmanager group. The group's next
+    notification carries it; a repeat or a flap of our alert would come before it or inside
+    it, as a notification of its own or as a firing alert next to the sentinel."""
+    notes = _group_notes(rx, lambda n: n["status"] == "resolved")
+    assert [n["status"] for n in notes] == ["firing", "resolved"]
+    assert [a["labels"]["component"] for a in notes[1]["alerts"]] == ["tension"]
+    sentinel = {"alertname": "data_age", "buoy": BUOY, "component": "sentinel"}
+    urllib.request.urlopen(urllib.request.Request(
+        f"{manager.url}/api/v2/alerts", data=json.dumps([{"labels": sentinel}]).encode(),
+        headers={"Content-Type": "application/json"}, method="POST"), timeout=5).close()
+    later = _group_notes(rx, lambda n: any(a["labels"].get("component") == "sentinel"
+                                           for a in n["alerts"]))
+    assert len(later) == 1, f"notifications after the resolved one: {later[:-1]}"
+    assert [a["labels"]["component"] for a in later[0]["alerts"]
+            if a["status"] == "firing"] == ["sentinel"]
+
+
 @pytest.fixture()
 def am(tmp_path):
     rx = Notifications()
@@ -196,10 +226,8 @@ def test_alerts_reach_alertmanager_stay_active_and_resolve(tmp_path, am):
         feeder = threading.Thread(target=_feed, args=(c, stop, now_s + 2), daemon=True)
         feeder.start()
         wait_until(lambda: not manager.active("data_age"), what="data_age resolved in AM", interval=0.2)
-        # one firing and one resolved notification for the data_age group
-        time.sleep(2.5)  # two group intervals: a repeat or a flap would have been sent by now
-        notes = [n for n in rx.drain() if n["groupLabels"].get("alertname") == "data_age"]
-        assert [n["status"] for n in notes] == ["firing", "resolved"]
+        # one firing and one resolved notification for the data_age group, nothing more
+        _nothing_more_after_resolved(manager, rx)
     finally:
         stop.set()
         c.close()
@@ -231,9 +259,8 @@ def test_an_alertmanager_outage_delays_but_loses_nothing(tmp_path, am):
         feeder = threading.Thread(target=_feed, args=(c, stop, now_s + 1), daemon=True)
         feeder.start()
         wait_until(lambda: not manager.active("data_age"), what="data_age resolved", interval=0.2)
-        time.sleep(2.5)
-        notes = [n for n in rx.drain() if n["groupLabels"].get("alertname") == "data_age"]
-        assert [n["status"] for n in notes] == ["firing", "resolved"]
+        # one firing and one resolved notification for the data_age group, nothing more
+        _nothing_more_after_resolved(manager, rx)
     finally:
         stop.set()
         c.close()

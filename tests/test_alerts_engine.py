@@ -133,9 +133,9 @@ def test_operator_commands_validate():
      "alerts.rule[2].threshold = -1: must be a finite number > 0"),
     ({"rule": [{"kind": "damage_fraction"}]},
      "alerts.rule[0].threshold: missing; rule kind 'damage_fraction' requires it"),
-    ({"rule": [{"kind": "fatigue"}]}, 'alerts.rule[0].kind = "fatigue": unknown rule kind'),
+    ({"rule": [{"kind": "fatigue"}]}, "alerts.rule[0].kind = 'fatigue': unknown rule kind"),
     ({"rule": [{"kind": "stale", "severity": "page"}]},
-     'alerts.rule[0].severity = "page": must be one of'),
+     "alerts.rule[0].severity = 'page': must be one of"),
     ({"rule": [{"kind": "stale", "threshold": 3}]},
      "alerts.rule[0].threshold = 3: unknown key"),
     ({"rule": [{"kind": "rejected_rate", "threshold": 1.5}]},
@@ -150,14 +150,14 @@ def test_operator_commands_validate():
                 "deadband": 0.6}]},
      "alerts.rule[0].deadband = 0.6: must be < threshold (0.5)"),
     ({"rule": [{"kind": "stale", "component": "a/b"}]},
-     'alerts.rule[0].component = "a/b": must be 1-64 letters'),
+     "alerts.rule[0].component = 'a/b': must be 1-64 letters"),
     ({"rule": [{"kind": "damage_fraction", "threshold": 0.1},
                {"kind": "damage_fraction", "threshold": 0.5}]},
-     'alerts.rule[1].name = "damage_fraction": duplicate of alerts.rule[0]'),
+     "alerts.rule[1].name = 'damage_fraction': duplicate of alerts.rule[0]"),
     ({"eval_interval_s": 0}, "alerts.eval_interval_s = 0: must be a finite number > 0 and <= 1e+09"),
     ({"resend_interval_s": "1h"}, "alerts.resend_interval_s = '1h': must be a finite number >= 0"),
     ({"rule": {"kind": "stale"}}, "alerts.rule = {'kind': 'stale'}: must be an array"),
-    ({"webhook": {"url": "ftp://x"}}, 'alerts.webhook.url = "ftp://x": must be an http'),
+    ({"webhook": {"url": "ftp://x"}}, "alerts.webhook.url = 'ftp://x': must be an http"),
     ({"email": {"host": "h", "from": "a@b", "to": []}}, "alerts.email.to = []: must be"),
     ({"outbox": {"retry_base_s": 10, "retry_max_s": 5}},
      "alerts.outbox.retry_max_s = 5: must be >= retry_base_s (10)"),
@@ -170,11 +170,12 @@ def test_config_errors_name_key_and_value(section, message):
 
 
 def test_engine_errors_for_unknown_components():
-    with pytest.raises(ValueError, match='alerts.rule\\[0\\].component = "mid": unknown '
+    with pytest.raises(ValueError, match="alerts.rule\\[0\\].component = 'mid': unknown "
                                          "component; expected one of \\['core', 'left'"):
         AlertEngine.from_config({"rule": [{"kind": "damage_rate", "threshold": 1,
                                            "component": "mid"}]}, "b1", COMPONENTS)
-    with pytest.raises(ValueError, match="has no endurance stress"):
+    with pytest.raises(ValueError, match="alerts.rule\\[0\\].component = 'core': component has "
+                                         "no endurance stress"):
         AlertEngine.from_config({"rule": [{"kind": "conductor_stress", "component": "core"}]},
                                 "b1", COMPONENTS)
     with pytest.raises(ValueError, match="endurance_stress_Pa = -1"):

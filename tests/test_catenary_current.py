@@ -9,7 +9,8 @@ import pytest
 
 from models.catenary import Joint, Line, Segment, solve
 from models.catenary.current import Drag, solve_in_current
-from models.catenary.closed_forms import critical_angle, current_cord_tension, hydrodynamic_constant
+from models.catenary.closed_forms import current_cord_tension
+from models.dynamics import critical_angle, hydrodynamic_constant
 
 
 def test_no_current_equals_catenary_multisegment():
@@ -28,7 +29,7 @@ def test_straight_line_at_seed002_critical_angle():
     # current towards the anchor (u < 0): weight and normal drag balance on a straight line at
     # the critical angle; choose the span so that the stretch fits anchor tension 1000 N
     w, d, cd, rho, u, ea, length = 30.0, 0.04, 1.2, 1025.0, -1.2, 2e6, 200.0
-    alpha = float(critical_angle(abs(u), hydrodynamic_constant(w, cd, rho, d)))
+    alpha = float(critical_angle(abs(u), hydrodynamic_constant(w, cd, d, rho)))
     t_a = 1000.0
     stretched = length + (t_a * length + 0.5 * w * math.sin(alpha) * length**2) / ea
     line = Line.homogeneous(length, w, ea, seabed=False)

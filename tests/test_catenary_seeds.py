@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from models import dynamics as dyn
 from models.catenary import closed_forms as cs
 from models.catenary import solve_line
 
@@ -74,10 +75,10 @@ def test_critical_angle_is_the_singular_angle_of_seed001_eq11():
     # (V/H)^2 = (rho C_D d V^2 / 2) / w = lam: seed 002's critical angle is where seed 001's
     # cord-in-current tension blows up (for beta measured on the upstream side, pi - alpha)
     w, cd, rho, d, v = 40.0, 1.2, 1025.0, 0.03, 1.5
-    hc = cs.hydrodynamic_constant(w, cd, rho, d)
+    hc = dyn.hydrodynamic_constant(w, cd, d, rho)
     lam = 0.5 * rho * cd * d * v * v / w
     assert (v / hc) ** 2 == pytest.approx(lam)
-    alpha = float(cs.critical_angle(v, hc))
+    alpha = float(dyn.critical_angle(v, hc))
     s = math.sqrt(4 * lam * lam + 1)
     assert math.cos(math.pi - alpha) == pytest.approx((1 - s) / (2 * lam), rel=1e-12)
     # weight and normal drag balance there: w cos(alpha) = lam w sin^2(alpha)

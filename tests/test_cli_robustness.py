@@ -288,7 +288,7 @@ def test_pace_speed_has_a_floor(tmp_path, capsys, speed):
 
 @pytest.mark.parametrize("extra, message", [
     ('[[alerts.rule]]\nkind = "damage_rate"\nthreshold = 1.0\ncomponent = "mid"\n',
-     'config error: alerts.rule[8].component = "mid": unknown component'),
+     "config error: alerts.rule[8].component = 'mid': unknown component"),
     ('[cable]\npreset = "vaps_biw"\nno_such_field = 1.0\n', "config error: cable"),
 ])
 def test_replay_exits_2_for_config_errors_found_when_the_pipeline_is_built(tmp_path, capsys,
@@ -383,10 +383,11 @@ def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
 
 @pytest.mark.parametrize("rule, message", [
     ('kind = "damage_fraction"\nname = "x"\ncomponent = "conductr"\nthreshold = 0.2\n',
-     'alerts.rule[8].component = "conductr": unknown component; expected one of '
+     "alerts.rule[8].component = 'conductr': unknown component (did you mean 'conductor'?); "
+     "expected one of "
      "['conductor', 'conductor_termination']"),
     ('kind = "stale"\nname = "y"\ncomponent = "tensoin"\n',
-     'alerts.rule[8].component = "tensoin": unknown sensor stream'),
+     "alerts.rule[8].component = 'tensoin': unknown sensor stream"),
 ])
 def test_check_config_refuses_a_rule_for_a_component_the_config_lacks(tmp_path, capsys, rule,
                                                                         message):

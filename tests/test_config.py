@@ -186,7 +186,7 @@ def test_every_section_is_parsed_once_into_its_typed_object():
     ({"alerts": {"rule": [{"kind": "damage_fraction", "threshhold": 0.1}]}},
      "config error: alerts.rule[0].threshhold = 0.1: unknown key (did you mean 'threshold'?)"),
     ({"alerts": {"rule": [{"kind": "damage_fractoin", "threshold": 0.1}]}},
-     "config error: alerts.rule[0].kind = \"damage_fractoin\": unknown rule kind (did you mean "
+     "config error: alerts.rule[0].kind = 'damage_fractoin': unknown rule kind (did you mean "
      "'damage_fraction'?)"),
     ({"source": [{"name": "lc", "sensor": "tension", "transport": "stdin",
                   "columns": {"tension_N": 0}, "stal_s": 3.0}]},

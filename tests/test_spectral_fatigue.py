@@ -6,10 +6,12 @@ import math
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from models.fatigue.sn_curve import SNCurve
 from models.fatigue.spectral import (cycle_rate_hz, damage_rate, damage_rate_from_psd,
-                                     range_density, spectral_moments, tovo_benasciutti_b)
+                                     range_density, segment_psds, spectral_moments,
+                                     tovo_benasciutti_b)
 from models.waves import jonswap
 
 FLife = pytest.importorskip("FLife")
@@ -78,3 +80,16 @@ def test_bad_spectra_are_refused():
         spectral_moments(F, -np.ones_like(F))
     with pytest.raises(ValueError, match="spectral method"):
         damage_rate(SNCurve.basquin(3, 12), spectral_moments(F, _spectra()["wave"]), "rice")
+
+
+def test_segment_psds_average_to_scipy_welch():
+    # Welch's estimate without overlap over the segments laid end to end: scipy as the oracle
+    rng = np.random.default_rng(7)
+    for n in (64, 63):  # even n has a Nyquist bin, odd n none
+        x = rng.normal(3.0, 2.0, 5 * n)
+        f, rows = segment_psds(x.reshape(5, n), 20.0)
+        f_ref, psd_ref = signal.welch(x, fs=20.0, nperseg=n, noverlap=0)
+        np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(rows.mean(axis=0), psd_ref, rtol=1e-12, atol=1e-15)
+    with pytest.raises(ValueError, match="segment_psds"):
+        segment_psds(np.zeros((2, 1)), 20.0)

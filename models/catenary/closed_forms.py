@@ -64,20 +64,7 @@ def current_cord_tension(beta, lam, p0, beta_top):
     return c * shape(np.asarray(beta, dtype=float))
 
 
-# --- seed 002 (Zajac 1957) -----------------------------------------------------------------
-
-def hydrodynamic_constant(w, cd, rho, d):
-    """Seed 002: H = sqrt(2 w / (C_D rho d)), the current speed at which the normal drag on a
-    cable normal to the flow equals its weight per length."""
-    return math.sqrt(2.0 * w / (cd * rho * d))
-
-
-def critical_angle(speed, hyd_constant):
-    """Seed 002: angle to the flow (rad) of a long cable whose weight and normal drag balance,
-    cos(alpha) = sqrt(1 + (H/V)^4 / 4) - (H/V)^2 / 2."""
-    r2 = (hyd_constant / np.asarray(speed, dtype=float)) ** 2
-    return np.arccos(np.sqrt(1.0 + 0.25 * r2 * r2) - 0.5 * r2)
-
+# --- seed 002 (Zajac 1957): hydrodynamic_constant and critical_angle are in models.dynamics
 
 # --- seed 003 (Filipich, Rosales, Almeida) -------------------------------------------------
 

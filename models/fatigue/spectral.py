@@ -210,12 +210,13 @@ def _density(method: str):
 def segment_psds(segments: ArrayLike, fs_hz: float
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One-sided PSD (units^2/Hz) of each equal-length segment (rows), its mean removed and
-    a Hann window applied: the periodograms Welch's estimate averages (Welch 1967). Returns
-    (frequencies, PSD per row)."""
+    a Hann window applied: the periodograms Welch's estimate averages (Welch 1967; their mean
+    is ``scipy.signal.welch(x, fs, nperseg=n, noverlap=0)`` over the segments laid end to
+    end). Returns (frequencies, PSD per row)."""
     x = np.atleast_2d(np.asarray(segments, dtype=float))
     n = x.shape[1]
     if n < 2 or x.shape[0] == 0 or not (math.isfinite(fs_hz) and fs_hz > 0):
-        raise ValueError("segment_psd: at least one segment of >= 2 samples and fs > 0")
+        raise ValueError("segment_psds: at least one segment of >= 2 samples and fs > 0")
     w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)  # periodic Hann, as scipy's
     spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
     spec /= fs_hz * float(np.sum(w * w))
@@ -223,10 +224,3 @@ def segment_psds(segments: ArrayLike, fs_hz: float
     freqs = np.fft.rfftfreq(n, 1.0 / fs_hz).astype(np.float64, copy=False)
     return freqs, spec.astype(np.float64, copy=False)
 
-
-def segment_psd(segments: ArrayLike, fs_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Mean one-sided PSD of equal-length segments (:func:`segment_psds`): Welch's estimate
-    without overlap, the same figures as ``scipy.signal.welch(x, fs, nperseg=n,
-    noverlap=0)`` over the segments laid end to end. Returns (frequencies, PSD)."""
-    f, rows = segment_psds(segments, fs_hz)
-    return f, rows.mean(axis=0)

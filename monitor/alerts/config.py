@@ -43,7 +43,8 @@ from msgspec import Meta
 from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth, check_url,
                                          parse_auth)
 from monitor.alerts.records import SEVERITIES
-from monitor.schema import MAX_DURATION_S, ConfigError, convert, did_you_mean, parse_struct, unknown
+from monitor.schema import (MAX_DURATION_S, ConfigError, check_keys, convert, did_you_mean,
+                            error, parse_struct)
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
@@ -90,14 +91,8 @@ KIND_PARAMS: Mapping[str, tuple[str, Mapping[str, tuple[Any, float | None]]]] = 
 }
 
 
-def _show(value: Any) -> str:
-    if isinstance(value, str):
-        return '"' + value.replace('"', '\\"') + '"'
-    return repr(value)
-
-
 def _err(where: str, value: Any, msg: str) -> ConfigError:
-    return ConfigError(f"config error: {where} = {_show(value)}: {msg}")
+    return error("", where, value, msg)  # ``where`` is the whole key path here
 
 
 def _get(where: str, d: Mapping[str, Any], key: str, tp: Any, default: Any) -> Any:
@@ -113,12 +108,6 @@ def _string(where: str, value: Any, pattern_ok=lambda s: True, what="a non-empty
 def _chunk_ok(s: str) -> bool:
     # rule names and components become Zenoh key chunks: no separators or wildcards
     return all(c.isalnum() or c in "_.-" for c in s) and len(s) <= 64
-
-
-def _check_keys(where: str, d: Mapping[str, Any], allowed: set[str]) -> None:
-    for key in d:
-        if key not in allowed:
-            raise unknown(where, key, d[key], allowed)
 
 
 @dataclass(frozen=True)
@@ -207,7 +196,7 @@ class AlertsConfig:
         d = {} if d is None else d
         if not isinstance(d, Mapping):
             raise _err(where, d, "must be a table")
-        _check_keys(where, d, {"eval_interval_s", "resend_interval_s", "history_limit", "rule",
+        check_keys(where, d, {"eval_interval_s", "resend_interval_s", "history_limit", "rule",
                                "webhook", "email", "alertmanager", "outbox"})
         eval_s = _get(where, d, "eval_interval_s", Seconds, 10.0)
         if eval_s * 1e9 != round(eval_s * 1e9):  # the alert tick grid is in int64 ns
@@ -274,7 +263,7 @@ def _rule(where: str, r: Any) -> RuleConfig:
         raise _err(f"{where}.kind", kind, f"unknown rule kind{did_you_mean(str(kind), KIND_PARAMS)}; "
                    f"expected one of {sorted(KIND_PARAMS)}")
     _, specs = KIND_PARAMS[kind]
-    _check_keys(where, r, {"kind", "name", "component", "severity", *specs})
+    check_keys(where, r, {"kind", "name", "component", "severity", *specs})
     name = _string(f"{where}.name", r.get("name", kind), _chunk_ok,
                    "1-64 letters, digits, '_', '.', '-'")
     component = r.get("component")
@@ -303,7 +292,7 @@ def _auth_dict(auth: HttpAuth) -> dict[str, str]:
 def _webhook(where: str, d: Any) -> WebhookConfig:
     if not isinstance(d, Mapping):
         raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"url", "timeout_s", "receiver", *AUTH_KEYS})
+    check_keys(where, d, {"url", "timeout_s", "receiver", *AUTH_KEYS})
     url = check_url(f"{where}.url", d.get("url"), _err)
     return WebhookConfig(
         url=url, timeout_s=_get(where, d, "timeout_s", Positive, 10.0),
@@ -315,7 +304,7 @@ def _webhook(where: str, d: Any) -> WebhookConfig:
 def _alertmanager(where: str, d: Any) -> AlertmanagerConfig:
     if not isinstance(d, Mapping):
         raise _err(where, d, "must be a table")
-    _check_keys(where, d, {"url", "resend_interval_s", "ends_at_intervals", "timeout_s", "job",
+    check_keys(where, d, {"url", "resend_interval_s", "ends_at_intervals", "timeout_s", "job",
                            "instance", "runbook_url", "generator_url", *AUTH_KEYS})
     raw = d.get("url")
     urls = [raw] if isinstance(raw, str) else raw

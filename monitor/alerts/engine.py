@@ -26,7 +26,7 @@ from monitor.alerts.records import AlertRecord
 from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, ConductorYield, Rule, TickStats
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.events import Observation
-from monitor.schema import ConfigError, did_you_mean
+from monitor.schema import error, unknown
 
 STATE_VERSION = 1
 
@@ -72,11 +72,9 @@ class AlertEngine:
         for r in self._rules:
             fp = self._record(r, "fire", 0).fingerprint
             if fp in self._by_fp:
-                raise ConfigError(
-                    f"config error: {r.cfg.where}.name = \"{r.name}\": rule {r.name!r} for "
-                    f"component {r.target!r} is also defined by {self._by_fp[fp].cfg.where}; "
-                    "give each rule a distinct name"
-                )
+                raise error(r.cfg.where, "name", r.name,
+                            f"rule {r.name!r} for component {r.target!r} is also defined by "
+                            f"{self._by_fp[fp].cfg.where}; give each rule a distinct name")
             self._by_fp[fp] = r
             self._by_key[(r.name, r.target)] = r
         self.last_t_ns = -1
@@ -103,24 +101,20 @@ class AlertEngine:
             return [cls(rc, rc.component or CABLE_COMPONENT)]
         if target_kind == "stream":
             if rc.component is not None and rc.component not in SENSOR_FIELDS:
-                raise ConfigError(
-                    f"config error: {rc.where}.component = \"{rc.component}\": unknown sensor "
-                    f"stream{did_you_mean(rc.component, SENSOR_FIELDS)}; expected one of "
-                    f"{sorted(SENSOR_FIELDS)}")
+                raise unknown(rc.where, "component", rc.component, SENSOR_FIELDS, "sensor stream",
+                              rc.component)
             return [cls(rc, s) for s in ([rc.component] if rc.component else SENSOR_FIELDS)]
         if rc.component is not None and rc.component not in self.endurance_Pa:
-            raise ConfigError(
-                f"config error: {rc.where}.component = \"{rc.component}\": unknown component"
-                f"{did_you_mean(rc.component, self.endurance_Pa)}; expected one of "
-                f"{sorted(self.endurance_Pa)}")
+            raise unknown(rc.where, "component", rc.component, self.endurance_Pa, "component",
+                          rc.component)
         names = [rc.component] if rc.component else list(self.endurance_Pa)
         if cls not in (ConductorStress, ConductorYield):
             return [cls(rc, n) for n in names]
         levels, what = ((self.endurance_Pa, "endurance") if cls is ConductorStress
                         else (self.yield_Pa, "yield"))
         if rc.component is not None and levels[rc.component] is None:
-            raise ConfigError(f"config error: {rc.where}.component = \"{rc.component}\": "
-                              f"component has no {what} stress (not a conductor)")
+            raise error(rc.where, "component", rc.component,
+                        f"component has no {what} stress (not a conductor)")
         return [cls(rc, n, levels[n]) for n in names if levels[n] is not None]
 
     # --- evaluation ------------------------------------------------------------------------

@@ -76,6 +76,11 @@ class SourceConfig(msgspec.Struct, frozen=True):
         return msgspec.structs.replace(self, format=fmt, port=self.port if need == "port" else 0,
                                        **maps)
 
+    @property
+    def timed_at_read(self) -> bool:
+        """Its samples take the time of the read (a delimited line without a time column)."""
+        return self.format == "delimited" and self.time_column is None
+
 
 class BridgeSection(msgspec.Struct, frozen=True):
     """``[bridge]``: where to publish, how often to report, what the cache holds."""

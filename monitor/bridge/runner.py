@@ -4,7 +4,8 @@ One thread reads every source (:class:`monitor.bridge.transports.Links`), parses
 blocks, publishes and reports. It sleeps until a source is readable or the next timed duty
 is due (a block to close on the wall clock, a state to change, the status, a transport's
 own); near a block's close every read is immediate, so the block goes out as soon as its
-closing line arrives (between blocks reads gather: ``_GATHER_S``). A block closes when a
+closing line arrives (between blocks reads gather: ``_GATHER_S``), and the lines of a read
+are parsed at once (:func:`monitor.bridge.formats.bulk_parser`). A block closes when a
 sample lies ``block_s`` after its first one, or when ``block_s`` of wall-clock time has
 passed since its first sample arrived (a quiet instrument still gets its samples out).
 Times must increase strictly within a source: a sample at or before the last one is counted
@@ -33,16 +34,19 @@ import logging
 import math
 import threading
 import time
+from bisect import bisect_left
 from collections import Counter
 from dataclasses import dataclass, field
+from itertools import islice
+from operator import lt
 from typing import Any, Callable
 
 import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.bridge.config import BridgeConfig, SourceConfig
-from monitor.bridge.formats import Rejected, parser
-from monitor.bridge.transports import LINKS, LineSplitter, Link, Links, ReceiveClock
+from monitor.bridge.formats import Rejected, Samples, bulk_parser, parser
+from monitor.bridge.transports import FLOOD, LINKS, LineSplitter, Link, Links, ReceiveClock
 from monitor.sensors import PublisherOptions, SensorPublisher
 from monitor import zenoh_io
 
@@ -52,23 +56,35 @@ _LOG_EVERY_S = 60.0
 _UNTIL_S = 0.05
 # Between blocks a source's lines only wait for their block, so their bytes may wait in the
 # kernel's buffers too: after a read the loop pauses up to _GATHER_S and the next read takes
-# every line of every source at once (a wake-up costs ~10 times a line: bench/bench_bridge.py).
-# From _NEAR_S before a block's close (its first line's arrival + block_s; that arrival itself
-# up to _GATHER_S late) every read is immediate, so the closing line is not delayed. Receive
-# times are taken at the read, so a source timed by the bridge (not the instrument) means no
-# pause at all. 20 ms is 1.8 kB at 921,600 Bd, well inside a tty's 4-kB buffer.
-_GATHER_S = 0.02
-_NEAR_S = 2 * _GATHER_S + 0.01
+# every line of every source at once (a wake-up with a small read costs ~50 us, as much as
+# 30 lines in bulk: bench/bench_bridge.py). Reads are immediate from _NEAR_S before the
+# arrival of a block's closing line, so it is not delayed: expected at its sensor time plus
+# the source's lag (the least of read time - sensor time of a read's last sample over this
+# block and the last: a gathered read's last line came just before it, so the least is the
+# instrument's own lag; the read that opened the block gave one). Receive times are taken at
+# the read, so a source timed by the bridge (not the instrument) means no pause at all. A
+# pause never outgrows what the kernel keeps for a link (Link.pause_limit_s: a tty's 4 kB, a
+# UDP socket's datagrams).
+_GATHER_S = 0.1
+# a flood: bytes coming so fast that this long a pause would gather ``FLOOD`` of them (a
+# pause would only slow the reading down)
+_FLOOD_S = 0.02
+_NEAR_S = 0.01
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
 _UNLOGGED = {"other_sentence", "repeat_fix"}
 
 
+# a read of fewer lines goes one by one: the bulk parser's set-up costs as much as a line
+_BULK_MIN = 2
+
+
 @dataclass
 class SourceState:
     cfg: SourceConfig
     parse: Callable[[str, int], Any]
+    parse_many: Callable[[list[bytes], int], Samples | None] | None = None
     connected: bool = False
     lines: int = 0
     samples: int = 0
@@ -82,15 +98,29 @@ class SourceState:
     # when ``connected`` last changed (or the bridge started): what a state's age counts from
     link_mono: float = field(default_factory=time.monotonic)
     state: str = "connecting"
+    # the open block: its first sample's time (None: no block open), its samples' times and
+    # values (a list per field: a flat list becomes an array at a tenth of a row's cost)
+    first_t: int | None = None
     t: list[int] = field(default_factory=list)
-    values: list[list[float]] = field(default_factory=list)
+    columns: list[list[float]] = field(default_factory=list)
     block_opened_mono: float = 0.0
+    # read time - sensor time (s) of a read's last sample: the least over the open block and
+    # over the block before (``_GATHER_S`` comment)
+    lag_s: float = math.inf
+    lag_before_s: float = math.inf
     logged: dict[str, float] = field(default_factory=dict)
 
     block_ns: int = 0  # block_s in ns (set from cfg)
 
     def __post_init__(self) -> None:
         self.block_ns = int(self.cfg.block_s * 1e9)
+        self.columns = [[] for _ in SENSOR_FIELDS[self.cfg.sensor]]
+
+    def near_s(self) -> float:
+        """When reads turn immediate for the open block's closing line (monotonic s)."""
+        assert self.first_t is not None, "no block open"
+        return (self.first_t + self.block_ns) * 1e-9 + min(self.lag_s, self.lag_before_s) \
+            - _NEAR_S
 
     def current_state(self, now_mono: float) -> str:
         """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
@@ -121,7 +151,7 @@ class Bridge:
         self.cfg = cfg
         self.publisher = publisher
         self.clock = ReceiveClock()
-        self.sources = [SourceState(s, parser(s)) for s in cfg.sources]
+        self.sources = [SourceState(s, parser(s), bulk_parser(s)) for s in cfg.sources]
         self._stop = threading.Event()
         self._links: Links | None = None
         self._status_pub: Any = None
@@ -174,7 +204,7 @@ class Bridge:
         self._recheck = False
         self._links.duties(now)
         for src in self.sources:
-            if src.t and now - src.block_opened_mono >= src.cfg.block_s:
+            if src.first_t is not None and now - src.block_opened_mono >= src.cfg.block_s:
                 self._flush(src)
         self._update_states(now)
         if now >= self._next_status:
@@ -182,7 +212,7 @@ class Bridge:
             self._next_status = now + self.cfg.status_interval_s
         due = min(self._next_status, self._next_state_change(), self._links.next_due())
         for src in self.sources:
-            if src.t:
+            if src.first_t is not None:
                 due = min(due, src.block_opened_mono + src.cfg.block_s)
         self._due = due
 
@@ -225,16 +255,18 @@ class Bridge:
 
     def _gather_s(self, now: float) -> float:
         """How long the next read may wait (``_GATHER_S`` comment): 0 near a block's close,
-        with a source timed by the bridge, with more waiting than a read takes (a flood), or
-        with a duty due."""
-        if self._links is None or self._links.full:
+        with a source timed by the bridge, with more waiting than a read takes, in a flood
+        (data coming so fast that a gathered read would hold ``FLOOD`` bytes: a pause would
+        only slow the reading down), or with a duty due."""
+        links = self._links
+        if links is None or links.full or links.rate_Bps * _FLOOD_S >= FLOOD:
             return 0.0
-        pause = min(_GATHER_S, self._due - now)
+        pause = min(_GATHER_S, self._due - now, links.pause_limit_s)
         for src in self.sources:
             if src.connected and src.time_source != "instrument":
                 return 0.0
-            if src.t:
-                pause = min(pause, src.block_opened_mono + src.cfg.block_s - _NEAR_S - now)
+            if src.first_t is not None:
+                pause = min(pause, src.near_s() - now)
         return pause
 
     def _update_states(self, now_mono: float) -> None:
@@ -268,8 +300,44 @@ class Bridge:
         src.last_line_mono = now
         if src.state != "reading":
             self._recheck = True
-        for line in data:
+        many = (src.parse_many(data, recv_ns) if src.parse_many is not None
+                and len(data) >= _BULK_MIN else None)
+        if many is not None and (src.last_t_ns is None or many.t_ns[0] > src.last_t_ns) \
+                and all(map(lt, many.t_ns, islice(many.t_ns, 1, None))):
+            self._samples(src, many, now)
+            return
+        for line in data:  # one by one: each rejection counted by its reason
             self._line(src, line, recv_ns, now)
+        if src.last_t_ns is not None:
+            src.lag_s = min(src.lag_s, now - src.last_t_ns * 1e-9)
+
+    def _samples(self, src: SourceState, many: Samples, now_mono: float) -> None:
+        """Samples of the bulk parser (times increasing, after the last) into blocks, as
+        :meth:`_line` puts them one by one."""
+        t, n, i = many.t_ns, len(many.t_ns), 0
+        while i < n:
+            first_t = src.first_t
+            if first_t is None:
+                first_t = self._open_block(src, t[i], now_mono)
+            end = bisect_left(t, first_t + src.block_ns, i)
+            src.t.extend(t[i:end])
+            for column, values in zip(src.columns, many.columns):
+                column.extend(values[i:end])
+            if end < n:
+                self._flush(src)
+            i = end
+        src.last_t_ns = t[-1]
+        src.lag_s = min(src.lag_s, now_mono - t[-1] * 1e-9)
+        src.time_source = many.time_source
+        src.samples += n
+        src.last_sample_mono = now_mono
+
+    def _open_block(self, src: SourceState, t_ns: int, now_mono: float) -> int:
+        """Open a block at sample time ``t_ns``; returns it."""
+        src.first_t = t_ns
+        src.block_opened_mono = now_mono
+        self._due = min(self._due, now_mono + src.cfg.block_s)
+        return t_ns
 
     def _line(self, src: SourceState, data: bytes, recv_ns: int, now_mono: float) -> None:
         try:
@@ -286,13 +354,13 @@ class Bridge:
         if src.last_t_ns is not None and t_ns <= src.last_t_ns:
             self._reject(src, "time_backwards")
             return
-        if src.t and t_ns - src.t[0] >= src.block_ns:
+        if src.first_t is not None and t_ns - src.first_t >= src.block_ns:
             self._flush(src)
-        if not src.t:
-            src.block_opened_mono = now_mono
-            self._due = min(self._due, now_mono + src.cfg.block_s)
+        if src.first_t is None:
+            self._open_block(src, t_ns, now_mono)
         src.t.append(t_ns)
-        src.values.append(vals)
+        for column, v in zip(src.columns, vals):
+            column.append(v)
         src.last_t_ns = t_ns
         src.time_source = time_source
         src.samples += 1
@@ -314,13 +382,14 @@ class Bridge:
                 "count": src.rejected.get(reason, 0) or src.events.get(reason, 0)}})
 
     def _flush(self, src: SourceState) -> None:
-        if not src.t:
+        if src.first_t is None:
             return
-        v = np.array(src.values, dtype=np.float64)
-        fields = {f: v[:, k].copy() for k, f in enumerate(SENSOR_FIELDS[src.cfg.sensor])}
-        block = SampleBlock(self.cfg.buoy_id, src.cfg.sensor, np.array(src.t, dtype=np.int64),
-                            fields)
-        src.t, src.values = [], []
+        fields = {f: np.array(column, np.float64)
+                  for f, column in zip(SENSOR_FIELDS[src.cfg.sensor], src.columns)}
+        block = SampleBlock(self.cfg.buoy_id, src.cfg.sensor, np.array(src.t, np.int64), fields)
+        src.t, src.first_t = [], None
+        src.columns = [[] for _ in src.columns]
+        src.lag_before_s, src.lag_s = src.lag_s, math.inf
         self.publisher.publish_block(block)
         src.blocks += 1
 

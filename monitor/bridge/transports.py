@@ -26,18 +26,26 @@ import selectors
 import socket
 import sys
 import time
+from operator import methodcaller
 from typing import Any, Callable
 
 from monitor.bridge.config import SourceConfig
 
 MAX_LINE = 4096
 _READ = 65536
-_FLOOD = 8192  # a read this long: more is waiting (1 kHz lines bring ~1 kB per 20 ms)
+FLOOD = 8192  # a read this long: more is waiting (1 kHz lines bring ~1 kB per 20 ms)
+_RATE_S = 0.1  # the bytes (datagrams) read per second are counted over windows this long
+_GATHER_GRAMS = 64
+_TTY_GATHER = 2048
+_UDP_BUFFER = 1 << 20
 _FILE_READ = 1 << 20  # per turn: a long file is read over several turns, the others served
 _IDLE_S = 0.2  # no byte for this long with nothing buffered: the instrument is between lines
 # a followed file has no readiness to wait on: looked at this often (appends, rotation,
 # truncation)
 _FILE_POLL_S = 0.005
+# a line with more than blanks, NULs and CRs; a line without its CR (CRLF line ends)
+_TEXT = methodcaller("strip", b"\r \t\x00")
+_CR = methodcaller("rstrip", b"\r")
 Emit = Callable[[list[bytes], int], None]
 Event = Callable[[str], None]
 
@@ -78,7 +86,12 @@ class LineSplitter:
         now = self.clock.now_ns()
         self.buf += data
         *lines, self.buf = self.buf.split(b"\n")
-        out = []
+        if self.synced and lines and max(map(len, lines)) <= MAX_LINE:
+            # the usual read: builtins over all its lines (the loop below costs ~0.5 us a line)
+            out = list(map(_CR, filter(_TEXT, lines)))
+            lines = []
+        else:
+            out = []
         for line in lines:
             if not self.synced:
                 self.synced = True
@@ -101,6 +114,7 @@ class Link:
     """One source's transport: opened, read when ready, closed and reopened on failure."""
 
     poll_s: float | None = None  # :meth:`poll` is called this often while open (None: never)
+    flood = FLOOD  # a read this long: more is waiting, read again at once
 
     def __init__(self, cfg: SourceConfig, lines: LineSplitter, event: Event,
                  connected: Callable[[bool], None]) -> None:
@@ -112,7 +126,8 @@ class Link:
         self.finished = False  # stdin at its end: nothing more will come
         self.backlog = False  # more to read at once (a long file)
         self.next_poll_mono = 0.0  # when :meth:`poll` is due (links with ``poll_s``)
-        self.full = False  # the last read was a flood's (``_FLOOD``): more is waiting
+        self.full = False  # the last read was a flood's (``FLOOD``): more is waiting
+        self.nread = 0  # bytes read
         # set by Links: stop waiting on a file object (before it is closed); what to wait
         # on has changed
         self.forget: Callable[[Any], None] = lambda fileobj: None
@@ -135,6 +150,12 @@ class Link:
 
     def close(self) -> None:
         """Release the descriptors (never raises)."""
+
+    def pause_limit_s(self, window_s: float) -> float:
+        """The longest pause before a read that loses nothing (``inf``: the kernel keeps
+        more than a pause brings), from what came in the last ``window_s`` (asked once per
+        window)."""
+        return math.inf
 
     # --- shared -------------------------------------------------------------------------
     def up(self, synced: bool) -> None:
@@ -164,7 +185,8 @@ class Link:
         self.retry_mono = time.monotonic() + self.cfg.reconnect_s
 
     def got(self, data: bytes) -> None:
-        self.full = len(data) >= _FLOOD
+        self.full = len(data) >= self.flood
+        self.nread += len(data)
         self.last_data_mono = time.monotonic()
         self.lines.feed(data)
 
@@ -178,6 +200,17 @@ def _close(obj: Any) -> None:
 
 
 class SerialLink(Link):
+    # a tty holds 4 kB for its reader (more waits in the driver, and a pty's writer waits,
+    # or the tail of a burst stays there until the next byte comes): pauses gather at most
+    # half of it, and a read of three quarters (a burst) is followed by another at once
+    flood = 3 * _TTY_GATHER // 2
+    _nread_before = 0
+
+    def pause_limit_s(self, window_s: float) -> float:
+        rate = (self.nread - self._nread_before) / window_s
+        self._nread_before = self.nread
+        return _TTY_GATHER / rate if rate > 0 else math.inf
+
     def open(self) -> None:
         import serial  # noqa: PLC0415 (pyserial only where a serial source is configured)
 
@@ -280,8 +313,20 @@ class TcpServerLink(Link):
 
 
 class UdpLink(Link):
+    grams = 0  # datagrams read
+    _grams_before = 0  # ... before the last window (:meth:`pause_limit_s`)
+
+    def pause_limit_s(self, window_s: float) -> float:
+        # a socket's buffer counts a small datagram as ~1 kB: pause for _GATHER_GRAMS at most
+        rate = (self.grams - self._grams_before) / window_s
+        self._grams_before = self.grams
+        return _GATHER_GRAMS / rate if rate > 0 else math.inf
+
     def open(self) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # room for the datagrams of a pause at its start, before their rate is known (the
+        # kernel caps this at net.core.rmem_max)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, _UDP_BUFFER)
         try:
             self.sock.bind((self.cfg.host, self.cfg.port))
         except OSError:
@@ -294,14 +339,21 @@ class UdpLink(Link):
         return [(self.sock, selectors.EVENT_READ)]
 
     def ready(self, fileobj: Any, mask: int) -> None:
+        grams = []
         for _ in range(1000):  # every datagram waiting, within reason
             try:
                 data = self.sock.recv(_READ)
             except BlockingIOError:
-                return
-            self.lines.reset(synced=True)  # each datagram holds whole lines
-            self.got(data if data.endswith(b"\n") else data + b"\n")
-        self.full = True
+                break
+            grams.append(data if data.endswith(b"\n") else data + b"\n")
+        if not grams:
+            return
+        self.grams += len(grams)
+        self.lines.reset(synced=True)  # each datagram holds whole lines
+        # all in one piece, parsed at once; a source timed at the read keeps a time for each
+        for piece in grams if self.cfg.timed_at_read else [b"".join(grams)]:
+            self.got(piece)
+        self.full = self.full or len(grams) == 1000
 
     def close(self) -> None:
         _close(getattr(self, "sock", None))
@@ -381,6 +433,9 @@ class Links:
         self._dirty = True
         self.stale = True
         self.full = False  # a read in the last pump was a flood's: more is waiting
+        self.rate_Bps = 0.0  # bytes read per second in the last whole window of ``_RATE_S``
+        self._window = (time.monotonic(), 0)  # its start and the bytes read before it
+        self.pause_limit_s = math.inf  # the longest pause before a read that loses nothing
         # stop() from another thread or a signal handler: a byte here ends the wait at once
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -458,6 +513,13 @@ class Links:
             if link.full:
                 link.full = False
                 self.full = True
+        now = time.monotonic()
+        if now - self._window[0] >= _RATE_S:
+            nread = sum(link.nread for link in self.links)
+            self.rate_Bps = (nread - self._window[1]) / (now - self._window[0])
+            self.pause_limit_s = min(link.pause_limit_s(now - self._window[0])
+                                     for link in self.links)
+            self._window = (now, nread)
 
     def _drain_wake(self) -> None:
         try:
