@@ -26,9 +26,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from models._jit import kernel
 
 
 def _pos(name: str, value: float) -> float:
@@ -210,7 +211,7 @@ def form_parameter(x: ArrayLike, z: ArrayLike) -> tuple[float, float]:
     return float(dist.max() / chord), chord
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def jerk_step(y: float, vz: float, b: float) -> float:
     """One implicit-Euler step of y' = (V_z - sign(y) sqrt|y|) / mu, b = dt / mu (inf: mu = 0).
 
@@ -225,7 +226,7 @@ def jerk_step(y: float, vz: float, b: float) -> float:
     return s * s if c >= 0.0 else -s * s
 
 
-@numba.njit(cache=True)
+@kernel()
 def _jerk_steps(vz: np.ndarray, b: float, y0: float, out: np.ndarray) -> float:
     y = y0
     for i in range(vz.size):

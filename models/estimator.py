@@ -33,10 +33,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from models._jit import kernel
 from models.catenary import VAPS_DEPTH, Line, TensionTable, solve, vaps_mooring
 from models.dynamics import (
     ElasticDragCord,
@@ -271,7 +271,7 @@ def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]
 _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 
 
-@numba.njit(cache=True)
+@kernel()
 def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain, drag_on,
                   drag_k, drag_b, y0, tan_flat, total, axial, drag, angle):
     """Per-sample dynamic increments (see the module docstring); returns the jerk state.

@@ -24,10 +24,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from models._jit import kernel
 from models.butterworth import bilinear_zpk, butter_analog_zpk, zpk2sos
 
 
@@ -65,7 +65,7 @@ def displacement_from_acceleration(
     return np.fft.irfft(np.fft.rfft(a, axis=-1) * gain, n=n, axis=-1)
 
 
-@numba.njit(cache=True)
+@kernel()
 def _sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray, out: np.ndarray) -> None:
     """Second-order sections, transposed direct form II (scipy.signal.sosfilt's layout),
     per channel, updating ``zi`` in place: scipy's per-call overhead dominated 1 s blocks."""

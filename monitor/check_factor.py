@@ -43,9 +43,9 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from models.waves import wavenumber
 
 MEMORY = 4096
@@ -59,7 +59,7 @@ def bound(depth_m: float, longest_period_s: float) -> float:
     return 1.0 / math.tanh(k * depth_m) ** 2
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _check(t, z, x, y, c2, window_ns, cover_min_ns, gap_ns, ints, prev,
            ring_dt, ring_v, sums):  # pragma: no cover - compiled
     """Flags of the samples ``t, z, x, y``. State in place: ``ints`` = [has_prev, prev_t,

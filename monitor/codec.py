@@ -42,10 +42,10 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import Mapping
 
-import numba
 import numpy as np
 from google.protobuf import descriptor_pb2
 
+from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.codec_np import (EXACT as _EXACT, FIELD_OFFSETS, FIELD_PERIOD, FIELD_T0,
                               FIRST_VALUE_FIELD, Q_DELTA, Q_QUANTUM, Q_RAW_INDEX, Q_RAW_VALUE)
@@ -208,7 +208,7 @@ DEFAULT_FIELD_NUMBERS = {
 # ----------------------------------------------------------------------------------- encode
 
 
-@numba.njit(cache=True)
+@kernel()
 def _regular_period(t: np.ndarray) -> int:
     """Constant positive step of ``t``, 0 for fewer than two samples, -1 if irregular."""
     n = t.shape[0]
@@ -223,12 +223,12 @@ def _regular_period(t: np.ndarray) -> int:
     return p
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _zigzag(d):
     return np.uint64((d << 1) ^ (d >> 63))
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _varint_size(z):
     z = np.uint64(z)
     n = 1
@@ -238,7 +238,7 @@ def _varint_size(z):
     return n
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _put_varint(out, k, z):
     """Write unsigned ``z`` as a varint at ``out[k]``; return the position after it."""
     z = np.uint64(z)
@@ -250,7 +250,7 @@ def _put_varint(out, k, z):
     return k + 1
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _quantize(v, q):
     """``(k, True)`` when ``float(k) * q`` is within ``q / 2`` of ``v`` (the decoder's exact
     arithmetic), ``(0, False)`` for a sample to keep raw (NaN, inf, too many quanta)."""
@@ -265,13 +265,13 @@ def _quantize(v, q):
     return 0, False
 
 
-@numba.njit(cache=True)
+@kernel()
 def payload_bound(n: int, nf: int) -> int:
     """Upper bound of the payload size of an ``n``-sample block with ``nf`` value fields."""
     return 9 + 11 + 11 + 10 * n + nf * (60 + 29 * n)
 
 
-@numba.njit(cache=True)
+@kernel()
 def _put_quantized(out, k, v, q, qb):
     """Encode the samples ``v`` of one field as a ``Quantized`` message body at ``out[k]``
     (``qb``: the 8 bytes of ``q``); return the end position. Sizes are counted first so the
@@ -322,7 +322,7 @@ def _put_quantized(out, k, v, q, qb):
     return k
 
 
-@numba.njit(cache=True)
+@kernel()
 def put_payload(out, k, t, vals, quanta, a, b):
     """Encode samples ``a:b`` of ``t``/``vals`` (n_fields, N) at ``out[k]`` with the field
     quanta ``quanta`` (n_fields,); return the end position. ``out`` must have
@@ -375,7 +375,7 @@ def encode_block(block: SampleBlock, overrides: Mapping[str, float] | None = Non
 # ----------------------------------------------------------------------------------- decode
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _read_varint(buf, p, end):
     """(value as int64 bit pattern, next position); next position -1 past ``end`` or overlong.
 
@@ -395,12 +395,12 @@ def _read_varint(buf, p, end):
     return result, -1
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _unzigzag(z):
     return ((z >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(z & 1)
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _read_i64(buf, p):
     v = 0
     for i in range(8):
@@ -408,7 +408,7 @@ def _read_i64(buf, p):
     return v
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _value_slot(fn_vals, fnum):
     """Index of field number ``fnum`` among the value fields, or -1."""
     j = -1
@@ -418,7 +418,7 @@ def _value_slot(fn_vals, fnum):
     return j
 
 
-@numba.njit(cache=True)
+@kernel()
 def _skip(buf, p, end, wt):
     """Position after a field of wire type ``wt`` starting at ``p``; -1 if malformed."""
     if wt == 0:
@@ -436,7 +436,7 @@ def _skip(buf, p, end, wt):
     return -1
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _varint_run(buf, p, end, wt):
     """Bounds ``(a, b)`` of the varints of a repeated varint field starting at ``p`` (after
     its tag): packed (``wt`` 2) or one unpacked value (``wt`` 0); ``b`` -1 if malformed."""
@@ -449,7 +449,7 @@ def _varint_run(buf, p, end, wt):
     return p, q
 
 
-@numba.njit(cache=True, inline="always")
+@kernel(inline="always")
 def _count_varints(buf, a, b):
     """Number of varints in ``buf[a:b]``, -1 if one is cut or longer than 10 bytes (so the
     decoding loops may trust every run they are given)."""
@@ -468,7 +468,7 @@ def _count_varints(buf, a, b):
     return n
 
 
-@numba.njit(cache=True)
+@kernel()
 def _read_f64(buf, p, scratch):
     """The little-endian double at ``buf[p]``, through ``scratch`` (float64 (1,)): no
     allocation per value in the decoding loops."""
@@ -476,7 +476,7 @@ def _read_f64(buf, p, scratch):
     return scratch[0]
 
 
-@numba.njit(cache=True)
+@kernel()
 def _scan_quantized(buf, p, end, sub, scratch):
     """Validate one ``Quantized`` body ``buf[p:end]``; return ``(samples, status)``."""
     nd = 0
@@ -529,7 +529,7 @@ def _scan_quantized(buf, p, end, sub, scratch):
     return nd, OK
 
 
-@numba.njit(cache=True)
+@kernel()
 def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
     """Decode a ``Quantized`` body validated by :func:`_scan_quantized` into
     ``out[pos:pos + n]`` (``vb``: the same row as bytes, for the raw samples; ``idx``: room
@@ -589,7 +589,7 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
             p = _skip(buf, p, end, tag & 7)
 
 
-@numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread
+@kernel(nogil=True)  # runs in the read-ahead thread
 def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
     m = offs.shape[0]
     nf = fn_vals.shape[0]

@@ -21,11 +21,12 @@ the same to the last bit.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 
-@numba.njit(cache=True, inline="always")
+
+@kernel(inline="always")
 def _varint(buf, p, end):
     """(value, next position) of the varint at ``p``; next position -1 if it is cut or
     longer than 9 bytes (no value of this layout needs more)."""
@@ -41,7 +42,7 @@ def _varint(buf, p, end):
     return 0, -1
 
 
-@numba.njit(cache=True, nogil=True)  # runs in the reader's read-ahead thread
+@kernel(nogil=True)  # runs in the reader's read-ahead thread
 def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta):
     m = offs.shape[0]
     nf = tags.shape[0]

@@ -19,13 +19,20 @@ MESSAGE = ("buoymon: compiling the numerical kernels, once after an install or u
 COMPILE_SECONDS = 30.0
 
 
+def announce_compiles(stream: TextIO | None = None, seconds: float = COMPILE_SECONDS) -> None:
+    """Print :data:`MESSAGE` to ``stream`` (stderr) when numba first compiles in this
+    process; installed once per process (and arguments), when numba is first imported (a
+    command whose kernels all run as plain Python never imports it: models._jit). Without
+    numba (the models then run as plain Python) nothing is installed."""
+    from monitor.numba_setup import after_numba_import
+
+    after_numba_import(lambda: _install(stream, seconds))
+
+
 # numba's listener registry is per process, so is this: a command run inside another
 # (the demo runs simulate) must not add a second listener and a second message
 @functools.cache
-def announce_compiles(stream: TextIO | None = None, seconds: float = COMPILE_SECONDS) -> None:
-    """Print :data:`MESSAGE` to ``stream`` (stderr) when numba first compiles in this
-    process; installed once per process (and arguments). Without numba (the models then run
-    as plain Python) nothing is installed."""
+def _install(stream: TextIO | None, seconds: float) -> None:
     try:
         from numba.core import event
     except ImportError:  # pragma: no cover - numba is a declared dependency

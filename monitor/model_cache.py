@@ -26,6 +26,7 @@ from typing import Callable, TypeVar
 
 import numpy as np
 
+from models._jit import compiled
 from monitor.atomic_file import atomic_write_bytes
 
 log = logging.getLogger(__name__)
@@ -57,6 +58,9 @@ def cached(kind: str, inputs: object, build: Callable[[], T]) -> T:
     ``inputs`` (whose ``repr`` must determine the result: dataclasses of numbers and strings)."""
     folder = cache_dir()
     builder_file = getattr(sys.modules.get(build.__module__), "__file__", None)
+    # a model build is long work (a catenary table: 1e5 solves) however small the log whose
+    # replay asked for it: its kernels run compiled (models._jit.uncompiled says why not)
+    build = compiled()(build)
     if folder is None or builder_file is None:  # off, or a build whose source is unknown
         return build()
     code = _code_version(builder_file)

@@ -35,10 +35,20 @@ def prepare_numba(stream: TextIO | None = None) -> None:
     """From now on (or as soon as numba is imported), print :data:`NOTICE` to ``stream``
     (default stderr) the first time this process compiles a kernel; numba's first import
     and target load without scipy. Idempotent."""
+    after_numba_import(lambda: _register(stream))
+
+
+def after_numba_import(then: Callable[[], None]) -> None:
+    """Run ``then()`` now if numba is imported, else right after its first import (which
+    loads numba's CPU target without scipy, see above); nothing is imported here."""
     if "numba" in sys.modules:
-        _register(stream)
-    elif not any(isinstance(f, _AfterImport) for f in sys.meta_path):
-        sys.meta_path.insert(0, _AfterImport("numba", lambda: _register(stream)))
+        then()
+        return
+    finder = next((f for f in sys.meta_path if isinstance(f, _AfterImport)), None)
+    if finder is None:
+        sys.meta_path.insert(0, _AfterImport("numba", then))
+    else:
+        finder.thens.append(then)
 
 
 @contextlib.contextmanager
@@ -77,11 +87,11 @@ def _register(stream: TextIO | None) -> None:
 
 
 class _AfterImport:
-    """A ``sys.meta_path`` finder that runs ``then()`` right after module ``name`` is first
-    imported (then steps aside). Duck-typed: importlib.abc costs 5 ms of a 40 ms --help."""
+    """A ``sys.meta_path`` finder that runs each of ``thens`` right after module ``name`` is
+    first imported (then steps aside). Duck-typed: importlib.abc costs 5 ms of a 40 ms --help."""
 
     def __init__(self, name: str, then: Callable[[], None]):
-        self.name, self.then = name, then
+        self.name, self.thens = name, [then]
 
     def find_spec(self, fullname, path, target=None):
         if fullname != self.name:
@@ -99,7 +109,8 @@ class _AfterImport:
     def _loaded(self) -> None:
         if self in sys.meta_path:
             sys.meta_path.remove(self)
-        self.then()
+        for then in self.thens:
+            then()
 
 
 class _ThenLoader:

@@ -45,9 +45,9 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from monitor.check_factor import CheckFactor
 from monitor.config import FieldLimits
 
@@ -76,12 +76,12 @@ _SLOT = np.array([0, 0, 0, 0, 1, 0, 0, 0, 0, 2], np.int64)
 _RANK = np.array([0, 1, 0, 3, 4, 0, 0, 0, 0, 5], np.int64)
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@kernel(nogil=True, inline="always")
 def _worst(a, b):  # pragma: no cover - compiled
     return a if _RANK[a] >= _RANK[b] else b
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@kernel(nogil=True, inline="always")
 def _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f):  # pragma: no cover - compiled
     """One older value ``w`` (NaN skipped) of the flat-line scan widens [lo, hi]; once that
     spans ``tol`` the line is not flat in the windows (suspect ``sw``, fail ``fw``) reaching
@@ -94,7 +94,7 @@ def _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f):  # pragma: no cove
     return lo, hi, flat_s, flat_f, False
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ring_head, ring_n, first_t):  # pragma: no cover - compiled
     """Flags ``(len(TESTS), n)`` of the samples ``t, x`` (``x``: fields x samples) and the
     spike flag of each sample's PREDECESSOR (0 = none). State arrays are updated in place;
@@ -214,7 +214,9 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
                     p1, p2 = np.radians(prev[0]), np.radians(lat)
                     h = (np.sin((p2 - p1) / 2) ** 2 + np.cos(p1) * np.cos(p2)
                          * np.sin(np.radians(lon - prev[1]) / 2) ** 2)
-                    if 2 * _EARTH_RADIUS_M * np.arcsin(np.sqrt(min(h, 1.0))) > location_max_m:
+                    # math.asin: libm's, compiled or not (numpy's own arcsin differs in the
+                    # last bit from it, so a kernel run as plain Python would too)
+                    if 2 * _EARTH_RADIUS_M * math.asin(np.sqrt(min(h, 1.0))) > location_max_m:
                         loc = 3
                 if abs(lat) > 90 or abs(lon) > 180:
                     loc = 4
@@ -252,7 +254,7 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
 
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@kernel(nogil=True, error_model="numpy")
 def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t):
     # pragma: no cover - compiled
     """The usual block, test by test in branch-free loops the compiler vectorises: every value

@@ -10,11 +10,12 @@ handling it defines).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 
-@numba.njit(cache=True)
+
+@kernel()
 def load_stats_pass(v, src, measured, lo, width, hist):
     """Add ``v``'s samples to ``hist`` (in place); return (finite, samples of source
     ``measured``, millinewton sum, min, max). ``finite`` False: nothing was added."""

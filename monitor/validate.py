@@ -51,9 +51,9 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
 from monitor.qartod import CHECK, FAIL, FLAT, StreamQC
@@ -64,7 +64,7 @@ REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_b
 _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 
 
-@numba.njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
               qc_code, repeat):  # pragma: no cover
     # Sequential by nature: each verdict depends on the last ACCEPTED sample before it.

@@ -54,7 +54,7 @@ def warm_up(folder: Path, config_path: str | None = None) -> None:
         logs.append(folder / f"{model}.mcap")
         simulate(SimConfig(hours=0.01, hs_m=1.5, tp_s=5.25, seed=4, load_model=model), logs[-1])
     for log in logs:  # one at a time: two logs of one buoy overlap in time
-        replay_logs(demo_config(), [log], show_progress=False)
+        replay_logs(demo_config(), [log], show_progress=False, plain=False)  # compiled
     codec = zenoh_io.default_codec()
     block = next(iter(LogReader([logs[0]], coalesce=False)))
     codec.decode(f"buoy/{block.buoy_id}/sensor/{block.sensor}", codec.encode(block), 0)

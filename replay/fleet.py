@@ -24,15 +24,12 @@ from __future__ import annotations
 import json
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from monitor.blocks import SampleBlock, parse_sensor_topic
 from monitor.config import Config, parse_config
-from monitor.shore import config_for_buoy
 from monitor.viz.human import remaining_life_text
 
 FLEET_REPORT_VERSION = 1
@@ -132,6 +129,8 @@ def discover(paths: Iterable[str | Path]) -> list[BuoyArchive]:
 
 def make_jobs(archives: Sequence[BuoyArchive], config: Config) -> list[BuoyJob]:
     """One job per buoy; the fleet shares ``config``, with each buoy's own id."""
+    from monitor.shore import config_for_buoy  # the daemon's configuration: only for a fleet
+
     return [BuoyJob(a.buoy_id, a.files, config_for_buoy(config, a.buoy_id).raw, config.source)
             for a in archives]
 
@@ -185,6 +184,9 @@ def _run_serial(jobs: Sequence[BuoyJob], done: Callable[[str], None]) -> list[di
 
 def _run_pool(jobs: Sequence[BuoyJob], workers: int, done: Callable[[str], None]
               ) -> list[dict[str, Any]]:
+    from concurrent.futures import ProcessPoolExecutor, as_completed  # 25 ms: only for a pool
+    from multiprocessing import get_context
+
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
                              mp_context=get_context(MP_START_METHOD)) as pool:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 from replay.mcap_scan import summary_records
-from monitor.mcap_file import MAGIC, OP_CHUNK, OP_MESSAGE, OP_STATISTICS
+from monitor.mcap_file import MAGIC, OP_CHUNK, OP_CHUNK_INDEX, OP_MESSAGE, OP_STATISTICS
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +65,35 @@ def time_span(paths: Sequence[str | PathLike] | str | PathLike) -> tuple[int, in
     if not spans:
         return None
     return min(sp[0] for sp in spans), max(sp[1] for sp in spans)
+
+
+def inflated_size(paths: Sequence[str | PathLike]) -> int | None:
+    """Bytes the files hold once their chunks are decompressed, from their summaries (the
+    chunk indexes' compressed and uncompressed sizes; anything outside chunks counts as
+    stored): a bound on the samples to read known before reading any (every sample takes at
+    least a byte). Cheap (reads only the ends of the files); None when a file has no
+    readable summary (cut short, or not MCAP)."""
+    total = 0
+    for path in expand_paths(paths):
+        try:
+            with open(path, "rb") as f:
+                size = f.seek(0, 2)
+                chunks, indexed = None, 0
+                for op, content in summary_records(f, size):
+                    if op == OP_STATISTICS and len(content) >= 26:
+                        chunks = struct.unpack_from("<I", content, 22)[0]  # chunk_count
+                    elif op == OP_CHUNK_INDEX and len(content) >= 16:
+                        # the record ends with compressed_size, uncompressed_size (u64)
+                        compressed, uncompressed = struct.unpack_from("<QQ", content,
+                                                                      len(content) - 16)
+                        size += uncompressed - compressed
+                        indexed += 1
+        except OSError:
+            return None
+        if chunks is None or indexed != chunks:  # no statistics, or chunks not indexed
+            return None
+        total += size
+    return total
 
 
 def file_start_ns(path: str | PathLike) -> int | None:

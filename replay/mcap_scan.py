@@ -13,13 +13,13 @@ import zlib
 from dataclasses import dataclass
 from typing import BinaryIO, Iterator, Mapping
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from monitor import codec
 from monitor.mcap_file import MAGIC, OP_CHUNK, OP_FOOTER
 
-@numba.njit(cache=True, nogil=True)  # runs in the read-ahead thread
+@kernel(nogil=True)  # runs in the read-ahead thread
 def scan_records(buf):
     """Locate records in a decompressed chunk (or any record sequence).
 

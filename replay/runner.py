@@ -9,6 +9,7 @@ gives the same committed damage as one pass, to the last bit.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import sys
@@ -17,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence, TextIO
 
+from models._jit import uncompiled
 from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
 from monitor.events import Sink
@@ -25,6 +27,27 @@ from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
 
 log = logging.getLogger(__name__)
+
+# Logs whose chunks inflate to at most this many bytes replay with every kernel run as plain
+# Python, never importing numba: loading numba and its CPU target for the cached kernels
+# costs about 0.55 s of CPU, more than such a log's loops take uncompiled. A whole replay in
+# a fresh process, CPU s plain / compiled, by inflated size (simulated logs of the default
+# streams; 2026-11-25, 2-core Xeon, `bench/bench_startup.py --plain-sweep`): 20 kB (36 s of
+# log) 0.43 / 1.10, 57 kB (2 min) 0.68 / 1.10, 84 kB (3 min) 0.82 / 1.14, 137 kB (5 min)
+# 1.06 / 1.14, 269 kB (10 min) 2.01 / 1.08: even near 130 kB; 100 kB keeps a margin.
+PLAIN_PYTHON_BYTES = 100_000
+
+
+def plain_python_pays(files: Sequence[Path]) -> bool:
+    """Whether the kernels should run as plain Python for these logs: they are small (inflate
+    to at most :data:`PLAIN_PYTHON_BYTES`, from their summaries) and this process has not
+    loaded numba yet (once loaded, compiled is faster at any size). Same bits either way."""
+    from replay.log_files import inflated_size
+
+    if "numba" in sys.modules:
+        return False
+    size = inflated_size(files)
+    return size is not None and size <= PLAIN_PYTHON_BYTES
 
 
 def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
@@ -221,11 +244,14 @@ def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
 
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
                 sinks: Sequence[Sink] = (), speed: float | None = None,
-                show_progress: bool | None = None, plot_fields: bool = False) -> ReplayResult:
+                show_progress: bool | None = None, plot_fields: bool = False,
+                plain: bool | None = None) -> ReplayResult:
     """Replay MCAP logs (files or directories) through the pipeline; return the report.
 
     ``plot_fields`` adds the report's optional plot fields (docs/REPORT_FORMAT.md: tension and
     damage histories, rainflow histograms, S-N curves) for ``buoymon report`` / ``--html``.
+    ``plain``: run every kernel as plain Python (True) or compiled (False); by default as
+    plain Python when the logs inflate to at most :data:`PLAIN_PYTHON_BYTES` (same bits).
     """
     from monitor.viz.report_history import ReportHistory
     from replay.forecast_log import read_forecasts
@@ -234,29 +260,32 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     from replay.report import add_plot_fields
 
     files = collect_logs(paths)
-    state = load_state(state_path)
-    if state is not None:
-        _check_state_components(state, config, state_path)
-    if show_progress is None:
-        show_progress = sys.stderr.isatty()
-    span = time_span(files) if show_progress else None
-    progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
-    # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-    source = LogReader(files, coalesce=speed is None)
-    history = ReportHistory() if plot_fields else None
-    all_sinks = [*sinks, history] if history is not None else list(sinks)
-    pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,
-                                  progress=progress, forecasts=read_forecasts(files))
-    result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
-                                 read_summary(source.stats))
-    if history is not None:
-        # rerun-sdk comes with it: 0.44 s of a 1.4 s replay of a tiny log that plots nothing
-        from monitor.viz.pipeline_sinks import report_plot_fields
+    if plain is None:
+        plain = plain_python_pays(files)
+    with uncompiled() if plain else contextlib.nullcontext():
+        state = load_state(state_path)
+        if state is not None:
+            _check_state_components(state, config, state_path)
+        if show_progress is None:
+            show_progress = sys.stderr.isatty()
+        span = time_span(files) if show_progress else None
+        progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
+        # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
+        source = LogReader(files, coalesce=speed is None)
+        history = ReportHistory() if plot_fields else None
+        all_sinks = [*sinks, history] if history is not None else list(sinks)
+        pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,
+                                      progress=progress, forecasts=read_forecasts(files))
+        result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
+                                     read_summary(source.stats))
+        if history is not None:
+            # rerun-sdk comes with it: 0.44 s of a 1.4 s replay of a tiny log that plots nothing
+            from monitor.viz.pipeline_sinks import report_plot_fields
 
-        add_plot_fields(result.report, report_plot_fields(history, pipeline.components))
-    if result.ignored_blocks:
-        result.report["inputs"]["ignored_blocks_of_other_buoys"] = result.ignored_blocks
-    if state_path is not None:
-        save_state(state_path, pipeline.state())
-    pipeline.close()
-    return result
+            add_plot_fields(result.report, report_plot_fields(history, pipeline.components))
+        if result.ignored_blocks:
+            result.report["inputs"]["ignored_blocks_of_other_buoys"] = result.ignored_blocks
+        if state_path is not None:
+            save_state(state_path, pipeline.state())
+        pipeline.close()
+        return result

@@ -15,9 +15,9 @@ import os
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, sensor_topic, validate_buoy_id
 from monitor import codec
 from monitor.mcap_file import OP_MESSAGE, McapFile
@@ -75,7 +75,7 @@ class Series:
     values: np.ndarray
 
 
-@numba.njit(cache=True)
+@kernel()
 def _encode_records(t, vals, quanta, starts, channel, seq0, log_ns):
     """MCAP message records (header + protobuf payload) of blocks ``starts[k]:starts[k+1]``."""
     nb = starts.shape[0] - 1
@@ -107,7 +107,7 @@ def _encode_records(t, vals, quanta, starts, channel, seq0, log_ns):
     return out[:p], rec_off
 
 
-@numba.njit(cache=True)
+@kernel()
 def _gather(buf, rec_off, order):
     """Concatenate records ``order`` of ``buf`` (bounds ``rec_off``); return bytes and bounds."""
     out = np.empty(buf.shape[0], np.uint8)

@@ -15,7 +15,8 @@ from daemon_harness import ENV, free_port
 from test_bridge import LBF, MAINE, Collector, maine_lines, pytestmark  # noqa: F401
 
 # `buoymon bridge` in a process that says afterwards which modules it had loaded; then it
-# imports the numba codec, to show the check sees numba when it is there
+# takes the numba codec's compiled encoder (importing monitor.codec alone loads no numba: its
+# kernels are compiled on first use, models._jit), to show the check sees numba when it is there
 _BRIDGE = r"""
 import json, sys
 from monitor import cli
@@ -23,6 +24,7 @@ rc = cli.main(sys.argv[1:])
 heavy = lambda: sorted(m for m in sys.modules if m.split(".")[0] in ("numba", "llvmlite"))
 out = {"rc": rc, "heavy": heavy()}
 import monitor.codec
+monitor.codec.put_payload.compiled
 out["heavy_after_codec"] = len(heavy())
 print(json.dumps(out))
 """

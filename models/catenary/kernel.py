@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from models._jit import kernel
 
 # regime codes (mirrored as names in models.catenary.REGIMES)
 SUSPENDED = 0
@@ -34,14 +35,17 @@ NOT_CONVERGED = 1
 OFF_SEABED_MODEL = 2  # equilibrium found, but it would need seabed contact not modelled
 
 _SMALL = 1e-6
+# np.hypot, not math.hypot, in the kernels: compiled both are libm's hypot, but Python's own
+# math.hypot differs from it in the last bit (0.1 % of inputs), so run as plain Python a
+# kernel would not give the compiled bits; numpy's is libm's
 
 
-@numba.njit(cache=True)
+@kernel()
 def _quotients(a: float, b: float):
     """Difference quotients g1 = (asinh a - asinh b)/(a-b), g2 = (Sa-Sb)/(a-b),
     e1 = (a/Sa - b/Sb)/(a-b), e2 = (1/Sa - 1/Sb)/(a-b), stable for a -> b."""
-    sa = math.hypot(1.0, a)
-    sb = math.hypot(1.0, b)
+    sa = np.hypot(1.0, a)
+    sb = np.hypot(1.0, b)
     g2 = (a + b) / (sa + sb)
     e2 = -g2 / (sa * sb)
     if a * b > 0.0:
@@ -67,7 +71,7 @@ def _quotients(a: float, b: float):
     return g1, g2, e1, e2, sa, sb
 
 
-@numba.njit(cache=True)
+@kernel()
 def piece(h: float, vt: float, w: float, length: float, c: float):
     """Span, height and their partials (d/dH, d/dVtop) of one fully suspended piece."""
     a = vt / h
@@ -83,7 +87,7 @@ def piece(h: float, vt: float, w: float, length: float, c: float):
     return dx, dz, dx_dh, dx_dv, dz_dh, dz_dv
 
 
-@numba.njit(cache=True)
+@kernel()
 def _heavy_prefix(seg_w, joint_p) -> int:
     """Number of segments from the anchor that may lie on the seabed: all heavy, with no float
     at the joints between them (segments 0 .. n-1)."""
@@ -97,7 +101,7 @@ def _heavy_prefix(seg_w, joint_p) -> int:
     return n_heavy
 
 
-@numba.njit(cache=True)
+@kernel()
 def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joint_v):
     """Residuals (span, height), Jacobian d(span, height)/d(H, VF) and end forces.
 
@@ -131,7 +135,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
         if seabed and w > 0.0 and vt > 0.0 and vb < 0.0:
             # lowest point of a mid-line sag: it must stay above the seabed
             a = vt / h
-            sa = math.hypot(1.0, a)
+            sa = np.hypot(1.0, a)
             z_low = z - sz - (vt * a / (w * (sa + 1.0)) + 0.5 * seg_c[k] * vt * vt / w)
             if z_low < -1e-9 * (abs(z) + seg_l[k]):
                 valid = False
@@ -156,7 +160,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
     c = seg_c[k_td]
     if l_susp > 0.0:
         a = vt / h
-        sa = math.hypot(1.0, a)
+        sa = np.hypot(1.0, a)
         ash = math.asinh(a)
         sx += h / w * ash + c * h * l_susp
         sz += vt * a / (w * (sa + 1.0)) + 0.5 * c * vt * l_susp
@@ -203,7 +207,7 @@ def evaluate(h, vf, x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, joint_h, joi
     return sx - x, sz - z, jxh, jxv, jzh, jzv, t, 0.0, grounded, regime, valid
 
 
-@numba.njit(cache=True)
+@kernel()
 def _sinhc_minus_one(p: float) -> float:
     """sinh(p)/p - 1 without cancellation for small p."""
     if p < 1e-3:
@@ -212,7 +216,7 @@ def _sinhc_minus_one(p: float) -> float:
     return math.sinh(p) / p - 1.0
 
 
-@numba.njit(cache=True)
+@kernel()
 def _phi_from_excess(q: float) -> float:
     """Solve sinh(phi)/phi = 1 + q (q > 0) for phi > 0 (seed 003's transcendental equation,
     with q = r - 1 passed directly so that near-taut lines keep their precision)."""
@@ -241,7 +245,7 @@ def _phi_from_excess(q: float) -> float:
     return p
 
 
-@numba.njit(cache=True)
+@kernel()
 def _rise(v0: float, w: float, length: float, c: float) -> float:
     """Height gained along a vertical (H = 0) piece whose vertical tension runs from v0 to
     v0 + w length: the integral of sign(V) (1 + c |V|) ds (V < 0: the piece hangs down)."""
@@ -256,7 +260,7 @@ def _rise(v0: float, w: float, length: float, c: float) -> float:
             + math.copysign(s2 * (1.0 + 0.5 * c * abs(v1)), v1))
 
 
-@numba.njit(cache=True)
+@kernel()
 def _column(lb, seg_l, seg_w, seg_c, joint_p):
     """Vertical (H = 0) line above a touchdown at unstretched distance lb from the anchor:
     returns (height of the fairlead, VF, lowest height reached, segment of the touchdown)."""
@@ -290,7 +294,7 @@ def _column(lb, seg_l, seg_w, seg_c, joint_p):
     return z, v, z_min, k_td
 
 
-@numba.njit(cache=True)
+@kernel()
 def slack_piled(x, z, seg_l, seg_w, seg_c, joint_p, n_heavy, joint_h, joint_v, out) -> bool:
     """H = 0 configuration: the heavy part next to the anchor lies slack on the seabed (longer
     than the span, so it piles up) and the rest stands vertically under the fairlead, folding
@@ -370,7 +374,7 @@ def slack_piled(x, z, seg_l, seg_w, seg_c, joint_p, n_heavy, joint_h, joint_v, o
     return True
 
 
-@numba.njit(cache=True)
+@kernel()
 def _guess(x, z, seg_l, seg_w, seg_c, joint_p, attempt):
     ltot = 0.0
     wtot = 0.0
@@ -386,7 +390,7 @@ def _guess(x, z, seg_l, seg_w, seg_c, joint_p, attempt):
         wabs += abs(joint_p[k])
     if wabs == 0.0:
         wabs = 1.0
-    d = math.hypot(x, z)
+    d = np.hypot(x, z)
     if ltot > d:
         # inextensible homogeneous catenary through both ends (exact for such a line):
         # sinh(phi)/phi = sqrt(L^2 - z^2)/x = 1 + q
@@ -418,7 +422,7 @@ def _guess(x, z, seg_l, seg_w, seg_c, joint_p, attempt):
     return max(h, 1e-12 * wabs), vf
 
 
-@numba.njit(cache=True)
+@kernel()
 def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, joint_v, out,
               h_warm=0.0, v_warm=0.0):
     """Solve one fairlead position, trying (h_warm, v_warm) first if h_warm > 0 (the previous
@@ -538,7 +542,7 @@ def solve_one(x, z, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, joint_h, join
     out[10] = jxh / det
 
 
-@numba.njit(cache=True)
+@kernel()
 def solve_many(xs, zs, seg_l, seg_w, seg_c, joint_p, mu, seabed, tol, out, joints_h, joints_v):
     """Solve a sequence of fairlead positions; each warm-starts from the previous answer
     (samples of a motion record are close to each other)."""

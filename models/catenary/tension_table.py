@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
+from models._jit import kernel
 from models.catenary.line import Line, broadcast_pair, solve
 
 
-@numba.njit(cache=True)
+@kernel()
 def _cell(g, x, k):
     """Index i in [0, len(g) - 2] with g[i] <= x < g[i + 1] (clamped at the ends), trying
     ``k`` (the previous point's cell: estimates are consecutive samples) before a bisection."""
@@ -35,7 +35,7 @@ def _cell(g, x, k):
     return lo
 
 
-@numba.njit(cache=True)
+@kernel()
 def _hermite(xg, zg, coef, xs, zs, out, want_slopes):
     """Evaluate the bicubic Hermite tables `coef` (nq, nx, nz, 4: f, f_x, f_z, f_xz) at points;
     out (n, nq, 3): value, d/dx, d/dz."""
