@@ -54,6 +54,17 @@ def test_outputs_never_overwrite_an_input_file(tmp_path, capsys):
     # also when the log comes from a folder given on the command line
     assert main(["replay", str(tmp_path), "--report", str(log)]) == 2
     assert log.read_bytes() == data
+    # and from a sub-folder of it, which the replay reads too (it used to overwrite the log,
+    # after warning that sub-folders were not searched)
+    (tmp_path / "sub" / "deeper").mkdir(parents=True)
+    deep = tiny_log(tmp_path / "sub" / "deeper" / "b.mcap")
+    deep_data = deep.read_bytes()
+    capsys.readouterr()
+    assert main(["replay", str(tmp_path / "sub"), "--report", str(deep)]) == 2
+    err = capsys.readouterr().err
+    assert f"--report {deep}: is the input file" in err
+    assert "sub-folders not searched" not in err
+    assert deep.read_bytes() == deep_data
     report = tmp_path / "r.json"
     assert main(["replay", str(log), "--report", str(report)]) == 0
     text = report.read_text()
