@@ -394,8 +394,8 @@ def test_check_config_accepts_a_saved_forecast_table(tmp_path, capsys):
 
 @pytest.mark.parametrize("rule, message", [
     ('kind = "damage_fraction"\nname = "x"\ncomponent = "conductr"\nthreshold = 0.2\n',
-     'alerts.rule[8].component = "conductr": unknown component; expected one of '
-     "['conductor', 'conductor_termination']"),
+     'alerts.rule[8].component = "conductr": unknown component (did you mean '
+     "'conductor'?); expected one of ['conductor', 'conductor_termination']"),
     ('kind = "stale"\nname = "y"\ncomponent = "tensoin"\n',
      'alerts.rule[8].component = "tensoin": unknown sensor stream'),
 ])
