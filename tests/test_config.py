@@ -223,3 +223,23 @@ def test_qc_keys_are_validated_with_key_and_value(section, message):
 
     with pytest.raises(ConfigError, match=re.escape(message)):
         config_with(default_config(), **section)
+
+
+
+def test_the_readme_load_row_names_every_key_and_motion_sensor_choice():
+    # the row listed motion_sensor = "imu" | "motion" while the default (and the shipped file)
+    # is "auto", and left out breaking_load_N and slack_limit_N
+    from pathlib import Path
+
+    from monitor.config import LoadConfig
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    (row,) = [line for line in readme.splitlines() if line.startswith("| `[load]` |")]
+    for key in LoadConfig.__struct_fields__:
+        assert f"`{key}" in row, key
+    c = default_config()
+    with pytest.raises(ConfigError) as exc:
+        config_with(c, load={**c.section("load"), "motion_sensor": "x"})
+    accepted = re.search(r"must be one of \[(.*)\]", str(exc.value))[1]
+    documented = row.split("`motion_sensor = ")[1].split("`")[0]
+    assert sorted(re.findall(r'"(\w+)"', documented)) == sorted(re.findall(r"'(\w+)'", accepted))
