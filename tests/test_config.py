@@ -138,6 +138,11 @@ def test_file_errors(tmp_path):
     bad.write_text("[buoy\nid = 1\n")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(bad)
+    # a folder given for the file was an OSError: exit status 1 with "[Errno 21] ..."
+    with pytest.raises(ConfigError, match=rf"config error: {re.escape(str(tmp_path))}: cannot read "
+                       r"\(Is a directory\)"):
+        load_config(tmp_path)
+    assert main(["check-config", str(tmp_path)]) == 2
 
 
 def test_check_config_command(tmp_path, capsys):
