@@ -409,3 +409,15 @@ def test_check_config_refuses_a_rule_for_a_component_the_config_lacks(tmp_path, 
     assert f"config error: {message}" in capsys.readouterr().err
     assert main(["replay", str(tiny_log(tmp_path / "a.mcap")), "--config", str(cfg)]) in (1, 2)
     assert message in capsys.readouterr().err
+
+
+def test_report_of_a_fleet_report_points_to_the_buoy_reports(tmp_path, capsys):
+    # `buoymon report DIR/fleet.json` said "required field 'buoy_id' is missing"
+    (tmp_path / "logs").mkdir()
+    tiny_log(tmp_path / "logs" / "a.mcap")
+    assert main(["replay", str(tmp_path / "logs"), "--workers", "1",
+                 "--report-dir", str(tmp_path / "out")]) == 0
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "out" / "fleet.json")]) == 2
+    assert "a fleet report (fleet.json)" in capsys.readouterr().err
+    assert main(["report", str(tmp_path / "out" / "buoys" / "qa.json")]) == 0
