@@ -11,6 +11,7 @@ a recorded or simulated log to a daemon.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from typing import Any, Callable, Iterable, Sequence
@@ -19,6 +20,8 @@ from monitor.blocks import SampleBlock
 from monitor.daemon_config import ZenohConfig
 from monitor.sensors import PublisherOptions, declare_sensor_publisher
 from monitor import zenoh_io
+
+log = logging.getLogger(__name__)
 
 
 def publisher_config(connect: Sequence[str]) -> ZenohConfig:
@@ -81,7 +84,12 @@ def play(blocks: Iterable[SampleBlock], zc: ZenohConfig, speed: float | None = N
     everything)."""
     codec = codec or zenoh_io.default_codec()
     with zenoh_io.open_session(zc) as session:
-        return publish_blocks(session, _lingering(blocks, linger_s), codec, speed, options)
+        sent = publish_blocks(session, _lingering(blocks, linger_s), codec, speed, options)
+        if not any(session.info.peers_zid()) and not any(session.info.routers_zid()):
+            # nothing waits for a subscriber, and the caches close with this session
+            log.warning("published %d blocks but no daemon or router was connected at %s: "
+                        "nobody received them", sent, list(zc.connect))
+        return sent
 
 
 def _lingering(blocks: Iterable[SampleBlock], linger_s: float) -> Iterable[SampleBlock]:

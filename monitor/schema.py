@@ -48,6 +48,8 @@ def read_toml(path: str | Path) -> dict[str, Any]:
             return tomllib.load(f)
     except FileNotFoundError:
         raise ConfigError(f"config error: file {str(path)!r} not found") from None
+    except OSError as exc:  # a folder, no permission: the same exit status 2 as a bad file
+        raise ConfigError(f"config error: {path}: cannot read ({exc.strerror})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config error: {path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError:

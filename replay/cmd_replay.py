@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"replay: --speed {args.speed}: must be >= {MIN_SPEED:g}", file=sys.stderr)
         return 2
     try:
-        inputs = expand_paths(args.logs)
+        inputs = expand_paths(args.logs, recursive=True)  # as the replay reads them
         for option in ("report", "html", "rrd"):
             if getattr(args, option):
                 check_output(getattr(args, option), inputs, f"--{option}")

@@ -57,5 +57,6 @@ def read_forecasts(files: Sequence[str | Path]) -> list[tuple[str, Any, int]]:
         except (OSError, McapError, ValueError, EOFError, struct.error) as exc:
             # a recording cut by a power loss ends mid-record: what came before is kept
             log.warning("%s: damaged or not MCAP (%s): forecasts past the damage not read, "
-                        "%d read before it", path, exc, len(out) - before)
+                        "%d read before it", path, str(exc) or type(exc).__name__,
+                        len(out) - before)  # mcap's EndOfFile has no message
     return sorted(out, key=lambda x: x[2])

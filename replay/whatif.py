@@ -49,6 +49,9 @@ class WhatIf:
 
     name: str
     overrides: Mapping[str, Any]
+    # components a --set names: one key cannot describe a new component, so a name the
+    # baseline lacks is a typo, refused rather than added beside the one meant
+    set_components: tuple[str, ...] = ()
 
 
 def parse_value(text: str) -> Any:
@@ -119,18 +122,28 @@ def load_whatif(path: str | Path | None = None, sets: Sequence[str] = ()) -> Wha
         except tomllib.TOMLDecodeError as exc:
             raise ConfigError(f"config error: {path}: not valid TOML: {exc}") from None
         name = path.stem
+    set_components: list[str] = []
     for expr in sets:
-        overrides = merge(overrides, parse_set(expr))
+        one = parse_set(expr)
+        set_components += [c["name"] for c in one.get("component", [])]
+        overrides = merge(overrides, one)
     if not overrides:
         raise ConfigError("config error: the what-if changes nothing (empty file, no --set)")
-    return WhatIf(name, overrides)
+    return WhatIf(name, overrides, tuple(set_components))
 
 
 def apply_whatif(config: Config, whatif: WhatIf) -> Config:
     """The baseline configuration with the what-if's overrides, validated, including the
     cable and S-N curve the models build from it (so a bad override fails before any replay)."""
     from monitor.components import build_cable, build_sn_curve
+    from monitor.schema import did_you_mean
 
+    known = [c.name for c in config.components]
+    for name in whatif.set_components:
+        if name not in known:
+            raise ConfigError(f"config error: --set component.{name}: no component {name!r} in "
+                              f"the configuration{did_you_mean(name, known)}; expected one of "
+                              f"{known} (a new component needs a --whatif file)")
     alt = parse_config(merge(config.raw, whatif.overrides),
                        source=f"{config.source} + what-if {whatif.name}")
     try:

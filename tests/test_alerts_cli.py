@@ -218,3 +218,32 @@ def test_alert_table_marks_logger_clock_times():
     assert "SINCE (UTC; sensor time, * logger clock)" in lines[0]
     assert "2026-11-18 11:06:40 *" in lines[1] and "2000-01-01 00:00:00 " in lines[2] + " "
     assert "*" not in lines[2]
+
+
+def test_ack_of_a_logger_clock_alert_says_why_it_cannot_be(tmp_path, capsys):
+    """`alerts list` shows the daemon's logger-clock (health) alerts with a fingerprint, but
+    only sensor-time alerts take an ack: acking one said "no such alert"."""
+    from monitor.checkpoint import CheckpointStore
+
+    # a data_age record as a stopped `buoymon run` saved it in its checkpoint
+    live = {"fingerprint": "166d062c5b05f60a", "rule": "data_age", "kind": "data_age",
+            "severity": "warning", "state": "firing", "event": "fire",
+            "labels": {"buoy": "b1", "component": "tension", "rule": "data_age"},
+            "annotations": {"value": "5.118 s", "threshold": "5 s",
+                            "summary": "no data on stream tension for 5 s"},
+            "starts_at_ns": 1795626014071910440, "ends_at_ns": 0, "at_ns": 1795626014071910440,
+            "value": 5.118, "threshold": 5.0, "unit": "s",
+            "summary": "no data on stream tension for 5 s", "acked_by": "", "ack_reason": ""}
+    path = tmp_path / "checkpoint.sqlite"
+    store = CheckpointStore(path)
+    store.save({"pipeline": {"alerts": firing_engine().state()},
+                "daemon": {"live": {"firing": [live]}}})
+    store.close()
+    assert main(["alerts", "list", "--state", str(path)]) == 0
+    assert "166d062c5b05f60a" in capsys.readouterr().out
+    assert main(["alerts", "ack", "166d062c5b05f60a", "--who", "a", "--why", "b",
+                 "--state", str(path)]) == 1
+    assert ("fingerprint '166d062c5b05f60a': a logger-clock alert (data_age), raised by the "
+            "daemon's own health rules; it cannot be acknowledged") in capsys.readouterr().err
+    assert main(["alerts", "ack", "0000", "--who", "a", "--why", "b", "--state", str(path)]) == 1
+    assert "fingerprint '0000': no such alert" in capsys.readouterr().err

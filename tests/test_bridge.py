@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 import queue
 import socket
@@ -204,6 +205,19 @@ def test_bad_config_is_refused_naming_key_and_value():
     with pytest.raises(ConfigError, match="gnss stream only"):
         parse_bridge_config({"buoy": {"id": "b"}, "source": [
             {"name": "x", "sensor": "tension", "transport": "stdin", "format": "nmea"}]})
+    # these were accepted, then every line was NaN, constant or rejected as bad_time
+    for key, value, message in (("scale", {"tension_N": math.nan}, "scale"),
+                                ("scale", {"tension_N": 0.0}, "scale"),
+                                ("offset", {"tension_N": math.inf}, "offset"),
+                                ("time_format", "%Y-%m-%d %Q", "time_format")):
+        with pytest.raises(ConfigError, match=rf"source\[0\]\.{message} = "):
+            parse_bridge_config({"buoy": {"id": "b"}, "source": [
+                {"name": "x", "sensor": "tension", "transport": "stdin",
+                 "columns": {"tension_N": 1}, key: value}]})
+    # the README's load cell format is fine
+    parse_bridge_config({"buoy": {"id": "b"}, "source": [
+        {"name": "x", "sensor": "tension", "transport": "stdin", "columns": {"tension_N": 1},
+         "time_column": 0, "time_format": "%Y-%m-%d-%H:%M:%S.%f"}]})
 
 
 def test_bridge_quanta_set_the_resolution_on_the_wire():

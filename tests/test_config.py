@@ -138,6 +138,11 @@ def test_file_errors(tmp_path):
     bad.write_text("[buoy\nid = 1\n")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(bad)
+    # a folder given for the file was an OSError: exit status 1 with "[Errno 21] ..."
+    with pytest.raises(ConfigError, match=rf"config error: {re.escape(str(tmp_path))}: cannot read "
+                       r"\(Is a directory\)"):
+        load_config(tmp_path)
+    assert main(["check-config", str(tmp_path)]) == 2
 
 
 def test_check_config_command(tmp_path, capsys):
@@ -223,3 +228,23 @@ def test_qc_keys_are_validated_with_key_and_value(section, message):
 
     with pytest.raises(ConfigError, match=re.escape(message)):
         config_with(default_config(), **section)
+
+
+
+def test_the_readme_load_row_names_every_key_and_motion_sensor_choice():
+    # the row listed motion_sensor = "imu" | "motion" while the default (and the shipped file)
+    # is "auto", and left out breaking_load_N and slack_limit_N
+    from pathlib import Path
+
+    from monitor.config import LoadConfig
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    (row,) = [line for line in readme.splitlines() if line.startswith("| `[load]` |")]
+    for key in LoadConfig.__struct_fields__:
+        assert f"`{key}" in row, key
+    c = default_config()
+    with pytest.raises(ConfigError) as exc:
+        config_with(c, load={**c.section("load"), "motion_sensor": "x"})
+    accepted = re.search(r"must be one of \[(.*)\]", str(exc.value))[1]
+    documented = row.split("`motion_sensor = ")[1].split("`")[0]
+    assert sorted(re.findall(r'"(\w+)"', documented)) == sorted(re.findall(r"'(\w+)'", accepted))

@@ -383,3 +383,11 @@ def test_recorded_forecasts_before_the_damage_are_kept_and_the_loss_said(tmp_pat
         ("b1", [k * 3600.0], T0 + k * S) for k in range(len(got))]
     assert (f"{cut}: damaged or not MCAP" in caplog.text
             and f"forecasts past the damage not read, {len(got)} read before it" in caplog.text)
+    # the reason is named, not an empty "()" (mcap's EndOfFile, raised for this cut, carries
+    # no message)
+    caplog.clear()
+    for end in range(path.stat().st_size // 2, path.stat().st_size // 2 + 64):
+        cut.write_bytes(path.read_bytes()[:end])
+        assert 0 < len(read_forecasts([cut])) < 6
+    assert f"{cut}: damaged or not MCAP (EndOfFile)" in caplog.text
+    assert f"{cut}: damaged or not MCAP ()" not in caplog.text

@@ -94,6 +94,9 @@ def test_load_whatif_from_file_then_sets(tmp_path):
     ("component.conductor.sn_curve=no_such_curve", r"sn_curve = 'no_such_curve'"),
     ("cable.no_such_field=1", r"config error: cable"),
     ("nonsense.key=1", r"unknown section"),
+    # a misspelt component name was added as a new component, the one meant left unchanged
+    ("component.conductr.lay=right", r"--set component\.conductr: no component 'conductr' in "
+     r"the configuration \(did you mean 'conductor'\?\)"),
 ])
 def test_bad_overrides_fail_before_any_replay_naming_the_key(expr, message):
     with pytest.raises(ConfigError, match=message):

@@ -145,28 +145,10 @@ def _command(args: argparse.Namespace) -> dict[str, Any] | None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        if args.state is not None:
-            result = _on_state_file(args.state, _command(args))
-        else:
-            if not 0 < args.timeout < math.inf:
-                raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
-            buoy, connect, state_path = args.buoy, [DEFAULT_CONNECT], None
-            if buoy is None:  # the buoy (and endpoints) of the daemon's configuration
-                target = load_target(args.config or DEFAULT_CONFIG)
-                buoy, connect = target.buoy_id, list(target.connect)
-                state_path = Path(target.state_path)
-            try:
-                result = _on_daemon(buoy, args.connect or connect, args.timeout, _command(args))
-            except TimeoutError as exc:
-                if state_path is None or not state_path.exists():
-                    raise
-                if args.alerts_command != "list":  # a stopped daemon's checkpoint, on request
-                    raise TimeoutError(f"{exc}; if the daemon is stopped, --state "
-                                       f"{state_path} acts on its checkpoint") from None
-                # listing reads, as `buoymon status` does: the stopped daemon's checkpoint
-                print(f"buoymon alerts: {exc}: daemon NOT RUNNING? the alerts of its last "
-                      f"checkpoint ({state_path}) follow", file=sys.stderr)
-                result = _on_state_file(state_path, None)
+        try:
+            result = _run(args)
+        except ValueError as exc:
+            raise _explain_live_ack(args, exc) from None
     except (ValueError, OSError, TimeoutError) as exc:
         print(f"buoymon alerts: {exc}", file=sys.stderr)
         return 1
@@ -179,6 +161,52 @@ def run(args: argparse.Namespace) -> int:
                             if k not in ("ok", "op", "alert"))
         print(f"{args.alerts_command} done" + (f": {details}" if details else ""))
     return 0
+
+
+def _explain_live_ack(args: argparse.Namespace, exc: ValueError) -> ValueError:
+    """``exc``, or for an ack of a listed logger-clock alert (which only the engine's sensor-time
+    alerts take) an error that says so instead of "no such alert"."""
+    from monitor.alerts.live import LIVE_RULES  # noqa: PLC0415
+
+    if args.alerts_command != "ack" or "no such alert" not in str(exc):
+        return exc
+    try:
+        listed = _run(argparse.Namespace(**{**vars(args), "alerts_command": "list"}))["alerts"]
+    except (ValueError, OSError, TimeoutError):
+        return exc
+    for a in listed:
+        if a.get("fingerprint") == args.fingerprint and a.get("rule") in LIVE_RULES:
+            return ValueError(f"fingerprint {args.fingerprint!r}: a logger-clock alert "
+                              f"({a['rule']}), raised by the daemon's own health rules; it cannot "
+                              "be acknowledged and clears when its cause does (docs/DAEMON.md)")
+    return exc
+
+
+def _run(args: argparse.Namespace) -> dict[str, Any]:
+    """The list, or the command's result, from the daemon or the state file."""
+    if args.state is not None:
+        result = _on_state_file(args.state, _command(args))
+    else:
+        if not 0 < args.timeout < math.inf:
+            raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
+        buoy, connect, state_path = args.buoy, [DEFAULT_CONNECT], None
+        if buoy is None:  # the buoy (and endpoints) of the daemon's configuration
+            target = load_target(args.config or DEFAULT_CONFIG)
+            buoy, connect = target.buoy_id, list(target.connect)
+            state_path = Path(target.state_path)
+        try:
+            result = _on_daemon(buoy, args.connect or connect, args.timeout, _command(args))
+        except TimeoutError as exc:
+            if state_path is None or not state_path.exists():
+                raise
+            if args.alerts_command != "list":  # a stopped daemon's checkpoint, on request
+                raise TimeoutError(f"{exc}; if the daemon is stopped, --state "
+                                   f"{state_path} acts on its checkpoint") from None
+            # listing reads, as `buoymon status` does: the stopped daemon's checkpoint
+            print(f"buoymon alerts: {exc}: daemon NOT RUNNING? the alerts of its last "
+                  f"checkpoint ({state_path}) follow", file=sys.stderr)
+            result = _on_state_file(state_path, None)
+    return result
 
 
 def format_table(alerts: list[dict[str, Any]]) -> str:

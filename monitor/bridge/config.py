@@ -6,6 +6,8 @@ the key and the value, as every configuration error of the product does.
 
 from __future__ import annotations
 
+import math
+from datetime import datetime
 from pathlib import Path
 from typing import Annotated, Any, Literal, Mapping
 
@@ -18,6 +20,7 @@ from monitor.schema import error, parse_struct, read_toml
 
 Positive = Annotated[float, Meta(gt=0)]
 NonEmpty = Annotated[str, Meta(min_length=1)]
+_SAMPLE_TIME = datetime(2018, 11, 30, 9, 58, 27, 538000)  # a time_format must read its own output
 # the key a transport cannot do without
 _NEEDS = {"serial": "device", "tcp_client": "port", "tcp_server": "port", "udp": "port",
           "file": "path", "stdin": None}
@@ -70,6 +73,17 @@ class SourceConfig(msgspec.Struct, frozen=True):
                 raise error(where, key, given,
                             f"must map fields of {self.sensor} ({list(fields)}) to numbers")
             maps[key] = {f: float(given.get(f, default)) for f in fields}
+            # a NaN, infinite or zero scale turns every line into NaN or a constant
+            if not all(math.isfinite(v) and (v != 0 or key == "offset")
+                       for v in maps[key].values()):
+                raise error(where, key, given, "must map fields to finite numbers"
+                            + (", not 0" if key == "scale" else ""))
+        if self.time_format != "unix":
+            try:  # a bad directive would reject every line as bad_time, one by one
+                datetime.strptime(_SAMPLE_TIME.strftime(self.time_format), self.time_format)
+            except ValueError as exc:
+                raise error(where, "time_format", self.time_format,
+                            f"not a strptime format ({exc})") from None
         need = _NEEDS[self.transport]
         if need is not None and need not in raw:
             raise error(where, need, None, f"is required with transport = {self.transport!r}")

@@ -279,6 +279,9 @@ def _alert(i: int, a: Any) -> Alert:
 def parse_report(data: Any) -> Report:
     """Check a decoded report and convert it; ValueError names the first bad field."""
     d = _mapping(data, "top level")
+    if "fleet_report_version" in d:  # the fleet's ranking: its buoys' own reports render
+        raise ValueError("report: a fleet report (fleet.json); render one of its buoys' "
+                         "replay reports instead: REPORT_DIR/buoys/<buoy>.json")
     for key in ("buoy_id", "time_start", "time_end", "samples", "tension_N", "components",
                 "alerts"):
         if key not in d:
