@@ -78,6 +78,10 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"replay: {exc}", file=sys.stderr)
         return 2
+    if not inputs:
+        print(f"replay: no log files in {args.logs}", file=sys.stderr)
+        return 1
+    args.logs = [str(p) for p in inputs]  # folders expanded once: each warning said once
     if cmd_fleet.wanted(args):
         return cmd_fleet.run(args, config)
     speed = 1.0 if args.realtime else args.speed
