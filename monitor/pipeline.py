@@ -305,6 +305,9 @@ class _LazyStreams(Mapping[str, StreamObs]):
         return obs
 
     def get(self, name: str, default: Any = None) -> Any:
+        obs = self._done.get(name)  # the stale and rejected-rate rules ask for the same stream
+        if obs is not None:
+            return obs
         return self[name] if name in self._pipeline.validators else default
 
     def __iter__(self):
