@@ -695,8 +695,7 @@ class Pipeline:
                              np.zeros(1, np.int64), np.full(1, tv.shape[0]))
             j = 0
         est_mean = ticks.est_means[k] if ticks.est_means is not None else tick.est[j]
-        self._evaluate(k, ticks.ends_l[k], tt, tv, tick, j, streams,
-                       {n: f[k] for n, f in figures.items()}, est_mean)
+        self._evaluate(k, ticks.ends_l[k], tt, tv, tick, j, streams, figures, est_mean)
         return tick.n_meas[j], tick.n[j], tick.meas[j], est_mean
 
     def _carry_estimate(self, estimate: tuple[np.ndarray, np.ndarray], ends: np.ndarray) -> None:
@@ -747,16 +746,16 @@ class Pipeline:
 
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, load: _TickLoad,
                   j: int, streams: Mapping[str, _StreamSlab],
-                  figures: Mapping[str, tuple[float, float, float, float]],
+                  figures: Mapping[str, list[tuple[float, float, float, float]]],
                   estimated: float) -> None:
         """Evaluate the alert rules at the end of the slab's ``k``-th tick (``load``'s
-        ``j``-th); ``figures`` are each component's (damage, damage_committed, rate, life)
-        at that tick's end, ``estimated`` the tick's mean motion estimate."""
+        ``j``-th); ``figures[name][k]`` are each component's (damage, damage_committed, rate,
+        life) at that tick's end, ``estimated`` the tick's mean motion estimate."""
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
             measured_tension_N=load.meas[j], estimated_tension_N=estimated,
-            components={n: ComponentObs(*f, load.smax[n][j]) for n, f in figures.items()},
+            components={n: ComponentObs(*f[k], load.smax[n][j]) for n, f in figures.items()},
             streams=_LazyStreams(self, end, streams, k),
             tension_range_N=(load.vmin[j], load.vmax[j]),
         )
@@ -765,7 +764,7 @@ class Pipeline:
         records = self.alerts.evaluate(obs)
         learner, forecasts = self.sea_states, self.forecasts
         if learner is not None and forecasts is not None:
-            committed = {n: f[1] for n, f in figures.items()}
+            committed = {n: c.damage_committed for n, c in obs.components.items()}
             learner.tick(end, committed, load.n[j])
             if forecasts.due(end):
                 records = [*records, *forecasts.apply(end, committed, learner.table)]

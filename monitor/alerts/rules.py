@@ -119,7 +119,6 @@ class Rule:
         value = self.observe(obs, tick)
         if value is None:
             return None
-        t = obs.t_ns
         self.value = value
         if self.reset_pending:
             # the caller emits the release record, then calls on_reset() to re-arm
@@ -132,6 +131,7 @@ class Rule:
             if self.firing:
                 self.clear_since_ns = -1
                 return None
+            t = obs.t_ns
             if self.pending_since_ns < 0:
                 self.pending_since_ns = t
             if t - self.pending_since_ns >= self.on_delay_ns:
@@ -145,6 +145,7 @@ class Rule:
             return None
         if self.latching:
             return None
+        t = obs.t_ns
         if self.clear_since_ns < 0:
             self.clear_since_ns = t
         if t - self.clear_since_ns >= self.off_delay_ns:
