@@ -296,19 +296,21 @@ class _LazyStreams(Mapping[str, StreamObs]):
         self._done: dict[str, StreamObs] = {}
 
     def __getitem__(self, name: str) -> StreamObs:
-        obs = self._done.get(name)
+        obs = self.get(name)
         if obs is None:
-            if name not in self._pipeline.validators:
-                raise KeyError(name)
-            obs = self._done[name] = self._pipeline._stream_one(name, self._now, self._streams,
-                                                                self._k)
+            raise KeyError(name)
         return obs
 
     def get(self, name: str, default: Any = None) -> Any:
-        obs = self._done.get(name)  # the stale and rejected-rate rules ask for the same stream
-        if obs is not None:
-            return obs
-        return self[name] if name in self._pipeline.validators else default
+        # the rules call get (once or twice a tick: stale and rejected rate ask for the same
+        # stream), so it does the work and [] wraps it
+        obs = self._done.get(name)
+        if obs is None:
+            if name not in self._pipeline.validators:
+                return default
+            obs = self._done[name] = self._pipeline._stream_one(name, self._now, self._streams,
+                                                                self._k)
+        return obs
 
     def __iter__(self):
         return iter(self._pipeline.validators)
