@@ -51,6 +51,7 @@ from monitor.codec_np import (EXACT as _EXACT, FIELD_OFFSETS, FIELD_PERIOD, FIEL
                               FIRST_VALUE_FIELD, Q_DELTA, Q_QUANTUM, Q_RAW_INDEX, Q_RAW_VALUE)
 from monitor.codec_regular import decode_regular
 from monitor.quanta import quanta
+from monitor.varint import read_varint, unzigzag
 
 PACKAGE = "buoymon.v2"
 QUANTIZED = "Quantized"
@@ -376,31 +377,6 @@ def encode_block(block: SampleBlock, overrides: Mapping[str, float] | None = Non
 
 
 @kernel(inline="always")
-def _read_varint(buf, p, end):
-    """(value as int64 bit pattern, next position); next position -1 past ``end`` or overlong.
-
-    Plain int64 arithmetic on purpose: mixing uint64 and int64 makes numba go through floats.
-    """
-    result = 0
-    shift = 0
-    while p < end:
-        b = np.int64(buf[p])
-        p += 1
-        result |= (b & 0x7F) << shift
-        if b < 0x80:
-            return result, p
-        shift += 7
-        if shift >= 70:
-            return result, -1
-    return result, -1
-
-
-@kernel(inline="always")
-def _unzigzag(z):
-    return ((z >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(z & 1)
-
-
-@kernel(inline="always")
 def _read_i64(buf, p):
     v = 0
     for i in range(8):
@@ -422,14 +398,14 @@ def _value_slot(fn_vals, fnum):
 def _skip(buf, p, end, wt):
     """Position after a field of wire type ``wt`` starting at ``p``; -1 if malformed."""
     if wt == 0:
-        _, p = _read_varint(buf, p, end)
+        _, p = read_varint(buf, p, end)
         return p
     if wt == 1:
         return p + 8 if p + 8 <= end else -1
     if wt == 5:
         return p + 4 if p + 4 <= end else -1
     if wt == 2:
-        ln, p = _read_varint(buf, p, end)
+        ln, p = read_varint(buf, p, end)
         if p < 0 or p + ln > end:
             return -1
         return p + ln
@@ -441,11 +417,11 @@ def _varint_run(buf, p, end, wt):
     """Bounds ``(a, b)`` of the varints of a repeated varint field starting at ``p`` (after
     its tag): packed (``wt`` 2) or one unpacked value (``wt`` 0); ``b`` -1 if malformed."""
     if wt == 2:
-        ln, p = _read_varint(buf, p, end)
+        ln, p = read_varint(buf, p, end)
         if p < 0 or p + ln > end:
             return p, -1
         return p, p + ln
-    _, q = _read_varint(buf, p, end)
+    _, q = read_varint(buf, p, end)
     return p, q
 
 
@@ -485,7 +461,7 @@ def _scan_quantized(buf, p, end, sub, scratch):
     top = -1
     q = np.nan
     while p < end:
-        tag, p = _read_varint(buf, p, end)
+        tag, p = read_varint(buf, p, end)
         if p < 0:
             return 0, BAD_WIRE
         fnum = tag >> 3
@@ -504,13 +480,13 @@ def _scan_quantized(buf, p, end, sub, scratch):
                 nd += c
             else:
                 while a < p:
-                    v, a = _read_varint(buf, a, p)
+                    v, a = read_varint(buf, a, p)
                     if a < 0:
                         return 0, BAD_WIRE
                     top = max(top, v) if v >= 0 else np.iinfo(np.int64).max
                     ni += 1
         elif fnum == sub[3] and wt == 2:
-            ln, p = _read_varint(buf, p, end)
+            ln, p = read_varint(buf, p, end)
             if p < 0 or p + ln > end or ln % 8 != 0:
                 return 0, BAD_WIRE
             nr += ln // 8
@@ -537,7 +513,7 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
     q = 0.0
     a0 = p
     while p < end:  # the quantum first: it may follow the deltas
-        tag, p = _read_varint(buf, p, end)
+        tag, p = read_varint(buf, p, end)
         if tag >> 3 == sub[0] and tag & 7 == 1:
             q = _read_f64(buf, p, scratch)
         p = _skip(buf, p, end, tag & 7)
@@ -546,7 +522,7 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
     i = pos
     r = 0
     while p < end:
-        tag, p = _read_varint(buf, p, end)
+        tag, p = read_varint(buf, p, end)
         fnum = tag >> 3
         wt = tag & 7
         if fnum == sub[1] and (wt == 0 or wt == 2):
@@ -558,7 +534,7 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
                 byte = np.int64(buf[s])
                 z |= (byte & 0x7F) << shift
                 if byte < 0x80:
-                    acc += _unzigzag(z)
+                    acc += unzigzag(z)
                     out[i] = acc * q
                     i += 1
                     z = 0
@@ -568,18 +544,18 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
         elif fnum == sub[2] and (wt == 0 or wt == 2):
             a, p = _varint_run(buf, p, end, wt)
             while a < p:
-                idx[r], a = _read_varint(buf, a, p)
+                idx[r], a = read_varint(buf, a, p)
                 r += 1
         else:
             p = _skip(buf, p, end, wt)
     p = a0
     w = 0
     while p < end and w < r:  # raw samples last: their indices may come after them
-        tag, p = _read_varint(buf, p, end)
+        tag, p = read_varint(buf, p, end)
         if tag >> 3 == sub[3] and (tag & 7 == 1 or tag & 7 == 2):
             ln = 8
             if tag & 7 == 2:
-                ln, p = _read_varint(buf, p, end)
+                ln, p = read_varint(buf, p, end)
             for s in range(p, p + ln, 8):
                 base = (pos + idx[w]) * 8
                 vb[base:base + 8] = buf[s:s + 8]
@@ -611,7 +587,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
         have_t0 = False
         st = 0
         while p < end:
-            tag, p = _read_varint(buf, p, end)
+            tag, p = read_varint(buf, p, end)
             if p < 0:
                 st = BAD_WIRE
                 break
@@ -626,7 +602,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
                 have_t0 = True
                 p += 8
             elif fnum == fn_period and wt == 0:
-                v, p = _read_varint(buf, p, end)
+                v, p = read_varint(buf, p, end)
                 periods[k] = v
             elif fnum == fn_off and (wt == 0 or wt == 2):
                 a, p = _varint_run(buf, p, end, wt)
@@ -636,7 +612,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
                     break
                 noff += c
             elif j >= 0 and quantized and wt == 2:
-                ln, p = _read_varint(buf, p, end)
+                ln, p = read_varint(buf, p, end)
                 if p < 0 or p + ln > end:
                     st = BAD_WIRE
                     break
@@ -650,7 +626,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
                 cnt[j] = c
                 p += ln
             elif j >= 0 and not quantized and wt == 2:
-                ln, p = _read_varint(buf, p, end)
+                ln, p = read_varint(buf, p, end)
                 if p < 0 or p + ln > end or ln % 8 != 0:
                     st = BAD_WIRE
                     break
@@ -702,24 +678,24 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
         fill[:] = 0
         noff = 0
         while p < end:
-            tag, p = _read_varint(buf, p, end)
+            tag, p = read_varint(buf, p, end)
             fnum = tag >> 3
             wt = tag & 7
             j = _value_slot(fn_vals, fnum)
             if fnum == fn_off and (wt == 2 or wt == 0):
                 a, p = _varint_run(buf, p, end, wt)
                 while a < p:
-                    z, a = _read_varint(buf, a, p)
-                    t[pos + noff] = _unzigzag(z)
+                    z, a = read_varint(buf, a, p)
+                    t[pos + noff] = unzigzag(z)
                     noff += 1
             elif j >= 0 and quantized and wt == 2:
-                ln, p = _read_varint(buf, p, end)
+                ln, p = read_varint(buf, p, end)
                 _fill_quantized(buf, p, p + ln, sub, vals[j], vb[j], pos, scratch, idx)
                 p += ln
             elif j >= 0 and not quantized and (wt == 2 or wt == 1):
                 ln = 8
                 if wt == 2:
-                    ln, p = _read_varint(buf, p, end)
+                    ln, p = read_varint(buf, p, end)
                 base = (pos + fill[j]) * 8
                 vb[j, base:base + ln] = buf[p:p + ln]
                 fill[j] += ln // 8

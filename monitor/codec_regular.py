@@ -24,22 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from models._jit import kernel
-
-
-@kernel(inline="always")
-def _varint(buf, p, end):
-    """(value, next position) of the varint at ``p``; next position -1 if it is cut or
-    longer than 9 bytes (no value of this layout needs more)."""
-    result = 0
-    shift = 0
-    while p < end and shift < 63:
-        b = np.int64(buf[p])
-        p += 1
-        result |= (b & 0x7F) << shift
-        if b < 0x80:
-            return result, p
-        shift += 7
-    return 0, -1
+from monitor.varint import read_varint, unzigzag
 
 
 @kernel(nogil=True)  # runs in the reader's read-ahead thread
@@ -65,18 +50,18 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
         for i in range(8):
             t0 |= np.int64(buf[p + 1 + i]) << (8 * i)
         p += 9
-        tag, p = _varint(buf, p, end)
+        tag, p = read_varint(buf, p, end)
         if p < 0 or tag != tag_period:
             return False, nsamp, t, vals, pos
-        period, p = _varint(buf, p, end)
+        period, p = read_varint(buf, p, end)
         if p < 0 or period <= 0:
             return False, nsamp, t, vals, pos
         n = -1
         for j in range(nf):
-            tag, p = _varint(buf, p, end)
+            tag, p = read_varint(buf, p, end)
             if p < 0 or tag != tags[j]:
                 return False, nsamp, t, vals, pos
-            ln, p = _varint(buf, p, end)
+            ln, p = read_varint(buf, p, end)
             body_end = p + ln
             if p < 0 or body_end > end or p + 10 > body_end or buf[p] != tag_q:
                 return False, nsamp, t, vals, pos
@@ -84,7 +69,7 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
             q = qv[0]
             if not (q > 0 and q < np.inf) or buf[p + 9] != tag_delta:
                 return False, nsamp, t, vals, pos
-            dl, a = _varint(buf, p + 10, body_end)
+            dl, a = read_varint(buf, p + 10, body_end)
             if a < 0 or a + dl != body_end or dl == 0 or buf[body_end - 1] >= 0x80:
                 return False, nsamp, t, vals, pos
             # the hot loop: the deltas of one field, straight to values
@@ -99,7 +84,7 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
                 if byte < 0x80:
                     if i >= cap:
                         return False, nsamp, t, vals, pos
-                    acc += ((z >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(z & 1)
+                    acc += unzigzag(z)
                     out[i] = acc * q
                     i += 1
                     z = 0
