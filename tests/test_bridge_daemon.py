@@ -164,8 +164,12 @@ def test_a_bridge_that_dies_without_a_word_turns_silent_and_is_alerted():
         gone = watch.status_fields()
         assert gone["bridge"]["sources"]["gps"]["state"] == "silent"
         assert gone["bridge"]["sources"]["gps"]["status_age_s"] > MIN_SILENT_S
+        # its last line keeps ageing: 0.1 s when reported, plus the silence since
+        assert gone["bridge"]["sources"]["gps"]["last_line_age_s"] == pytest.approx(
+            0.1 + gone["bridge"]["sources"]["gps"]["status_age_s"])
         (rec,) = live.evaluate(gone, time.time_ns())
         assert (rec.rule, rec.component, rec.event) == ("bridge_source", "gps", "fire")
+        assert "silent, last line 3 s ago" in rec.summary, rec.summary
         watch.close()
 
 

@@ -5,7 +5,9 @@ Prometheus metrics (``buoymon_bridge_*``) and the live rule ``bridge_source`` se
 
 A bridge that dies publishes nothing more: a source whose last report is older than
 ``max(3 x the bridge's status interval, MIN_SILENT_S)`` is shown in state ``silent`` (one
-that stopped cleanly said ``stopped`` in its last status, and stays so).
+that stopped cleanly said ``stopped`` in its last status, and stays so). The ages a bridge
+reports (``last_line_age_s``, ``last_sample_age_s``) were true when it reported: the daemon
+adds the report's age, so they keep growing while a bridge is silent instead of freezing.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from typing import Any
 
 # a bridge's status older than this (and than three of its intervals) means the bridge is gone
 MIN_SILENT_S = 3.0
+# a source's ages in a bridge's report, in seconds as of the report
+_AGES = ("last_line_age_s", "last_sample_age_s")
 
 
 class BridgeWatch:
@@ -55,6 +59,9 @@ class BridgeWatch:
         for name, (entry, arrived, silent_s) in sorted(items):
             age = now - arrived
             shown = {**entry, "status_age_s": age}
+            for key in _AGES:  # as of now, not as of the report (module docstring)
+                if isinstance(entry.get(key), (int, float)):
+                    shown[key] = entry[key] + age
             if age > silent_s and entry.get("state") != "stopped":
                 shown["state"] = "silent"
             out[name] = shown
