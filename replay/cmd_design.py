@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from models.environment import HOURS_PER_YEAR
+from models.waves import breaking_height
 from monitor.config import ConfigError, default_config, load_config
 from replay.sea_state_files import read_sea_states
 
@@ -68,7 +69,12 @@ def design(config_path: Path | None, scatter: Path, load_model: str = "wavfor",
     hours = counts * record_h
     dmg = physics_damage(config, hs_c, tp_c, load_model, duration_s)
     per_year = HOURS_PER_YEAR / hours.sum()
-    out: dict = {"records": len(ss), "skipped": dict(ss.skipped), "hours": float(hours.sum()),
+    out: dict = {"records": len(ss), "skipped": dict(ss.skipped),
+                 # Hs above the breaking height of its Tp in the mooring's depth: a record
+                 # that cannot be a sea (a corrupt row), yet simulated like the rest
+                 "records_breaking": int(np.sum(ss.hs_m > breaking_height(
+                     ss.tp_s, config.mooring.depth_m))),
+                 "hours": float(hours.sum()),
                  "record_hours": record_h, "bins": int(cells.shape[0]),
                  "load_model": load_model, "buoy_id": config.buoy.id, "components": {}}
     for c, name in enumerate(dmg.components):
@@ -102,8 +108,12 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, OSError) as e:
         print(f"buoymon design: {e}", file=sys.stderr)
         return 2
+    skipped = "; ".join(f"{n} {why}" for why, n in sorted(result["skipped"].items()))
     print(f"{result['records']:,} sea states ({result['hours'] / HOURS_PER_YEAR:.1f} years) in "
-          f"{result['bins']} Hs/Tp bins, {result['load_model']} load model")
+          f"{result['bins']} Hs/Tp bins, {result['load_model']} load model"
+          + (f"; {result['records_breaking']} not a possible sea (Hs above the breaking "
+             "height of its Tp)" if result["records_breaking"] else "")
+          + (f"; rows skipped: {skipped}" if skipped else ""))
     for name, c in result["components"].items():
         life = c["design_life_years"]
         life_s = "no damage" if life is None else _years(life)

@@ -253,6 +253,26 @@ def test_design_command_on_a_measured_month(tmp_path):
     assert 0 < c["worst_bin"]["share"] <= 1
 
 
+def test_design_says_which_rows_it_skipped_and_which_cannot_be_a_sea(tmp_path, capsys):
+    """Two corrupt rows after the record: a bad date is skipped, Hs 9 m at Tz 4.09 s (Tp 5.25
+    s; breaks above 6.1 m in 23 m, tests/test_waves.py) cannot be a sea. Both were silent:
+    the impossible row alone gave 100 % of the damage and a design life of 0.0 h."""
+    from monitor.cli import main  # noqa: PLC0415
+    scatter = tmp_path / "s.txt"
+    scatter.write_text("time (YYYY-MM-DD-HH); significant wave height (m); zero-up-crossing "
+                       "period (s)\n1996-01-01-00; 1.5; 4.0855\n1996-01-01-01; 9; 4.0855\n"
+                       "1996-13-01-02; 1.5; 4.0855\n")
+    out = tmp_path / "d.json"
+    assert main(["design", "--scatter", str(scatter), "--duration", "60",
+                 "--json", str(out)]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first == ("2 sea states (0.0 years) in 2 Hs/Tp bins, wavfor load model; 1 not a "
+                     "possible sea (Hs above the breaking height of its Tp); rows skipped: "
+                     "1 bad time")
+    d = json.loads(out.read_text())
+    assert (d["records"], d["records_breaking"], d["skipped"]) == (2, 1, {"bad time": 1})
+
+
 @pytest.mark.skipif(not NDBC.exists(), reason="shared/realdata not beside the project")
 def test_hindcast_forecast_of_the_second_half_within_20_percent():
     """Train the table on 15 days of hourly measured sea states (each hour's damage from the
