@@ -301,3 +301,14 @@ def test_hindcast_forecast_of_the_second_half_within_20_percent():
     assert actual > 0
     assert proj.damage[0, -1] == pytest.approx(actual, rel=0.20)
     assert (rates.source[0] == "learned").sum() > half // 2
+
+
+def test_the_documented_forecast_payload_lies_ahead_of_its_issue_time():
+    """docs/FORECAST.md's payload example: its steps start at its issue time (the example was
+    issued 2026-11-25 with steps of 2025-11-25, so a daemon applying it projected 0 steps)."""
+    from monitor.forecast import parse_forecast  # noqa: PLC0415
+    doc = (REPO / "docs" / "FORECAST.md").read_text()
+    example = doc.split("Payload (JSON):\n\n```json\n", 1)[1].split("```", 1)[0]
+    fc = parse_forecast(json.loads(example))
+    assert fc.issued_s == fc.t_s[0] == 1795608000.0  # 2026-11-25T12:00:00Z
+    assert list(fc.hs_m) == [1.2, 1.5, 2.1]
