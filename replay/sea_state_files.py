@@ -52,20 +52,23 @@ class SeaStates:
 def read_sea_states(path: str | Path) -> SeaStates:
     """Read a sea-state file in any of the module's formats (ValueError if none fits)."""
     p = Path(path)
-    with p.open(newline="") as fh:
-        first = fh.readline()
-        fh.seek(0)
-        if first.lstrip().startswith("#YY") or first.startswith("YY "):
-            rows, skipped = _ndbc(fh)
-        elif first.lower().startswith("time (yyyy-mm-dd-hh)"):
-            rows, skipped = _benchmark(fh)
-        elif "hs_m" in first and "tp_s" in first:
-            rows, skipped = _csv(fh)
-        else:
-            raise ValueError(f"{p}: not a sea-state file (expected a CSV header with time, "
-                             "hs_m, tp_s; an NDBC '#YY MM DD hh mm ... WVHT DPD' header; or "
-                             "'time (YYYY-MM-DD-HH); significant wave height (m); "
-                             "zero-up-crossing period (s)')")
+    try:
+        with p.open(newline="") as fh:
+            first = fh.readline()
+            fh.seek(0)
+            if first.lstrip().startswith("#YY") or first.startswith("YY "):
+                rows, skipped = _ndbc(fh)
+            elif first.lower().startswith("time (yyyy-mm-dd-hh)"):
+                rows, skipped = _benchmark(fh)
+            elif "hs_m" in first and "tp_s" in first:
+                rows, skipped = _csv(fh)
+            else:
+                raise ValueError(f"{p}: not a sea-state file (expected a CSV header with "
+                                 "time, hs_m, tp_s; an NDBC '#YY MM DD hh mm ... WVHT DPD' "
+                                 "header; or 'time (YYYY-MM-DD-HH); significant wave height "
+                                 "(m); zero-up-crossing period (s)')")
+    except UnicodeDecodeError as exc:  # a binary file: say which, not just the codec's words
+        raise ValueError(f"{p}: not a text file ({exc})") from None
     return _assemble(rows, skipped, p)
 
 

@@ -236,6 +236,11 @@ def test_forecast_refuses_bad_input(tmp_path):
     bad.write_text("time,hs_m,tp_s\n2026-01-01T00:00:00Z,-1,5\n")
     p = _buoymon("forecast", "--sea-states", str(bad), cwd=tmp_path)
     assert p.returncode == 2 and "no usable sea state" in p.stderr
+    binary = tmp_path / "x.bin"  # was "buoymon forecast: 'utf-8' codec can't decode ..."
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n\xe5\xff" * 8)
+    for cmd in (("forecast", "--sea-states"), ("design", "--scatter")):
+        p = _buoymon(*cmd, str(binary), cwd=tmp_path)
+        assert p.returncode == 2 and f"buoymon {cmd[0]}: {binary}: not a text file" in p.stderr
 
 
 @pytest.mark.integration  # the CLI end to end
