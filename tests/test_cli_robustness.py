@@ -84,6 +84,23 @@ def test_an_output_that_is_a_folder_is_refused_before_any_work(tmp_path, capsys)
     assert "is a folder" in capsys.readouterr().err
 
 
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(tmp_path, capsys):
+    """Was: the whole replay ran, then "buoymon replay: [Errno 2] No such file or directory:
+    '/proc/.x.json.691lshzr.tmp'" (a temporary file's name), exit status 1."""
+    log = tiny_log(tmp_path / "a.mcap")
+    assert main(["replay", str(log), "--report", "/proc/x.json"]) == 2
+    out = capsys.readouterr()
+    assert "replay: --report /proc/x.json: cannot write in /proc (" in out.err
+    assert out.out == ""  # refused before the replay, not after it
+    assert main(["replay", str(log), "--html", str(log / "sub" / "r.html")]) == 2
+    assert f"--html {log / 'sub' / 'r.html'}: {log} is a file, not a folder" in \
+        capsys.readouterr().err
+    csv = tmp_path / "m.csv"
+    csv.write_text("time_s,tension_N\n0,100\n")
+    assert main(["import", str(csv), "-o", "/proc/m.mcap"]) == 2
+    assert "-o /proc/m.mcap: cannot write in /proc" in capsys.readouterr().err
+
+
 def test_files_that_cannot_be_read_or_written_give_a_message(tmp_path, capsys):
     missing = tmp_path / "no" / "such" / "x.mcap"
     assert main(["simulate", "-o", str(missing), "--hours", "0.001", "--hs", "1", "--tp", "5",
