@@ -163,3 +163,44 @@ def test_a_udp_flood_loses_no_datagram_while_reads_gather(tmp_path):
         assert v.tolist() == [round(float(ln.split(",")[2]), 1) for ln in lines]
     finally:
         col.close()
+
+
+@pytest.mark.parametrize("bulk", [False, True])
+def test_one_corrupt_future_time_stamp_is_dropped_not_every_later_sample(bulk):
+    """The Maine load cell re-timed to the logger's clock (Unix seconds), one line's time 10
+    years ahead: that line is ``time_ahead`` and the other 299 go out. Was: the bridge took
+    it, and every later line was ``time_backwards`` for good (seen on a pty: samples 101 of
+    400 lines, rejected time_backwards 299, state "reading"). An instrument whose clock runs
+    steadily an hour ahead, across a two-hour silence, loses nothing."""
+    raw = maine_lines(300)
+    r0 = 1_800_000_000 * 10**9
+    step = 350_000_000
+
+    def feed(offset_ns: int, leap_at: int | None, pause_at: int | None):
+        cfg = parse_bridge_config({"buoy": {"id": "t1"}, "bridge": {"connect": [
+            "tcp/127.0.0.1:7447"]}, "source": [{
+                "name": "lc", "sensor": "tension", "transport": "stdin",
+                "columns": {"tension_N": 2}, "time_column": 0, "time_format": "unix"}]})
+        out = Blocks()
+        bridge = Bridge(cfg, out)
+        src = bridge.sources[0]
+        if not bulk:
+            src.parse_many = None
+        recv = r0
+        for k0 in range(0, len(raw), 10):  # reads of 10 lines, received as the last is sent
+            chunk = []
+            for k in range(k0, k0 + 10):
+                recv += step + (7200 * 10**9 if k == pause_at else 0)
+                t = recv + offset_ns + (10 * 365 * 86400 * 10**9 if k == leap_at else 0)
+                chunk.append(f"{t // 10**9}.{t % 10**9:09d},{raw[k].split(',', 1)[1]}".encode())
+            bridge.handle(0, "lines", chunk, recv)
+        bridge._flush(src)
+        return src, np.concatenate([b.t_ns for b in out.blocks])
+
+    src, t = feed(-200_000_000, 105, None)  # the leap mid-read (bulk falls back to lines)
+    assert (src.samples, dict(src.rejected)) == (299, {"time_ahead": 1})
+    assert t.size == 299 and np.all(np.diff(t) > 0) and t[-1] < r0 + 300 * step
+    src, t = feed(-200_000_000, 109, None)  # the leap as a read's last line
+    assert (src.samples, dict(src.rejected)) == (299, {"time_ahead": 1})
+    src, t = feed(3600 * 10**9, None, 150)  # steadily an hour ahead, then 2 h of silence
+    assert (src.samples, dict(src.rejected), t.size) == (300, {}, 300)

@@ -9,7 +9,11 @@ are parsed at once (:func:`monitor.bridge.formats.bulk_parser`). A block closes 
 sample lies ``block_s`` after its first one, or when ``block_s`` of wall-clock time has
 passed since its first sample arrived (a quiet instrument still gets its samples out).
 Times must increase strictly within a source: a sample at or before the last one is counted
-(``time_backwards``) and dropped, so no garbage time reaches the monitor.
+(``time_backwards``) and dropped, so no garbage time reaches the monitor. A corrupt time stamp
+far in the future would make every later sample ``time_backwards``, for good: a sample more
+than ``_MAX_AHEAD_NS`` ahead of the logger's clock whose time leapt that much further than
+the logger's clock since its source's previous sample is counted (``time_ahead``) and dropped
+instead (an instrument whose clock is steadily ahead keeps its pace and is not touched).
 
 Status: every ``status_interval_s`` a JSON document on ``buoy/<id>/bridge/status``: per
 source its transport, stream, whether connected, its ``state``, counters (lines, samples,
@@ -73,6 +77,9 @@ _NEAR_S = 0.01
 # reasons that are not faults of the data: header lines of a CSV file (not counted), NMEA
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
+# a time stamp this far ahead of the logger's clock, reached by a leap of as much: corrupt
+# (the daemon's clock_skew_max_s default)
+_MAX_AHEAD_NS = 600 * 10**9
 _UNLOGGED = {"other_sentence", "repeat_fix"}
 
 
@@ -93,6 +100,7 @@ class SourceState:
     events: Counter = field(default_factory=Counter)
     time_source: str | None = None
     last_t_ns: int | None = None
+    last_recv_ns: int = 0  # the receive time of the read that gave ``last_t_ns``
     last_sample_mono: float | None = None
     last_line_mono: float | None = None
     # when ``connected`` last changed (or the bridge started): what a state's age counts from
@@ -138,6 +146,13 @@ class SourceState:
                 "time_source": self.time_source,
                 "last_line_age_s": _age(now_mono, self.last_line_mono),
                 "last_sample_age_s": _age(now_mono, self.last_sample_mono)}
+
+
+def _leaps_ahead(src: SourceState, t_ns: int, recv_ns: int) -> bool:
+    """A corrupt time stamp (module docstring): ``t_ns`` is over ``_MAX_AHEAD_NS`` ahead of
+    the logger's clock, and got there by a leap of as much beyond the clock's own advance."""
+    return (t_ns - recv_ns > _MAX_AHEAD_NS and src.last_t_ns is not None
+            and (t_ns - src.last_t_ns) - (recv_ns - src.last_recv_ns) > _MAX_AHEAD_NS)
 
 
 def _age(now_mono: float, then: float | None) -> float | None:
@@ -303,15 +318,16 @@ class Bridge:
         many = (src.parse_many(data, recv_ns) if src.parse_many is not None
                 and len(data) >= _BULK_MIN else None)
         if many is not None and (src.last_t_ns is None or many.t_ns[0] > src.last_t_ns) \
-                and all(map(lt, many.t_ns, islice(many.t_ns, 1, None))):
-            self._samples(src, many, now)
+                and all(map(lt, many.t_ns, islice(many.t_ns, 1, None))) \
+                and not _leaps_ahead(src, many.t_ns[-1], recv_ns):
+            self._samples(src, many, recv_ns, now)
             return
         for line in data:  # one by one: each rejection counted by its reason
             self._line(src, line, recv_ns, now)
         if src.last_t_ns is not None:
             src.lag_s = min(src.lag_s, now - src.last_t_ns * 1e-9)
 
-    def _samples(self, src: SourceState, many: Samples, now_mono: float) -> None:
+    def _samples(self, src: SourceState, many: Samples, recv_ns: int, now_mono: float) -> None:
         """Samples of the bulk parser (times increasing, after the last) into blocks, as
         :meth:`_line` puts them one by one."""
         t, n, i = many.t_ns, len(many.t_ns), 0
@@ -327,6 +343,7 @@ class Bridge:
                 self._flush(src)
             i = end
         src.last_t_ns = t[-1]
+        src.last_recv_ns = recv_ns
         src.lag_s = min(src.lag_s, now_mono - t[-1] * 1e-9)
         src.time_source = many.time_source
         src.samples += n
@@ -354,6 +371,9 @@ class Bridge:
         if src.last_t_ns is not None and t_ns <= src.last_t_ns:
             self._reject(src, "time_backwards")
             return
+        if _leaps_ahead(src, t_ns, recv_ns):
+            self._reject(src, "time_ahead")
+            return
         if src.first_t is not None and t_ns - src.first_t >= src.block_ns:
             self._flush(src)
         if src.first_t is None:
@@ -362,6 +382,7 @@ class Bridge:
         for column, v in zip(src.columns, vals):
             column.append(v)
         src.last_t_ns = t_ns
+        src.last_recv_ns = recv_ns
         src.time_source = time_source
         src.samples += 1
         src.last_sample_mono = now_mono
