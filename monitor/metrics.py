@@ -215,7 +215,8 @@ _BRIDGE_COUNTERS = {
     "samples": ("buoymon_bridge_samples", "Lines parsed into samples"),
     "blocks": ("buoymon_bridge_blocks", "Blocks published"),
 }
-BRIDGE_STATES = ("reading", "connecting", "stalled", "disconnected", "stopped", "silent")
+BRIDGE_STATES = ("reading", "rejecting", "connecting", "stalled", "disconnected", "stopped",
+                 "silent")
 
 
 def _bridge_metrics(buoy: str, sources: Mapping[str, Any]) -> Iterator[Metric]:

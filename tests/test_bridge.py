@@ -590,3 +590,54 @@ def test_followed_files_truncated_in_place_and_started_at_their_end(tmp_path):
         assert sorted(got.tolist()) == sorted(exp * 2)
     finally:
         col.close()
+
+
+def test_a_source_whose_every_line_is_rejected_is_rejecting_and_alerted(tmp_path):
+    """A load cell on a pty sending lines that give no sample (here non-numeric loads, as a
+    wrong column map or baud rate does): once ``stall_s`` passes the bridge process reports
+    ``rejecting`` (was "reading" for ever: lines kept coming) and the daemon's live rule fires
+    on it, naming the reasons; the Maine load cell's own lines then bring it back to reading."""
+    from monitor.alerts.live import LiveAlerts, LiveConfig  # noqa: PLC0415
+    from monitor.metrics import BRIDGE_STATES  # noqa: PLC0415
+
+    port = free_port()
+    col = Collector(port)
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    cfg = tmp_path / "b.toml"
+    cfg.write_text(f'[buoy]\nid = "t1"\n[bridge]\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                   'status_interval_s = 0.2\n[[source]]\nname = "lc"\nsensor = "tension"\n'
+                   f'transport = "serial"\ndevice = "{os.ttyname(slave)}"\nstall_s = 1.0\n'
+                   f'columns = {{ tension_N = 2 }}\nscale = {{ tension_N = {LBF} }}\n')
+    p = subprocess.Popen([sys.executable, "-m", "monitor.cli", "--log-level", "warning",
+                          "bridge", "--config", str(cfg)], env=ENV, stderr=subprocess.PIPE)
+
+    def state_after(lines: list[str], pause: float) -> dict:
+        for line in lines:
+            os.write(master, line.encode() + b"\n")
+            time.sleep(pause)
+        return col.status[-1]["sources"]["lc"]
+
+    try:
+        time.sleep(1.5)  # connected to the collector
+        bad = state_after(["2018-11-30-09:58:27.538, 0.35,4O, 0.02"] * 40, 0.05)
+        good = state_after(maine_lines(20), 0.05)
+        time.sleep(0.5)
+        good = col.status[-1]["sources"]["lc"]
+    finally:
+        p.terminate()
+        p.wait(30)
+        col.close()
+        os.close(master)
+        os.close(slave)
+    assert bad["state"] == "rejecting" and bad["samples"] == 0
+    assert bad["rejected"] == {"non_numeric": bad["lines"]} and bad["lines"] >= 30
+    assert good["state"] == "reading" and good["samples"] == 20
+    assert "rejecting" in BRIDGE_STATES
+    live = LiveAlerts("t1", LiveConfig())
+    (rec,) = live.evaluate({"bridge": {"sources": {"lc": bad}}}, time.time_ns())
+    assert (rec.rule, rec.component, rec.event) == ("bridge_source", "lc", "fire")
+    assert rec.summary.startswith("bridge source lc (serial -> tension): rejecting every line "
+                                  "(non_numeric), last line 0 s ago"), rec.summary
+    (rec,) = live.evaluate({"bridge": {"sources": {"lc": good}}}, time.time_ns())
+    assert rec.event == "clear"

@@ -74,8 +74,8 @@ def test_bridge_source_families():
                                                       *cell[1:]))] == 1
     states = {dict(k[1])["state"]: v for k, v in got.items()
               if k[0] == "buoymon_bridge_source_state" and dict(k[1])["source"] == "cell"}
-    assert states == {"reading": 0, "connecting": 0, "stalled": 1, "disconnected": 0,
-                      "stopped": 0, "silent": 0}
+    assert states == {"reading": 0, "rejecting": 0, "connecting": 0, "stalled": 1,
+                      "disconnected": 0, "stopped": 0, "silent": 0}
     assert got[("buoymon_bridge_line_age_seconds", cell)] == 7.5
     assert math.isnan(got[("buoymon_bridge_line_age_seconds", gps)])
     assert got[("buoymon_bridge_status_age_seconds", gps)] == 0.4

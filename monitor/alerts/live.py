@@ -29,7 +29,8 @@ alert_outbox_dropped     critical     an alert channel's ``dropped_total`` rose 
 checkpoint_failed        critical     the last checkpoint attempt failed
 (checkpoint)
 bridge_source (source)   warning      a bridge source is ``stalled`` (no line for its
-                                      ``stall_s``), ``disconnected``, ``stopped`` (its bridge
+                                      ``stall_s``), ``rejecting`` (lines but no sample for
+                                      it), ``disconnected``, ``stopped`` (its bridge
                                       exited) or ``silent`` (its bridge stopped reporting):
                                       monitor.bridge.runner, monitor.bridge.watch
 =======================  ===========  =========================================================
@@ -191,10 +192,13 @@ class LiveAlerts:
             state = str(b.get("state"))
             quiet = b.get("last_line_age_s")
             out.append(Condition(
-                "bridge_source", name, "warning", state in ("stalled", "disconnected", "stopped", "silent"),
+                "bridge_source", name, "warning",
+                state in ("stalled", "rejecting", "disconnected", "stopped", "silent"),
                 _num(quiet), _num(b.get("stall_s")), "s",
-                f"bridge source {name} ({b.get('transport')} -> {b.get('sensor')}): {state}, "
-                f"last line {'never' if quiet is None else f'{_num(quiet):.0f} s ago'}"))
+                f"bridge source {name} ({b.get('transport')} -> {b.get('sensor')}): {state}"
+                + (f" every line ({', '.join(sorted(b.get('rejected') or {}))})"
+                   if state == "rejecting" else "")
+                + f", last line {'never' if quiet is None else f'{_num(quiet):.0f} s ago'}"))
         ckpt = doc.get("checkpoint")
         if ckpt is not None:
             out.append(Condition(

@@ -22,7 +22,9 @@ ages of the last line and sample. Each reason is logged at most once a minute pe
 
 A source's ``state`` makes a dead instrument loud within ``stall_s``: ``reading`` (connected,
 a line within ``stall_s``, or connected less than ``stall_s`` ago), ``stalled`` (connected,
-no line for ``stall_s``: a cable cut on the far side, an instrument hung), ``connecting``
+no line for ``stall_s``: a cable cut on the far side, an instrument hung), ``rejecting``
+(connected, lines coming, but none gave a sample for ``stall_s``: a wrong column map, baud
+rate or time format, a GNSS without a fix), ``connecting``
 (not connected for less than ``stall_s``: starting, a reconnect) and ``disconnected`` (not
 connected for ``stall_s``: a device unplugged, a socket refused); the last status of a
 bridge that stops says ``stopped``. Each change is logged (a warning when it leaves
@@ -131,10 +133,14 @@ class SourceState:
             - _NEAR_S
 
     def current_state(self, now_mono: float) -> str:
-        """``reading``, ``stalled``, ``connecting`` or ``disconnected`` (module docstring)."""
+        """``reading``, ``rejecting``, ``stalled``, ``connecting`` or ``disconnected``
+        (module docstring)."""
         quiet_s = now_mono - max(self.link_mono, self.last_line_mono or self.link_mono)
         if self.connected:
-            return "reading" if quiet_s <= self.cfg.stall_s else "stalled"
+            if quiet_s > self.cfg.stall_s:
+                return "stalled"
+            fruitless_s = now_mono - max(self.link_mono, self.last_sample_mono or self.link_mono)
+            return "reading" if fruitless_s <= self.cfg.stall_s else "rejecting"
         return "connecting" if quiet_s <= self.cfg.stall_s else "disconnected"
 
     def status(self, now_mono: float) -> dict[str, Any]:
@@ -232,12 +238,16 @@ class Bridge:
         self._due = due
 
     def _next_state_change(self) -> float:
-        """When a source's quiet time passes ``stall_s`` next (reading -> stalled,
-        connecting -> disconnected)."""
+        """When a source's quiet time passes ``stall_s`` next (reading or rejecting ->
+        stalled, connecting -> disconnected), or its time without a sample does (reading ->
+        rejecting)."""
         due = math.inf
         for src in self.sources:
-            if src.state in ("reading", "connecting"):
+            if src.state in ("reading", "rejecting", "connecting"):
                 due = min(due, max(src.link_mono, src.last_line_mono or src.link_mono)
+                          + src.cfg.stall_s)
+            if src.state == "reading":
+                due = min(due, max(src.link_mono, src.last_sample_mono or src.link_mono)
                           + src.cfg.stall_s)
         return due
 
@@ -291,8 +301,9 @@ class Bridge:
                 continue
             fields = {"source": src.cfg.name, "state": state, "was": src.state,
                       "transport": src.cfg.transport, "stall_s": src.cfg.stall_s}
-            if state in ("stalled", "disconnected"):
-                log.warning("bridge source %s", state, extra={"fields": fields})
+            if state in ("stalled", "rejecting", "disconnected"):
+                log.warning("bridge source %s", state, extra={"fields": {
+                    **fields, "rejected": dict(src.rejected)}})
             else:
                 log.info("bridge source %s", state, extra={"fields": fields})
             src.state = state
