@@ -37,6 +37,16 @@ def decode_state(data: bytes) -> Any:
     return _dec(json.loads(data))
 
 
+def decode_checkpoint(path: str, seq: int, data: bytes) -> Any:
+    """:func:`decode_state` of the checkpoint ``seq`` read from ``path``; a damaged one is a
+    ValueError naming the file (was a bare "Expecting value: line 1 column 1 (char 0)")."""
+    try:
+        return decode_state(data)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise ValueError(f"{path}: checkpoint {seq} is damaged ({exc}); the file is left as "
+                         "it is: move it aside to start afresh") from None
+
+
 def _enc(x: Any) -> Any:
     if isinstance(x, np.ndarray):
         a = np.ascontiguousarray(x)
@@ -126,7 +136,7 @@ class CheckpointStore:
         row = self._db.execute("SELECT seq, saved_ns, state FROM checkpoint WHERE id = 1").fetchone()
         if row is None:
             return None
-        return Checkpoint(int(row[0]), int(row[1]), decode_state(row[2]))
+        return Checkpoint(int(row[0]), int(row[1]), decode_checkpoint(self.path, row[0], row[2]))
 
     def save(self, state: Any) -> int:
         """Store ``state`` atomically and durably; returns the new sequence number."""

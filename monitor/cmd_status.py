@@ -107,7 +107,7 @@ def read_state_file(path: str) -> dict[str, Any]:
     if not Path(path).exists():
         raise ValueError(f"no daemon answered and there is no state file at {path} "
                          "([state] path)")
-    from monitor.checkpoint import decode_state  # noqa: PLC0415
+    from monitor.checkpoint import decode_checkpoint  # noqa: PLC0415
 
     db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
     try:
@@ -118,7 +118,7 @@ def read_state_file(path: str) -> dict[str, Any]:
         db.close()
     if row is None:
         raise ValueError(f"{path}: the checkpoint is empty (the daemon never saved)")
-    state = decode_state(row[2])
+    state = decode_checkpoint(path, row[0], row[2])
     doc = dict((state.get("daemon") or {}).get("last_status") or {})
     if not doc:
         raise ValueError(f"{path}: checkpoint {row[0]} holds no status (written before any "

@@ -83,6 +83,31 @@ def test_a_file_that_is_not_a_checkpoint_is_refused_and_left_alone(tmp_path):
     assert bad.read_bytes() == b"garbage, not SQLite" * 10
 
 
+@pytest.mark.integration  # starts the daemon and status processes
+def test_a_damaged_checkpoint_is_named_and_left_alone(tmp_path):
+    """A checkpoint database whose state blob is damaged: the daemon and `buoymon status` said
+    only "Expecting value: line 1 column 1 (char 0)"."""
+    path = tmp_path / "state.sqlite"
+    store = CheckpointStore(path)
+    assert store.save({"a": 1}) == 1
+    store._db.execute("UPDATE checkpoint SET state = x'00112233' WHERE id = 1")
+    store.close()
+    data = path.read_bytes()
+    with pytest.raises(ValueError, match=f"{path}: checkpoint 1 is damaged .*move it aside"):
+        CheckpointStore(path).load()
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text((Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml")
+                   .read_text() + f'\n[state]\npath = "{path}"\n[metrics]\nenabled = false\n'
+                   '[zenoh]\nlisten = ["tcp/127.0.0.1:1"]\n')  # nothing answers a status query
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    for cmd, rc in ((["run"], 2), (["status"], 1)):
+        p = subprocess.run([sys.executable, "-m", "monitor.cli", *cmd, "--config", str(cfg)],
+                           capture_output=True, text=True, timeout=120, env=env)
+        assert p.returncode == rc and "Traceback" not in p.stderr, p.stderr
+        assert f"{path}: checkpoint 1 is damaged (" in p.stderr, p.stderr
+    assert path.read_bytes() == data
+
+
 def test_periodic_checkpointer_respects_interval():
     now = [100.0]
     saved = []
