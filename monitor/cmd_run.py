@@ -48,6 +48,12 @@ def build_daemon(path: str) -> Daemon:
             out.append(AlertDelivery(session, pipeline, cfg.alerts))
         return out
 
+    if cfg.alerts.webhook or cfg.alerts.email or cfg.alerts.alertmanager:
+        from monitor.alerts.outbox import Outbox  # noqa: PLC0415
+
+        # opened here too, so a damaged outbox stops the start with its name (exit status 2),
+        # not with a traceback once the daemon has begun to serve
+        Outbox(cfg.alerts.outbox.path, {}).close()
     return Daemon(cfg.buoy.id, cfg.daemon, make_pipeline, default_codec(), attach=attach)
 
 

@@ -360,3 +360,34 @@ def test_an_outbox_of_an_older_version_is_upgraded(tmp_path):
         assert box.run_once() is None and sent == [b"A"]
     finally:
         box.close()
+
+
+def test_a_damaged_outbox_is_named_by_the_daemon_and_the_outbox_command(tmp_path):
+    """An outbox file that is not an outbox database (damaged, or another file at its path):
+    `buoymon run` and `buoymon alerts outbox` ended in a traceback (sqlite3.DatabaseError:
+    file is not a database); a missing folder of `[alerts.outbox] path` likewise (unable to
+    open database file)."""
+    import os  # noqa: PLC0415
+    import subprocess  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+    from pathlib import Path  # noqa: PLC0415
+
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(repo)}
+    bad = tmp_path / "outbox.sqlite"
+    bad.write_bytes(b"garbage, not SQLite" * 300)
+    cfg = tmp_path / "cfg.toml"
+    base = (repo / "monitor" / "vaps_seed004.toml").read_text() + (
+        f'\n[state]\npath = "{tmp_path / "st.sqlite"}"\n[metrics]\nenabled = false\n'
+        '[alerts.webhook]\nurl = "http://127.0.0.1:9/hook"\n[alerts.outbox]\n')
+    cfg.write_text(base + f'path = "{bad}"\n')
+    for cmd, rc in ((["run"], 2), (["alerts", "outbox"], 1)):
+        p = subprocess.run([sys.executable, "-m", "monitor.cli", *cmd, "--config", str(cfg)],
+                           capture_output=True, text=True, timeout=120, env=env)
+        assert p.returncode == rc and "Traceback" not in p.stderr, p.stderr
+        assert f"{bad}: not an alert outbox database (file is not a database)" in p.stderr
+    assert bad.read_bytes() == b"garbage, not SQLite" * 300
+    # a folder that does not exist yet is made, as for the state
+    box = Outbox(str(tmp_path / "new" / "deeper" / "o.sqlite"), {})
+    assert box.pending() == 0
+    box.close()

@@ -27,6 +27,7 @@ not advance while a receiver is down.
 from __future__ import annotations
 
 import logging
+import os
 import random
 import sqlite3
 import threading
@@ -102,13 +103,20 @@ class Outbox:
         self.clock = clock
         # one connection shared by the enqueuing thread and the sender thread, serialised by
         # a lock; the lock is never held while a sender talks to the network
+        os.makedirs(os.path.dirname(os.path.abspath(self.path)), exist_ok=True)  # as the state
         self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=FULL")
-        self._db.executescript(_SCHEMA)
-        columns = {row[1] for row in self._db.execute("PRAGMA table_info(outbox)")}
-        if "dead_s" not in columns:  # an outbox written before dead letters existed
-            self._db.execute("ALTER TABLE outbox ADD COLUMN dead_s REAL")
+        try:
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.executescript(_SCHEMA)
+            columns = {row[1] for row in self._db.execute("PRAGMA table_info(outbox)")}
+            if "dead_s" not in columns:  # an outbox written before dead letters existed
+                self._db.execute("ALTER TABLE outbox ADD COLUMN dead_s REAL")
+        except sqlite3.DatabaseError as exc:  # another file, or a damaged one: never overwritten
+            self._db.close()
+            raise ValueError(f"{self.path}: not an alert outbox database ({exc}); the file is "
+                             "left as it is: move it aside to start afresh (its undelivered "
+                             "alerts are lost)") from None
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._stop = threading.Event()
