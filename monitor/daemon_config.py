@@ -59,6 +59,8 @@ from monitor.blocks import SENSOR_FIELDS
 from monitor.schema import error, parse_struct
 
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
+# the port of an IP endpoint (before zenoh's optional "#" metadata)
+_PORT = re.compile(r"^(?:tcp|udp|tls|quic|ws)/.*:(\d+)(?:#.*)?$")
 
 Positive = Annotated[float, Meta(gt=0)]
 NonEmpty = Annotated[str, Meta(min_length=1)]
@@ -117,6 +119,10 @@ class ZenohConfig(msgspec.Struct, frozen=True):
                 if not _ENDPOINT.match(e):
                     raise error(where, key, list(getattr(self, key)),
                                 f"endpoint {e!r} is not of the form '<proto>/<address>'")
+                port = _PORT.search(e)
+                if port is not None and int(port.group(1)) > 65535:  # zenoh refuses it at start
+                    raise error(where, key, list(getattr(self, key)),
+                                f"endpoint {e!r}: port {port.group(1)} is not in 0..65535")
         if self.mode == "client" and not self.connect:
             raise error(where, "connect", [], "client mode needs at least one endpoint")
         if self.mode == "client" and "listen" not in raw:

@@ -78,6 +78,12 @@ def test_sections_parse_given_values():
     ("zenoh", {"auth": {"user": "u"}}, "zenoh.auth.password = None: user and password"),
     ("zenoh", {"auth": {"token": "x"}}, "zenoh.auth.token = 'x': unknown key"),
     ("zenoh", "peer", "zenoh = 'peer': must be a table"),
+    # check-config said ok; `buoymon run` failed at start ("invalid port value")
+    ("zenoh", {"listen": ["tcp/127.0.0.1:99999"]},
+     "zenoh.listen = ['tcp/127.0.0.1:99999']: endpoint 'tcp/127.0.0.1:99999': port 99999 is "
+     "not in 0..65535"),
+    ("zenoh", {"mode": "client", "connect": ["tcp/[::1]:70000#iface=lo"]},
+     "endpoint 'tcp/[::1]:70000#iface=lo': port 70000 is not in 0..65535"),
     ("state", {"path": ""}, "state.path = '': must be a non-empty string"),
     ("state", {"checkpoint_interval_s": -1}, "state.checkpoint_interval_s = -1: must be a finite number > 0"),
     ("state", {"checkpoint_interval_s": float("nan")}, "state.checkpoint_interval_s = nan"),
