@@ -68,6 +68,19 @@ Endpoints = Annotated[tuple[str, ...], Meta(
     description="a list of endpoint strings like 'tcp/127.0.0.1:7447'")]
 
 
+def check_endpoints(where: str, key: str, endpoints: tuple[str, ...]) -> None:
+    """Config error naming ``where.key`` unless every endpoint is '<proto>/<address>' with a
+    port (if any) that zenoh takes: it refuses others only when the session opens."""
+    for e in endpoints:
+        if not _ENDPOINT.match(e):
+            raise error(where, key, list(endpoints),
+                        f"endpoint {e!r} is not of the form '<proto>/<address>'")
+        port = _PORT.search(e)
+        if port is not None and int(port.group(1)) > 65535:
+            raise error(where, key, list(endpoints),
+                        f"endpoint {e!r}: port {port.group(1)} is not in 0..65535")
+
+
 def _pair(where: str, given: Mapping[str, Any], a: str, b: str) -> None:
     """Keys ``a`` and ``b`` must be given together."""
     if (a in given) != (b in given):
@@ -115,14 +128,7 @@ class ZenohConfig(msgspec.Struct, frozen=True):
 
     def check(self, where: str, raw: Mapping[str, Any]) -> "ZenohConfig":
         for key in ("listen", "connect"):
-            for e in getattr(self, key):
-                if not _ENDPOINT.match(e):
-                    raise error(where, key, list(getattr(self, key)),
-                                f"endpoint {e!r} is not of the form '<proto>/<address>'")
-                port = _PORT.search(e)
-                if port is not None and int(port.group(1)) > 65535:  # zenoh refuses it at start
-                    raise error(where, key, list(getattr(self, key)),
-                                f"endpoint {e!r}: port {port.group(1)} is not in 0..65535")
+            check_endpoints(where, key, getattr(self, key))
         if self.mode == "client" and not self.connect:
             raise error(where, "connect", [], "client mode needs at least one endpoint")
         if self.mode == "client" and "listen" not in raw:

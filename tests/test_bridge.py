@@ -10,6 +10,7 @@ import json
 import math
 import os
 import queue
+import re
 import socket
 import subprocess
 import sys
@@ -202,6 +203,13 @@ def test_bad_config_is_refused_naming_key_and_value():
     with pytest.raises(ConfigError, match=r"source\[0\].device"):
         parse_bridge_config({"buoy": {"id": "b"}, "source": [
             {"name": "x", "sensor": "gnss", "transport": "serial"}]})
+    # a bad endpoint was accepted; the bridge then failed when its session opened
+    for endpoint, message in (("tcp/127.0.0.1:99999", "port 99999 is not in 0..65535"),
+                              ("127.0.0.1:7447", "is not of the form '<proto>/<address>'")):
+        with pytest.raises(ConfigError, match=rf"bridge\.connect = .*{re.escape(message)}"):
+            parse_bridge_config({"buoy": {"id": "b"}, "bridge": {"connect": [endpoint]},
+                                 "source": [{"name": "x", "sensor": "tension",
+                                             "transport": "stdin", "columns": {"tension_N": 1}}]})
     with pytest.raises(ConfigError, match="gnss stream only"):
         parse_bridge_config({"buoy": {"id": "b"}, "source": [
             {"name": "x", "sensor": "tension", "transport": "stdin", "format": "nmea"}]})

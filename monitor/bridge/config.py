@@ -15,6 +15,7 @@ import msgspec
 from msgspec import Meta
 
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
+from monitor.daemon_config import check_endpoints
 from monitor.quanta import quanta as sensor_quanta
 from monitor.schema import error, parse_struct, read_toml
 
@@ -107,6 +108,7 @@ class BridgeSection(msgspec.Struct, frozen=True):
                       ] = msgspec.field(default_factory=dict)  # field -> quantum on the wire
 
     def check(self, where: str, raw: Mapping[str, Any]) -> "BridgeSection":
+        check_endpoints(where, "connect", self.connect)
         try:
             for sensor in SENSOR_FIELDS:
                 sensor_quanta(sensor, self.quanta)
