@@ -76,7 +76,11 @@ def fetch(target: DaemonTarget, timeout: float) -> tuple[str, dict[str, Any]]:
     doc = query_daemon(target, timeout)
     if doc is not None:
         return "daemon", doc
-    return "state file", read_state_file(target.state_path)
+    try:
+        return "state file", read_state_file(target.state_path)
+    except ValueError as exc:  # say first that the daemon did not answer (busy, or stopped)
+        raise ValueError(f"no daemon answered at {', '.join(target.connect)} within "
+                         f"{timeout:g} s, and {exc}") from None
 
 
 def query_daemon(target: DaemonTarget, timeout: float) -> dict[str, Any] | None:
@@ -105,8 +109,7 @@ def query_daemon(target: DaemonTarget, timeout: float) -> dict[str, Any] | None:
 def read_state_file(path: str) -> dict[str, Any]:
     """The status saved with the last checkpoint (read-only: the file is not touched)."""
     if not Path(path).exists():
-        raise ValueError(f"no daemon answered and there is no state file at {path} "
-                         "([state] path)")
+        raise ValueError(f"there is no state file at {path} ([state] path)")
     from monitor.checkpoint import decode_checkpoint  # noqa: PLC0415
 
     db = sqlite3.connect(f"file:{path}?mode=ro", uri=True)

@@ -164,3 +164,26 @@ def test_kill_9_during_saves_leaves_a_whole_checkpoint(tmp_path):
         assert acked <= cp.state["i"] <= acked + 1
         last_acked = cp.state["i"]
     assert last_acked > 8
+
+
+def test_status_without_an_answer_says_so_before_the_state_file(tmp_path, capsys):
+    """A daemon that does not answer (stopped, or busy at its start) with a checkpoint not yet
+    written: `buoymon status` said only "PATH: the checkpoint is empty (the daemon never
+    saved)", as if no daemon were configured."""
+    from daemon_harness import free_port  # noqa: PLC0415
+    from monitor.cli import main  # noqa: PLC0415
+
+    path = tmp_path / "state.sqlite"
+    CheckpointStore(path).close()  # created, nothing saved yet
+    port = free_port()
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text(f'[buoy]\nid = "b1"\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
+                   f'[state]\npath = "{path}"\n')
+    assert main(["status", "--config", str(cfg), "--timeout", "0.5"]) == 1
+    assert capsys.readouterr().err == (
+        f"buoymon status: no daemon answered at tcp/127.0.0.1:{port} within 0.5 s, and "
+        f"{path}: the checkpoint is empty (the daemon never saved)\n")
+    path.unlink()
+    assert main(["status", "--config", str(cfg), "--timeout", "0.5"]) == 1
+    assert capsys.readouterr().err.endswith(
+        f"within 0.5 s, and there is no state file at {path} ([state] path)\n")
