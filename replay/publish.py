@@ -8,6 +8,7 @@ advanced publishers with a cache, as a sensor driver publishes (``monitor.sensor
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import Sequence
 
@@ -42,6 +43,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if not args.connect:
         p.error("--connect is required (the daemon's listen endpoint)")
+    # checked here: the player raised a traceback on them once the session was open
+    if args.speed is not None and not 0 < args.speed < math.inf:
+        p.error(f"--speed {args.speed}: must be a number > 0 (times real time)")
+    if not 0 <= args.linger_s < math.inf:
+        p.error(f"--linger-s {args.linger_s}: must be a number of seconds >= 0")
     try:
         options = PublisherOptions(cache_blocks=args.cache_blocks)
     except ValueError as exc:

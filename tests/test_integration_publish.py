@@ -87,3 +87,12 @@ def test_publish_module_says_when_nothing_could_be_sent(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         publish_main([str(garbage), "--connect", "garbage"])
     assert exc.value.code == 2 and "'garbage' is not a Zenoh endpoint" in capsys.readouterr().err
+    # a speed or linger that cannot be: a usage error (was a ValueError traceback from the
+    # player, once the session was open)
+    for option, value, message in (("--speed", "0", "--speed 0.0: must be a number > 0"),
+                                   ("--speed", "-1", "--speed -1.0: must be a number > 0"),
+                                   ("--speed", "nan", "--speed nan: must be a number > 0"),
+                                   ("--linger-s", "-5", "--linger-s -5.0: must be a number")):
+        with pytest.raises(SystemExit) as exc:
+            publish_main([str(garbage), "--connect", endpoint, option, value])
+        assert exc.value.code == 2 and message in capsys.readouterr().err
