@@ -68,9 +68,13 @@ def displacement_from_acceleration(
 @kernel()
 def _sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray, out: np.ndarray) -> None:
     """Second-order sections, transposed direct form II (scipy.signal.sosfilt's layout),
-    per channel, updating ``zi`` in place: scipy's per-call overhead dominated 1 s blocks."""
-    for c in range(x.shape[0]):
-        for i in range(x.shape[1]):
+    per channel, updating ``zi`` in place: scipy's per-call overhead dominated 1 s blocks.
+    The channels are interleaved sample by sample: each channel's recursion is one chain of
+    dependent operations (its latency, not the arithmetic, sets the pace), and the channels'
+    independent chains overlap (11 instead of 17 ns per 3-channel sample; each channel's
+    operations and their order are unchanged, so are its bits)."""
+    for i in range(x.shape[1]):
+        for c in range(x.shape[0]):
             v = x[c, i]
             for s in range(sos.shape[0]):
                 y = sos[s, 0] * v + zi[c, s, 0]
