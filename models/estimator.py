@@ -257,13 +257,16 @@ class EstimatorState:
                    settling=int(d.get("settling", 0)))
 
 
-def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]:
+def _as_block(name: str, value: ArrayLike, n: int | None,
+              finite: bool = True) -> NDArray[np.float64]:
+    """``value`` as a 1-D float array of ``n`` samples (any length for None), all finite
+    unless ``finite`` is False (the caller checks)."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array")
     if n is not None and arr.size != n:
         raise ValueError(f"{name} has {arr.size} samples, expected {n}")
-    if not np.all(np.isfinite(arr)):
+    if finite and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite values")
     return arr
 
@@ -272,23 +275,45 @@ _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 
 
 @kernel()
-def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain, drag_on,
-                  drag_k, drag_b, y0, tan_flat, total, axial, drag, angle):
+def _dynamic_core(p, span, height, dt, want, t_qs, h, v, qflags, axial_mode, axial_gain,
+                  drag_on, drag_k, drag_b, y0, tan_flat, total, qs_out, axial, drag, angle,
+                  flags):
     """Per-sample dynamic increments (see the module docstring); returns the jerk state.
 
-    p: (3, n + 2) surge, sway, heave with the two previous samples first.
+    p: (3, n + 2) surge, sway, heave with the two previous samples first. ``want``: the
+    samples to estimate, whose quasi-static ``t_qs, h, v, qflags`` are given in order (one
+    per wanted sample); the others only advance the jerk ODE (the stream state), and get
+    NaN tension, quasi-static and angle, no axial increment and no flags, as a NaN
+    quasi-static input gives them.
     """
     inv_dt = 1.0 / dt
     y = y0
     xs = span + p[0, 1]
     chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
-    for i in range(t_qs.size):
+    k = 0
+    for i in range(want.size):
         j = i + 2
         xs = span + p[0, j]
         ys = p[1, j]
         hor = math.sqrt(xs * xs + ys * ys)
-        tq, hi, vi = t_qs[i], h[i], v[i]
-        f = flags[i]
+        d_i = 0.0
+        if drag_on:
+            zc = height + p[2, j]
+            chord = math.sqrt(hor * hor + zc * zc)
+            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
+            chord_prev = chord
+            d_i = drag_k * y
+        drag[i] = d_i
+        if not want[i]:
+            total[i] = math.nan
+            qs_out[i] = math.nan
+            axial[i] = 0.0
+            angle[i] = math.nan
+            flags[i] = 0
+            continue
+        tq, hi, vi = t_qs[k], h[k], v[k]
+        f = qflags[k]
+        k += 1
         a_i = 0.0
         if axial_mode != 0:
             if axial_mode == 1:  # short line: inertia of a third of the line, acceleration
@@ -301,22 +326,15 @@ def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain
                 s2 = (p[2, j] - p[2, j - 1]) * inv_dt
             if tq > 0.0 and hor > 0.0:
                 a_i = axial_gain * ((hi / tq) * (xs * s0 + ys * s1) / hor + (vi / tq) * s2)
-        d_i = 0.0
-        if drag_on:
-            zc = height + p[2, j]
-            chord = math.sqrt(hor * hor + zc * zc)
-            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
-            chord_prev = chord
-            d_i = drag_k * y
-            if vi > tan_flat * hi:
-                f |= 4  # Flag.FLAT_CORD
+        if drag_on and vi > tan_flat * hi:
+            f |= 4  # Flag.FLAT_CORD
         tot = tq + a_i + d_i
         if tot <= 0.0:
             tot = 0.0
             f |= 1  # Flag.SLACK
         total[i] = tot
+        qs_out[i] = tq
         axial[i] = a_i
-        drag[i] = d_i
         angle[i] = math.atan2(vi, hi)
         flags[i] = f
     return y
@@ -404,7 +422,7 @@ class MotionTensionEstimator:
         y = _as_block("sway", sway, z.size)
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, z.size)
-        return self._estimate(x, y, z, settling=None, want=_want_mask(want, z.size))
+        return self._estimate(x, y, z, 0, _want_mask(want, z.size))
 
     def update_accel(
         self,
@@ -417,26 +435,32 @@ class MotionTensionEstimator:
         """As :meth:`update` from IMU accelerations (m/s^2, gravity removed, motion frame),
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
         Samples before the integrator has settled are flagged SETTLING."""
-        az = _as_block("accel_z", accel_z, None)
+        az = _as_block("accel_z", accel_z, None, finite=False)
         a = np.empty((3, az.size))
-        a[0] = _as_block("accel_x", accel_x, az.size)
-        a[1] = _as_block("accel_y", accel_y, az.size)
+        a[0] = _as_block("accel_x", accel_x, az.size, finite=False)
+        a[1] = _as_block("accel_y", accel_y, az.size, finite=False)
         a[2] = az
         if self._imu is None:
             self._imu = DisplacementIntegrator(self.config.dt, self.config.imu_f_cut, channels=3)
             if self._imu_saved is not None:
                 self._imu.load_state(self._imu_saved)
         start = self._imu.samples_seen
-        d = self._imu.update(a)
+        try:
+            d = self._imu.update(a)  # (which checks that every value is finite)
+        except ValueError:
+            for name, row in zip(("accel_x", "accel_y", "accel_z"), a):
+                _as_block(name, row, az.size)  # names the field
+            raise
         settle_n = int(self._imu.settle_time_s / self.config.dt)
-        settling = (start + np.arange(az.size)) < settle_n
+        settling = min(max(settle_n - start, 0), az.size)
         x, y = d[0], d[1]
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, az.size)
         return self._estimate(x, y, d[2], settling, _want_mask(want, az.size))
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling, want=None) -> Estimate:
+    def _estimate(self, x, y, z, settling: int, want=None) -> Estimate:
+        """``settling``: how many of the first samples the IMU integrator still settles."""
         c = self.config
         n = z.size
         if n == 0:
@@ -447,34 +471,33 @@ class MotionTensionEstimator:
         fresh = self._hist is None
         p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
         if want is None:
+            want = np.ones(n, np.bool_)
             x_off = np.hypot(c.span + x, y) - c.span
             t_qs, h, v, qflags = self.quasi_static(x_off, z)
-            flags = np.array(qflags, dtype=np.uint8)
-        else:
-            # unwanted samples: NaN in, NaN out of the dynamic core (whose state only depends
-            # on the positions)
-            t_qs, h, v = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-            flags = np.zeros(n, np.uint8)
-            x_off = np.hypot(c.span + x[want], y[want]) - c.span
-            t_qs[want], h[want], v[want], flags[want] = self.quasi_static(x_off, z[want])
-        total, axial, drag, angle = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        else:  # the quasi-static lookup (most of the cost) of the wanted samples only
+            idx = np.flatnonzero(want)
+            x_off = np.hypot(c.span + x[idx], y[idx]) - c.span
+            t_qs, h, v, qflags = self.quasi_static(x_off, z[idx])
+        total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+                                         np.empty(n))
+        flags = np.empty(n, np.uint8)
         self._jerk_y = _dynamic_core(
-            p, c.span, c.height, c.dt,
+            p, c.span, c.height, c.dt, want,
             np.ascontiguousarray(t_qs, dtype=float), np.ascontiguousarray(h, dtype=float),
-            np.ascontiguousarray(v, dtype=float), flags,
+            np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(qflags, dtype=np.uint8),
             self._axial_mode, self._axial_gain, c.drag is not None, self._drag_k, self._drag_b,
-            self._jerk_y, self._tan_flat, total, axial, drag, angle,
+            self._jerk_y, self._tan_flat, total, qs, axial, drag, angle, flags,
         )
-        if settling is not None:
-            flags[settling] |= np.uint8(Flag.SETTLING)
         if fresh:
             self._settling = 2
-        if self._settling:
-            flags[:self._settling] |= np.uint8(Flag.SETTLING)
-            self._settling = max(self._settling - n, 0)
+        # SETTLING marks a block's first samples only (callers may rely on it)
+        settling = max(settling, self._settling)
+        if settling:
+            flags[:settling] |= np.uint8(Flag.SETTLING)
+        self._settling = max(self._settling - n, 0)
         self._hist = p[:, -2:].copy()
         self._seen += n
-        return Estimate(total, np.asarray(t_qs, dtype=float), axial, drag, angle, flags)
+        return Estimate(total, qs, axial, drag, angle, flags)
 
 
 def _want_mask(want, n: int) -> NDArray[np.bool_] | None:

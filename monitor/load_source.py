@@ -160,9 +160,12 @@ class _ModelsEstimator:
                 self.pending += np.column_stack([fields[k] for k in self._fields]).tolist()
             return _EMPTY  # (else withheld: the stream is not at the configured rate)
         flags, tension = self._update(fields, want)
-        ok = (flags & np.uint8(self._est.Flag.SETTLING)) == 0
-        clamped = (flags & np.uint8(self._est.Flag.OUT_OF_RANGE)) != 0
-        return t_ns[ok], np.asarray(tension, dtype=np.float64)[ok], clamped[ok]
+        # the model flags a block's first samples only as SETTLING
+        settled = 0
+        if flags.shape[0] and flags[0] & self._est.Flag.SETTLING:
+            settled = int(np.count_nonzero(flags & np.uint8(self._est.Flag.SETTLING)))
+        clamped = (flags[settled:] & np.uint8(self._est.Flag.OUT_OF_RANGE)) != 0
+        return t_ns[settled:], tension[settled:], clamped
 
     def _update(self, fields: Mapping[str, np.ndarray],
                 want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:

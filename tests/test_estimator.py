@@ -205,7 +205,14 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         b = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want)
         np.testing.assert_array_equal(b.tension[want], a.tension[want])
         np.testing.assert_array_equal(b.flags[want], a.flags[want])
-        assert np.isnan(b.tension[~want]).all()
+        np.testing.assert_array_equal(b.quasi_static[want], a.quasi_static[want])
+        np.testing.assert_array_equal(b.axial[want], a.axial[want])
+        np.testing.assert_array_equal(b.top_angle[want], a.top_angle[want])
+        np.testing.assert_array_equal(b.drag, a.drag)  # the jerk ODE runs over every sample
+        assert np.isnan(b.tension[~want]).all() and np.isnan(b.quasi_static[~want]).all()
+        assert np.isnan(b.top_angle[~want]).all() and (b.axial[~want] == 0).all()
+        # the first samples settle, the others carry no flags
+        assert ((b.flags[~want] & ~np.uint8(Flag.SETTLING)) == 0).all()
     assert part.state.to_dict() == full.state.to_dict()
     with pytest.raises(ValueError, match="want must be a boolean mask of 3 samples"):
         part.update(np.zeros(3), np.zeros(3), np.zeros(3), want=np.ones(2, bool))
