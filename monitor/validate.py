@@ -150,6 +150,29 @@ def _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat):  # pragma: no cove
     return run
 
 
+@kernel(nogil=True)
+def _scan(t, values):  # pragma: no cover - compiled
+    """(every value finite, the times strictly increasing), in one pass."""
+    bad = False
+    for f in range(values.shape[0]):
+        for i in range(t.shape[0]):  # v - v is 0 for finite v, NaN otherwise
+            bad |= (values[f, i] - values[f, i]) != 0.0
+    increasing = True
+    for i in range(1, t.shape[0]):
+        increasing &= t[i] > t[i - 1]
+    return not bad, increasing
+
+
+@kernel(nogil=True)
+def _fail_codes(flags):  # pragma: no cover - compiled
+    """The QC fails that reject a sample: flat line (_FLAT) over check factor (_CHECK)."""
+    n = flags.shape[1]
+    code = np.empty(n, np.int8)
+    for i in range(n):
+        code[i] = _FLAT if flags[FLAT, i] == FAIL else (_CHECK if flags[CHECK, i] == FAIL else 0)
+    return code
+
+
 class StreamValidator:
     """Validates one sensor stream; keeps its counters and last accepted sample."""
 
@@ -189,19 +212,19 @@ class StreamValidator:
                              f"and {len(self.fields)} fields")
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
-        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT, _CHECK or _RANGE
         repeat = np.zeros(n, np.bool_)  # the time of the newest sample seen before it
         qc_values = values
-        if n and not np.isfinite(values).all():
+        finite, increasing = _scan(t_ns, values) if n else (True, True)
+        if not finite:
             # an infinite value is missing here, as it is once saved (strict JSON state) and
             # as the nan rule rejects it: flags must not change with a restart
             qc_values = np.where(np.isfinite(values), values, np.nan)
-        if n and int(t_ns[0]) > max(seen, floor_ns) and (n == 1 or bool(np.all(t_ns[1:] > t_ns[:-1]))):
+        if n and int(t_ns[0]) > max(seen, floor_ns) and increasing:
             new = None  # the usual case: every sample is new
             flags, _ = self.qc.check(t_ns, qc_values)
-            qc_code[flags[CHECK] == FAIL] = _CHECK
-            qc_code[flags[FLAT] == FAIL] = _FLAT
+            qc_code = _fail_codes(flags)
         elif n:
+            qc_code = np.zeros(n, np.int8)
             newest = np.maximum.accumulate(np.concatenate(([seen], t_ns[:-1])))
             repeat = t_ns == newest
             new = t_ns > np.maximum(newest, floor_ns)
@@ -210,6 +233,8 @@ class StreamValidator:
                 idx = np.flatnonzero(new)
                 qc_code[idx[flags[CHECK] == FAIL]] = _CHECK
                 qc_code[idx[flags[FLAT] == FAIL]] = _FLAT
+        else:
+            qc_code = np.zeros(0, np.int8)
         if self._watch is not None and n:
             outside = self._outside_watch_circle(qc_values)
             qc_code[outside] = _RANGE
