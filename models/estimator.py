@@ -46,7 +46,7 @@ from models.dynamics import (
     form_parameter,
     jerk_step,
 )
-from models.imu import DisplacementIntegrator
+from models.imu import DisplacementIntegrator, sos_step
 
 
 class Flag(enum.IntFlag):
@@ -274,46 +274,81 @@ def _as_block(name: str, value: ArrayLike, n: int | None,
 _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 
 
-@kernel()
-def _dynamic_core(p, span, height, dt, want, t_qs, h, v, qflags, axial_mode, axial_gain,
-                  drag_on, drag_k, drag_b, y0, tan_flat, total, qs_out, axial, drag, angle,
-                  flags):
-    """Per-sample dynamic increments (see the module docstring); returns the jerk state.
+# no IMU integration in _advance: positions given
+_NO_ACCEL, _NO_SOS, _NO_ZI = np.empty((3, 0)), np.empty((0, 6)), np.empty((3, 0, 2))
 
-    p: (3, n + 2) surge, sway, heave with the two previous samples first. ``want``: the
-    samples to estimate, whose quasi-static ``t_qs, h, v, qflags`` are given in order (one
-    per wanted sample); the others only advance the jerk ODE (the stream state), and get
-    NaN tension, quasi-static and angle, no axial increment and no flags, as a NaN
-    quasi-static input gives them.
+
+@kernel()
+def _advance(p, fresh, accel, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
+             total, qs, axial, drag, angle, flags):
+    """The stream over a block: every sample's position and drag increment, the other
+    outputs as for a sample not wanted (NaN tension, quasi-static and angle, no axial
+    increment, no flags; :func:`_wanted` then fills the wanted ones). Returns (ok, jerk
+    state); ok False, nothing changed, if an acceleration is NaN or infinite.
+
+    p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
+    ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
+    ``accel`` holds the block's (3, n) IMU accelerations, integrated here sample by sample
+    (:func:`models.imu.sos_step`, the integrator's sections ``sos`` and memory ``zi``): the
+    filter's chains of operations then overlap the jerk ODE's in one loop.
     """
+    n = total.size
+    integrate = accel.shape[1] == n
+    if integrate:
+        bad = False
+        for c in range(3):
+            for i in range(n):  # x - x is 0 for finite x, NaN otherwise; the OR vectorises
+                bad |= (accel[c, i] - accel[c, i]) != 0.0
+        if bad:
+            return False, y0
+        for c in range(3):
+            p[c, 2] = sos_step(sos, zi, c, accel[c, 0])
+    if fresh:
+        for c in range(3):
+            p[c, 0] = p[c, 2]
+            p[c, 1] = p[c, 2]
     inv_dt = 1.0 / dt
     y = y0
     xs = span + p[0, 1]
     chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
-    k = 0
-    for i in range(want.size):
+    for i in range(n):
         j = i + 2
-        xs = span + p[0, j]
-        ys = p[1, j]
-        hor = math.sqrt(xs * xs + ys * ys)
+        if integrate and i > 0:
+            for c in range(3):
+                p[c, j] = sos_step(sos, zi, c, accel[c, i])
         d_i = 0.0
         if drag_on:
+            xs = span + p[0, j]
+            ys = p[1, j]
+            hor = math.sqrt(xs * xs + ys * ys)
             zc = height + p[2, j]
             chord = math.sqrt(hor * hor + zc * zc)
             y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
             chord_prev = chord
             d_i = drag_k * y
         drag[i] = d_i
-        if not want[i]:
-            total[i] = math.nan
-            qs_out[i] = math.nan
-            axial[i] = 0.0
-            angle[i] = math.nan
-            flags[i] = 0
-            continue
+        total[i] = math.nan
+        qs[i] = math.nan
+        axial[i] = 0.0
+        angle[i] = math.nan
+        flags[i] = 0
+    return True, y
+
+
+@kernel()
+def _wanted(p, idx, t_qs, h, v, qflags, span, dt, axial_mode, axial_gain, drag_on, tan_flat,
+            total, qs, axial, drag, angle, flags):
+    """The estimates of the samples ``idx`` (see the module docstring), whose quasi-static
+    ``t_qs, h, v, qflags`` are given in order, after :func:`_advance`."""
+    inv_dt = 1.0 / dt
+    for k in range(idx.size):
+        i = idx[k]
+        j = i + 2
+        xs = span + p[0, j]
+        ys = p[1, j]
+        hor = math.sqrt(xs * xs + ys * ys)
         tq, hi, vi = t_qs[k], h[k], v[k]
         f = qflags[k]
-        k += 1
         a_i = 0.0
         if axial_mode != 0:
             if axial_mode == 1:  # short line: inertia of a third of the line, acceleration
@@ -328,16 +363,15 @@ def _dynamic_core(p, span, height, dt, want, t_qs, h, v, qflags, axial_mode, axi
                 a_i = axial_gain * ((hi / tq) * (xs * s0 + ys * s1) / hor + (vi / tq) * s2)
         if drag_on and vi > tan_flat * hi:
             f |= 4  # Flag.FLAT_CORD
-        tot = tq + a_i + d_i
+        tot = tq + a_i + drag[i]
         if tot <= 0.0:
             tot = 0.0
             f |= 1  # Flag.SLACK
         total[i] = tot
-        qs_out[i] = tq
+        qs[i] = tq
         axial[i] = a_i
         angle[i] = math.atan2(vi, hi)
         flags[i] = f
-    return y
 
 
 class MotionTensionEstimator:
@@ -444,50 +478,62 @@ class MotionTensionEstimator:
             self._imu = DisplacementIntegrator(self.config.dt, self.config.imu_f_cut, channels=3)
             if self._imu_saved is not None:
                 self._imu.load_state(self._imu_saved)
-        start = self._imu.samples_seen
+        settle_n = int(self._imu.settle_time_s / self.config.dt)
+        settling = min(max(settle_n - self._imu.samples_seen, 0), az.size)
+        want = _want_mask(want, az.size)
         try:
-            d = self._imu.update(a)  # (which checks that every value is finite)
+            if heading_deg is None:  # integrated in the estimator's loop
+                return self._estimate(None, None, None, settling, want, accel=a)
+            d = self._imu.update(a)
         except ValueError:
+            if np.all(np.isfinite(a)):  # not the input's (the quasi-static model's)
+                raise
             for name, row in zip(("accel_x", "accel_y", "accel_z"), a):
                 _as_block(name, row, az.size)  # names the field
             raise
-        settle_n = int(self._imu.settle_time_s / self.config.dt)
-        settling = min(max(settle_n - start, 0), az.size)
-        x, y = d[0], d[1]
-        if heading_deg is not None:
-            x, y = _rotate(x, y, heading_deg, az.size)
-        return self._estimate(x, y, d[2], settling, _want_mask(want, az.size))
+        x, y = _rotate(d[0], d[1], heading_deg, az.size)
+        return self._estimate(x, y, d[2], settling, want)
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling: int, want=None) -> Estimate:
-        """``settling``: how many of the first samples the IMU integrator still settles."""
+    def _estimate(self, x, y, z, settling: int, want=None, accel=None) -> Estimate:
+        """``settling``: how many of the first samples the IMU integrator still settles;
+        ``accel``: the (3, n) IMU accelerations to integrate (then x, y, z are None)."""
         c = self.config
-        n = z.size
+        n = z.size if accel is None else accel.shape[1]
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
         p = np.empty((3, n + 2))
-        p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
         fresh = self._hist is None
-        p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
-        if want is None:
-            want = np.ones(n, np.bool_)
-            x_off = np.hypot(c.span + x, y) - c.span
-            t_qs, h, v, qflags = self.quasi_static(x_off, z)
-        else:  # the quasi-static lookup (most of the cost) of the wanted samples only
-            idx = np.flatnonzero(want)
-            x_off = np.hypot(c.span + x[idx], y[idx]) - c.span
-            t_qs, h, v, qflags = self.quasi_static(x_off, z[idx])
+        if not fresh:
+            p[:, :2] = self._hist
+        if accel is None:
+            p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
+            accel, sos, zi = _NO_ACCEL, _NO_SOS, _NO_ZI
+        else:
+            sos, zi = self._imu.loop_state()
         total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
                                          np.empty(n))
         flags = np.empty(n, np.uint8)
-        self._jerk_y = _dynamic_core(
-            p, c.span, c.height, c.dt, want,
-            np.ascontiguousarray(t_qs, dtype=float), np.ascontiguousarray(h, dtype=float),
-            np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(qflags, dtype=np.uint8),
-            self._axial_mode, self._axial_gain, c.drag is not None, self._drag_k, self._drag_b,
-            self._jerk_y, self._tan_flat, total, qs, axial, drag, angle, flags,
-        )
+        ok, jerk_y = _advance(p, fresh, accel, sos, zi, c.span, c.height, c.dt,
+                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y,
+                              total, qs, axial, drag, angle, flags)
+        if not ok:
+            raise ValueError("acceleration contains NaN or infinite values")
+        # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
+        idx = np.arange(n) if want is None else np.flatnonzero(want)
+        x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
+        x_off = np.hypot(c.span + x[idx], y[idx]) - c.span
+        t_qs, h, v, qflags = self.quasi_static(x_off, z[idx])
+        _wanted(p, idx, np.ascontiguousarray(t_qs, dtype=float),
+                np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(v, dtype=float),
+                np.ascontiguousarray(qflags, dtype=np.uint8), c.span, c.dt, self._axial_mode,
+                self._axial_gain, c.drag is not None, self._tan_flat,
+                total, qs, axial, drag, angle, flags)
+        # the stream moves on only now (the quasi-static model may raise)
+        if zi is not _NO_ZI:
+            self._imu.advance(zi, n)
+        self._jerk_y = jerk_y
         if fresh:
             self._settling = 2
         # SETTLING marks a block's first samples only (callers may rely on it)
