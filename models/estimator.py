@@ -483,7 +483,7 @@ class MotionTensionEstimator:
         want = _want_mask(want, az.size)
         try:
             if heading_deg is None:  # integrated in the estimator's loop
-                return self._estimate(None, None, None, settling, want, accel=a)
+                return self._estimate(None, None, None, settling, want, (a, self._imu))
             d = self._imu.update(a)
         except ValueError:
             if np.all(np.isfinite(a)):  # not the input's (the quasi-static model's)
@@ -495,11 +495,14 @@ class MotionTensionEstimator:
         return self._estimate(x, y, d[2], settling, want)
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling: int, want=None, accel=None) -> Estimate:
+    def _estimate(self, x, y, z, settling: int, want=None,
+                  integrate: tuple[NDArray[np.float64], DisplacementIntegrator] | None = None
+                  ) -> Estimate:
         """``settling``: how many of the first samples the IMU integrator still settles;
-        ``accel``: the (3, n) IMU accelerations to integrate (then x, y, z are None)."""
+        ``integrate``: the (3, n) IMU accelerations to integrate here and the integrator
+        (then x, y, z are None)."""
         c = self.config
-        n = z.size if accel is None else accel.shape[1]
+        n = z.size if integrate is None else integrate[0].shape[1]
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
@@ -507,11 +510,12 @@ class MotionTensionEstimator:
         fresh = self._hist is None
         if not fresh:
             p[:, :2] = self._hist
-        if accel is None:
+        if integrate is None:
             p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
             accel, sos, zi = _NO_ACCEL, _NO_SOS, _NO_ZI
         else:
-            sos, zi = self._imu.loop_state()
+            accel, imu = integrate
+            sos, zi = imu.loop_state()
         total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
                                          np.empty(n))
         flags = np.empty(n, np.uint8)
@@ -531,8 +535,8 @@ class MotionTensionEstimator:
                 self._axial_gain, c.drag is not None, self._tan_flat,
                 total, qs, axial, drag, angle, flags)
         # the stream moves on only now (the quasi-static model may raise)
-        if zi is not _NO_ZI:
-            self._imu.advance(zi, n)
+        if integrate is not None:
+            integrate[1].advance(zi, n)
         self._jerk_y = jerk_y
         if fresh:
             self._settling = 2
