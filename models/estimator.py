@@ -46,7 +46,7 @@ from models.dynamics import (
     form_parameter,
     jerk_step,
 )
-from models.imu import DisplacementIntegrator
+from models.imu import DisplacementIntegrator, sos_step
 
 
 class Flag(enum.IntFlag):
@@ -257,13 +257,16 @@ class EstimatorState:
                    settling=int(d.get("settling", 0)))
 
 
-def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]:
+def _as_block(name: str, value: ArrayLike, n: int | None,
+              finite: bool = True) -> NDArray[np.float64]:
+    """``value`` as a 1-D float array of ``n`` samples (any length for None), all finite
+    unless ``finite`` is False (the caller checks)."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim != 1:
         raise ValueError(f"{name} must be a 1-D array")
     if n is not None and arr.size != n:
         raise ValueError(f"{name} has {arr.size} samples, expected {n}")
-    if not np.all(np.isfinite(arr)):
+    if finite and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite values")
     return arr
 
@@ -271,24 +274,81 @@ def _as_block(name: str, value: ArrayLike, n: int | None) -> NDArray[np.float64]
 _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 
 
-@kernel()
-def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain, drag_on,
-                  drag_k, drag_b, y0, tan_flat, total, axial, drag, angle):
-    """Per-sample dynamic increments (see the module docstring); returns the jerk state.
+# no IMU integration in _advance: positions given
+_NO_ACCEL, _NO_SOS, _NO_ZI = np.empty((3, 0)), np.empty((0, 6)), np.empty((3, 0, 2))
 
-    p: (3, n + 2) surge, sway, heave with the two previous samples first.
+
+@kernel()
+def _advance(p, fresh, accel, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
+             total, qs, axial, drag, angle, flags):
+    """The stream over a block: every sample's position and drag increment, the other
+    outputs as for a sample not wanted (NaN tension, quasi-static and angle, no axial
+    increment, no flags; :func:`_wanted` then fills the wanted ones). Returns (ok, jerk
+    state); ok False, nothing changed, if an acceleration is NaN or infinite.
+
+    p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
+    ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
+    ``accel`` holds the block's (3, n) IMU accelerations, integrated here sample by sample
+    (:func:`models.imu.sos_step`, the integrator's sections ``sos`` and memory ``zi``): the
+    filter's chains of operations then overlap the jerk ODE's in one loop.
     """
+    n = total.size
+    integrate = accel.shape[1] == n
+    if integrate:
+        bad = False
+        for c in range(3):
+            for i in range(n):  # x - x is 0 for finite x, NaN otherwise; the OR vectorises
+                bad |= (accel[c, i] - accel[c, i]) != 0.0
+        if bad:
+            return False, y0
+        for c in range(3):
+            p[c, 2] = sos_step(sos, zi, c, accel[c, 0])
+    if fresh:
+        for c in range(3):
+            p[c, 0] = p[c, 2]
+            p[c, 1] = p[c, 2]
     inv_dt = 1.0 / dt
     y = y0
     xs = span + p[0, 1]
     chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
-    for i in range(t_qs.size):
+    for i in range(n):
+        j = i + 2
+        if integrate and i > 0:
+            for c in range(3):
+                p[c, j] = sos_step(sos, zi, c, accel[c, i])
+        d_i = 0.0
+        if drag_on:
+            xs = span + p[0, j]
+            ys = p[1, j]
+            hor = math.sqrt(xs * xs + ys * ys)
+            zc = height + p[2, j]
+            chord = math.sqrt(hor * hor + zc * zc)
+            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
+            chord_prev = chord
+            d_i = drag_k * y
+        drag[i] = d_i
+        total[i] = math.nan
+        qs[i] = math.nan
+        axial[i] = 0.0
+        angle[i] = math.nan
+        flags[i] = 0
+    return True, y
+
+
+@kernel()
+def _wanted(p, idx, t_qs, h, v, qflags, span, dt, axial_mode, axial_gain, drag_on, tan_flat,
+            total, qs, axial, drag, angle, flags):
+    """The estimates of the samples ``idx`` (see the module docstring), whose quasi-static
+    ``t_qs, h, v, qflags`` are given in order, after :func:`_advance`."""
+    inv_dt = 1.0 / dt
+    for k in range(idx.size):
+        i = idx[k]
         j = i + 2
         xs = span + p[0, j]
         ys = p[1, j]
         hor = math.sqrt(xs * xs + ys * ys)
-        tq, hi, vi = t_qs[i], h[i], v[i]
-        f = flags[i]
+        tq, hi, vi = t_qs[k], h[k], v[k]
+        f = qflags[k]
         a_i = 0.0
         if axial_mode != 0:
             if axial_mode == 1:  # short line: inertia of a third of the line, acceleration
@@ -301,25 +361,17 @@ def _dynamic_core(p, span, height, dt, t_qs, h, v, flags, axial_mode, axial_gain
                 s2 = (p[2, j] - p[2, j - 1]) * inv_dt
             if tq > 0.0 and hor > 0.0:
                 a_i = axial_gain * ((hi / tq) * (xs * s0 + ys * s1) / hor + (vi / tq) * s2)
-        d_i = 0.0
-        if drag_on:
-            zc = height + p[2, j]
-            chord = math.sqrt(hor * hor + zc * zc)
-            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
-            chord_prev = chord
-            d_i = drag_k * y
-            if vi > tan_flat * hi:
-                f |= 4  # Flag.FLAT_CORD
-        tot = tq + a_i + d_i
+        if drag_on and vi > tan_flat * hi:
+            f |= 4  # Flag.FLAT_CORD
+        tot = tq + a_i + drag[i]
         if tot <= 0.0:
             tot = 0.0
             f |= 1  # Flag.SLACK
         total[i] = tot
+        qs[i] = tq
         axial[i] = a_i
-        drag[i] = d_i
         angle[i] = math.atan2(vi, hi)
         flags[i] = f
-    return y
 
 
 class MotionTensionEstimator:
@@ -404,7 +456,7 @@ class MotionTensionEstimator:
         y = _as_block("sway", sway, z.size)
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, z.size)
-        return self._estimate(x, y, z, settling=None, want=_want_mask(want, z.size))
+        return self._estimate(x, y, z, 0, _want_mask(want, z.size))
 
     def update_accel(
         self,
@@ -417,64 +469,85 @@ class MotionTensionEstimator:
         """As :meth:`update` from IMU accelerations (m/s^2, gravity removed, motion frame),
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
         Samples before the integrator has settled are flagged SETTLING."""
-        az = _as_block("accel_z", accel_z, None)
+        az = _as_block("accel_z", accel_z, None, finite=False)
         a = np.empty((3, az.size))
-        a[0] = _as_block("accel_x", accel_x, az.size)
-        a[1] = _as_block("accel_y", accel_y, az.size)
+        a[0] = _as_block("accel_x", accel_x, az.size, finite=False)
+        a[1] = _as_block("accel_y", accel_y, az.size, finite=False)
         a[2] = az
         if self._imu is None:
             self._imu = DisplacementIntegrator(self.config.dt, self.config.imu_f_cut, channels=3)
             if self._imu_saved is not None:
                 self._imu.load_state(self._imu_saved)
-        start = self._imu.samples_seen
-        d = self._imu.update(a)
         settle_n = int(self._imu.settle_time_s / self.config.dt)
-        settling = (start + np.arange(az.size)) < settle_n
-        x, y = d[0], d[1]
-        if heading_deg is not None:
-            x, y = _rotate(x, y, heading_deg, az.size)
-        return self._estimate(x, y, d[2], settling, _want_mask(want, az.size))
+        settling = min(max(settle_n - self._imu.samples_seen, 0), az.size)
+        want = _want_mask(want, az.size)
+        try:
+            if heading_deg is None:  # integrated in the estimator's loop
+                return self._estimate(None, None, None, settling, want, (a, self._imu))
+            d = self._imu.update(a)
+        except ValueError:
+            if np.all(np.isfinite(a)):  # not the input's (the quasi-static model's)
+                raise
+            for name, row in zip(("accel_x", "accel_y", "accel_z"), a):
+                _as_block(name, row, az.size)  # names the field
+            raise
+        x, y = _rotate(d[0], d[1], heading_deg, az.size)
+        return self._estimate(x, y, d[2], settling, want)
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling, want=None) -> Estimate:
+    def _estimate(self, x, y, z, settling: int, want=None,
+                  integrate: tuple[NDArray[np.float64], DisplacementIntegrator] | None = None
+                  ) -> Estimate:
+        """``settling``: how many of the first samples the IMU integrator still settles;
+        ``integrate``: the (3, n) IMU accelerations to integrate here and the integrator
+        (then x, y, z are None)."""
         c = self.config
-        n = z.size
+        n = z.size if integrate is None else integrate[0].shape[1]
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
         p = np.empty((3, n + 2))
-        p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
         fresh = self._hist is None
-        p[:, :2] = p[:, 2:3] if fresh else self._hist  # a fresh stream starts at rest
-        if want is None:
-            x_off = np.hypot(c.span + x, y) - c.span
-            t_qs, h, v, qflags = self.quasi_static(x_off, z)
-            flags = np.array(qflags, dtype=np.uint8)
+        if not fresh:
+            p[:, :2] = self._hist
+        if integrate is None:
+            p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
+            accel, sos, zi = _NO_ACCEL, _NO_SOS, _NO_ZI
         else:
-            # unwanted samples: NaN in, NaN out of the dynamic core (whose state only depends
-            # on the positions)
-            t_qs, h, v = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
-            flags = np.zeros(n, np.uint8)
-            x_off = np.hypot(c.span + x[want], y[want]) - c.span
-            t_qs[want], h[want], v[want], flags[want] = self.quasi_static(x_off, z[want])
-        total, axial, drag, angle = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-        self._jerk_y = _dynamic_core(
-            p, c.span, c.height, c.dt,
-            np.ascontiguousarray(t_qs, dtype=float), np.ascontiguousarray(h, dtype=float),
-            np.ascontiguousarray(v, dtype=float), flags,
-            self._axial_mode, self._axial_gain, c.drag is not None, self._drag_k, self._drag_b,
-            self._jerk_y, self._tan_flat, total, axial, drag, angle,
-        )
-        if settling is not None:
-            flags[settling] |= np.uint8(Flag.SETTLING)
+            accel, imu = integrate
+            sos, zi = imu.loop_state()
+        total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+                                         np.empty(n))
+        flags = np.empty(n, np.uint8)
+        ok, jerk_y = _advance(p, fresh, accel, sos, zi, c.span, c.height, c.dt,
+                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y,
+                              total, qs, axial, drag, angle, flags)
+        if not ok:
+            raise ValueError("acceleration contains NaN or infinite values")
+        # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
+        idx = np.arange(n) if want is None else np.flatnonzero(want)
+        x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
+        x_off = np.hypot(c.span + x[idx], y[idx]) - c.span
+        t_qs, h, v, qflags = self.quasi_static(x_off, z[idx])
+        _wanted(p, idx, np.ascontiguousarray(t_qs, dtype=float),
+                np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(v, dtype=float),
+                np.ascontiguousarray(qflags, dtype=np.uint8), c.span, c.dt, self._axial_mode,
+                self._axial_gain, c.drag is not None, self._tan_flat,
+                total, qs, axial, drag, angle, flags)
+        # the stream moves on only now (the quasi-static model may raise)
+        if integrate is not None:
+            integrate[1].advance(zi, n)
+        self._jerk_y = jerk_y
         if fresh:
             self._settling = 2
-        if self._settling:
-            flags[:self._settling] |= np.uint8(Flag.SETTLING)
-            self._settling = max(self._settling - n, 0)
+        # SETTLING marks a block's first samples only (callers may rely on it)
+        settling = max(settling, self._settling)
+        if settling:
+            flags[:settling] |= np.uint8(Flag.SETTLING)
+        self._settling = max(self._settling - n, 0)
         self._hist = p[:, -2:].copy()
         self._seen += n
-        return Estimate(total, np.asarray(t_qs, dtype=float), axial, drag, angle, flags)
+        return Estimate(total, qs, axial, drag, angle, flags)
 
 
 def _want_mask(want, n: int) -> NDArray[np.bool_] | None:

@@ -23,6 +23,7 @@ from typing import Any, Mapping, Protocol
 
 import numpy as np
 
+from models._jit import kernel
 from monitor import model_cache
 from monitor.config import Config, LoadConfig, MooringConfig
 from monitor.motion_rate import GAP, RESUME, STEP, WITHHOLD, MotionRate
@@ -79,6 +80,15 @@ def _build_model(m: MooringConfig, dt: float) -> tuple[Any, Any]:
 
 
 _EMPTY = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool))
+
+
+@kernel(nogil=True)
+def _longest_step(t_ns):  # pragma: no cover - compiled
+    """The longest interval between consecutive times (0 for fewer than two)."""
+    longest = 0
+    for i in range(1, t_ns.shape[0]):
+        longest = max(longest, t_ns[i] - t_ns[i - 1])
+    return longest
 
 
 class _ModelsEstimator:
@@ -160,9 +170,12 @@ class _ModelsEstimator:
                 self.pending += np.column_stack([fields[k] for k in self._fields]).tolist()
             return _EMPTY  # (else withheld: the stream is not at the configured rate)
         flags, tension = self._update(fields, want)
-        ok = (flags & np.uint8(self._est.Flag.SETTLING)) == 0
-        clamped = (flags & np.uint8(self._est.Flag.OUT_OF_RANGE)) != 0
-        return t_ns[ok], np.asarray(tension, dtype=np.float64)[ok], clamped[ok]
+        # the model flags a block's first samples only as SETTLING
+        settled = 0
+        if flags.shape[0] and flags[0] & self._est.Flag.SETTLING:
+            settled = int(np.count_nonzero(flags & np.uint8(self._est.Flag.SETTLING)))
+        clamped = (flags[settled:] & np.uint8(self._est.Flag.OUT_OF_RANGE)) != 0
+        return t_ns[settled:], tension[settled:], clamped
 
     def _update(self, fields: Mapping[str, np.ndarray],
                 want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -234,16 +247,26 @@ class LoadSelector:
     def needed(self, m_t: np.ndarray, e_t: np.ndarray) -> np.ndarray:
         """Boolean mask of the estimated samples at times ``e_t`` that :meth:`select` will
         use with the measured times ``m_t`` of the same slab (pure: nothing changes)."""
+        use = self._use(m_t, e_t)
+        if isinstance(use, np.ndarray):
+            return use
+        mask = np.zeros(e_t.shape, bool)
+        mask[use:] = True
+        return mask
+
+    def _use(self, m_t: np.ndarray, e_t: np.ndarray) -> int | np.ndarray:
+        """:meth:`needed` as the index from which on every estimate is used (the usual
+        case), or as the mask. Both series are strictly increasing (accepted samples)."""
         if self.mode == "estimated":
-            return np.ones(e_t.shape, bool)
+            return 0
         if self.mode == "measured" or e_t.shape[0] == 0:
-            return np.zeros(e_t.shape, bool)
+            return e_t.shape[0]
         prev = self.last_measured_ns
         if (m_t.shape[0] and prev is not None and int(m_t[0]) - prev <= self.stale_ns
-                and (m_t.shape[0] == 1 or int(np.max(m_t[1:] - m_t[:-1])) <= self.stale_ns)):
+                and _longest_step(m_t) <= self.stale_ns):
             # the usual case, the cell alive all along: only estimates more than stale_after_s
             # past its newest sample are needed (the general rule below gives the same)
-            return e_t - m_t[-1] > self.stale_ns
+            return int(np.searchsorted(e_t, m_t[-1] + np.int64(self.stale_ns), side="right"))
         # latest accepted tension time at or before each estimated sample
         idx = np.searchsorted(m_t, e_t, side="right") - 1
         never = idx < 0
@@ -257,22 +280,31 @@ class LoadSelector:
                e_clamped: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(t_ns, tension_N, source)`` in time order; ``source`` is MEASURED or ESTIMATED.
         The estimates used that ``e_clamped`` marks are counted in ``estimates_clamped``."""
-        use = self.needed(m_t, e_t)
-        if e_clamped is not None:
-            self.estimates_clamped += int(np.count_nonzero(use & e_clamped))
+        use = self._use(m_t, e_t)
+        if isinstance(use, np.ndarray):
+            if e_clamped is not None:
+                self.estimates_clamped += int(np.count_nonzero(use & e_clamped))
+            self.above_break["estimated"] += int(np.count_nonzero(use & (e_v > self.breaking_N)))
+            used_t, used_v = e_t[use], e_v[use]
+        else:  # the estimates from index ``use`` on
+            if e_clamped is not None:
+                self.estimates_clamped += int(np.count_nonzero(e_clamped[use:]))
+            self.above_break["estimated"] += int(np.count_nonzero(e_v[use:] > self.breaking_N))
+            used_t, used_v = e_t[use:], e_v[use:]
         if self.mode != "estimated":
             self.above_break["measured"] += int(np.count_nonzero(m_v > self.breaking_N))
-        self.above_break["estimated"] += int(np.count_nonzero(use & (e_v > self.breaking_N)))
         if self.mode == "estimated":
             return e_t, e_v, np.full(e_t.shape, ESTIMATED, np.int8)
         if m_t.shape[0]:
             self.last_measured_ns = int(m_t[-1])
         measured = (m_t, m_v, np.full(m_t.shape, MEASURED, np.int8))
-        if not use.any():
+        if not used_t.shape[0]:
             return measured
-        t = np.concatenate([m_t, e_t[use]])
-        v = np.concatenate([m_v, e_v[use]])
-        src = np.concatenate([measured[2], np.full(int(use.sum()), ESTIMATED, np.int8)])
+        t = np.concatenate([m_t, used_t])
+        v = np.concatenate([m_v, used_v])
+        src = np.concatenate([measured[2], np.full(used_t.shape[0], ESTIMATED, np.int8)])
+        if not m_t.shape[0] or m_t[-1] < used_t[0]:  # already in time order
+            return t, v, src
         order = np.argsort(t, kind="stable")
         return t[order], v[order], src[order]
 

@@ -34,12 +34,40 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from models._jit import kernel
+
 TOLERANCE = 0.02  # relative difference of the median spacing from the step: a mismatch
 WINDOW = 15  # intervals in the running median (odd: the median is one of them)
 _FIRST = 2  # intervals that set the step under "auto"
 
 # plan events: (sample index in the block, kind, new step in s or None)
 GAP, STEP, WITHHOLD, RESUME = "gap", "step", "withhold", "resume"
+
+
+def _intervals(t_ns: np.ndarray, prev: np.int64 | int, first: bool) -> np.ndarray:
+    """Intervals (ns) before each sample of ``t_ns``, the first from ``prev``, or without it
+    (``first``: the stream's first sample has none)."""
+    d = np.diff(t_ns, prepend=prev)
+    return d[1:] if first else d
+
+
+@kernel(nogil=True)
+def _regular(t_ns, prev, first, step_ns, tol, gap_ns):  # pragma: no cover - compiled
+    """(every interval of the block a gap (> ``gap_ns``) or within ``tol`` of ``step_ns``,
+    any gap): the comparisons of the intervals of :func:`_intervals`, in one pass."""
+    n = t_ns.shape[0]
+    regular = True
+    gaps = False
+    if not first:
+        d = t_ns[0] - prev
+        gaps = d > gap_ns
+        regular = gaps or abs(d - step_ns) <= tol
+    for i in range(1, n):
+        d = t_ns[i] - t_ns[i - 1]
+        g = d > gap_ns
+        regular &= g | (abs(d - step_ns) <= tol)
+        gaps |= g
+    return regular, gaps
 
 
 def _step_s(median_ns: float) -> float:
@@ -76,35 +104,56 @@ class MotionRate:
         n = t_ns.shape[0]
         if n == 0:
             return []
-        prev = np.int64(t_ns[0] if self.last_t_ns is None else self.last_t_ns)
-        d = np.diff(t_ns, prepend=prev)
-        if self.last_t_ns is None:
-            d = d[1:]  # the stream's first sample has no interval
+        first = self.last_t_ns is None  # the stream's first sample has no interval
+        prev = np.int64(t_ns[0] if first else self.last_t_ns)
         self.last_t_ns = int(t_ns[-1])
-        if self.dt is not None and not self.withholding and self._fast(d, self.dt):
-            return self._fast_plan(d, n)
-        return self._slow_plan(d, n)
-
-    def _fast(self, d: np.ndarray, dt: float) -> bool:
-        """Every interval of the block and of the window a gap or within the tolerance of the
-        step: then so is every running median (the usual block, vectorised)."""
-        step_ns = dt * 1e9
-        tol = TOLERANCE * step_ns
-        ring = np.asarray(self.ring, dtype=np.float64)
-        return bool(np.all((np.abs(d - step_ns) <= tol) | (d > self.gap_ns))
-                    and np.all(np.abs(ring - step_ns) <= tol))
-
-    def _fast_plan(self, d: np.ndarray, n: int) -> list[tuple[int, str, float | None]]:
-        offset = n - d.shape[0]  # 1 for a stream's first block
-        gaps = d > self.gap_ns
-        self.ring = (self.ring + d[~gaps][-WINDOW:].tolist())[-WINDOW:]
-        return [(int(i) + offset, GAP, None) for i in np.flatnonzero(gaps)]
-
-    def _slow_plan(self, d: np.ndarray, n: int) -> list[tuple[int, str, float | None]]:
         events: list[tuple[int, str, float | None]] = []
+        start = 0
+        # sample by sample until the step is known and the spacing agrees with it (a
+        # stream's first samples, a rate change), then the rest of the block at once
+        while start < n:
+            rest = t_ns[start:]
+            fast = self._fast_plan(rest, prev, first)
+            if fast is not None:
+                return events + [(i + start, kind, dt) for i, kind, dt in fast]
+            stop = self._slow_plan(_intervals(rest, prev, first), rest.shape[0], events, start)
+            if stop is None:
+                break
+            prev, first, start = t_ns[stop - 1], False, stop
+        return events
+
+    def _fast_plan(self, t_ns: np.ndarray, prev: np.int64,
+                   first: bool) -> list[tuple[int, str, float | None]] | None:
+        """The usual block: the step known, every interval of the block and of the window a
+        gap or within the tolerance of the step; then so is every running median, and the
+        only events are the gaps (one compiled pass over the times). None otherwise."""
+        if self.dt is None or self.withholding:
+            return None
+        step_ns = self.dt * 1e9
+        tol = TOLERANCE * step_ns
+        regular, gaps = _regular(t_ns, prev, first, step_ns, tol, float(self.gap_ns))
+        if not (regular and all(abs(r - step_ns) <= tol for r in self.ring)):
+            return None
+        n = t_ns.shape[0]
+        if not gaps:  # only the window's newest intervals are needed
+            tail = _intervals(t_ns[-WINDOW - 1:], prev, first or n > WINDOW)
+            self.ring = (self.ring + tail.tolist())[-WINDOW:]
+            return []
+        d = _intervals(t_ns, prev, first)
+        offset = n - d.shape[0]  # 1 for a stream's first block
+        is_gap = d > self.gap_ns
+        self.ring = (self.ring + d[~is_gap][-WINDOW:].tolist())[-WINDOW:]
+        return [(int(i) + offset, GAP, None) for i in np.flatnonzero(is_gap)]
+
+    def _slow_plan(self, d: np.ndarray, n: int, events: list[tuple[int, str, float | None]],
+                   base: int) -> int | None:
+        """The intervals ``d`` before the last ``d.shape[0]`` of ``n`` samples one by one,
+        their events (sample index + ``base``) into ``events``, until a ``step`` or
+        ``resume`` event: returns the index (+ ``base``) of the sample after it, None at the
+        end."""
         offset = n - d.shape[0]
         for k, interval in enumerate(d.tolist()):
-            i = k + offset
+            i = k + offset + base
             if interval > self.gap_ns:
                 events.append((i, GAP, None))
                 if self.dt is None:  # the spacing so far was of the stretch before the gap
@@ -117,18 +166,22 @@ class MotionRate:
                 if len(self.ring) >= _FIRST and median > 0:
                     self.dt = _step_s(median)
                     events.append((i, STEP, self.dt))
+                    return i + 1
                 continue
             off = not abs(median - self.dt * 1e9) <= TOLERANCE * self.dt * 1e9
             if self.configured_hz is not None:
+                self.mismatched += off
                 if off != self.withholding:
                     self.withholding = off
                     events.append((i, WITHHOLD, None) if off else (i, RESUME, self.dt))
-                self.mismatched += off
+                    if not off:
+                        return i + 1
             elif off and median > 0:
                 self.dt = _step_s(median)
                 self.changes += 1
                 events.append((i, STEP, self.dt))
-        return events
+                return i + 1
+        return None
 
     def figures(self) -> dict[str, Any]:
         """For the status and the report."""

@@ -521,8 +521,8 @@ class Pipeline:
             self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
             streams[s] = info = _StreamSlab(t, values, codes, before)
             n_acc += info.acc_t.shape[0]
-            for i, reason in enumerate(REASONS, start=1):
-                rejected[reason] += int(np.count_nonzero(codes == i))
+            for reason, n in before[1].items():  # the validator counted them
+                rejected[reason] += validator.rejected[reason] - n
             if info.acc_t.shape[0]:
                 first, last = int(info.acc_t[0]), int(info.acc_t[-1])
                 start = self.last["time_start_ns"]

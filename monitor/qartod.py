@@ -257,34 +257,38 @@ def _qc(t, x, p, location_max_m, prev_t, prev, prev2, n_seen, ring_t, ring_x, ri
 @kernel(nogil=True, error_model="numpy")
 def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t):
     # pragma: no cover - compiled
-    """The usual block, test by test in branch-free loops the compiler vectorises: every value
-    finite, two finite samples before it, no location test. Returns
-    ``(ok, flags, spike_prev, counts, ring_head, ring_n)``; ``ok`` False (nothing changed)
-    means: use :func:`_qc`. Same flags as :func:`_qc` for such a block."""
+    """The usual block, test by test in branch-free loops the compiler vectorises, writing
+    the flag rows in place: every value finite, two finite samples before it, no location
+    test. Returns ``(ok, flags, spike_prev, counts, ring_head, ring_n)``; ``ok`` False
+    (nothing changed) means: use :func:`_qc`. Same flags as :func:`_qc` for such a block."""
     nf, n = x.shape
     cap = ring_t.shape[0]
     flags = np.full((_N_TESTS, n), 2, np.uint8)
-    spike_prev = np.zeros(n, np.uint8)
+    spike_prev = np.full(n, 2, np.uint8)
     counts = np.zeros((_N_TESTS, 3), np.int64)
+    bad = False  # x - x is 0 for finite x, NaN otherwise: the OR vectorises
+    for f in range(nf):
+        bad |= not (np.isfinite(prev[f]) and np.isfinite(prev2[f]))
+        for i in range(n):
+            bad |= (x[f, i] - x[f, i]) != 0.0
+    if bad:
+        return False, flags, spike_prev, counts, ring_head, ring_n
     dt = np.empty(n)
     dt[0] = (t[0] - prev_t) * 1e-9
     for i in range(1, n):
         dt[i] = (t[i] - t[i - 1]) * 1e-9
-    z = np.empty(n + 2)
-    rate = np.empty(n)
-    for f in range(nf):
-        if not (np.isfinite(prev[f]) and np.isfinite(prev2[f])):
-            return False, flags, spike_prev, counts, ring_head, ring_n
-        for i in range(n):
-            if not np.isfinite(x[f, i]):
-                return False, flags, spike_prev, counts, ring_head, ring_n
-    gr = np.ones(n, np.uint8)
-    rt = np.full(n, 2, np.uint8)
-    sp = np.full(n, 2, np.uint8)
-    ft = np.full(n, 2, np.uint8)
+    z = np.empty(n + 2)  # a field's values with the two before the block
+    gr = flags[0]
+    rt = flags[2]
+    ft = flags[3]
+    sp = spike_prev
+    gr[:] = 1
     quick = np.empty(n, np.bool_)
     for f in range(nf):
         xf = x[f]
+        z[0] = prev2[f]
+        z[1] = prev[f]
+        z[2:] = xf
         # thresholds in locals: the loops below then vectorise
         fmin, fmax, smin, smax = p[f, 0], p[f, 1], p[f, 2], p[f, 3]
         for i in range(n):
@@ -294,19 +298,12 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
             gr[i] = max(gr[i], g)
         if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]):
             rs, rf = p[f, 6], p[f, 7]
-            r0 = abs(xf[0] - prev[f]) / dt[0]
-            rate[0] = r0
-            for i in range(1, n):
-                rate[i] = abs(xf[i] - xf[i - 1]) / dt[i]
             for i in range(n):
-                roc = rate[i]
+                roc = abs(z[i + 2] - z[i + 1]) / dt[i]
                 r = np.uint8(4) if roc > rf else (np.uint8(3) if roc > rs else np.uint8(1))
                 rt[i] = r if rt[i] == 2 else max(rt[i], r)
         if np.isfinite(p[f, 4]) or np.isfinite(p[f, 5]):
             ss, sf = p[f, 4], p[f, 5]
-            z[0] = prev2[f]
-            z[1] = prev[f]
-            z[2:] = xf
             for i in range(n):
                 d = abs(z[i + 1] - (z[i] + z[i + 2]) / 2.0)
                 s = np.uint8(4) if d > sf else (np.uint8(3) if d > ss else np.uint8(1))
@@ -318,10 +315,8 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
             near = min(sw, fw) * 1e-9
             # a sample whose predecessor lies within both windows and differs by tol or more
             # is not flat: decided here in a loop the compiler vectorises
-            last = prev[f]
             for i in range(n):
-                quick[i] = abs(xf[i] - last) >= tol and dt[i] <= near
-                last = xf[i]
+                quick[i] = (abs(z[i + 2] - z[i + 1]) >= tol) & (dt[i] <= near)
             for i in range(n):
                 if quick[i]:
                     if ft[i] == 2:
@@ -364,10 +359,6 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
                 if flat_f and span > fw:
                     fl = np.uint8(4)
                 ft[i] = fl if ft[i] == 2 else max(ft[i], fl)
-    flags[0] = gr
-    flags[2] = rt
-    flags[3] = ft
-    spike_prev[:] = sp
     # tallies in locals (stores into ``counts`` each sample would not vectorise)
     g3 = g4 = s3 = s4 = r3 = r4 = f3 = f4 = 0
     for i in range(n):

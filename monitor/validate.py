@@ -67,53 +67,110 @@ _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 @kernel(nogil=True)
 def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
               qc_code, repeat):  # pragma: no cover
-    # Sequential by nature: each verdict depends on the last ACCEPTED sample before it.
+    # Sequential by nature: each verdict depends on the last ACCEPTED sample before it. But
+    # nearly every sample is accepted, and a sample after an accepted one is judged against
+    # its predecessor: ``run[i]`` (computed in loops the compiler vectorises) says sample i
+    # passes every rule if sample i - 1 was accepted. A run of such samples after an
+    # accepted one is accepted at once; the others take the rules one by one below.
     n = t.shape[0]
     nf = values.shape[0]
     codes = np.zeros(n, dtype=np.int8)
     counts = np.zeros(len(REASONS) + 1, np.int64)
-    for i in range(n):
+    run = _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat)
+    prev_accepted = False
+    i = 0
+    while i < n:
+        if prev_accepted and run[i]:
+            j = i + 1
+            while j < n and run[j]:
+                j += 1
+            counts[ACCEPTED] += j - i
+            last_t = t[j - 1]
+            for f in range(nf):
+                last_v[f] = values[f, j - 1]
+            i = j
+            continue
         ti = t[i]
-        if has_last and ti == last_t:
-            codes[i] = _DUP
-            counts[_DUP] += 1
-            continue
-        if (has_last and ti < last_t) or ti <= floor_t:
-            codes[i] = _BACK
-            counts[_BACK] += 1
-            continue
-        if repeat[i]:
-            codes[i] = _DUP
-            counts[_DUP] += 1
-            continue
         code = ACCEPTED
-        for f in range(nf):
-            v = values[f, i]
-            if not np.isfinite(v):
-                code = _NAN
-                break
-        if code == ACCEPTED:
+        if has_last and ti == last_t:
+            code = _DUP
+        elif (has_last and ti < last_t) or ti <= floor_t:
+            code = _BACK
+        elif repeat[i]:
+            code = _DUP
+        else:
             for f in range(nf):
                 v = values[f, i]
-                if v < lo[f] or v > hi[f]:
-                    code = _RANGE
+                if not np.isfinite(v):
+                    code = _NAN
                     break
-        if code == ACCEPTED and has_last:
-            dt = (ti - last_t) * 1e-9
-            for f in range(nf):
-                if abs(values[f, i] - last_v[f]) > rate[f] * dt:
-                    code = _SPIKE
-                    break
-        if code == ACCEPTED and qc_code[i]:
-            code = qc_code[i]
+            if code == ACCEPTED:
+                for f in range(nf):
+                    v = values[f, i]
+                    if v < lo[f] or v > hi[f]:
+                        code = _RANGE
+                        break
+            if code == ACCEPTED and has_last:
+                dt = (ti - last_t) * 1e-9
+                for f in range(nf):
+                    if abs(values[f, i] - last_v[f]) > rate[f] * dt:
+                        code = _SPIKE
+                        break
+            if code == ACCEPTED and qc_code[i]:
+                code = qc_code[i]
         codes[i] = code
         counts[code] += 1
-        if code == ACCEPTED:
+        prev_accepted = code == ACCEPTED
+        if prev_accepted:
             last_t = ti
             has_last = True
             for f in range(nf):
                 last_v[f] = values[f, i]
+        i += 1
     return codes, counts, last_t, has_last
+
+
+@kernel(nogil=True)
+def _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat):  # pragma: no cover
+    """``run[i]`` (i >= 1): sample i passes every rule of :func:`_validate` when sample
+    i - 1 was its last accepted one (the same comparisons, branch-free; run[0] is False)."""
+    n = t.shape[0]
+    run = np.zeros(n, np.bool_)
+    dt = np.empty(n)
+    for i in range(1, n):
+        run[i] = (t[i] > t[i - 1]) & (t[i] > floor_t) & (qc_code[i] == 0) & (not repeat[i])
+        dt[i] = (t[i] - t[i - 1]) * 1e-9
+    for f in range(values.shape[0]):
+        x = values[f]
+        lo_f, hi_f, rate_f = lo[f], hi[f], rate[f]
+        for i in range(1, n):
+            v = x[i]
+            run[i] &= (((v - v) == 0.0) & (not ((v < lo_f) | (v > hi_f)))
+                       & (not (abs(v - x[i - 1]) > rate_f * dt[i])))
+    return run
+
+
+@kernel(nogil=True)
+def _scan(t, values):  # pragma: no cover - compiled
+    """(every value finite, the times strictly increasing), in one pass."""
+    bad = False
+    for f in range(values.shape[0]):
+        for i in range(t.shape[0]):  # v - v is 0 for finite v, NaN otherwise
+            bad |= (values[f, i] - values[f, i]) != 0.0
+    increasing = True
+    for i in range(1, t.shape[0]):
+        increasing &= t[i] > t[i - 1]
+    return not bad, increasing
+
+
+@kernel(nogil=True)
+def _fail_codes(flags):  # pragma: no cover - compiled
+    """The QC fails that reject a sample: flat line (_FLAT) over check factor (_CHECK)."""
+    n = flags.shape[1]
+    code = np.empty(n, np.int8)
+    for i in range(n):
+        code[i] = _FLAT if flags[FLAT, i] == FAIL else (_CHECK if flags[CHECK, i] == FAIL else 0)
+    return code
 
 
 class StreamValidator:
@@ -155,19 +212,19 @@ class StreamValidator:
                              f"and {len(self.fields)} fields")
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
-        qc_code = np.zeros(n, np.int8)  # a QC fail that rejects: _FLAT, _CHECK or _RANGE
         repeat = np.zeros(n, np.bool_)  # the time of the newest sample seen before it
         qc_values = values
-        if n and not np.isfinite(values).all():
+        finite, increasing = _scan(t_ns, values) if n else (True, True)
+        if not finite:
             # an infinite value is missing here, as it is once saved (strict JSON state) and
             # as the nan rule rejects it: flags must not change with a restart
             qc_values = np.where(np.isfinite(values), values, np.nan)
-        if n and int(t_ns[0]) > max(seen, floor_ns) and (n == 1 or bool(np.all(t_ns[1:] > t_ns[:-1]))):
+        if n and int(t_ns[0]) > max(seen, floor_ns) and increasing:
             new = None  # the usual case: every sample is new
             flags, _ = self.qc.check(t_ns, qc_values)
-            qc_code[flags[CHECK] == FAIL] = _CHECK
-            qc_code[flags[FLAT] == FAIL] = _FLAT
+            qc_code = _fail_codes(flags)
         elif n:
+            qc_code = np.zeros(n, np.int8)
             newest = np.maximum.accumulate(np.concatenate(([seen], t_ns[:-1])))
             repeat = t_ns == newest
             new = t_ns > np.maximum(newest, floor_ns)
@@ -176,6 +233,8 @@ class StreamValidator:
                 idx = np.flatnonzero(new)
                 qc_code[idx[flags[CHECK] == FAIL]] = _CHECK
                 qc_code[idx[flags[FLAT] == FAIL]] = _FLAT
+        else:
+            qc_code = np.zeros(0, np.int8)
         if self._watch is not None and n:
             outside = self._outside_watch_circle(qc_values)
             qc_code[outside] = _RANGE

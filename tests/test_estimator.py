@@ -205,7 +205,14 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         b = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want)
         np.testing.assert_array_equal(b.tension[want], a.tension[want])
         np.testing.assert_array_equal(b.flags[want], a.flags[want])
-        assert np.isnan(b.tension[~want]).all()
+        np.testing.assert_array_equal(b.quasi_static[want], a.quasi_static[want])
+        np.testing.assert_array_equal(b.axial[want], a.axial[want])
+        np.testing.assert_array_equal(b.top_angle[want], a.top_angle[want])
+        np.testing.assert_array_equal(b.drag, a.drag)  # the jerk ODE runs over every sample
+        assert np.isnan(b.tension[~want]).all() and np.isnan(b.quasi_static[~want]).all()
+        assert np.isnan(b.top_angle[~want]).all() and (b.axial[~want] == 0).all()
+        # the first samples settle, the others carry no flags
+        assert ((b.flags[~want] & ~np.uint8(Flag.SETTLING)) == 0).all()
     assert part.state.to_dict() == full.state.to_dict()
     with pytest.raises(ValueError, match="want must be a boolean mask of 3 samples"):
         part.update(np.zeros(3), np.zeros(3), np.zeros(3), want=np.ones(2, bool))
@@ -245,3 +252,26 @@ def test_catenary_estimator_options_and_errors():
     assert cfg.ea == pytest.approx(40.0 / comp)
     with pytest.raises(ValueError, match="needs a finite ea"):
         config(ea=math.inf, axial_model="infinite")
+
+
+def test_imu_integrated_in_the_estimator_loop_equals_the_integrator(vaps):
+    # heading None integrates inside the estimator's loop; a heading (0 deg: the identity
+    # rotation) goes through models.imu.DisplacementIntegrator.update first: the same bits
+    cfg, qs = vaps
+    m = waves.buoy_motion(1.5, 5.25, 300.0, DT, seed=4, depth=23.0, direction_deg=30.0)
+    fused, separate = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    for i in range(0, m.t.size, 777):
+        sl = slice(i, i + 777)
+        a = fused.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl])
+        b = separate.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], heading_deg=0.0)
+        for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)):
+            np.testing.assert_array_equal(x, y)
+    assert fused.state.to_dict() == separate.state.to_dict()
+    assert np.isfinite(a.tension).all() and np.std(a.drag) > 0
+    # a NaN acceleration is named and changes nothing
+    before = fused.state.to_dict()
+    bad = m.accel_y[:50].copy()
+    bad[7] = np.nan
+    with pytest.raises(ValueError, match="accel_y contains NaN"):
+        fused.update_accel(m.accel_x[:50], bad, m.accel_z[:50])
+    assert fused.state.to_dict() == before

@@ -235,3 +235,27 @@ def test_status_and_metrics_say_the_stream_is_not_at_the_configured_rate():
     assert got[("buoymon_motion_rate_hz", (("buoy", "vaps"), ("setting", "10.0")))] == 10.0
     assert got[("buoymon_motion_rate_mismatch_samples_total", (("buoy", "vaps"),))] == 299
     assert got[("buoymon_motion_rate_changes_total", (("buoy", "vaps"),))] == 0
+
+
+class _SampleBySample(MotionRate):
+    """The tracker without its one-pass path for regular blocks: every interval through the
+    running median (the oracle of that path)."""
+
+    def _fast_plan(self, t_ns, prev, first):
+        return None
+
+
+@pytest.mark.parametrize("configured", [None, 10.0])
+def test_regular_stretches_at_once_give_the_sample_by_sample_events(configured):
+    # a jittered start, missing samples, gaps, rate changes and returns, in blocks of any size
+    rng = np.random.default_rng(3)
+    t = _times([(0.1, 400), (0.2, 1), (0.1, 300), (20.0, 1), (0.1, 30), (0.4, 200), (0.104, 50), (0.1, 500),
+                (30.0, 1), (0.4, 100), (0.1, 100)])
+    t[1:300] += rng.integers(-500_000, 500_000, 299)
+    for seed in range(10):
+        r = np.random.default_rng(seed)
+        cuts = sorted(set(r.integers(1, t.shape[0], int(r.integers(1, 12))).tolist()))
+        fast, slow = MotionRate(configured, GAP_NS), _SampleBySample(configured, GAP_NS)
+        for a, b in zip([0, *cuts], [*cuts, t.shape[0]]):
+            assert fast.plan(t[a:b]) == slow.plan(t[a:b])
+            assert fast.state() == slow.state()

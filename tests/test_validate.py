@@ -122,3 +122,66 @@ def test_a_displacement_the_line_cannot_reach_is_a_location_fail():
     assert [REASONS[c - 1] if c else "ok" for c in codes] == [
         "ok", "out_of_range", "ok", "out_of_range", "ok", "ok"]
     assert val.qc_counts()["location"] == {"suspect": 0, "fail": 2}
+
+
+def _sequential_verdicts(t, values, lo, hi, rate, floor, qc_code, repeat):
+    """The rules one sample at a time, as the module docstring states them (the oracle of
+    the kernel, which accepts runs of samples at once)."""
+    has_last, last_t, last_v, codes = False, 0, None, []
+    for i, ti in enumerate(t.tolist()):
+        v = values[:, i]
+        if has_last and ti == last_t:
+            code = 4
+        elif (has_last and ti < last_t) or ti <= floor:
+            code = 5
+        elif repeat[i]:
+            code = 4
+        elif not np.all(np.isfinite(v)):
+            code = 1
+        elif np.any((v < lo) | (v > hi)):
+            code = 2
+        elif has_last and np.any(np.abs(v - last_v) > rate * ((ti - last_t) * 1e-9)):
+            code = 3
+        else:
+            code = int(qc_code[i])
+        codes.append(code)
+        if code == 0:
+            has_last, last_t, last_v = True, ti, v
+    return codes
+
+
+def test_runs_of_accepted_samples_give_the_sequential_verdicts():
+    # three fields, every reason, the QC fails and repeats the pipeline passes in, against
+    # the one-sample-at-a-time rules
+    from monitor.validate import _validate
+
+    rng = np.random.default_rng(11)
+    n = 20_000
+    t = np.cumsum(rng.integers(1, 2 * S // 10, n)).astype(np.int64)
+    t[rng.integers(1, n, 80)] -= S
+    dup = rng.integers(1, n, 60)
+    t[dup] = t[dup - 1]
+    values = 5 * np.sin(np.arange(n) / 20)[None, :] * np.array([[1.0], [0.5], [2.0]])
+    values += rng.normal(0, 0.05, (3, n))
+    for f in range(3):
+        values[f, rng.integers(0, n, 30)] = rng.choice([np.nan, np.inf, -np.inf], 30)
+        values[f, rng.integers(0, n, 30)] += 40.0  # spikes
+        values[f, rng.integers(0, n, 10)] = 1e6  # out of range
+    lo, hi, rate = np.array([-50.0, -30.0, -80.0]), np.array([50.0, 30.0, 80.0]), np.array(
+        [200.0, 100.0, 300.0])
+    qc_code = np.zeros(n, np.int8)
+    qc_code[rng.integers(0, n, 40)] = 6
+    qc_code[rng.integers(0, n, 40)] = 7
+    repeat = np.zeros(n, np.bool_)
+    repeat[rng.integers(0, n, 40)] = True
+    floor = int(t[300])
+    ref = _sequential_verdicts(t, values, lo, hi, rate, floor, qc_code, repeat)
+    assert set(ref) == set(range(8)), sorted(set(ref))
+    last_v = np.zeros(3)
+    codes, counts, last_t, has_last = _validate(t, values, lo, hi, rate, np.int64(0), last_v,
+                                                False, np.int64(floor), qc_code, repeat)
+    assert codes.tolist() == ref
+    assert counts.tolist() == np.bincount(ref, minlength=8).tolist()
+    accepted = np.flatnonzero(np.array(ref) == 0)
+    assert has_last and last_t == t[accepted[-1]]
+    np.testing.assert_array_equal(last_v, values[:, accepted[-1]])

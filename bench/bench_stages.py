@@ -1,0 +1,90 @@
+"""Benchmark: CPU per sample of the replay's per-sample stages (issue 22, part 3).
+
+Replays a log (default: the 1-day bench log of the golden check, /work/wt/_gold/day1.mcap,
+or the log given as the first argument) in process with the default configuration, timing
+each stage with a wrapper (``time.process_time_ns``) around its entry point; prints the
+stage's CPU per sample it takes, best of N replays (second argument, default 5; the first
+replay warms the caches and is not counted). Stages:
+
+``validate``        StreamValidator.check (all streams; includes qc and check_factor)
+``  qc``            StreamQC.check (QARTOD tests and the check factor)
+``  check_factor``  CheckFactor.check (motion streams only)
+``estimator``       the pipeline's estimator feed (_ModelsEstimator.feed, the rate tracker, the
+                    IMU integrator, the quasi-static lookup and the dynamic core)
+``  imu``           DisplacementIntegrator.update
+``  quasi_static``  the quasi-static model's lookup of the wanted samples
+``selector``        LoadSelector.needed + select
+``stress``          Component.stress (every component)
+
+Figures (2-core Xeon shared with other jobs, 2026-11-25; ns per sample of the stage's input,
+1-day bench log, best of 5) are in the commit messages of the branch that added this script.
+
+Run: PYTHONPATH=. python bench/bench_stages.py [LOG] [N]
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import defaultdict
+
+from models import estimator, imu
+from monitor import check_factor, components, load_source, qartod, validate
+from monitor.config import default_config
+from replay.reader import LogReader
+from replay.runner import run_blocks
+
+LOG = "/work/wt/_gold/day1.mcap"
+
+cpu: dict[str, int] = defaultdict(int)
+samples: dict[str, int] = defaultdict(int)
+
+
+def _timed(owner, name: str, stage: str, count) -> None:
+    """Wrap ``owner.name`` to add its CPU time to ``stage`` and ``count(args)`` samples."""
+    func = getattr(owner, name)
+
+    def wrapper(*args, **kw):
+        t0 = time.process_time_ns()
+        out = func(*args, **kw)
+        cpu[stage] += time.process_time_ns() - t0
+        samples[stage] += count(args, out)
+        return out
+
+    setattr(owner, name, wrapper)
+
+
+def main() -> None:
+    log = sys.argv[1] if len(sys.argv) > 1 else LOG
+    reps = int(sys.argv[2]) if len(sys.argv) > 2 else 5
+    _timed(validate.StreamValidator, "check", "validate", lambda a, o: a[1].shape[0])
+    _timed(qartod.StreamQC, "check", "  qc", lambda a, o: a[1].shape[0])
+    _timed(check_factor.CheckFactor, "check", "  check_factor", lambda a, o: a[1].shape[0])
+    _timed(load_source._ModelsEstimator, "feed", "estimator", lambda a, o: a[1].shape[0])
+    _timed(imu.DisplacementIntegrator, "update", "  imu", lambda a, o: o.shape[-1])
+    _timed(estimator.CatenaryQuasiStatic, "__call__", "  quasi_static",
+           lambda a, o: a[1].shape[0])
+    _timed(load_source.LoadSelector, "needed", "selector", lambda a, o: 0)
+    _timed(load_source.LoadSelector, "select", "selector", lambda a, o: a[3].shape[0])
+    _timed(components.Component, "stress", "stress", lambda a, o: a[1].shape[0])
+    cfg = default_config()
+    best: dict[str, tuple[int, int]] = {}
+    total = []
+    for rep in range(reps + 1):
+        cpu.clear()
+        samples.clear()
+        t0 = time.process_time()
+        run_blocks(cfg, LogReader([log]))
+        if rep:
+            total.append(time.process_time() - t0)
+            for k, v in cpu.items():
+                if k not in best or v < best[k][0]:
+                    best[k] = (v, samples[k])
+    print(f"{log}: replay CPU best {min(total):.3f} s, median {sorted(total)[len(total) // 2]:.3f} s")
+    for k, (ns, n) in best.items():
+        per = f"{ns / n:7.1f} ns/sample" if n else ""
+        print(f"{k:16s} {ns / 1e6:8.1f} ms  {n:>10,d} samples  {per}")
+
+
+if __name__ == "__main__":
+    main()
