@@ -95,14 +95,16 @@ class _TickLoad:
     """Per-tick load figures of consecutive ticks in one pass (the tick loop then only
     indexes lists): max and min tension, the mean of each source, each component's peak
     stress. Tick ``k`` covers samples ``[starts[k], stops[k])``; every tick is reduced the
-    same way (sequential sums), whichever slab it came in."""
+    same way (a sum is one ``np.add.reduceat`` segment: the first sample plus numpy's
+    pairwise sum of the rest, the same bits wherever the segment starts), whichever slab
+    it came in."""
 
     def __init__(self, v: np.ndarray, src: np.ndarray, stresses: Mapping[str, np.ndarray],
                  starts: np.ndarray, stops: np.ndarray) -> None:
         n = stops - starts
         full = np.flatnonzero(n > 0)
 
-        def per_tick(values: np.ndarray, empty: float = math.nan) -> list:
+        def per_tick(values: np.ndarray, empty: float = math.nan) -> list[Any]:
             """The non-empty ticks' values as a list over all ticks."""
             out = np.full(n.shape[0], empty, dtype=values.dtype)
             out[full] = values
@@ -129,7 +131,8 @@ class _TickLoad:
 
 
 def _seq_mean(x: np.ndarray) -> float:
-    """Mean by a sequential sum, as ``_TickLoad`` reduces whole ticks (NaN if empty)."""
+    """Mean by one ``np.add.reduceat`` segment, as ``_TickLoad`` reduces whole ticks (NaN if
+    empty)."""
     return float(np.add.reduceat(x, [0])[0]) / x.shape[0] if x.shape[0] else math.nan
 
 
