@@ -195,12 +195,8 @@ class Component:
                                    residue=figures)
         if run is not None:  # the compiled pass
             self._pending = [_EMPTY, _EMPTY, _EMPTY]
-            out = []
-            if figures:
-                for committed, rate, res in zip(run.committed.tolist(), run.rate_per_day.tolist(),
-                                                run.residue.tolist()):
-                    damage = committed + res
-                    out.append((damage, committed, rate, fatigue.remaining_life_days(damage, rate)))
+            out = list(zip(run.damage.tolist(), run.committed.tolist(),
+                           run.rate_per_day.tolist(), run.life_days.tolist())) if figures else []
             return TickRun((run.ranges, run.means, np.ones(run.ranges.shape[0])), out)
         parts, out, start = [], [], 0
         for stop, end in zip(stops, ends_ns):

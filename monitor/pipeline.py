@@ -95,49 +95,44 @@ class _TickLoad:
     """Per-tick load figures of consecutive ticks in one pass (the tick loop then only
     indexes lists): max and min tension, the mean of each source, each component's peak
     stress. Tick ``k`` covers samples ``[starts[k], stops[k])``; every tick is reduced the
-    same way (sequential sums), whichever slab it came in."""
+    same way (a sum is one ``np.add.reduceat`` segment: the first sample plus numpy's
+    pairwise sum of the rest, the same bits wherever the segment starts), whichever slab
+    it came in."""
 
     def __init__(self, v: np.ndarray, src: np.ndarray, stresses: Mapping[str, np.ndarray],
                  starts: np.ndarray, stops: np.ndarray) -> None:
         n = stops - starts
         full = np.flatnonzero(n > 0)
-        k = starts.shape[0]
-        self.vmax, self.vmin = [math.nan] * k, [math.nan] * k
-        self.meas, self.est = [math.nan] * k, [math.nan] * k
-        self.smax = {name: [math.nan] * k for name in stresses}
-        self.n, self.n_meas = n.tolist(), [0] * k  # samples, and of them measured, per tick
-        if full.shape[0] == 0:
-            return
+
+        def per_tick(values: np.ndarray, empty: float = math.nan) -> list[Any]:
+            """The non-empty ticks' values as a list over all ticks."""
+            out = np.full(n.shape[0], empty, dtype=values.dtype)
+            out[full] = values
+            return out.tolist()
+
         # the non-empty ticks are back to back: reduce over their span in one call each
-        at, end = starts[full], int(stops[full[-1]])
-        span = slice(0, end)
-        idx = full.tolist()
-        for out, vals in ((self.vmax, np.maximum.reduceat(v[span], at)),
-                          (self.vmin, np.minimum.reduceat(v[span], at))):
-            for i, x in zip(idx, vals.tolist()):
-                out[i] = x
-        for name, s in stresses.items():
-            out = self.smax[name]
-            for i, x in zip(idx, np.maximum.reduceat(s[span], at).tolist()):
-                out[i] = x
+        at, span = starts[full], slice(0, int(stops[full[-1]]) if full.shape[0] else 0)
+        self.vmax = per_tick(np.maximum.reduceat(v[span], at))
+        self.vmin = per_tick(np.minimum.reduceat(v[span], at))
+        self.smax = {name: per_tick(np.maximum.reduceat(s[span], at))
+                     for name, s in stresses.items()}
         measured = src[span] == MEASURED
-        sums = np.add.reduceat(v[span], at).tolist()
-        n_meas = np.add.reduceat(measured.astype(np.int64), at).tolist()
-        for j, i in enumerate(idx):
-            count = int(n[i])
-            self.n_meas[i] = n_meas[j]
-            if n_meas[j] == count:  # the usual cases: one source
-                self.meas[i] = sums[j] / count
-            elif n_meas[j] == 0:
-                self.est[i] = sums[j] / count
-            else:
-                a, b = int(starts[i]), int(stops[i])
-                self.meas[i] = _seq_mean(v[a:b][measured[a:b]])
-                self.est[i] = _seq_mean(v[a:b][~measured[a:b]])
+        count = n[full]
+        n_meas = np.add.reduceat(measured.astype(np.int64), at)
+        mean = np.add.reduceat(v[span], at) / count
+        self.n, self.n_meas = n.tolist(), per_tick(n_meas, 0)  # samples, and of them measured
+        # a tick of one source (the usual case): the mean of its samples is that source's
+        self.meas = per_tick(np.where(n_meas == count, mean, math.nan))
+        self.est = per_tick(np.where(n_meas == 0, mean, math.nan))
+        for i in full[(n_meas != count) & (n_meas != 0)].tolist():
+            a, b = int(starts[i]), int(stops[i])
+            self.meas[i] = _seq_mean(v[a:b][measured[a:b]])
+            self.est[i] = _seq_mean(v[a:b][~measured[a:b]])
 
 
 def _seq_mean(x: np.ndarray) -> float:
-    """Mean by a sequential sum, as ``_TickLoad`` reduces whole ticks (NaN if empty)."""
+    """Mean by one ``np.add.reduceat`` segment, as ``_TickLoad`` reduces whole ticks (NaN if
+    empty)."""
     return float(np.add.reduceat(x, [0])[0]) / x.shape[0] if x.shape[0] else math.nan
 
 
@@ -209,9 +204,10 @@ class _TensionStats:
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
-    # set by prepare(): per tick end, samples received and rejected, rejected per reason
-    # (None without rejections), accepted, and the last accepted time
-    _ticks: tuple[list[int], list[int], list[list[int]] | None, list[int], list[int]]
+    # set by prepare(): per tick end, samples received and rejected in the tick, accepted
+    # in all, whether a sample was ever accepted and the last accepted time (0 if not), and
+    # rejected per reason in all (None without rejections in the slab)
+    _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None]
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
@@ -233,36 +229,33 @@ class _StreamSlab:
                 self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
 
     def prepare(self, ends: np.ndarray) -> None:
-        """Vectorised health at every tick end of this slab (cumulative counts and last time)."""
-        cut = np.searchsorted(self.t, ends, side="right")
-        rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+        """Vectorised health at every tick end of this slab (counts and last time)."""
+        accepted, rejected, has_last, last_t = self._before
         by_reason = None
         if self.rej_t.shape[0]:
             by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
-                                  for i in range(1, len(REASONS) + 1)])
+                                  for i in range(1, len(REASONS) + 1)]).tolist()
         k = np.searchsorted(self.acc_t, ends, side="right")
+        has = (k > 0) | has_last
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
-                        self._before[3])
+                        last_t)
         # python ints: the per-tick reads below are then cheap
-        self._ticks = (cut.tolist(), rej_cut.tolist(),
-                       None if by_reason is None else by_reason.tolist(), k.tolist(), last.tolist())
+        self._ticks = (np.diff(np.searchsorted(self.t, ends, side="right"), prepend=0).tolist(),
+                       np.diff(np.searchsorted(self.rej_t, ends, side="right"), prepend=0).tolist(),
+                       (accepted + k).tolist(), has.tolist(), np.where(has, last, 0).tolist(),
+                       by_reason)
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
         (the caller adds what earlier slabs contributed to the same tick) for ``k = 0``."""
-        accepted, rejected, has_last, last_t = self._before
-        cut, rej_cut, by_reason, n_acc, last = self._ticks
-        if n_acc[k]:
-            has_last, last_t = True, last[k]
-        received = cut[k] - (cut[k - 1] if k else 0)
-        rejected_tick = rej_cut[k] - (rej_cut[k - 1] if k else 0)
+        received, rejected_tick, accepted, has_last, last, by_reason = self._ticks
+        last_t, rejected = last[k], self._before[1]
         return StreamObs(
-            last_t_ns=last_t if has_last else 0,
-            stale=not has_last or now - last_t > stale_ns,
-            accepted=accepted + n_acc[k],
+            last_t_ns=last_t, stale=not has_last[k] or now - last_t > stale_ns,
+            accepted=accepted[k],
             rejected=rejected if by_reason is None else
             {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)},
-            rejected_in_tick=rejected_tick, received_in_tick=received,
+            rejected_in_tick=rejected_tick[k], received_in_tick=received[k],
         )
 
 
@@ -735,16 +728,20 @@ class Pipeline:
 
     def _estimate_means(self, e_t: np.ndarray, e_v: np.ndarray, ends: np.ndarray) -> list[float]:
         """Mean motion estimate in each tick ending at ``ends`` (the first one with the
-        estimates an earlier slab left for it), by sequential sums: split invariant."""
-        cuts = np.searchsorted(e_t, ends, side="right").tolist()
-        means, start = [], 0
-        for k, stop in enumerate(cuts):
-            seg = e_v[start:stop]
-            if k == 0 and self.open_estimate[0].shape[0]:
-                seg = np.concatenate([self.open_estimate[1], seg])
-            means.append(_seq_mean(seg))
-            start = stop
-        return means
+        estimates an earlier slab left for it), each reduced as ``_seq_mean`` reduces it:
+        split invariant."""
+        cuts = np.searchsorted(e_t, ends, side="right")
+        starts = np.append(0, cuts[:-1])
+        n = cuts - starts
+        full = np.flatnonzero(n > 0)
+        # the non-empty ticks are back to back: one reduction for all of them
+        sums = np.add.reduceat(e_v[:int(cuts[full[-1]]) if full.shape[0] else 0], starts[full])
+        means = np.full(ends.shape[0], math.nan)
+        means[full] = sums / n[full]
+        out = means.tolist()
+        if out and self.open_estimate[0].shape[0]:
+            out[0] = _seq_mean(np.concatenate([self.open_estimate[1], e_v[:int(cuts[0])]]))
+        return out
 
     def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, load: _TickLoad,
                   j: int, streams: Mapping[str, _StreamSlab],

@@ -3,10 +3,13 @@ StreamingRainflow.feed + MinerAccumulator.add_cycles per tick."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 
 import numpy as np
+import pytest
 
+from models._jit import uncompiled
 from models.fatigue import MinerAccumulator, SNCurve, StreamingRainflow, commit_ticks
 
 
@@ -40,3 +43,53 @@ def test_commit_ticks_equals_feed_and_add_cycles_per_tick():
     # per-tick calls
     goodman = sn.with_factors(mean_correction="goodman", ultimate_Pa=250e6)
     assert commit_ticks(StreamingRainflow(), MinerAccumulator(goodman), stress, stops, times) is None
+
+
+def _per_tick(stress, stops, times, sn):
+    """The oracle: feed + add_cycles + the accumulator's properties, tick by tick."""
+    rf, mi = StreamingRainflow(), MinerAccumulator(sn, rate_window_s=86400.0, rate_buckets=24)
+    rows, start = [], 0
+    for stop, t in zip(stops, times):
+        mi.add_cycles(*rf.feed(stress[start:stop]), time_s=t)
+        mi.set_provisional_from(rf)
+        rows.append((mi.damage_committed, mi.damage_rate_per_day, mi.damage,
+                     mi.remaining_life_days))
+        start = stop
+    return rows, mi
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_tick_dating_over_days_equals_add_cycles(plain):
+    """Rate, damage and remaining life of every tick over three days of hourly rate buckets
+    (the window fills, old buckets are dropped, a quiet spell empties it, a storm drives the damage past 1): the compiled dating equals add_cycles' to the last
+    bit, compiled and as plain Python."""
+    rng = np.random.default_rng(7)
+    n_ticks = 3 * 24 * 6  # 10-min ticks
+    per = 40
+    amp = np.full(n_ticks, 30e6)
+    amp[150:310] = 0.0  # a quiet spell longer than the window
+    amp[-30:] = 250e6  # the storm: failure
+    stress = (60e6 + np.repeat(amp, per) * np.sin(np.arange(n_ticks * per) / 3.0)
+              + rng.normal(0, 2e5, n_ticks * per))
+    stops = (per * np.arange(1, n_ticks + 1)).tolist()
+    stops[100:104] = [stops[99]] * 4  # ticks without samples
+    times = (1.7e9 + 600.0 * np.arange(1, n_ticks + 1)).tolist()
+    sn = SNCurve.vaps_copper()
+    rows, oracle = _per_tick(stress, stops, times, sn)
+    rf, mi = StreamingRainflow(), MinerAccumulator(sn, rate_window_s=86400.0, rate_buckets=24)
+    with uncompiled() if plain else contextlib.nullcontext():
+        # in slabs, with a state round trip in between: the buckets carried across
+        runs = [commit_ticks(rf, mi, stress[:stops[200]], stops[:201], times[:201])]
+        st = json.loads(json.dumps([rf.state(), mi.state()]))
+        rf, mi = StreamingRainflow.from_state(st[0]), MinerAccumulator.from_state(st[1])
+        rest = [s - stops[200] for s in stops[201:]]
+        runs.append(commit_ticks(rf, mi, stress[stops[200]:], rest, times[201:]))
+    got = [row for run in runs for row in zip(run.committed.tolist(), run.rate_per_day.tolist(),
+                                               run.damage.tolist(), run.life_days.tolist())]
+    assert got == rows
+    assert len({r[1] for r in rows}) > 300 and rows[140][1] > 1e-6  # rates really vary
+    assert rows[305][1] == 0.0 < rows[330][1]  # the quiet spell emptied the window
+    assert rows[-1][2] > 1.0 and rows[-1][3] == 0.0  # life used up
+    assert mi.damage_rate_per_day == oracle.damage_rate_per_day
+    mi.set_provisional_from(rf)
+    assert json.dumps(mi.state()) == json.dumps(oracle.state())

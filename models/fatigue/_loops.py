@@ -496,12 +496,80 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     return k, nc, committed
 
 
+# -------------------------------------------------------------------- dating
+@jitable
+def remaining_life_days(damage, rate_per_day):
+    """Days until the Miner sum ``damage`` reaches 1 at ``rate_per_day`` (1/day): 0 once it
+    has (also when the rate has since dropped to nothing), infinite while nothing accrues."""
+    if damage >= 1.0:
+        return 0.0
+    return (1.0 - damage) / rate_per_day if rate_per_day > 0.0 else math.inf
+
+
+def date_loop(committed, cycles, times, residue, prev, total, t_first, keys, vals, n, width,
+              n_buckets, rates, damage, life):
+    """``MinerAccumulator._take_kernel_ticks``'s dating of consecutive ticks: tick i brought
+    the committed damage to ``committed[i]`` with ``cycles[i]`` cycles at ``times[i]``
+    (non-decreasing) from ``prev`` (``total`` cycles before the first). Each tick's damage
+    goes to the rate bucket of its time in ``keys[:n]``/``vals[:n]`` (the accumulator's
+    buckets in their order, with room for one more per tick) and buckets past the window
+    are dropped, as ``MinerAccumulator._date`` does; ``rates[i]`` is then
+    ``_rate_per_day``, ``damage[i] = committed[i] + residue[i]`` and ``life[i]`` its
+    ``remaining_life_days``. ``t_first`` is NaN before the first dated commit. The same
+    float operations in the same order as those methods: the same bits.
+    Returns (prev, total, t_first, n)."""
+    keep = n_buckets + 1
+    for i in range(committed.shape[0]):
+        c = committed[i]
+        added = c - prev
+        prev = c
+        total += cycles[i]
+        t = times[i]
+        if math.isnan(t_first):
+            t_first = t
+        b = math.floor(t / width)
+        j = n - 1
+        while j >= 0 and keys[j] != b:
+            j -= 1
+        if j >= 0:
+            vals[j] = vals[j] + added
+        else:
+            keys[n] = b
+            vals[n] = 0.0 + added
+            n += 1
+        if n > keep:
+            oldest = b - n_buckets
+            kept = 0
+            for j in range(n):
+                if keys[j] > oldest:
+                    keys[kept] = keys[j]
+                    vals[kept] = vals[j]
+                    kept += 1
+            n = kept
+        rate = 0.0
+        if t > t_first:
+            # the window's buckets in time order (the newest, b, last), summed one by one
+            # from zero as _rate_per_day's sum() adds them
+            in_window = 0.0
+            for j in range(n):
+                if keys[j] > b - n_buckets:
+                    in_window += vals[j]
+            whole, since = t - t_first, t - (b - n_buckets + 1) * width
+            span = since if since < whole else whole  # min(whole, since)
+            if span > 0:
+                rate = in_window / span * 86400.0
+        rates[i] = rate
+        damage[i] = c + residue[i]
+        life[i] = remaining_life_days(damage[i], rate)
+    return prev, total, t_first, n
+
+
 _LOOPS: dict[str, Callable] = {"axial_compiled": axial_loop, "feed_compiled": feed_loop,
                                "commit_compiled": commit_loop,
                                "commit_damage_compiled": _commit_damage,
                                "damage_compiled": damage_loop, "residue_compiled": residue_loop,
                                "residue_cycles_compiled": residue_cycles_loop,
-                               "ticks_compiled": ticks_loop}
+                               "ticks_compiled": ticks_loop, "date_compiled": date_loop}
 
 
 def __getattr__(name: str):

@@ -36,18 +36,12 @@ import math
 import numpy as np
 
 from models.fatigue import _loops
+# a building block of the compiled tick dating, so it lives with the loops (numba's cache)
+from models.fatigue._loops import remaining_life_days
 from models.fatigue.sn_curve import SNCurve
 
 _DAY_S = 86400.0
 _STATE_VERSION = 1
-
-
-def remaining_life_days(damage: float, rate_per_day: float) -> float:
-    """Days until the Miner sum ``damage`` reaches 1 at ``rate_per_day`` (1/day): 0 once it
-    has (also when the rate has since dropped to nothing), infinite while nothing accrues."""
-    if damage >= 1.0:
-        return 0.0
-    return (1.0 - damage) / rate_per_day if rate_per_day > 0.0 else math.inf
 
 
 class MinerAccumulator:
@@ -143,34 +137,31 @@ class MinerAccumulator:
                 raise ValueError(f"time_s must be finite and non-decreasing, got {time_s!r} after {self._t_last!r}")
         return time_s
 
-    def _take_kernel_ticks(self, committed: np.ndarray, cycles: np.ndarray,
-                           times_s: np.ndarray) -> np.ndarray:
+    def _take_kernel_ticks(self, committed: np.ndarray, cycles: np.ndarray, times_s: np.ndarray,
+                           residue: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Adopt the totals of a compiled loop that committed cycles on ``_params`` and
         ``_table`` (``models.fatigue.ticks``) for consecutive ticks (committed total, cycles
-        and time of each), dating each tick's damage as :meth:`add_cycles` does; returns the
-        damage rate after each tick. The loop is a replay's per-tick hot path, so it runs on
-        locals (the same float operations in the same order as one call per tick)."""
-        rates = np.empty(len(committed))
-        width = self.rate_window_s / self.rate_buckets
-        keep = self.rate_buckets + 1
-        buckets = self._buckets
-        prev, total_cycles = self._committed, self._cycles
-        for i, (c, n, t) in enumerate(zip(committed.tolist(), cycles.tolist(), times_s.tolist())):
-            added = c - prev
-            prev = c
-            total_cycles += n
-            if self._t_first is None:
-                self._t_first = t
-            self._t_last = t
-            b = math.floor(t / width)
-            buckets[b] = buckets.get(b, 0.0) + added
-            if len(buckets) > keep:
-                oldest = b - self.rate_buckets
-                buckets = self._buckets = {k: v for k, v in buckets.items() if k > oldest}
-            self._rate = None
-            rates[i] = self.damage_rate_per_day
-        self._committed, self._cycles = prev, total_cycles
-        return rates
+        and time of each, times non-decreasing), dating each tick's damage as
+        :meth:`add_cycles` does; returns per tick the damage rate after it and, with the
+        open residue's damage ``residue``, the damage and the remaining life. The ticks are
+        a replay's per-tick hot path: one compiled pass (``_loops.date_loop``, the same
+        float operations in the same order as :meth:`_date` and :meth:`_rate_per_day`)."""
+        n_ticks = committed.shape[0]
+        rates, damage, life = np.empty(n_ticks), np.empty(n_ticks), np.empty(n_ticks)
+        if n_ticks == 0:
+            return rates, damage, life
+        n = len(self._buckets)
+        keys, vals = np.empty(n + n_ticks, np.int64), np.empty(n + n_ticks)
+        keys[:n], vals[:n] = list(self._buckets), list(self._buckets.values())
+        prev, total, t_first, n = (_loops.date_compiled or _loops.date_loop)(
+            committed, cycles, times_s, residue, self._committed, self._cycles,
+            math.nan if self._t_first is None else self._t_first, keys, vals, n,
+            self.rate_window_s / self.rate_buckets, self.rate_buckets, rates, damage, life)
+        self._committed, self._cycles, self._t_first = float(prev), float(total), float(t_first)
+        self._t_last = float(times_s[-1])
+        self._buckets = dict(zip(keys[:int(n)].tolist(), vals[:int(n)].tolist()))
+        self._rate, self._older = float(rates[-1]), None
+        return rates, damage, life
 
     def set_provisional(self, ranges_Pa, means_Pa, counts) -> float:
         """Set the provisional damage from the rainflow residue half cycles; return it."""

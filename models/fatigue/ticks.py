@@ -6,9 +6,10 @@
   ``pending`` (ranges, means, counts) cycles closed earlier in the first tick. Returns a
   :class:`TickCommits` with each tick's committed damage, damage rate and (if
   ``residue``) the open residue's damage at its end (``MinerAccumulator.residue_damage``),
-  and the closed cycles; or None for a mean-corrected curve (the pass commits nominal
-  ranges), then the caller runs ``rainflow.feed`` and ``miner.add_cycles`` per tick, which
-  give the same bits. Without numba the pass runs as plain Python.
+  the damage and remaining life (``remaining_life_days``) they give, and the closed
+  cycles; or None for a mean-corrected curve (the pass commits nominal ranges), then the
+  caller runs ``rainflow.feed`` and ``miner.add_cycles`` per tick, which give the same bits.
+  Without numba the pass runs as plain Python.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ class TickCommits:
     committed: np.ndarray  # committed Miner damage at each tick's end
     rate_per_day: np.ndarray  # the accumulator's damage rate after each tick
     residue: np.ndarray  # damage of the open residue at each tick's end (NaN if not asked)
+    damage: np.ndarray  # committed + residue at each tick's end (NaN if not asked)
+    life_days: np.ndarray  # remaining_life_days(damage, rate_per_day) (NaN if not asked)
     ranges: np.ndarray  # the closed cycles (counts 1), closure order; pending ones excluded
     means: np.ndarray
 
@@ -65,5 +68,6 @@ def commit_ticks(rainflow: StreamingRainflow, miner: MinerAccumulator, stress_Pa
             rainflow._grow()  # the next tick may not fit the stack storage
     rainflow._samples += x.shape[0]
     # date each tick's damage in order, as add_cycles does
-    rates = miner._take_kernel_ticks(committed, cycles, np.asarray(times_s, np.float64))
-    return TickCommits(committed, rates, res, out_r[:nc], out_m[:nc])
+    rates, damage, life = miner._take_kernel_ticks(committed, cycles,
+                                                   np.asarray(times_s, np.float64), res)
+    return TickCommits(committed, rates, res, damage, life, out_r[:nc], out_m[:nc])
