@@ -9,9 +9,9 @@ import pytest
 from scipy import signal
 
 from models.fatigue.sn_curve import SNCurve
-from models.fatigue.spectral import (cycle_rate_hz, damage_rate, damage_rate_from_psd,
-                                     range_density, segment_psds, spectral_moments,
-                                     tovo_benasciutti_b)
+from models.fatigue.spectral import (Periodograms, cycle_rate_hz, damage_rate,
+                                     damage_rate_from_psd, range_density, segment_psds,
+                                     spectral_moments, tovo_benasciutti_b)
 from models.waves import jonswap
 
 FLife = pytest.importorskip("FLife")
@@ -93,3 +93,31 @@ def test_segment_psds_average_to_scipy_welch():
         np.testing.assert_allclose(rows.mean(axis=0), psd_ref, rtol=1e-12, atol=1e-15)
     with pytest.raises(ValueError, match="segment_psds"):
         segment_psds(np.zeros((2, 1)), 20.0)
+
+
+def _fresh_periodograms(x: np.ndarray, fs: float) -> np.ndarray:
+    """The periodograms written as one numpy expression on fresh arrays (the formula
+    segment_psds had before it reused buffers): the bit-level reference."""
+    n = x.shape[1]
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+    spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
+    spec /= fs * float(np.sum(w * w))
+    spec[:, 1:n // 2 + (n % 2)] *= 2.0
+    return spec
+
+
+def test_periodograms_give_each_row_the_same_bits_alone_batched_or_in_a_reused_buffer():
+    rng = np.random.default_rng(11)
+    work = Periodograms(1024, max_rows=40)
+    for m, scale, fs in ((37, 1e6, 20.0), (3, 1e-2, 10.0), (40, 5e8, 19.98), (1, 1.0, 20.0)):
+        x = rng.normal(2.0, 1.0, (m, 1024)) * scale  # a mean to remove, stress-like scales
+        ref = _fresh_periodograms(x, fs)
+        work.rows(m)[:] = x
+        batched = work.compute(m, fs)
+        alone = np.vstack([segment_psds(x[i], fs)[1] for i in range(m)])
+        for got in (batched, alone, segment_psds(x, fs)[1]):
+            assert np.array_equal(got.view(np.int64), ref.view(np.int64))
+    with pytest.raises(ValueError, match="max_rows"):
+        work.rows(41)
+    with pytest.raises(ValueError, match="fs"):
+        work.compute(1, 0.0)

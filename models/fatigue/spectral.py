@@ -207,20 +207,72 @@ def _density(method: str):
     return _dirlik_density if _check_method(method) == "dirlik" else _tb_density
 
 
+def hann(n: int) -> NDArray[np.float64]:
+    """The periodic Hann window of ``n`` points (scipy's ``get_window("hann", n)``)."""
+    return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+
+
+class Periodograms:
+    """The periodograms Welch's estimate averages (Welch 1967): one-sided PSD (units^2/Hz)
+    of segments of ``n`` samples, each its mean removed and a Hann window applied, computed
+    in buffers kept for up to ``max_rows`` segments at a time.
+
+    A stream of slabs then allocates nothing per call: fresh arrays of a few hundred kB
+    (a slab's segments) are new pages for the allocator each time, and the page faults cost
+    several times the arithmetic. Each row is computed on its own (numpy's row-wise mean,
+    pocketfft's one transform per row, elementwise steps), so a row's bits do not depend on
+    the rows beside it or on the buffer: :func:`segment_psds` is this on fresh arrays.
+    """
+
+    def __init__(self, n: int, max_rows: int = 128) -> None:
+        if n < 2 or max_rows < 1:
+            raise ValueError("Periodograms: segments of >= 2 samples, max_rows >= 1")
+        self.n, self.max_rows = n, max_rows
+        self.window = hann(n)
+        self.window_power = float(np.sum(self.window * self.window))
+        self._x = np.empty((0, n))
+        self._spectrum = np.empty((0, n // 2 + 1), complex)
+        self._psd = np.empty((0, n // 2 + 1))
+
+    def rows(self, m: int) -> NDArray[np.float64]:
+        """The input buffer's first ``m`` rows (``1 <= m <= max_rows``), for the caller to
+        fill with segments before :meth:`compute`."""
+        if not 1 <= m <= self.max_rows:
+            raise ValueError(f"Periodograms.rows: m = {m}: need 1 <= m <= max_rows = "
+                             f"{self.max_rows}")
+        if m > self._x.shape[0]:
+            size = min(max(m, 2 * self._x.shape[0]), self.max_rows)
+            self._x = np.empty((size, self.n))
+            self._spectrum = np.empty((size, self.n // 2 + 1), complex)
+            self._psd = np.empty((size, self.n // 2 + 1))
+        return self._x[:m]
+
+    def compute(self, m: int, fs_hz: float) -> NDArray[np.float64]:
+        """The PSD of each of the first ``m`` rows filled (a view of a buffer the next call
+        overwrites; the input rows are overwritten too)."""
+        if not (math.isfinite(fs_hz) and fs_hz > 0):
+            raise ValueError(f"Periodograms.compute: fs = {fs_hz!r}: must be finite and > 0")
+        x = self.rows(m)
+        np.subtract(x, x.mean(axis=1, keepdims=True), out=x)
+        np.multiply(x, self.window, out=x)
+        psd = np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
+        np.square(psd, out=psd)
+        psd /= fs_hz * self.window_power
+        n = self.n
+        psd[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
+        return psd
+
+
 def segment_psds(segments: ArrayLike, fs_hz: float
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One-sided PSD (units^2/Hz) of each equal-length segment (rows), its mean removed and
     a Hann window applied: the periodograms Welch's estimate averages (Welch 1967; their mean
     is ``scipy.signal.welch(x, fs, nperseg=n, noverlap=0)`` over the segments laid end to
-    end). Returns (frequencies, PSD per row)."""
+    end). Returns (frequencies, PSD per row); :class:`Periodograms` for a stream."""
     x = np.atleast_2d(np.asarray(segments, dtype=float))
-    n = x.shape[1]
-    if n < 2 or x.shape[0] == 0 or not (math.isfinite(fs_hz) and fs_hz > 0):
+    if x.shape[1] < 2 or x.shape[0] == 0 or not (math.isfinite(fs_hz) and fs_hz > 0):
         raise ValueError("segment_psds: at least one segment of >= 2 samples and fs > 0")
-    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)  # periodic Hann, as scipy's
-    spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
-    spec /= fs_hz * float(np.sum(w * w))
-    spec[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
-    freqs = np.fft.rfftfreq(n, 1.0 / fs_hz).astype(np.float64, copy=False)
-    return freqs, spec.astype(np.float64, copy=False)
-
+    work = Periodograms(x.shape[1], x.shape[0])
+    work.rows(x.shape[0])[:] = x
+    freqs = np.fft.rfftfreq(x.shape[1], 1.0 / fs_hz).astype(np.float64, copy=False)
+    return freqs, work.compute(x.shape[0], fs_hz)
