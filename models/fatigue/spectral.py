@@ -32,6 +32,7 @@ rainflow path uses it: one damage formula on every path.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Literal, Protocol
@@ -102,7 +103,8 @@ def spectral_moments(f_hz: ArrayLike, psd: ArrayLike) -> SpectralMoments:
     if np.any(g < 0) or np.any(f < 0):
         raise ValueError("a one-sided PSD has f >= 0 and psd >= 0")
     w = 2.0 * np.pi * f
-    m = [float(np.trapezoid(w**i * g, f)) for i in (0, 1, 2, 4)]
+    # the four integrals as the rows of one (each row its own sum: the bits of one by one)
+    m = np.trapezoid(np.stack([w**i * g for i in (0, 1, 2, 4)]), f).tolist()
     if not all(v > 0 for v in m):
         raise ValueError("the spectrum has no variance or no frequency content (m0, m2 or "
                          "m4 is 0)")
@@ -121,11 +123,21 @@ def dirlik_coefficients(mom: SpectralMoments) -> tuple[float, float, float, floa
     return d1, d2, d3, q, r
 
 
-def _dirlik_density(z: NDArray[np.float64], mom: SpectralMoments) -> NDArray[np.float64]:
-    """Dirlik's density of Z = S / (2 sigma) per cycle (integrates to 1)."""
+def _gauss_parts(z: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(-Z^2, exp(-Z^2 / 2)): the factors of the densities that depend on Z alone."""
+    neg_z2 = -z**2
+    return neg_z2, np.exp(neg_z2 / 2.0)
+
+
+def _dirlik_density(z: NDArray[np.float64], mom: SpectralMoments,
+                    parts: tuple[NDArray[np.float64], NDArray[np.float64]]
+                    ) -> NDArray[np.float64]:
+    """Dirlik's density of Z = S / (2 sigma) per cycle (integrates to 1); ``parts``:
+    :func:`_gauss_parts` of ``z``."""
     d1, d2, d3, q, r = dirlik_coefficients(mom)
-    return (d1 / q * np.exp(-z / q) + d2 * z / r**2 * np.exp(-z**2 / (2.0 * r**2))
-            + d3 * z * np.exp(-z**2 / 2.0))
+    neg_z2, rayleigh = parts
+    return (d1 / q * np.exp(-z / q) + d2 * z / r**2 * np.exp(neg_z2 / (2.0 * r**2))
+            + d3 * z * rayleigh)
 
 
 def tovo_benasciutti_b(mom: SpectralMoments) -> float:
@@ -145,19 +157,22 @@ def _tb_weights(mom: SpectralMoments) -> tuple[float, float]:
     return b * mom.nu0_hz, (1.0 - b) * mom.nup_hz
 
 
-def _tb_density(z: NDArray[np.float64], mom: SpectralMoments) -> NDArray[np.float64]:
-    """Tovo-Benasciutti density of Z = S / (2 sigma) (= amplitude / sigma) per cycle."""
+def _tb_density(z: NDArray[np.float64], mom: SpectralMoments,
+                parts: tuple[NDArray[np.float64], NDArray[np.float64]]) -> NDArray[np.float64]:
+    """Tovo-Benasciutti density of Z = S / (2 sigma) (= amplitude / sigma) per cycle;
+    ``parts``: :func:`_gauss_parts` of ``z``."""
     nb, rc = _tb_weights(mom)
     a2 = mom.alpha2
-    return (nb * z * np.exp(-z**2 / 2.0)
-            + rc * z / a2**2 * np.exp(-z**2 / (2.0 * a2**2))) / (nb + rc)
+    neg_z2, rayleigh = parts
+    return (nb * z * rayleigh
+            + rc * z / a2**2 * np.exp(neg_z2 / (2.0 * a2**2))) / (nb + rc)
 
 
 def range_density(range_Pa: ArrayLike, mom: SpectralMoments,
                   method: Method = "dirlik") -> NDArray[np.float64]:
     """Probability density (1/Pa) of the rainflow stress range S per cycle."""
     z = np.asarray(range_Pa, dtype=float) / (2.0 * mom.sigma)
-    return _density(method)(z, mom) / (2.0 * mom.sigma)
+    return _density(method)(z, mom, _gauss_parts(z)) / (2.0 * mom.sigma)
 
 
 def cycle_rate_hz(mom: SpectralMoments, method: Method = "dirlik") -> float:
@@ -173,14 +188,28 @@ def damage_rate(curve: DamageCurve, mom: SpectralMoments,
     ``curve.damage_per_cycle`` (Pa ranges, e.g. ``models.fatigue.SNCurve``) is integrated
     against the method's range density; ``nu * integral p(S) / N(S) dS``.
     """
-    z_max = 60.0 * max(1.0, _scale(mom, method))
+    z, w, parts = _quadrature(60.0 * max(1.0, _scale(mom, method)))
+    dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
+    density = _density(method)(z, mom, parts)
+    return cycle_rate_hz(mom, method) * float(np.sum(w * density * dpc))
+
+
+# a pure function of z_max, memoised: a stream of spectra (the learner's windows) is
+# integrated on a few grids, and building one (and its exponential) was a quarter of a call
+@functools.lru_cache(maxsize=16)
+def _quadrature(z_max: float) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                       tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Gauss-Legendre nodes Z and weights on the panels from 1e-6 to ``z_max``, and
+    :func:`_gauss_parts` of the nodes (read-only arrays)."""
     n = int(_PANELS_PER_DECADE * math.log10(z_max / 1e-6))
     edges = np.geomspace(1e-6, z_max, n + 1)
     half = 0.5 * np.diff(edges)
     z = (edges[:-1, None] + half[:, None] * (1.0 + _GL_X[None, :])).ravel()
     w = (half[:, None] * _GL_W[None, :]).ravel()
-    dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
-    return cycle_rate_hz(mom, method) * float(np.sum(w * _density(method)(z, mom) * dpc))
+    parts = _gauss_parts(z)
+    for a in (z, w, *parts):
+        a.flags.writeable = False
+    return z, w, parts
 
 
 def damage_rate_from_psd(curve: DamageCurve, f_hz: ArrayLike, psd: ArrayLike,
