@@ -98,13 +98,16 @@ def spectral_moments(f_hz: ArrayLike, psd: ArrayLike) -> SpectralMoments:
     g = np.asarray(psd, dtype=float)
     if f.ndim != 1 or f.shape != g.shape or f.size < 2:
         raise ValueError("f_hz and psd must be 1-D arrays of the same length >= 2")
-    if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))) or np.any(np.diff(f) <= 0):
+    if not (np.isfinite(f).all() and np.isfinite(g).all()) or (np.diff(f) <= 0).any():
         raise ValueError("f_hz must be finite and increasing, psd finite")
-    if np.any(g < 0) or np.any(f < 0):
+    if (g < 0).any() or (f < 0).any():
         raise ValueError("a one-sided PSD has f >= 0 and psd >= 0")
     w = 2.0 * np.pi * f
     # the four integrals as the rows of one (each row its own sum: the bits of one by one)
-    m = np.trapezoid(np.stack([w**i * g for i in (0, 1, 2, 4)]), f).tolist()
+    y = np.empty((4, f.size))
+    for row, i in zip(y, (0, 1, 2, 4)):
+        np.multiply(w**i, g, out=row)
+    m = np.trapezoid(y, f).tolist()
     if not all(v > 0 for v in m):
         raise ValueError("the spectrum has no variance or no frequency content (m0, m2 or "
                          "m4 is 0)")
