@@ -12,7 +12,7 @@ of each window, per component:
   one), the window is added to :class:`models.sea_state_table.DamageRateTable` with the
   covered hours;
 * the **Dirlik damage** of the window's stress (Welch PSD of Hann-windowed, non-overlapping
-  segments of ``SEGMENT`` load samples, :func:`models.fatigue.spectral.segment_psds`; a
+  segments of ``SEGMENT`` load samples, :class:`models.fatigue.spectral.Periodograms`; a
   segment's rate is taken from its samples' times, and a segment whose rate differs from the
   window's first by more than 2 % spans a gap and is left out) times the covered seconds is
   set beside the rainflow damage; a window where they differ by more than
@@ -32,7 +32,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
-from models.fatigue.spectral import damage_rate_from_psd, segment_psds
+from models.fatigue.spectral import Periodograms, damage_rate_from_psd
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
 
@@ -57,29 +57,41 @@ class _Spectra:
         self.x = {n: np.array(st.get("x", {}).get(n, []), float) for n in self.names}
         self.psd = {n: np.array(v, float) for n, v in st.get("psd", {}).items()}
 
-    def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
-        t = np.concatenate([self.t, t])
-        x = {n: np.concatenate([self.x[n], stresses[n]]) for n in self.names}
-        full = t.shape[0] // SEGMENT * SEGMENT
-        if full:
-            starts = np.arange(0, full, SEGMENT)
-            spans = (t[starts + SEGMENT - 1] - t[starts]) / 1e9
-            fs = np.where(spans > 0, (SEGMENT - 1) / np.where(spans > 0, spans, 1.0), np.nan)
-            if self.fs is None and np.isfinite(fs).any():
-                self.fs = float(fs[np.isfinite(fs)][0])
-            good = np.isfinite(fs) & (np.abs(fs / (self.fs or 1.0) - 1.0) <= _RATE_TOLERANCE)
-            self.dropped += int(np.count_nonzero(~good))
-            if good.any():
-                for n in self.names:
-                    _, rows = segment_psds(x[n][:full].reshape(-1, SEGMENT)[good], self.fs)
-                    # segment by segment in time order: the same sum for any block split
-                    acc = self.psd.get(n)
-                    for row in rows:
-                        acc = row if acc is None else acc + row
-                    self.psd[n] = acc
-                self.segments += int(np.count_nonzero(good))
-        self.t = t[full:]
-        self.x = {n: v[full:] for n, v in x.items()}
+    def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray],
+             work: Periodograms) -> None:
+        """Samples in time order: every segment they complete is added to the sums."""
+        nc = self.t.shape[0]  # the open segment's samples come first
+        full = (nc + t.shape[0]) // SEGMENT * SEGMENT  # of the open and new samples
+        if not full:
+            self.t = np.concatenate([self.t, t])
+            self.x = {n: np.concatenate([self.x[n], stresses[n]]) for n in self.names}
+            return
+        # segment j is samples [j S, (j + 1) S) of the open ones and t: only the first
+        # starts among the open ones
+        ends = np.arange(SEGMENT - 1 - nc, full - nc, SEGMENT)
+        starts = t[np.maximum(ends - (SEGMENT - 1), 0)]
+        if nc:
+            starts[0] = self.t[0]
+        spans = (t[ends] - starts) / 1e9
+        fs = np.where(spans > 0, (SEGMENT - 1) / np.where(spans > 0, spans, 1.0), np.nan)
+        if self.fs is None and np.isfinite(fs).any():
+            self.fs = float(fs[np.isfinite(fs)][0])
+        good = np.isfinite(fs) & (np.abs(fs / (self.fs or 1.0) - 1.0) <= _RATE_TOLERANCE)
+        self.dropped += int(np.count_nonzero(~good))
+        taken = np.flatnonzero(good)
+        per = work.max_rows // len(self.names)  # segments of each component per batch
+        for a in range(0, taken.shape[0], per):
+            js = taken[a:a + per]
+            m = js.shape[0]
+            rows = work.rows(len(self.names) * m)
+            for i, n in enumerate(self.names):
+                _segments(rows[i * m:(i + 1) * m], js, self.x[n], stresses[n])
+            psd = work.compute(len(self.names) * m, self.fs)  # type: ignore[arg-type]
+            for i, n in enumerate(self.names):
+                self.psd[n] = _sum_in_order(self.psd.get(n), psd[i * m:(i + 1) * m])
+        self.segments += taken.shape[0]
+        self.t = t[full - nc:].astype(np.int64)
+        self.x = {n: stresses[n][full - nc:].astype(float) for n in self.names}
 
     def mean_psd(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
         """(frequencies, mean PSD) of the window, None without a whole segment."""
@@ -117,6 +129,35 @@ class _Spectra:
                 "psd": {n: v.tolist() for n, v in self.psd.items()}}
 
 
+def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray) -> None:
+    """Segments ``js`` (increasing) of the open samples ``open_x`` followed by ``x`` into
+    the rows of ``out``: segment j is samples [j S, (j + 1) S), only the first can start
+    among the open ones."""
+    nc = open_x.shape[0]
+    if nc and js[0] == 0:
+        out[0, :nc] = open_x
+        out[0, nc:] = x[:SEGMENT - nc]
+        out, js = out[1:], js[1:]
+    if not js.shape[0]:
+        return
+    first = js[0] * SEGMENT - nc  # in x
+    if js[-1] - js[0] + 1 == js.shape[0]:  # consecutive: the usual case
+        out[:] = x[first:first + js.shape[0] * SEGMENT].reshape(-1, SEGMENT)
+    else:
+        body = x[first:(js[-1] + 1) * SEGMENT - nc].reshape(-1, SEGMENT)
+        out[:] = body[js - js[0]]
+
+
+def _sum_in_order(acc: np.ndarray | None, rows: np.ndarray) -> np.ndarray:
+    """``acc`` plus each row in turn (from the first row without ``acc``): one addition per
+    segment in time order, so a window's sum is the same for any block split."""
+    if acc is None:
+        acc, rows = rows[0].copy(), rows[1:]
+    for row in rows:
+        np.add(acc, row, out=acc)
+    return acc
+
+
 class _WindowSpectra:
     """:class:`_Spectra` of each learning window for one set of signals fed together."""
 
@@ -125,6 +166,7 @@ class _WindowSpectra:
         st = state or {}
         self.names, self.window_ns = tuple(names), window_ns
         self.current = _Spectra(self.names, st.get("current"))
+        self.work = Periodograms(SEGMENT)
         self.done: dict[int, _Spectra] = {
             int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
 
@@ -137,10 +179,12 @@ class _WindowSpectra:
         if first == last:  # the usual case: the slab lies in one window
             self._feed(first, t_ns, values)
             return
-        index = -(-t_ns // w)
-        cuts = np.flatnonzero(np.diff(index)) + 1
-        for a, b in zip([0, *cuts.tolist()], [*cuts.tolist(), t_ns.shape[0]]):
-            self._feed(int(index[a]), t_ns[a:b], {n: s[a:b] for n, s in values.items()})
+        # window k takes ((k-1) W, k W]: cut after each window end (t_ns is in time order)
+        cuts = np.searchsorted(t_ns, np.arange(first, last, dtype=np.int64) * w, side="right")
+        bounds = [0, *cuts.tolist(), t_ns.shape[0]]
+        for k, a, b in zip(range(first, last + 1), bounds[:-1], bounds[1:]):
+            if b > a:
+                self._feed(k, t_ns[a:b], {n: s[a:b] for n, s in values.items()})
 
     def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         if self.current.index != k:
@@ -148,7 +192,7 @@ class _WindowSpectra:
                 self.done[self.current.index] = self.current
             self.current = _Spectra(self.names)
             self.current.index = k
-        self.current.feed(t_ns, values)
+        self.current.feed(t_ns, values, self.work)
 
     def take(self, k: int) -> _Spectra | None:
         """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""

@@ -9,9 +9,9 @@ import pytest
 from scipy import signal
 
 from models.fatigue.sn_curve import SNCurve
-from models.fatigue.spectral import (cycle_rate_hz, damage_rate, damage_rate_from_psd,
-                                     range_density, segment_psds, spectral_moments,
-                                     tovo_benasciutti_b)
+from models.fatigue.spectral import (Periodograms, cycle_rate_hz, damage_rate,
+                                     damage_rate_from_psd, range_density, segment_psds,
+                                     spectral_moments, tovo_benasciutti_b)
 from models.waves import jonswap
 
 FLife = pytest.importorskip("FLife")
@@ -93,3 +93,83 @@ def test_segment_psds_average_to_scipy_welch():
         np.testing.assert_allclose(rows.mean(axis=0), psd_ref, rtol=1e-12, atol=1e-15)
     with pytest.raises(ValueError, match="segment_psds"):
         segment_psds(np.zeros((2, 1)), 20.0)
+
+
+def _fresh_periodograms(x: np.ndarray, fs: float) -> np.ndarray:
+    """The periodograms written as one numpy expression on fresh arrays (the formula
+    segment_psds had before it reused buffers): the bit-level reference."""
+    n = x.shape[1]
+    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+    spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
+    spec /= fs * float(np.sum(w * w))
+    spec[:, 1:n // 2 + (n % 2)] *= 2.0
+    return spec
+
+
+def test_periodograms_give_each_row_the_same_bits_alone_batched_or_in_a_reused_buffer():
+    rng = np.random.default_rng(11)
+    work = Periodograms(1024, max_rows=40)
+    for m, scale, fs in ((37, 1e6, 20.0), (3, 1e-2, 10.0), (40, 5e8, 19.98), (1, 1.0, 20.0)):
+        x = rng.normal(2.0, 1.0, (m, 1024)) * scale  # a mean to remove, stress-like scales
+        ref = _fresh_periodograms(x, fs)
+        work.rows(m)[:] = x
+        batched = work.compute(m, fs)
+        alone = np.vstack([segment_psds(x[i], fs)[1] for i in range(m)])
+        for got in (batched, alone, segment_psds(x, fs)[1]):
+            assert np.array_equal(got.view(np.int64), ref.view(np.int64))
+    with pytest.raises(ValueError, match="max_rows"):
+        work.rows(41)
+    with pytest.raises(ValueError, match="fs"):
+        work.compute(1, 0.0)
+
+
+def _damage_rate_written_out(curve, f, g, method, ranges):
+    """damage_rate_from_psd as one expression per step, its grid built afresh (the code before
+    the grid was memoised), and the range density at ``ranges``: the bit-level reference."""
+    w = 2.0 * np.pi * f
+    mom = spectral_moments(f, g)
+    m = [float(np.trapezoid(w**i * g, f)) for i in (0, 1, 2, 4)]
+    assert m == [mom.m0, mom.m1, mom.m2, mom.m4]
+    if method == "dirlik":
+        a2 = mom.alpha2
+        xm = mom.m1 / mom.m0 * math.sqrt(mom.m2 / mom.m4)
+        d1 = 2.0 * (xm - a2**2) / (1.0 + a2**2)
+        r = (a2 - xm - d1**2) / (1.0 - a2 - d1 + d1**2)
+        d2 = (1.0 - a2 - d1 + d1**2) / (1.0 - r)
+        d3 = 1.0 - d1 - d2
+        q = 1.25 * (a2 - d3 - d2 * r) / d1
+        z_max = 60.0 * max(1.0, abs(q), abs(r))
+    else:
+        z_max = 60.0
+    n = int(64 * math.log10(z_max / 1e-6))
+    edges = np.geomspace(1e-6, z_max, n + 1)
+    half = 0.5 * np.diff(edges)
+    x, wt = np.polynomial.legendre.leggauss(8)
+    z = (edges[:-1, None] + half[:, None] * (1.0 + x[None, :])).ravel()
+    wz = (half[:, None] * wt[None, :]).ravel()
+
+    def density(z):
+        if method == "dirlik":
+            return (d1 / q * np.exp(-z / q) + d2 * z / r**2 * np.exp(-z**2 / (2.0 * r**2))
+                    + d3 * z * np.exp(-z**2 / 2.0))
+        b = tovo_benasciutti_b(mom)
+        nb, rc = b * mom.nu0_hz, (1.0 - b) * mom.nup_hz
+        return (nb * z * np.exp(-z**2 / 2.0)
+                + rc * z / mom.alpha2**2 * np.exp(-z**2 / (2.0 * mom.alpha2**2))) / (nb + rc)
+
+    dpc = curve.damage_per_cycle(2.0 * mom.sigma * z)
+    rate = cycle_rate_hz(mom, method) * float(np.sum(wz * density(z) * dpc))
+    return rate, density(ranges / (2.0 * mom.sigma)) / (2.0 * mom.sigma)
+
+
+@pytest.mark.parametrize("method", ["dirlik", "tovo_benasciutti"])
+def test_damage_rate_on_the_memoised_grid_has_the_bits_of_a_fresh_one(method):
+    curves = (SNCurve.basquin(3, 12.164), SNCurve.basquin(5, 15.606))
+    for g in _spectra().values():
+        ranges = np.linspace(0.0, 10.0 * math.sqrt(spectral_moments(F, g).m0), 1001)
+        for curve in curves:
+            rate, dens = _damage_rate_written_out(curve, F, g, method, ranges)
+            for _ in range(2):  # the grid built, then reused
+                assert damage_rate_from_psd(curve, F, g, method) == rate
+        got = range_density(ranges, spectral_moments(F, g), method)
+        assert np.array_equal(got.view(np.int64), dens.view(np.int64))

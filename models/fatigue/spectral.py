@@ -32,6 +32,7 @@ rainflow path uses it: one damage formula on every path.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Literal, Protocol
@@ -97,12 +98,16 @@ def spectral_moments(f_hz: ArrayLike, psd: ArrayLike) -> SpectralMoments:
     g = np.asarray(psd, dtype=float)
     if f.ndim != 1 or f.shape != g.shape or f.size < 2:
         raise ValueError("f_hz and psd must be 1-D arrays of the same length >= 2")
-    if not (np.all(np.isfinite(f)) and np.all(np.isfinite(g))) or np.any(np.diff(f) <= 0):
+    if not (np.isfinite(f).all() and np.isfinite(g).all()) or (np.diff(f) <= 0).any():
         raise ValueError("f_hz must be finite and increasing, psd finite")
-    if np.any(g < 0) or np.any(f < 0):
+    if (g < 0).any() or (f < 0).any():
         raise ValueError("a one-sided PSD has f >= 0 and psd >= 0")
     w = 2.0 * np.pi * f
-    m = [float(np.trapezoid(w**i * g, f)) for i in (0, 1, 2, 4)]
+    # the four integrals as the rows of one (each row its own sum: the bits of one by one)
+    y = np.empty((4, f.size))
+    for row, i in zip(y, (0, 1, 2, 4)):
+        np.multiply(w**i, g, out=row)
+    m = np.trapezoid(y, f).tolist()
     if not all(v > 0 for v in m):
         raise ValueError("the spectrum has no variance or no frequency content (m0, m2 or "
                          "m4 is 0)")
@@ -121,11 +126,21 @@ def dirlik_coefficients(mom: SpectralMoments) -> tuple[float, float, float, floa
     return d1, d2, d3, q, r
 
 
-def _dirlik_density(z: NDArray[np.float64], mom: SpectralMoments) -> NDArray[np.float64]:
-    """Dirlik's density of Z = S / (2 sigma) per cycle (integrates to 1)."""
+def _gauss_parts(z: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(-Z^2, exp(-Z^2 / 2)): the factors of the densities that depend on Z alone."""
+    neg_z2 = -z**2
+    return neg_z2, np.exp(neg_z2 / 2.0)
+
+
+def _dirlik_density(z: NDArray[np.float64], mom: SpectralMoments,
+                    parts: tuple[NDArray[np.float64], NDArray[np.float64]]
+                    ) -> NDArray[np.float64]:
+    """Dirlik's density of Z = S / (2 sigma) per cycle (integrates to 1); ``parts``:
+    :func:`_gauss_parts` of ``z``."""
     d1, d2, d3, q, r = dirlik_coefficients(mom)
-    return (d1 / q * np.exp(-z / q) + d2 * z / r**2 * np.exp(-z**2 / (2.0 * r**2))
-            + d3 * z * np.exp(-z**2 / 2.0))
+    neg_z2, rayleigh = parts
+    return (d1 / q * np.exp(-z / q) + d2 * z / r**2 * np.exp(neg_z2 / (2.0 * r**2))
+            + d3 * z * rayleigh)
 
 
 def tovo_benasciutti_b(mom: SpectralMoments) -> float:
@@ -145,19 +160,22 @@ def _tb_weights(mom: SpectralMoments) -> tuple[float, float]:
     return b * mom.nu0_hz, (1.0 - b) * mom.nup_hz
 
 
-def _tb_density(z: NDArray[np.float64], mom: SpectralMoments) -> NDArray[np.float64]:
-    """Tovo-Benasciutti density of Z = S / (2 sigma) (= amplitude / sigma) per cycle."""
+def _tb_density(z: NDArray[np.float64], mom: SpectralMoments,
+                parts: tuple[NDArray[np.float64], NDArray[np.float64]]) -> NDArray[np.float64]:
+    """Tovo-Benasciutti density of Z = S / (2 sigma) (= amplitude / sigma) per cycle;
+    ``parts``: :func:`_gauss_parts` of ``z``."""
     nb, rc = _tb_weights(mom)
     a2 = mom.alpha2
-    return (nb * z * np.exp(-z**2 / 2.0)
-            + rc * z / a2**2 * np.exp(-z**2 / (2.0 * a2**2))) / (nb + rc)
+    neg_z2, rayleigh = parts
+    return (nb * z * rayleigh
+            + rc * z / a2**2 * np.exp(neg_z2 / (2.0 * a2**2))) / (nb + rc)
 
 
 def range_density(range_Pa: ArrayLike, mom: SpectralMoments,
                   method: Method = "dirlik") -> NDArray[np.float64]:
     """Probability density (1/Pa) of the rainflow stress range S per cycle."""
     z = np.asarray(range_Pa, dtype=float) / (2.0 * mom.sigma)
-    return _density(method)(z, mom) / (2.0 * mom.sigma)
+    return _density(method)(z, mom, _gauss_parts(z)) / (2.0 * mom.sigma)
 
 
 def cycle_rate_hz(mom: SpectralMoments, method: Method = "dirlik") -> float:
@@ -173,14 +191,28 @@ def damage_rate(curve: DamageCurve, mom: SpectralMoments,
     ``curve.damage_per_cycle`` (Pa ranges, e.g. ``models.fatigue.SNCurve``) is integrated
     against the method's range density; ``nu * integral p(S) / N(S) dS``.
     """
-    z_max = 60.0 * max(1.0, _scale(mom, method))
+    z, w, parts = _quadrature(60.0 * max(1.0, _scale(mom, method)))
+    dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
+    density = _density(method)(z, mom, parts)
+    return cycle_rate_hz(mom, method) * float(np.sum(w * density * dpc))
+
+
+# a pure function of z_max, memoised: a stream of spectra (the learner's windows) is
+# integrated on a few grids, and building one (and its exponential) was a quarter of a call
+@functools.lru_cache(maxsize=16)
+def _quadrature(z_max: float) -> tuple[NDArray[np.float64], NDArray[np.float64],
+                                       tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Gauss-Legendre nodes Z and weights on the panels from 1e-6 to ``z_max``, and
+    :func:`_gauss_parts` of the nodes (read-only arrays)."""
     n = int(_PANELS_PER_DECADE * math.log10(z_max / 1e-6))
     edges = np.geomspace(1e-6, z_max, n + 1)
     half = 0.5 * np.diff(edges)
     z = (edges[:-1, None] + half[:, None] * (1.0 + _GL_X[None, :])).ravel()
     w = (half[:, None] * _GL_W[None, :]).ravel()
-    dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
-    return cycle_rate_hz(mom, method) * float(np.sum(w * _density(method)(z, mom) * dpc))
+    parts = _gauss_parts(z)
+    for a in (z, w, *parts):
+        a.flags.writeable = False
+    return z, w, parts
 
 
 def damage_rate_from_psd(curve: DamageCurve, f_hz: ArrayLike, psd: ArrayLike,
@@ -207,20 +239,72 @@ def _density(method: str):
     return _dirlik_density if _check_method(method) == "dirlik" else _tb_density
 
 
+def hann(n: int) -> NDArray[np.float64]:
+    """The periodic Hann window of ``n`` points (scipy's ``get_window("hann", n)``)."""
+    return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
+
+
+class Periodograms:
+    """The periodograms Welch's estimate averages (Welch 1967): one-sided PSD (units^2/Hz)
+    of segments of ``n`` samples, each its mean removed and a Hann window applied, computed
+    in buffers kept for up to ``max_rows`` segments at a time.
+
+    A stream of slabs then allocates nothing per call: fresh arrays of a few hundred kB
+    (a slab's segments) are new pages for the allocator each time, and the page faults cost
+    several times the arithmetic. Each row is computed on its own (numpy's row-wise mean,
+    pocketfft's one transform per row, elementwise steps), so a row's bits do not depend on
+    the rows beside it or on the buffer: :func:`segment_psds` is this on fresh arrays.
+    """
+
+    def __init__(self, n: int, max_rows: int = 128) -> None:
+        if n < 2 or max_rows < 1:
+            raise ValueError("Periodograms: segments of >= 2 samples, max_rows >= 1")
+        self.n, self.max_rows = n, max_rows
+        self.window = hann(n)
+        self.window_power = float(np.sum(self.window * self.window))
+        self._x = np.empty((0, n))
+        self._spectrum = np.empty((0, n // 2 + 1), complex)
+        self._psd = np.empty((0, n // 2 + 1))
+
+    def rows(self, m: int) -> NDArray[np.float64]:
+        """The input buffer's first ``m`` rows (``1 <= m <= max_rows``), for the caller to
+        fill with segments before :meth:`compute`."""
+        if not 1 <= m <= self.max_rows:
+            raise ValueError(f"Periodograms.rows: m = {m}: need 1 <= m <= max_rows = "
+                             f"{self.max_rows}")
+        if m > self._x.shape[0]:
+            size = min(max(m, 2 * self._x.shape[0]), self.max_rows)
+            self._x = np.empty((size, self.n))
+            self._spectrum = np.empty((size, self.n // 2 + 1), complex)
+            self._psd = np.empty((size, self.n // 2 + 1))
+        return self._x[:m]
+
+    def compute(self, m: int, fs_hz: float) -> NDArray[np.float64]:
+        """The PSD of each of the first ``m`` rows filled (a view of a buffer the next call
+        overwrites; the input rows are overwritten too)."""
+        if not (math.isfinite(fs_hz) and fs_hz > 0):
+            raise ValueError(f"Periodograms.compute: fs = {fs_hz!r}: must be finite and > 0")
+        x = self.rows(m)
+        np.subtract(x, x.mean(axis=1, keepdims=True), out=x)
+        np.multiply(x, self.window, out=x)
+        psd = np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
+        np.square(psd, out=psd)
+        psd /= fs_hz * self.window_power
+        n = self.n
+        psd[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
+        return psd
+
+
 def segment_psds(segments: ArrayLike, fs_hz: float
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One-sided PSD (units^2/Hz) of each equal-length segment (rows), its mean removed and
     a Hann window applied: the periodograms Welch's estimate averages (Welch 1967; their mean
     is ``scipy.signal.welch(x, fs, nperseg=n, noverlap=0)`` over the segments laid end to
-    end). Returns (frequencies, PSD per row)."""
+    end). Returns (frequencies, PSD per row); :class:`Periodograms` for a stream."""
     x = np.atleast_2d(np.asarray(segments, dtype=float))
-    n = x.shape[1]
-    if n < 2 or x.shape[0] == 0 or not (math.isfinite(fs_hz) and fs_hz > 0):
+    if x.shape[1] < 2 or x.shape[0] == 0 or not (math.isfinite(fs_hz) and fs_hz > 0):
         raise ValueError("segment_psds: at least one segment of >= 2 samples and fs > 0")
-    w = 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)  # periodic Hann, as scipy's
-    spec = np.abs(np.fft.rfft((x - x.mean(axis=1, keepdims=True)) * w, axis=1)) ** 2
-    spec /= fs_hz * float(np.sum(w * w))
-    spec[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
-    freqs = np.fft.rfftfreq(n, 1.0 / fs_hz).astype(np.float64, copy=False)
-    return freqs, spec.astype(np.float64, copy=False)
-
+    work = Periodograms(x.shape[1], x.shape[0])
+    work.rows(x.shape[0])[:] = x
+    freqs = np.fft.rfftfreq(x.shape[1], 1.0 / fs_hz).astype(np.float64, copy=False)
+    return freqs, work.compute(x.shape[0], fs_hz)
