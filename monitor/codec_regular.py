@@ -76,23 +76,32 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
             out = vals[j]
             i = pos
             acc = 0
-            z = 0
-            shift = 0
-            for s in range(a, body_end):
-                byte = np.int64(buf[s])
-                z |= (byte & 0x7F) << shift
-                if byte < 0x80:
-                    if i >= cap:
-                        return False, nsamp, t, vals, pos
-                    acc += unzigzag(z)
-                    out[i] = acc * q
-                    i += 1
-                    z = 0
-                    shift = 0
-                else:
-                    shift += 7
-                    if shift >= 63:  # overlong: let the general kernel say so
-                        return False, nsamp, t, vals, pos
+            s = a
+            last = body_end - 1
+            while s < body_end:
+                if i >= cap:
+                    return False, nsamp, t, vals, pos
+                # one- and two-byte varints without a branch on the length (their mix is
+                # the data's: a branch on it mispredicts); longer ones in a loop
+                b0 = np.int64(buf[s])
+                b1 = np.int64(buf[min(s + 1, last)])
+                c0 = b0 >> 7
+                z = (b0 & 0x7F) | (((b1 & 0x7F) << 7) * c0)
+                s += 1 + c0
+                if c0 & (b1 >> 7):
+                    shift = 14
+                    while True:
+                        byte = np.int64(buf[s])
+                        s += 1
+                        z |= (byte & 0x7F) << shift
+                        if byte < 0x80:
+                            break
+                        shift += 7
+                        if shift >= 63:  # overlong: let the general kernel say so
+                            return False, nsamp, t, vals, pos
+                acc += unzigzag(z)
+                out[i] = acc * q
+                i += 1
             if n < 0:
                 n = i - pos
             elif i - pos != n:
@@ -104,7 +113,13 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
             t[pos + i] = t0 + i * period
         nsamp[k] = n
         pos += n
-    return True, nsamp, t, vals, pos
+    # the samples lie at the front of each over-allocated row: move the rows together, left
+    # and in place (memory already touched, no new array), for the caller to view
+    flat = vals.reshape(nf * cap)
+    for j in range(1, nf):
+        for i in range(pos):
+            flat[j * pos + i] = flat[j * cap + i]
+    return True, nsamp, t, flat[:nf * pos].reshape((nf, pos)), pos
 
 
 def _tag(field: int, wire_type: int) -> int:
@@ -125,5 +140,4 @@ def decode_regular(buf: np.ndarray, offs: np.ndarray, lens: np.ndarray, numbers:
         np.array([_tag(f, 2) for f in fn_vals], np.int64), _tag(sub[0], 1), _tag(sub[1], 2))
     if not ok:
         return None
-    return (np.zeros(offs.shape[0], np.int8), nsamp, t[:total].copy(),
-            np.ascontiguousarray(vals[:, :total]))
+    return np.zeros(offs.shape[0], np.int8), nsamp, t[:total], vals

@@ -49,6 +49,25 @@ class Slab(dict):
         self.copies: dict[str, int] = {}
 
 
+# One buffered run of samples: times and one array per field. The arrays are the blocks' own
+# (no copy when a block is pushed); take() copies the values it releases once, into the slab.
+_Part = tuple[np.ndarray, tuple[np.ndarray, ...]]
+
+
+def _joined(parts: Sequence[_Part]) -> tuple[np.ndarray, np.ndarray]:
+    """The parts' samples in one time array (the part's own if only one) and one new
+    ``(n_fields, n)`` value array."""
+    t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
+    values = np.empty((len(parts[0][1]), t.shape[0]))
+    at = 0
+    for pt, fields in parts:
+        n = pt.shape[0]
+        for row, f in zip(values, fields):
+            row[at:at + n] = f
+        at += n
+    return t, values
+
+
 class ReorderBuffer:
     """Per-stream buffers of received samples and the watermark rule above."""
 
@@ -57,28 +76,28 @@ class ReorderBuffer:
         self.load_streams = tuple(load_streams)
         self.horizon_ns = int(horizon_ns)
         self.gate_all = gate_all
-        self._pending: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {s: [] for s in SENSOR_ORDER}
+        self._pending: dict[str, list[_Part]] = {s: [] for s in SENSOR_ORDER}
         self.received_max: dict[str, int] = {}
         self._in_order = dict.fromkeys(SENSOR_ORDER, True)
         if state is not None:
             self.received_max = {k: int(v) for k, v in state["received_max"].items()}
             for sensor, (t, values) in state["pending"].items():
                 t = np.array(t, dtype=np.int64)
+                values = np.array(values, dtype=np.float64)  # null -> NaN
                 self._pending[sensor].append(
-                    (t, np.array(values, dtype=np.float64).reshape(len(SENSOR_FIELDS[sensor]), -1)))  # null -> NaN
+                    (t, tuple(values.reshape(len(SENSOR_FIELDS[sensor]), -1))))
                 self._in_order[sensor] = not bool(np.any(t[1:] < t[:-1]))
 
     def push(self, block: SampleBlock) -> None:
         if len(block) == 0:
             return
         t = block.t_ns
-        values = np.stack([block.fields[f] for f in SENSOR_FIELDS[block.sensor]])
         parts = self._pending[block.sensor]
         # the usual case: sorted blocks arriving in order; then take() never re-sorts
         if self._in_order[block.sensor] and (
                 (parts and t[0] < parts[-1][0][-1]) or bool(np.any(t[1:] < t[:-1]))):
             self._in_order[block.sensor] = False
-        parts.append((t, values))
+        parts.append((t, tuple(block.fields[f] for f in SENSOR_FIELDS[block.sensor])))
         newest = int(t.max())
         self.received_max[block.sensor] = max(self.received_max.get(block.sensor, _NEVER), newest)
 
@@ -116,8 +135,7 @@ class ReorderBuffer:
             if not parts:
                 continue
             if not self._in_order[sensor]:
-                t = np.concatenate([p[0] for p in parts])
-                values = np.concatenate([p[1] for p in parts], axis=1)
+                t, values = _joined(parts)
                 order = np.argsort(t, kind="stable")
                 t, values = t[order], values[:, order]
                 copy = (t[1:] == t[:-1]) & ((values[:, 1:] == values[:, :-1]) | (
@@ -126,25 +144,22 @@ class ReorderBuffer:
                     keep = np.r_[True, ~copy]
                     t, values = t[keep], values[:, keep]
                     slab.copies[sensor] = int(np.count_nonzero(copy))
-                parts = [(t, values)]
+                parts = [(t, tuple(values))]
                 self._in_order[sensor] = True
             # parts are sorted and in order: the samples taken are a prefix of them
             taken, rest = [], []
-            for t, values in parts:
+            for t, fields in parts:
                 if upto_ns is None or t[-1] <= upto_ns:
-                    taken.append((t, values))
+                    taken.append((t, fields))
                 elif t[0] > upto_ns:
-                    rest.append((t, values))
+                    rest.append((t, fields))
                 else:
                     cut = int(np.searchsorted(t, upto_ns, side="right"))
-                    taken.append((t[:cut], values[:, :cut]))
-                    rest.append((t[cut:], values[:, cut:]))
+                    taken.append((t[:cut], tuple(f[:cut] for f in fields)))
+                    rest.append((t[cut:], tuple(f[cut:] for f in fields)))
             self._pending[sensor] = rest
-            if len(taken) == 1:
-                slab[sensor] = taken[0]
-            elif taken:
-                slab[sensor] = (np.concatenate([p[0] for p in taken]),
-                                np.concatenate([p[1] for p in taken], axis=1))
+            if taken:
+                slab[sensor] = _joined(taken)
         return slab
 
     def buffered(self) -> int:
@@ -155,8 +170,8 @@ class ReorderBuffer:
         for sensor in SENSOR_ORDER:
             parts = self._pending[sensor]
             if parts:
-                t = np.concatenate([p[0] for p in parts])
-                values = np.concatenate([p[1] for p in parts], axis=1).ravel()
+                t, values = _joined(parts)
+                values = values.ravel()
                 # strict JSON: NaN/inf (not validated yet) become null, read back as NaN,
                 # which validation rejects with the same reason ("nan")
                 flat = [v if np.isfinite(v) else None for v in values.tolist()]

@@ -41,15 +41,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def wanted(args: argparse.Namespace) -> bool:
-    """Fleet mode: a fleet option is given, or the logs hold other than exactly one buoy."""
+    """Fleet mode: a fleet option is given, or the logs hold other than exactly one buoy.
+    The buoys found are kept in ``args.archives`` for :func:`run`, which then needs no second
+    discovery (a file without a summary is read whole to find its buoys)."""
     if args.workers != 1 or args.cluster or args.report_dir or args.whatif or args.set_:
         return True
     from replay.fleet import discover
 
     try:
-        return len(discover(args.logs)) > 1
+        args.archives = discover(args.logs)
     except FileNotFoundError:
         return False  # the single-log path reports the missing file
+    return len(args.archives) > 1
 
 
 def _check(args: argparse.Namespace) -> str | None:
@@ -81,7 +84,9 @@ def run(args: argparse.Namespace, config: Config) -> int:
         return 2
     try:
         whatif = load_whatif(args.whatif, args.set_) if (args.whatif or args.set_) else None
-        archives = discover(args.logs)
+        archives = getattr(args, "archives", None)
+        if archives is None:
+            archives = discover(args.logs)
     except ConfigError as exc:
         print(exc, file=sys.stderr)
         return 2

@@ -6,6 +6,7 @@ alike."""
 
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from typing import Iterator
 
 import numpy as np
@@ -17,29 +18,57 @@ from replay.salvage import FileContext, FileStats
 
 
 class _Stream:
-    """Pending (not yet released) samples of one topic, across files."""
+    """Pending (not yet released) samples of one topic, across files: one part per run of
+    records, each holding whole messages, kept as decoded (never joined into one store:
+    a block is a view of one part, or joins only its own samples)."""
 
     def __init__(self, topic: str, buoy_id: str, sensor: str):
         self.topic, self.buoy_id, self.sensor = topic, buoy_id, sensor
         self.nf = len(SENSOR_FIELDS[sensor])
-        self.t_parts: list[np.ndarray] = []
-        self.v_parts: list[np.ndarray] = []
-        self.length = 0
+        self.parts: list[tuple[np.ndarray, np.ndarray]] = []
+        self.bounds = [0]  # start index of each part, then the end of the last one
+
+    @property
+    def length(self) -> int:
+        return self.bounds[-1]
 
     def add(self, t: np.ndarray, v: np.ndarray) -> int:
-        """Append samples; return their start index in the stream's pending store."""
+        """Append samples; return their start index in the stream's pending samples."""
         start = self.length
-        self.t_parts.append(t)
-        self.v_parts.append(v)
-        self.length += t.shape[0]
+        self.parts.append((t, v))
+        self.bounds.append(start + t.shape[0])
         return start
 
-    def store(self) -> tuple[np.ndarray, np.ndarray]:
-        if len(self.t_parts) != 1:
-            self.t_parts = [np.concatenate(self.t_parts) if self.t_parts else np.empty(0, np.int64)]
-            self.v_parts = [np.concatenate(self.v_parts, axis=1) if self.v_parts
-                            else np.empty((self.nf, 0))]
-        return self.t_parts[0], self.v_parts[0]
+    def take(self, start: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Samples of messages (start, n) in that order: views of a part when they are
+        contiguous in it (usual)."""
+        if start.shape[0] == 0:
+            return np.empty(0, np.int64), np.empty((self.nf, 0))
+        if np.array_equal(start[1:], start[:-1] + n[:-1]):
+            return self._span(int(start[0]), int(start[-1] + n[-1]))
+        t, v = self._span(0, self.length)  # out of read order (rare): join, then gather
+        idx = _gather_index(start, n)
+        return t[idx], v[:, idx]
+
+    def _span(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """Samples ``a .. b - 1``: views when they lie in one part."""
+        if a >= b:
+            return np.empty(0, np.int64), np.empty((self.nf, 0))
+        first = bisect_right(self.bounds, a) - 1
+        last = bisect_left(self.bounds, b) - 1
+        pieces = [(t[max(a - lo, 0):b - lo], v[:, max(a - lo, 0):b - lo])
+                  for (t, v), lo in zip(self.parts[first:last + 1], self.bounds[first:last + 1])]
+        if len(pieces) == 1:
+            return pieces[0]
+        return (np.concatenate([p[0] for p in pieces]),
+                np.concatenate([p[1] for p in pieces], axis=1))
+
+    def keep_only(self, start: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """Drop every sample but those of messages (start, n); return their new starts."""
+        t, v = self.take(start, n)
+        self.parts = [(t, v)] if t.shape[0] else []
+        self.bounds = [0, t.shape[0]] if t.shape[0] else [0]
+        return np.cumsum(n) - n
 
 
 def _gather_index(start: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -49,18 +78,6 @@ def _gather_index(start: np.ndarray, n: np.ndarray) -> np.ndarray:
         return np.empty(0, np.int64)
     first = np.cumsum(n) - n
     return np.repeat(start - first, n) + np.arange(total)
-
-
-def _take(t: np.ndarray, v: np.ndarray, start: np.ndarray, n: np.ndarray
-          ) -> tuple[np.ndarray, np.ndarray]:
-    """Samples of messages (start, n) in that order: views when they are contiguous (usual)."""
-    if start.shape[0] == 0:
-        return t[:0], v[:, :0]
-    if np.array_equal(start[1:], start[:-1] + n[:-1]):
-        a, b = int(start[0]), int(start[-1] + n[-1])
-        return t[a:b], v[:, a:b]
-    idx = _gather_index(start, n)
-    return t[idx], v[:, idx]
 
 
 _COLS = ("stream", "pub", "log", "start", "n", "seq")
@@ -167,33 +184,28 @@ class StreamMerge:
         rank = np.argsort(np.argsort([s.topic for s in self._streams]))
         order = np.lexsort((rel["seq"], rank[rel["stream"]], rel["pub"]))
         rel = {k: v[order] for k, v in rel.items()}
-        stores = {int(s): self._streams[s].store() for s in np.unique(tab["stream"])}
         # a release is as long as a chunk: cut it into spans of at most COALESCE_S of sensor
         # time, so no coalesced block runs ahead of the other streams by more than that
         span = (rel["pub"] - rel["pub"][0]) // COALESCE_NS if rel["pub"].shape[0] else rel["pub"]
         cuts = np.flatnonzero(np.r_[True, span[1:] != span[:-1], True])
         blocks = [b for a, z in zip(cuts[:-1], cuts[1:])
-                  for b in self._blocks({k: v[a:z] for k, v in rel.items()}, stores, rank)]
-        # compact: keep only the held-back samples in the stores
-        for s, (t, v) in stores.items():
-            stream = self._streams[s]
+                  for b in self._blocks({k: v[a:z] for k, v in rel.items()}, rank)]
+        # compact: keep only the held-back samples
+        for s in np.unique(tab["stream"]).tolist():
             mine = keep["stream"] == s
-            kt, kv = _take(t, v, keep["start"][mine], keep["n"][mine])
-            stream.t_parts, stream.v_parts = [kt], [kv]
-            stream.length = kt.shape[0]
-            keep["start"][mine] = np.cumsum(keep["n"][mine]) - keep["n"][mine]
+            keep["start"][mine] = self._streams[s].keep_only(keep["start"][mine],
+                                                             keep["n"][mine])
         self._pending = [keep] if keep["pub"].shape[0] else []
         yield from blocks
 
-    def _blocks(self, rel: dict, stores: dict, rank: np.ndarray) -> list[SampleBlock]:
+    def _blocks(self, rel: dict, rank: np.ndarray) -> list[SampleBlock]:
         out: list[tuple[int, int, int, SampleBlock]] = []
         for s in np.unique(rel["stream"]).tolist():
             mine = np.flatnonzero(rel["stream"] == s)
             stream = self._streams[s]
-            t, v = stores[s]
             names = list(SENSOR_FIELDS[stream.sensor])
             if self.coalesce:
-                tt, vv = _take(t, v, rel["start"][mine], rel["n"][mine])
+                tt, vv = stream.take(rel["start"][mine], rel["n"][mine])
                 blk = SampleBlock(stream.buoy_id, stream.sensor, tt,
                                   {f: vv[q] for q, f in enumerate(names)},
                                   int(rel["log"][mine].max()))
@@ -201,8 +213,9 @@ class StreamMerge:
                 continue
             for k in mine.tolist():
                 a, n = int(rel["start"][k]), int(rel["n"][k])
-                blk = SampleBlock(stream.buoy_id, stream.sensor, t[a:a + n].copy(),
-                                  {f: v[q, a:a + n].copy() for q, f in enumerate(names)},
+                t, v = stream._span(a, a + n)
+                blk = SampleBlock(stream.buoy_id, stream.sensor, t.copy(),
+                                  {f: v[q].copy() for q, f in enumerate(names)},
                                   int(rel["log"][k]))
                 out.append((0, 0, k, blk))
         out.sort(key=lambda x: x[:3])

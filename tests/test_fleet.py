@@ -219,3 +219,28 @@ def test_cli_rejects_single_buoy_options_in_fleet_mode(archive, capsys):
     assert "--speed applies to one buoy" in capsys.readouterr().err
     assert main(["replay", str(archive), "--workers", "0"]) == 2
     assert "--workers 0: must be >= 1" in capsys.readouterr().err
+
+
+def test_cli_reads_a_file_without_summary_once_to_find_its_buoys(tmp_path, monkeypatch, capsys):
+    """Two buoys, one file cut short (no summary: read whole for its buoys): the check for
+    fleet mode and the fleet run share one discovery."""
+    import numpy as np
+
+    import replay.fleet as fleet
+    from monitor.blocks import SampleBlock
+    from replay.writer import LogWriter
+
+    t0 = 1_600_000_000 * 10**9
+    for buoy in ("b1", "b2"):
+        with LogWriter(tmp_path / f"{buoy}.mcap") as w:
+            for s in range(60):
+                t = t0 + s * 10**9 + np.arange(20, dtype=np.int64) * 50_000_000
+                w.write_block(SampleBlock(buoy, "tension", t, {"tension_N": 5000.0 + 0 * t}))
+    cut = tmp_path / "b2.mcap"
+    cut.write_bytes(cut.read_bytes()[:-200])  # the footer and summary gone
+    scanned = []
+    whole = fleet._scan_buoys_and_start
+    monkeypatch.setattr(fleet, "_scan_buoys_and_start", lambda p: scanned.append(p) or whole(p))
+    assert main(["replay", str(tmp_path), "--no-progress"]) == 0
+    assert "fleet: 2 buoy(s)" in capsys.readouterr().out
+    assert [Path(p).name for p in scanned] == ["b2.mcap"]
