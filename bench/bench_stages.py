@@ -11,13 +11,26 @@ replay warms the caches and is not counted). Stages:
 ``  check_factor``  CheckFactor.check (motion streams only)
 ``estimator``       the pipeline's estimator feed (_ModelsEstimator.feed, the rate tracker, the
                     IMU integrator, the quasi-static lookup and the dynamic core)
-``  imu``           DisplacementIntegrator.update
-``  quasi_static``  the quasi-static model's lookup of the wanted samples
-``selector``        LoadSelector.needed + select
+``  imu``           DisplacementIntegrator.update (not called once the estimator integrates
+                    the IMU in its own loop: then inside ``estimator``)
+``  quasi_static``  the quasi-static model's lookup of the wanted samples (per call: in the
+                    default configuration one sample per slab is wanted)
+``selector``        LoadSelector.needed + select (per estimated sample)
 ``stress``          Component.stress (every component)
 
-Figures (2-core Xeon shared with other jobs, 2026-11-25; ns per sample of the stage's input,
-1-day bench log, best of 5) are in the commit messages of the branch that added this script.
+Measured 2026-11-25 on the 2-core Xeon shared with 7 other jobs (load 4-5: figures are
+best of 5 and move by 10-20 % between runs), 1-day bench log, main at 7e8ba84 against the
+branch estval, run one after the other:
+
+    stage          main 7e8ba84            estval
+    validate       85.0 ms  32.8 ns/sample  44.0 ms  17.0 ns/sample
+      qc           32.5 ms  12.5            20.1 ms   7.8
+    estimator      82.4 ms  95.3            46.3 ms  53.6
+      imu          19.8 ms  22.9            (in the estimator's loop)
+      quasi_static  8.2 ms  62 calls         8.7 ms  62 calls
+    selector       15.6 ms  18.0             6.2 ms   7.2
+    stress          8.6 ms   2.5             7.5 ms   2.2
+    replay CPU     0.739 s                  0.617 s
 
 Run: PYTHONPATH=. python bench/bench_stages.py [LOG] [N]
 """
