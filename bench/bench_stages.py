@@ -11,13 +11,26 @@ replay warms the caches and is not counted). Stages:
 ``  check_factor``  CheckFactor.check (motion streams only)
 ``estimator``       the pipeline's estimator feed (_ModelsEstimator.feed, the rate tracker, the
                     IMU integrator, the quasi-static lookup and the dynamic core)
-``  imu``           DisplacementIntegrator.update
-``  quasi_static``  the quasi-static model's lookup of the wanted samples
-``selector``        LoadSelector.needed + select
+``  imu``           DisplacementIntegrator.update (not called once the estimator integrates
+                    the IMU in its own loop: then inside ``estimator``)
+``  quasi_static``  the quasi-static model's lookup of the wanted samples (per call: in the
+                    default configuration one sample per slab is wanted)
+``selector``        LoadSelector.needed + select (per estimated sample)
 ``stress``          Component.stress (every component)
 
-Figures (2-core Xeon shared with other jobs, 2026-11-25; ns per sample of the stage's input,
-1-day bench log, best of 5) are in the commit messages of the branch that added this script.
+Measured 2026-11-25 19:10 UTC on the 2-core Xeon shared with 7 other jobs (load 7: figures
+are best of 5 and move by 10-20 % between runs), 1-day bench log, main at 7e8ba84 against
+the branch estval at d96e0e6, two rounds run one after the other (the range of the two):
+
+    stage          main 7e8ba84                  estval
+    validate       69.5-70.9 ms  26.8-27.4 ns    39.4-44.5 ms  15.2-17.2 ns per sample
+      qc           27.9-29.2     10.8-11.3       18.8-19.7      7.3-7.6
+    estimator      68.7-75.4     79.5-87.2       44.1-45.1     51.1-52.2
+      imu          17.1-18.2     19.8-21.0       (in the estimator's loop)
+      quasi_static  6.9 ms, 62 calls              7.7-8.7 ms, 62 calls
+    selector       10.6-11.4     12.3-13.2       5.6-6.1        6.4-7.0 (per estimate)
+    stress          6.6-6.7       1.9             6.7-8.0        1.9-2.3
+    replay CPU     0.636-0.637 s                 0.585-0.601 s
 
 Run: PYTHONPATH=. python bench/bench_stages.py [LOG] [N]
 """

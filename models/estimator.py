@@ -275,11 +275,11 @@ _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 
 
 # no IMU integration in _advance: positions given
-_NO_ACCEL, _NO_SOS, _NO_ZI = np.empty((3, 0)), np.empty((0, 6)), np.empty((3, 0, 2))
+_NO_ACCEL, _NO_SOS, _NO_ZI = np.empty(0), np.empty((0, 6)), np.empty((3, 0, 2))
 
 
 @kernel()
-def _advance(p, fresh, accel, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
+def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
              total, qs, axial, drag, angle, flags):
     """The stream over a block: every sample's position and drag increment, the other
     outputs as for a sample not wanted (NaN tension, quasi-static and angle, no axial
@@ -288,21 +288,21 @@ def _advance(p, fresh, accel, sos, zi, span, height, dt, drag_on, drag_k, drag_b
 
     p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
     ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
-    ``accel`` holds the block's (3, n) IMU accelerations, integrated here sample by sample
+    ``ax, ay, az`` hold the block's n IMU accelerations, integrated here sample by sample
     (:func:`models.imu.sos_step`, the integrator's sections ``sos`` and memory ``zi``): the
     filter's chains of operations then overlap the jerk ODE's in one loop.
     """
     n = total.size
-    integrate = accel.shape[1] == n
+    integrate = az.size == n
     if integrate:
         bad = False
-        for c in range(3):
-            for i in range(n):  # x - x is 0 for finite x, NaN otherwise; the OR vectorises
-                bad |= (accel[c, i] - accel[c, i]) != 0.0
+        for i in range(n):  # x - x is 0 for finite x, NaN otherwise; the OR vectorises
+            bad |= ((ax[i] - ax[i]) != 0.0) | ((ay[i] - ay[i]) != 0.0) | ((az[i] - az[i]) != 0.0)
         if bad:
             return False, y0
-        for c in range(3):
-            p[c, 2] = sos_step(sos, zi, c, accel[c, 0])
+        p[0, 2] = sos_step(sos, zi, 0, ax[0])
+        p[1, 2] = sos_step(sos, zi, 1, ay[0])
+        p[2, 2] = sos_step(sos, zi, 2, az[0])
     if fresh:
         for c in range(3):
             p[c, 0] = p[c, 2]
@@ -314,8 +314,9 @@ def _advance(p, fresh, accel, sos, zi, span, height, dt, drag_on, drag_k, drag_b
     for i in range(n):
         j = i + 2
         if integrate and i > 0:
-            for c in range(3):
-                p[c, j] = sos_step(sos, zi, c, accel[c, i])
+            p[0, j] = sos_step(sos, zi, 0, ax[i])
+            p[1, j] = sos_step(sos, zi, 1, ay[i])
+            p[2, j] = sos_step(sos, zi, 2, az[i])
         d_i = 0.0
         if drag_on:
             xs = span + p[0, j]
@@ -470,10 +471,8 @@ class MotionTensionEstimator:
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
         Samples before the integrator has settled are flagged SETTLING."""
         az = _as_block("accel_z", accel_z, None, finite=False)
-        a = np.empty((3, az.size))
-        a[0] = _as_block("accel_x", accel_x, az.size, finite=False)
-        a[1] = _as_block("accel_y", accel_y, az.size, finite=False)
-        a[2] = az
+        a = (_as_block("accel_x", accel_x, az.size, finite=False),
+             _as_block("accel_y", accel_y, az.size, finite=False), az)
         if self._imu is None:
             self._imu = DisplacementIntegrator(self.config.dt, self.config.imu_f_cut, channels=3)
             if self._imu_saved is not None:
@@ -484,9 +483,9 @@ class MotionTensionEstimator:
         try:
             if heading_deg is None:  # integrated in the estimator's loop
                 return self._estimate(None, None, None, settling, want, (a, self._imu))
-            d = self._imu.update(a)
+            d = self._imu.update(np.stack(a))
         except ValueError:
-            if np.all(np.isfinite(a)):  # not the input's (the quasi-static model's)
+            if all(np.all(np.isfinite(row)) for row in a):  # not the input's (the model's)
                 raise
             for name, row in zip(("accel_x", "accel_y", "accel_z"), a):
                 _as_block(name, row, az.size)  # names the field
@@ -496,13 +495,13 @@ class MotionTensionEstimator:
 
     # ------------------------------------------------------------------ core
     def _estimate(self, x, y, z, settling: int, want=None,
-                  integrate: tuple[NDArray[np.float64], DisplacementIntegrator] | None = None
-                  ) -> Estimate:
+                  integrate: tuple[tuple[NDArray[np.float64], ...], DisplacementIntegrator]
+                  | None = None) -> Estimate:
         """``settling``: how many of the first samples the IMU integrator still settles;
-        ``integrate``: the (3, n) IMU accelerations to integrate here and the integrator
-        (then x, y, z are None)."""
+        ``integrate``: the IMU accelerations (x, y, z rows of n) to integrate here and the
+        integrator (then x, y, z are None)."""
         c = self.config
-        n = z.size if integrate is None else integrate[0].shape[1]
+        n = z.size if integrate is None else integrate[0][2].size
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
@@ -510,16 +509,17 @@ class MotionTensionEstimator:
         fresh = self._hist is None
         if not fresh:
             p[:, :2] = self._hist
+        accel: tuple[NDArray[np.float64], ...]
         if integrate is None:
             p[0, 2:], p[1, 2:], p[2, 2:] = x, y, z
-            accel, sos, zi = _NO_ACCEL, _NO_SOS, _NO_ZI
+            accel, sos, zi = (_NO_ACCEL,) * 3, _NO_SOS, _NO_ZI
         else:
             accel, imu = integrate
             sos, zi = imu.loop_state()
         total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
                                          np.empty(n))
         flags = np.empty(n, np.uint8)
-        ok, jerk_y = _advance(p, fresh, accel, sos, zi, c.span, c.height, c.dt,
+        ok, jerk_y = _advance(p, fresh, *accel, sos, zi, c.span, c.height, c.dt,
                               c.drag is not None, self._drag_k, self._drag_b, self._jerk_y,
                               total, qs, axial, drag, angle, flags)
         if not ok:
