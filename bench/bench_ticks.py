@@ -19,23 +19,25 @@ CPU time per tick (best of ``--runs`` passes over ``--reps`` slabs) of
 ``--repo`` runs the same figures on another checkout (e.g. main) for a before/after in one
 session: the parts' interfaces are the same there.
 
-Measured 2026-11-25 18:35 UTC on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz, load
-average 5-6 from other work), CPU us per tick, best of 7, two interleaved sessions
+Measured 2026-11-25 19:07 UTC on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz, load
+average 8 from other work), CPU us per tick, best of 7, two interleaved sessions
 (``--repo /work/main`` = before, main at 7e8ba84; after = branch ticks):
 
     part              before        after
-    run_ticks         6.82 / 7.25   3.24 / 3.27
-    tick_load         0.78 / 0.78   0.64 / 0.64
-    stream_health     0.90 / 0.86   0.90 / 0.92
-    estimate_means    1.30 / 1.32   0.13 / 0.13
-    damage_split      0.53 / 0.54   0.54 / 0.56
+    run_ticks         7.32 / 7.33   3.35 / 3.31
+    tick_load         0.78 / 0.78   0.66 / 0.65
+    stream_health     0.87 / 0.86   0.68 / 0.63
+    estimate_means    1.33 / 1.32   0.13 / 0.13
+    damage_split      0.56 / 0.55   0.53 / 0.53
 
-Of ``run_ticks`` after, about 2.9 us is the compiled rainflow/Miner pass itself (1.4 us
-per component and tick counting and committing 200 samples, 0.4 us the open residue's
+Of ``run_ticks`` after, about 2.9 us is the compiled rainflow/Miner pass itself (per
+component and tick 1.4 us counting and committing 200 samples, 0.4 us the open residue's
 damage): the Python around it (dating each tick for the damage rate, the figure tuples)
-went from about 3.7 to 0.3 us per tick. ``tick_load`` is now six ``reduceat`` passes
-over the slab's samples (data-bound), ``stream_health`` the ``StreamObs`` each rule's
-tick asks for, ``damage_split`` three numpy passes per component and slab.
+went from about 4 to 0.3 us per tick. In the 1-day replay itself (thread CPU of
+``Component.run_ticks`` over its 8640 ticks, two runs each): 74-89 ms before, 48 ms after,
+of which the compiled pass is 30-32 ms both times. ``tick_load`` is now six ``reduceat``
+passes over the slab's samples (data-bound), ``stream_health`` the ``StreamObs`` each
+rule's tick asks for, ``damage_split`` three numpy passes per component and slab.
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -180,8 +180,8 @@ class Component:
         self.miner.add_cycles(ranges, means, counts, time_s=tick_end_ns / 1e9)
         self._pending = [_EMPTY, _EMPTY, _EMPTY]
 
-    def run_ticks(self, stress_Pa: np.ndarray, stops: list[int], ends_ns: list[int],
-                  figures: bool = True) -> TickRun:
+    def run_ticks(self, stress_Pa: np.ndarray, stops: list[int],
+                  ends_ns: Sequence[int] | np.ndarray, figures: bool = True) -> TickRun:
         """Whole alert ticks: tick ``k`` takes ``stress_Pa[stops[k - 1]:stops[k]]`` (from 0
         for the first) and ends at ``ends_ns[k]``, where its cycles (and those pending from
         earlier blocks, first) are committed. ``figures`` asks for each tick's figures.
@@ -191,7 +191,7 @@ class Component:
             return TickRun((_EMPTY,) * 3, [])
         ranges, means, counts = self._pending
         run = fatigue.commit_ticks(self.rainflow, self.miner, stress_Pa, stops,
-                                   [e / 1e9 for e in ends_ns], (ranges, means, counts),
+                                   np.asarray(ends_ns, np.int64) / 1e9, (ranges, means, counts),
                                    residue=figures)
         if run is not None:  # the compiled pass
             self._pending = [_EMPTY, _EMPTY, _EMPTY]

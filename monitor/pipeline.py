@@ -250,13 +250,11 @@ class _StreamSlab:
         (the caller adds what earlier slabs contributed to the same tick) for ``k = 0``."""
         received, rejected_tick, accepted, has_last, last, by_reason = self._ticks
         last_t, rejected = last[k], self._before[1]
-        return StreamObs(
-            last_t_ns=last_t, stale=not has_last[k] or now - last_t > stale_ns,
-            accepted=accepted[k],
-            rejected=rejected if by_reason is None else
-            {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)},
-            rejected_in_tick=rejected_tick[k], received_in_tick=received[k],
-        )
+        if by_reason is not None:
+            rejected = {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)}
+        # positional (the fields' order): keywords cost 60 % more per call, at every tick
+        return StreamObs(last_t, not has_last[k] or now - last_t > stale_ns, accepted[k],
+                         rejected, rejected_tick[k], received[k])
 
 
 @dataclasses.dataclass(slots=True)
@@ -649,7 +647,7 @@ class Pipeline:
         every component's figures at every tick end (when the ticks are evaluated)."""
         figures = {}
         for name, comp in self.components.items():
-            run = comp.run_ticks(stresses[name], ticks.cuts[:ticks.n], ticks.ends_l,
+            run = comp.run_ticks(stresses[name], ticks.cuts[:ticks.n], ticks.ends,
                                  ticks.evaluate)
             figures[name] = run.figures
             closed[name].append(run.cycles)
