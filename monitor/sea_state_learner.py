@@ -41,6 +41,7 @@ WINDOW_HISTORY = 2000  # closed windows kept for the report (about 6 weeks of 30
 _RATE_TOLERANCE = 0.02
 _WAVE_F_MAX_HZ = 0.5  # the wave band's top for Hs and Tp from motion (models.waves)
 _COMPARE_FLOOR = 1e-12  # both damages below this: nothing to compare (a calm window)
+_BATCH_ROWS = 128  # segments transformed per batch (buffers of about 2.6 MB per signal set)
 
 
 class _Spectra:
@@ -166,7 +167,8 @@ class _WindowSpectra:
         st = state or {}
         self.names, self.window_ns = tuple(names), window_ns
         self.current = _Spectra(self.names, st.get("current"))
-        self.work = Periodograms(SEGMENT)
+        # room for a batch of at least one segment of every signal
+        self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
         self.done: dict[int, _Spectra] = {
             int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
 
