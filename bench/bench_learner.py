@@ -8,38 +8,42 @@ IMU slabs, the window closes (Dirlik damage of each component, the sea state, th
 and the rest of the ticks. Prints those, and checks the learned table and windows are the
 same each time.
 
-Measured 2026-11-25 18:40-19:05 UTC on the 2-core development machine (AMD EPYC, shared
+Measured 2026-11-25 18:40-19:20 UTC on the 2-core development machine (AMD EPYC, shared
 with up to 8 other jobs: load average 4-9, so only best-of-N CPU times compare), runs of main
 7e8ba84 and of this build interleaved:
 
 - this script on the lead's 1-day golden log (same generator; 48 windows, 123 load and 60
-  IMU slabs, 8,640 ticks), learner alone, best of 7: main 0.128 / 0.135 CPU-s, this build
-  0.078 / 0.075 (-42 %); with per-call timers, load feed 55 -> 30 ms, IMU feed 27 -> 15 ms,
-  ticks with the window closes 53 -> 36 ms (of which ~17 ms are the timers themselves);
-  default run (log written by this script): 0.071 CPU-s;
-- inside an in-process replay of that log (best of 5, the methods timed in place): load feed
-  54 -> 30 ms, IMU feed 33 -> 21 ms, window closes 50 -> 36 ms (Dirlik 39 -> 25 ms): the
-  learner ~137 -> ~86 ms of the replay's 0.695 -> 0.601 CPU-s;
-- the whole replay (``/work/wt/_notes/prof.py time 7``, three interleaved pairs): main best
-  0.603 / 0.648 / 0.646 CPU-s (medians 0.660-0.685), this build 0.559 / 0.595 / 0.563
-  (medians 0.577-0.627): -7 to -13 %.
+  IMU slabs, 8,640 ticks), learner alone, best of 9: main 0.131 / 0.132 CPU-s, this build
+  0.088 / 0.078 (-33 to -41 %); with per-call timers, load feed 53 -> 30 ms, IMU feed
+  25 -> 17 ms, ticks with the window closes 47-50 -> 41-42 ms (of which ~17 ms are the timers
+  themselves); default run (log written by this script): 0.071 CPU-s;
+- inside an in-process replay of that log (best of 5, the methods timed in place; before the
+  row-sum kernel): load feed 54 -> 30 ms, IMU feed 33 -> 21 ms, window closes 50 -> 36 ms
+  (Dirlik 39 -> 25 ms): the learner ~137 -> ~86 ms of the replay's 0.695 -> 0.601 CPU-s;
+- the whole replay (``/work/wt/_notes/prof.py time 7``, three interleaved pairs at load 8):
+  main best 0.710 / 0.676 / 0.704 CPU-s (medians 0.76-0.81), this build 0.655 / 0.624 /
+  0.644 (medians 0.67-0.69): -8 % best, -13 to -15 % median;
+- the 30-day benchmark log, one ``buoymon replay`` each at load 9: main 22.56 CPU-s, this
+  build 21.13 and 20.38 (report and state identical to main's to the last bit); peak RSS
+  217 MB / 230 and 222 MB (1 day: 206-207 / 208-210 MB: the kept buffers, ~2 MB).
 
 Where the time went: fresh slab-sized temporaries (a few hundred kB: the concatenated slab,
 each numpy step's output) were new pages for the allocator each call, and their page faults
 cost several times the arithmetic ((x - mean) * w on 35 x 1024 samples: 280 us fresh, 25 us
 in place). The periodograms now run in buffers kept between calls
-(models.fatigue.spectral.Periodograms), both components in one batch; the Dirlik
-integration reuses its quadrature grid.
+(models.fatigue.spectral.Periodograms), both components in one batch; a batch's rows are
+added to the window's sum by one compiled loop (35 rows: 42 us as a numpy call per row,
+8.5 us); the Dirlik integration reuses its quadrature grid.
 
 What is left (each the same bits as before, so kept as it is): pocketfft's transforms (~2 us
 per 1,024-sample segment, ~4,200 a day; ``scipy.fft.rfft`` gives the same bits but took 273
 against 147 us for 70 segments) and numpy's complex ``abs`` (its SIMD hypot: a compiled
-kernel would give other bits); a few elementwise passes and one ``np.add`` per segment
-(~3 ms a day: a numba kernel would save about that, but runs element by element in Python
-when small replays run uncompiled); the Dirlik density and the S-N curve's damage per cycle
-on 5,600 quadrature nodes per window and component (~0.1 ms each); the sea state from the
-IMU spectrum and the table's update at each close (models.waves, models.sea_state_table);
-the ticks' own Python (~0.1 us each).
+kernel would give other bits); a few elementwise passes over a batch (square, scale, double:
+~2 ms a day, which a fused kernel would save but then run per row in numpy when small
+replays run uncompiled); the per-slab rate checks (~20 small numpy calls); the Dirlik
+density and the S-N curve's damage per cycle on 5,600 quadrature nodes per window and
+component (~0.1 ms each); the sea state from the IMU spectrum and the table's update at each
+close (models.waves, models.sea_state_table); the ticks' own Python (~0.1 us each).
 
 Run: ``python bench/bench_learner.py [--repeat N] [--log PATH]``.
 """
