@@ -421,6 +421,8 @@ class Pipeline:
             qc.check(part, np.zeros((1, 3)))
         for comp in self.components.values():
             comp.warm_up()
+        if self.sea_states is not None:
+            self.sea_states.warm_up()
 
     # ------------------------------------------------------------------ driving
     @classmethod

@@ -4,10 +4,13 @@ window's segments (models.fatigue.spectral.segment_psds, summed in time order)."
 
 from __future__ import annotations
 
+import contextlib
 import json
 
 import numpy as np
+import pytest
 
+from models._jit import uncompiled
 from models.fatigue.spectral import segment_psds
 from monitor.sea_state_learner import SEGMENT, _WindowSpectra
 
@@ -73,7 +76,13 @@ def feed_in(pieces: list[int], save_at: int | None = None) -> dict[int, object]:
     return windows
 
 
-def test_window_sums_are_the_same_bits_for_any_split_and_across_a_saved_state():
+@pytest.mark.parametrize("plain", [False, True], ids=["compiled", "plain"])
+def test_window_sums_are_the_same_bits_for_any_split_and_across_a_saved_state(plain):
+    with uncompiled() if plain else contextlib.nullcontext():
+        check_window_sums()
+
+
+def check_window_sums() -> None:
     t, x = stream()
     ref = reference(t, x)
     assert sorted(ref) == [8_334, 8_335, 8_337, 8_338]
