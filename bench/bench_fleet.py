@@ -26,6 +26,13 @@ hour (which has grown: QC check factor, duplicates in validation) on the same ar
 26.0 + 26.0 CPU-s; 260 / 302 CPU-s per buoy-year; reading alone 7.3 / 11.1 CPU-s (one-pass
 decode of regular payloads). Target under 60: not reached. Details in docs/FLEET.md.
 
+Measured 2026-11-25 19:04-19:07 UTC on the same machine at load average 8.3-9.1 (figures
+uncertain by well over 10 %), ``--buoys 2 --days 3`` (10.4 M tension samples), this build
+(reader parts kept as decoded, ordering copies once, branch-free varints) and main 7e8ba84
+alternated: serial 3.9 / 4.1 CPU-s against 4.5 / 4.5, 238-251 against 274-275 CPU-s per
+buoy-year; reading alone 0.6 against 0.7 CPU-s. Target under 60: not reached (the pipeline
+is 83-85 % of the CPU).
+
 Usage: python bench/bench_fleet.py [--buoys 12] [--days 30] [--dir DIR] [--keep] [--repeat R]
 [--measured-only]
 """

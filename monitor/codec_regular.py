@@ -113,13 +113,7 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
             t[pos + i] = t0 + i * period
         nsamp[k] = n
         pos += n
-    # the samples lie at the front of each over-allocated row: move the rows together, left
-    # and in place (memory already touched, no new array), for the caller to view
-    flat = vals.reshape(nf * cap)
-    for j in range(1, nf):
-        for i in range(pos):
-            flat[j * pos + i] = flat[j * cap + i]
-    return True, nsamp, t, flat[:nf * pos].reshape((nf, pos)), pos
+    return True, nsamp, t, vals, pos
 
 
 def _tag(field: int, wire_type: int) -> int:
@@ -140,4 +134,7 @@ def decode_regular(buf: np.ndarray, offs: np.ndarray, lens: np.ndarray, numbers:
         np.array([_tag(f, 2) for f in fn_vals], np.int64), _tag(sub[0], 1), _tag(sub[1], 2))
     if not ok:
         return None
-    return np.zeros(offs.shape[0], np.int8), nsamp, t[:total], vals
+    # copies: views would keep the over-allocated arrays (a bound: every sample takes at least
+    # one byte per field) alive for as long as the pipeline buffers the samples
+    return (np.zeros(offs.shape[0], np.int8), nsamp, t[:total].copy(),
+            np.ascontiguousarray(vals[:, :total]))
