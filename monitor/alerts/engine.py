@@ -21,6 +21,7 @@ import math
 from collections import deque
 from typing import Any, Iterable, Mapping
 
+from monitor.alerts.batch import TickBatch, TickInputs, batchable
 from monitor.alerts.config import CABLE_COMPONENT, KIND_PARAMS, AlertsConfig, RuleConfig
 from monitor.alerts.records import AlertRecord
 from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, ConductorYield, Rule, TickStats
@@ -153,6 +154,11 @@ class AlertEngine:
             if event in ("reset", "rearm"):
                 rule.on_reset()
         return out
+
+    def tick_batch(self, inputs: TickInputs) -> TickBatch | None:
+        """The rules over many ticks at once (:mod:`monitor.alerts.batch`; the same results
+        as :meth:`evaluate` at each), None when a rule is of a kind it does not scan."""
+        return TickBatch(self, self._rules, inputs) if batchable(self._rules) else None
 
     def _record(self, rule: Rule, event: str, t: int) -> AlertRecord:
         firing = event in ("fire", "resend")

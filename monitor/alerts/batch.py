@@ -1,0 +1,361 @@
+"""Alert evaluation of many ticks at once: the replay path of :class:`~monitor.alerts.engine.
+AlertEngine` (issue 22: one Python call per rule per tick was a quarter of a replay's CPU).
+
+The pipeline hands the figures of a slab's ticks as arrays (:class:`TickInputs`); each rule
+instance becomes a row of per-tick values (NaN where the tick has no data for it) and a
+condition code, built by numpy (and a compiled pass over the load samples for slack snaps).
+:func:`scan_ticks` then runs the firing state machine of :meth:`Rule.step` over the ticks in
+one compiled loop and stops at the first tick where anything happens: a transition, a
+re-send, a pending reset, a cable replacement, or a tick the caller marks (a forecast due).
+That tick is evaluated the ordinary way (:meth:`AlertEngine.evaluate` on an Observation),
+so every record is built by the same code as in the live path; the quiet ticks before it
+only moved pending/clearing times and each rule's last value, which :meth:`TickBatch.sync`
+writes into the rule objects first.
+
+Bit-identity with the per-tick path holds because each row is the value its rule's
+``observe`` computes, by the same IEEE operations (tests/test_alerts_batch.py runs both).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable, Mapping
+
+import numpy as np
+
+from models._jit import kernel
+from monitor.alerts.rules import (NS, ConductorStress, ConductorYield, DamageFraction,
+                                  DamageRate, ModelResidual, RejectedRate, RemainingLife, Rule,
+                                  SlackSnap, Stale, TensionHigh)
+
+if TYPE_CHECKING:
+    from monitor.alerts.engine import AlertEngine
+
+NO_DUE = np.iinfo(np.int64).max  # no forecast due: scan_ticks never stops for one
+
+# condition codes of scan_ticks: value > on, value < on, value >= on, hysteresis (>= off
+# while firing, > on otherwise), value - baseline >= on (damage fraction), a given flag
+_ABOVE, _BELOW, _AT_LEAST, _HYSTERESIS, _ABOVE_BASELINE, _FLAG = range(6)
+
+
+@dataclass(frozen=True, eq=False)
+class StreamTicks:
+    """One sensor stream's health at each tick end, as the per-tick ``StreamObs``."""
+
+    last_t_ns: np.ndarray  # int64, 0 when no accepted sample yet
+    stale: np.ndarray  # bool
+    received: np.ndarray  # int64, samples received in the tick
+    rejected: np.ndarray  # int64, samples rejected in the tick
+
+
+@dataclass(frozen=True, eq=False)
+class TickInputs:
+    """What the rules observe at each of ``ends.shape[0]`` consecutive tick ends, as arrays
+    (NaN where the per-tick Observation has NaN). ``components[name]`` is (n, 5): damage,
+    committed, rate per day, remaining life days, peak stress. ``stream(name)`` and
+    ``load()`` (load samples ``t, v`` and each tick's ``starts, stops`` in them) are asked
+    only for the rules that need them."""
+
+    buoy_id: str
+    ends: np.ndarray  # int64
+    tension_max: np.ndarray
+    measured: np.ndarray
+    estimated: np.ndarray
+    components: Mapping[str, np.ndarray]
+    stream: Callable[[str], StreamTicks]
+    load: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+
+
+@kernel(inline="always")
+def _holds(mode, v, on, off, firing, baseline, flag):
+    """Whether a rule's condition holds for value ``v`` (the subclasses' ``holds``)."""
+    if mode == 0:
+        return v > on
+    if mode == 1:
+        return v < on
+    if mode == 2:
+        return v >= on
+    if mode == 3:
+        return v >= off if firing else v > on
+    if mode == 4:
+        return v - baseline >= on
+    return flag != 0
+
+
+@kernel()
+def scan_ticks(ends, values, flags, mode, on, off, on_delay, off_delay, latching, resend_ns,
+               stop, due_ns, j0, firing, pending, clear, last_sent, reset_pending, acked,
+               baseline, last_data):
+    """Run :meth:`Rule.step` and the engine's re-send test for every rule (row) from tick
+    ``j0`` on; return the first tick where one would return an event or a re-send is due
+    (or ``stop`` is set, or the tick ends at or after ``due_ns``), the tick count when none.
+    The ticks before it are applied: ``pending``/``clear`` move as in ``step`` and
+    ``last_data`` is the last tick with a value per rule; nothing else can change on them."""
+    n = ends.shape[0]
+    rules = mode.shape[0]
+    for j in range(j0, n):
+        t = ends[j]
+        if stop[j] or t >= due_ns:
+            return j
+        for r in range(rules):  # anything to report at this tick? (changes nothing)
+            v = values[r, j]
+            if v == v:
+                if reset_pending[r]:
+                    return j
+                if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
+                    if not firing[r]:
+                        p = pending[r] if pending[r] >= 0 else t
+                        if t - p >= on_delay[r]:
+                            return j
+                        continue  # a quiet rule has nothing to re-send
+                elif firing[r] and not latching[r]:
+                    c = clear[r] if clear[r] >= 0 else t
+                    if t - c >= off_delay[r]:
+                        return j
+            if resend_ns and firing[r] and not acked[r] and t - last_sent[r] >= resend_ns:
+                return j
+        for r in range(rules):  # a quiet tick: only the pending and clearing times move
+            v = values[r, j]
+            if v != v:
+                continue
+            last_data[r] = j
+            if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
+                if firing[r]:
+                    clear[r] = -1
+                elif pending[r] < 0:
+                    pending[r] = t
+            elif not firing[r]:
+                pending[r] = -1
+            elif not latching[r] and clear[r] < 0:
+                clear[r] = t
+    return n
+
+
+@kernel()
+def slack_snap_ticks(t, x, starts, stops, floor, snap_level, window_ns, last_slack):
+    """:meth:`SlackSnap.observe` over consecutive ticks: each tick's peak snap tension (0 when
+    none, NaN without samples) and the time of the last slack sample after it."""
+    n = starts.shape[0]
+    values = np.empty(n)
+    after = np.empty(n, np.int64)
+    last = last_slack
+    for k in range(n):
+        if stops[k] == starts[k]:
+            values[k] = np.nan
+        else:
+            peak = -np.inf
+            found = False
+            for i in range(starts[k], stops[k]):
+                xi = x[i]
+                if xi < floor and t[i] > last:
+                    last = t[i]
+                if xi >= snap_level and last >= 0 and t[i] - last <= window_ns:
+                    if not found or xi > peak:
+                        peak = xi
+                    found = True
+            values[k] = peak if found else 0.0
+        after[k] = last
+    return values, after
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) both kernels now, on empty input."""
+    f, i, u = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.uint8)
+    slack_snap_ticks(i, f, i, i, 0.0, 0.0, 0, -1)
+    scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), i, f, f, i, i, u, 0,
+               np.zeros(0, bool), NO_DUE, 0, u, i, i, i, u, u, f, i)
+
+
+class _Row:
+    """How one rule instance is scanned: its values and flags per tick, condition code and
+    levels, and how to bring the rule object to the end of tick ``j`` (``side``; its value
+    through ``value_at``)."""
+
+    def __init__(self, values: np.ndarray, mode: int, on: float, off: float = math.nan,
+                 flags: np.ndarray | None = None,
+                 side: Callable[[int], None] | None = None,
+                 value_at: Callable[[int], float] | None = None) -> None:
+        self.values, self.mode, self.on, self.off, self.flags = values, mode, on, off, flags
+        self.side = side
+        self.value_at = value_at or (lambda j: float(values[j]))
+
+
+def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray) -> _Row:
+    comp = x.components[rule.target]
+    committed = comp[:, 1]
+    # the accumulator restarted (committed damage went down): replacement, a reset tick
+    prev = np.concatenate([[rule.last_committed], committed[:-1]])
+    stop |= committed < prev
+
+    def side(j: int) -> None:
+        rule.last_committed = float(committed[j])
+    return _Row(comp[:, 0], _ABOVE_BASELINE, rule.threshold, side=side)
+
+
+def _component_figure(column: int, mode: int, level: str) -> Callable[..., _Row]:
+    def build(rule: Rule, x: TickInputs, stop: np.ndarray) -> _Row:
+        return _Row(x.components[rule.target][:, column], mode, getattr(rule, level))
+    return build
+
+
+def _tension_high(rule: TensionHigh, x: TickInputs, stop: np.ndarray) -> _Row:
+    return _Row(x.tension_max, _HYSTERESIS, rule.on_level, rule.off_level)
+
+
+def _model_residual(rule: ModelResidual, x: TickInputs, stop: np.ndarray) -> _Row:
+    return _Row(np.abs(x.measured - x.estimated), _ABOVE, rule.threshold)
+
+
+def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray) -> _Row:
+    t, v, starts, stops = x.load()
+    values, after = slack_snap_ticks(t, v, starts, stops, float(rule.floor),
+                                     float(rule.snap_level), rule.window_ns, rule.last_slack_ns)
+
+    def side(j: int) -> None:
+        rule.last_slack_ns = int(after[j])
+    return _Row(values, _AT_LEAST, float(rule.snap_level), side=side)
+
+
+def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
+    s = x.stream(rule.target)
+    ends = x.ends
+
+    def value_at(j: int) -> float:  # as observe: Python's int / int, correctly rounded
+        last = int(s.last_t_ns[j])
+        return (int(ends[j]) - last) / NS if last > 0 else math.inf
+    return _Row(np.zeros(ends.shape[0]), _FLAG, math.nan,
+                flags=s.stale.astype(np.uint8), value_at=value_at)
+
+
+def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
+    s = x.stream(rule.target)
+    ends = x.ends
+    new = s.received > 0
+    # the window's entries: those the rule holds, then one per tick with samples
+    old = np.array(list(rule.ticks), np.int64).reshape(-1, 3)
+    t_e = np.concatenate([old[:, 0], ends[new]])
+    rej = np.concatenate([[0], np.cumsum(np.concatenate([old[:, 1], s.rejected[new]]))])
+    rec = np.concatenate([[0], np.cumsum(np.concatenate([old[:, 2], s.received[new]]))])
+    hi = old.shape[0] + np.cumsum(new)
+    lo = np.searchsorted(t_e, ends - rule.window_ns, side="right")
+    n_rej, n_rec = rej[hi] - rej[lo], rec[hi] - rec[lo]
+    # exact int -> float conversions (counts < 2**53): the same quotient as observe's
+    values = np.divide(n_rej, n_rec, out=np.full(ends.shape[0], math.nan), where=n_rec > 0)
+
+    def side(j: int) -> None:
+        a, b = int(lo[j]), int(hi[j])
+        rule.ticks = deque(zip(t_e[a:b].tolist(), np.diff(rej[a:b + 1]).tolist(),
+                               np.diff(rec[a:b + 1]).tolist()))
+        rule.rejected, rule.received = int(n_rej[j]), int(n_rec[j])
+    return _Row(values, _ABOVE, rule.threshold, side=side)
+
+
+_BUILDERS: Mapping[type, Callable[..., _Row]] = {
+    DamageFraction: _damage_fraction,
+    DamageRate: _component_figure(2, _ABOVE, "threshold"),
+    RemainingLife: _component_figure(3, _BELOW, "threshold"),
+    ConductorStress: _component_figure(4, _ABOVE, "level"),
+    ConductorYield: _component_figure(4, _ABOVE, "level"),
+    TensionHigh: _tension_high,
+    SlackSnap: _slack_snap,
+    Stale: _stale,
+    RejectedRate: _rejected_rate,
+    ModelResidual: _model_residual,
+}
+
+
+def batchable(rules: list[Rule]) -> bool:
+    """Whether every rule is of a kind this module scans (exactly: not a subclass)."""
+    return all(type(r) in _BUILDERS for r in rules)
+
+
+class TickBatch:
+    """The rules of one engine over the ticks of ``inputs`` (:meth:`run`)."""
+
+    def __init__(self, engine: "AlertEngine", rules: list[Rule], inputs: TickInputs) -> None:
+        n = inputs.ends.shape[0]
+        if n and int(inputs.ends[0]) <= engine.last_t_ns:
+            raise ValueError(f"tick t_ns={int(inputs.ends[0])} is not after the previous "
+                             f"evaluation ({engine.last_t_ns}); alert ticks must advance")
+        self.engine, self.rules, self.ends = engine, rules, inputs.ends
+        self.stop = np.zeros(n, bool)
+        rows = [_BUILDERS[type(r)](r, inputs, self.stop) for r in rules]
+        self.rows = rows
+        k = len(rules)
+        self.values = np.empty((k, n))
+        self.flags = np.zeros((k, n), np.uint8)
+        for i, row in enumerate(rows):
+            self.values[i] = row.values
+            if row.flags is not None:
+                self.flags[i] = row.flags
+        self.mode = np.array([row.mode for row in rows], np.int64)
+        self.on = np.array([row.on for row in rows], np.float64)
+        self.off = np.array([row.off for row in rows], np.float64)
+        self.on_delay = np.array([r.on_delay_ns for r in rules], np.int64)
+        self.off_delay = np.array([r.off_delay_ns for r in rules], np.int64)
+        self.latching = np.array([r.latching for r in rules], np.uint8)
+        self.firing = np.zeros(k, np.uint8)
+        self.pending = np.zeros(k, np.int64)
+        self.clear = np.zeros(k, np.int64)
+        self.last_sent = np.zeros(k, np.int64)
+        self.reset_pending = np.zeros(k, np.uint8)
+        self.acked = np.zeros(k, np.uint8)
+        self.baseline = np.zeros(k, np.float64)
+        self.last_data = np.zeros(k, np.int64)
+        self.reload()
+
+    def run(self, tick: Callable[[int], None],
+            quiet: Callable[[int, int], None] | None = None,
+            next_due: Callable[[], int | None] | None = None) -> None:
+        """Evaluate every tick: ``tick(k)`` must pass the ``k``-th tick's Observation to
+        :meth:`AlertEngine.evaluate` (and may do more), and is called only for ticks where
+        something happens or that end at or after ``next_due()``; ``quiet(a, b)`` is told
+        of each run of ticks ``a..b-1`` in between, in order."""
+        j, n = 0, self.ends.shape[0]
+        while True:
+            due = next_due() if next_due is not None else None
+            stop = self.scan(j, NO_DUE if due is None else due)
+            if quiet is not None and stop > j:
+                quiet(j, stop)
+            if stop == n:
+                break
+            self.sync(stop)
+            tick(stop)
+            self.reload()
+            j = stop + 1
+        self.sync(n)
+
+    def scan(self, j0: int, due_ns: int = NO_DUE) -> int:
+        """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)."""
+        return int(scan_ticks(self.ends, self.values, self.flags, self.mode, self.on, self.off,
+                              self.on_delay, self.off_delay, self.latching,
+                              self.engine._resend_ns, self.stop, due_ns, j0, self.firing,
+                              self.pending, self.clear, self.last_sent, self.reset_pending,
+                              self.acked, self.baseline, self.last_data))
+
+    def sync(self, j: int) -> None:
+        """Bring the rule objects and the engine to the end of tick ``j - 1``."""
+        if j == 0:
+            return
+        for i, (rule, row) in enumerate(zip(self.rules, self.rows)):
+            rule.pending_since_ns = int(self.pending[i])
+            rule.clear_since_ns = int(self.clear[i])
+            if self.last_data[i] >= 0:
+                rule.value = row.value_at(int(self.last_data[i]))
+            if row.side is not None:
+                row.side(j - 1)
+        self.engine.last_t_ns = int(self.ends[j - 1])
+
+    def reload(self) -> None:
+        """Take the rules' firing state from the rule objects (after an ordinary tick)."""
+        for i, rule in enumerate(self.rules):
+            self.firing[i] = rule.firing
+            self.pending[i] = rule.pending_since_ns
+            self.clear[i] = rule.clear_since_ns
+            self.last_sent[i] = rule.last_sent_ns
+            self.reset_pending[i] = rule.reset_pending
+            self.acked[i] = bool(rule.acked_by)
+            self.baseline[i] = getattr(rule, "baseline", 0.0)
+        self.last_data[:] = -1
