@@ -710,12 +710,19 @@ class Pipeline:
         meas[0], n_meas[0], n_load[0] = load0.meas[j0], load0.n_meas[j0], load0.n[j0]
         tension_max = np.array(load.vmax)
         tension_max[0] = load0.vmax[j0]
-        comps = {}
-        for name, f in figures.items():
-            a = comps[name] = np.empty((n, 5))
-            a[:, :4] = f
-            a[:, 4] = load.smax[name]
-            a[0, 4] = load0.smax[name][j0]
+        # each component figure the rules ask for, once (as a column: a whole (n, 4) array
+        # from the tuples costs more than the rules' alert ticks used to)
+        columns: dict[tuple[str, int], np.ndarray] = {}
+
+        def component(name: str, i: int) -> np.ndarray:
+            if (name, i) not in columns:
+                if i < 4:
+                    col = np.array([f[i] for f in figures[name]])
+                else:
+                    col = np.array(load.smax[name])
+                    col[0] = load0.smax[name][j0]
+                columns[name, i] = col
+            return columns[name, i]
         health: dict[str, StreamTicks] = {}  # stale and rejected-rate rules ask for the same
 
         def stream(s: str) -> StreamTicks:
@@ -724,14 +731,14 @@ class Pipeline:
             return health[s]
         batch = tick_batch(TickInputs(
             buoy_id=self.buoy_id, ends=ticks.ends, tension_max=tension_max,
-            measured=np.array(meas), estimated=np.array(est), components=comps, stream=stream,
+            measured=np.array(meas), estimated=np.array(est), component=component, stream=stream,
             load=lambda: self._load_by_tick(t, v, ticks)))
         if batch is None:
             return None
         learner, forecasts = self.sea_states, self.forecasts
         quiet, next_due = None, None
         if learner is not None and forecasts is not None:
-            committed = {name: a[:, 1].tolist() for name, a in comps.items()}
+            committed = {name: [x[1] for x in f] for name, f in figures.items()}
 
             def quiet(a: int, b: int) -> None:  # the learner sees every tick
                 for q in range(a, b):

@@ -96,7 +96,7 @@ class Ticks:
         return TickInputs(
             buoy_id="b1", ends=self.ends[a:b], tension_max=self.tmax[a:b],
             measured=self.meas[a:b], estimated=self.est[a:b],
-            components={n: c[a:b] for n, c in self.comps.items()},
+            component=lambda name, i: self.comps[name][a:b, i],
             stream=lambda s: StreamTicks(*(x[a:b] for x in (
                 self.streams[s].last_t_ns, self.streams[s].stale, self.streams[s].received,
                 self.streams[s].rejected))),

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from itertools import chain
 from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
@@ -53,17 +54,18 @@ class StreamTicks:
 @dataclass(frozen=True, eq=False)
 class TickInputs:
     """What the rules observe at each of ``ends.shape[0]`` consecutive tick ends, as arrays
-    (NaN where the per-tick Observation has NaN). ``components[name]`` is (n, 5): damage,
-    committed, rate per day, remaining life days, peak stress. ``stream(name)`` and
-    ``load()`` (load samples ``t, v`` and each tick's ``starts, stops`` in them) are asked
-    only for the rules that need them."""
+    (NaN where the per-tick Observation has NaN). ``component(name, i)`` is a component's
+    figure ``i`` of the per-tick ComponentObs (0 damage, 1 committed, 2 rate per day,
+    3 remaining life days, 4 peak stress); it, ``stream(name)`` and ``load()`` (load samples
+    ``t, v`` and each tick's ``starts, stops`` in them) are asked only for what the rules
+    need."""
 
     buoy_id: str
     ends: np.ndarray  # int64
     tension_max: np.ndarray
     measured: np.ndarray
     estimated: np.ndarray
-    components: Mapping[str, np.ndarray]
+    component: Callable[[str, int], np.ndarray]
     stream: Callable[[str], StreamTicks]
     load: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
@@ -183,20 +185,19 @@ class _Row:
 
 
 def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray) -> _Row:
-    comp = x.components[rule.target]
-    committed = comp[:, 1]
+    committed = x.component(rule.target, 1)
     # the accumulator restarted (committed damage went down): replacement, a reset tick
-    prev = np.concatenate([[rule.last_committed], committed[:-1]])
-    stop |= committed < prev
+    stop[0] |= committed[0] < rule.last_committed
+    stop[1:] |= committed[1:] < committed[:-1]
 
     def side(j: int) -> None:
         rule.last_committed = float(committed[j])
-    return _Row(comp[:, 0], _ABOVE_BASELINE, rule.threshold, side=side)
+    return _Row(x.component(rule.target, 0), _ABOVE_BASELINE, rule.threshold, side=side)
 
 
 def _component_figure(column: int, mode: int, level: str) -> Callable[..., _Row]:
     def build(rule: Rule, x: TickInputs, stop: np.ndarray) -> _Row:
-        return _Row(x.components[rule.target][:, column], mode, getattr(rule, level))
+        return _Row(x.component(rule.target, column), mode, getattr(rule, level))
     return build
 
 
@@ -233,21 +234,22 @@ def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
     s = x.stream(rule.target)
     ends = x.ends
     new = s.received > 0
-    # the window's entries: those the rule holds, then one per tick with samples
-    old = np.array(list(rule.ticks), np.int64).reshape(-1, 3)
-    t_e = np.concatenate([old[:, 0], ends[new]])
-    rej = np.concatenate([[0], np.cumsum(np.concatenate([old[:, 1], s.rejected[new]]))])
-    rec = np.concatenate([[0], np.cumsum(np.concatenate([old[:, 2], s.received[new]]))])
-    hi = old.shape[0] + np.cumsum(new)
-    lo = np.searchsorted(t_e, ends - rule.window_ns, side="right")
-    n_rej, n_rec = rej[hi] - rej[lo], rec[hi] - rec[lo]
+    # the window's entries (t, rejected, received): those the rule holds, then one per tick
+    # with samples; the window at tick j is entries lo[j]..hi[j]-1
+    m = len(rule.ticks)
+    entries = np.empty((m + int(np.count_nonzero(new)), 3), np.int64)
+    entries[:m] = np.fromiter(chain.from_iterable(rule.ticks), np.int64, 3 * m).reshape(m, 3)
+    entries[m:, 0], entries[m:, 1], entries[m:, 2] = ends[new], s.rejected[new], s.received[new]
+    sums = np.zeros((entries.shape[0] + 1, 2), np.int64)
+    np.cumsum(entries[:, 1:], axis=0, out=sums[1:])
+    hi = m + np.cumsum(new)
+    lo = np.searchsorted(entries[:, 0], ends - rule.window_ns, side="right")
+    n_rej, n_rec = (sums[hi] - sums[lo]).T
     # exact int -> float conversions (counts < 2**53): the same quotient as observe's
     values = np.divide(n_rej, n_rec, out=np.full(ends.shape[0], math.nan), where=n_rec > 0)
 
     def side(j: int) -> None:
-        a, b = int(lo[j]), int(hi[j])
-        rule.ticks = deque(zip(t_e[a:b].tolist(), np.diff(rej[a:b + 1]).tolist(),
-                               np.diff(rec[a:b + 1]).tolist()))
+        rule.ticks = deque(map(tuple, entries[lo[j]:hi[j]].tolist()))
         rule.rejected, rule.received = int(n_rej[j]), int(n_rec[j])
     return _Row(values, _ABOVE, rule.threshold, side=side)
 
