@@ -231,6 +231,8 @@ def _pipeline_run(block_s: int, hooked: bool, monkeypatch) -> tuple[str, str, li
     from synthetic_buoy import blocks_interleaved, sea
     from test_pipeline import FakeEstimator
 
+    # every slab through the batch when not hooked, even of one tick
+    monkeypatch.setattr(pipeline_mod, "BATCH_MIN_TICKS", 1)
     monkeypatch.setattr(pipeline_mod, "build_estimator",
                         lambda config, state=None, sensor=None: FakeEstimator())
     config = config_with(default_config(), alerts={"resend_interval_s": 60, "rule": [
