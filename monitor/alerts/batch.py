@@ -22,7 +22,7 @@ import math
 from collections import deque
 from dataclasses import dataclass
 from itertools import chain
-from typing import TYPE_CHECKING, Callable, Mapping
+from typing import TYPE_CHECKING, Callable, Literal, Mapping
 
 import numpy as np
 
@@ -171,16 +171,13 @@ def warm_up() -> None:
 
 
 class _Row:
-    """How one rule instance is scanned: its values and flags per tick, condition code and
-    levels, and how to bring the rule object to the end of tick ``j`` (``side``; its value
-    through ``value_at``)."""
+    """One rule instance over a slab: its values and flags per tick, and how to bring the
+    rule object to the end of tick ``j`` (``side``; its value through ``value_at``)."""
 
-    def __init__(self, values: np.ndarray, mode: int, on: float, off: float = math.nan,
-                 flags: np.ndarray | None = None,
+    def __init__(self, values: np.ndarray, flags: np.ndarray | None = None,
                  side: Callable[[int], None] | None = None,
                  value_at: Callable[[int], float] | None = None) -> None:
-        self.values, self.mode, self.on, self.off, self.flags = values, mode, on, off, flags
-        self.side = side
+        self.values, self.flags, self.side = values, flags, side
         self.value_at = value_at or (lambda j: float(values[j]))
 
 
@@ -192,21 +189,21 @@ def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray) -> _
 
     def side(j: int) -> None:
         rule.last_committed = float(committed[j])
-    return _Row(x.component(rule.target, 0), _ABOVE_BASELINE, rule.threshold, side=side)
+    return _Row(x.component(rule.target, 0), side=side)
 
 
-def _component_figure(column: int, mode: int, level: str) -> Callable[..., _Row]:
+def _component_figure(column: int) -> Callable[..., _Row]:
     def build(rule: Rule, x: TickInputs, stop: np.ndarray) -> _Row:
-        return _Row(x.component(rule.target, column), mode, getattr(rule, level))
+        return _Row(x.component(rule.target, column))
     return build
 
 
 def _tension_high(rule: TensionHigh, x: TickInputs, stop: np.ndarray) -> _Row:
-    return _Row(x.tension_max, _HYSTERESIS, rule.on_level, rule.off_level)
+    return _Row(x.tension_max)
 
 
 def _model_residual(rule: ModelResidual, x: TickInputs, stop: np.ndarray) -> _Row:
-    return _Row(np.abs(x.measured - x.estimated), _ABOVE, rule.threshold)
+    return _Row(np.abs(x.measured - x.estimated))
 
 
 def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray) -> _Row:
@@ -216,7 +213,7 @@ def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray) -> _Row:
 
     def side(j: int) -> None:
         rule.last_slack_ns = int(after[j])
-    return _Row(values, _AT_LEAST, float(rule.snap_level), side=side)
+    return _Row(values, side=side)
 
 
 def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
@@ -226,8 +223,7 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
     def value_at(j: int) -> float:  # as observe: Python's int / int, correctly rounded
         last = int(s.last_t_ns[j])
         return (int(ends[j]) - last) / NS if last > 0 else math.inf
-    return _Row(np.zeros(ends.shape[0]), _FLAG, math.nan,
-                flags=s.stale.astype(np.uint8), value_at=value_at)
+    return _Row(np.zeros(ends.shape[0]), s.stale, value_at=value_at)
 
 
 def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
@@ -251,61 +247,67 @@ def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
     def side(j: int) -> None:
         rule.ticks = deque(map(tuple, entries[lo[j]:hi[j]].tolist()))
         rule.rejected, rule.received = int(n_rej[j]), int(n_rec[j])
-    return _Row(values, _ABOVE, rule.threshold, side=side)
+    return _Row(values, side=side)
 
 
-_BUILDERS: Mapping[type, Callable[..., _Row]] = {
-    DamageFraction: _damage_fraction,
-    DamageRate: _component_figure(2, _ABOVE, "threshold"),
-    RemainingLife: _component_figure(3, _BELOW, "threshold"),
-    ConductorStress: _component_figure(4, _ABOVE, "level"),
-    ConductorYield: _component_figure(4, _ABOVE, "level"),
-    TensionHigh: _tension_high,
-    SlackSnap: _slack_snap,
-    Stale: _stale,
-    RejectedRate: _rejected_rate,
-    ModelResidual: _model_residual,
+def _level(code: int, on: str, off: str | None = None) -> Callable[[Rule], tuple]:
+    """A rule's condition: code, its level attribute and (hysteresis) its off level."""
+    return lambda r: (code, float(getattr(r, on)), float(getattr(r, off)) if off else math.nan)
+
+
+# per rule class: its condition (scan_ticks's code and levels) and its row builder
+_KINDS: Mapping[type, tuple[Callable[[Rule], tuple], Callable[..., _Row]]] = {
+    DamageFraction: (_level(_ABOVE_BASELINE, "threshold"), _damage_fraction),
+    DamageRate: (_level(_ABOVE, "threshold"), _component_figure(2)),
+    RemainingLife: (_level(_BELOW, "threshold"), _component_figure(3)),
+    ConductorStress: (_level(_ABOVE, "level"), _component_figure(4)),
+    ConductorYield: (_level(_ABOVE, "level"), _component_figure(4)),
+    TensionHigh: (_level(_HYSTERESIS, "on_level", "off_level"), _tension_high),
+    SlackSnap: (_level(_AT_LEAST, "snap_level"), _slack_snap),
+    Stale: (lambda r: (_FLAG, math.nan, math.nan), _stale),
+    RejectedRate: (_level(_ABOVE, "threshold"), _rejected_rate),
+    ModelResidual: (_level(_ABOVE, "threshold"), _model_residual),
 }
 
 
-def batchable(rules: list[Rule]) -> bool:
-    """Whether every rule is of a kind this module scans (exactly: not a subclass)."""
-    return all(type(r) in _BUILDERS for r in rules)
+class BatchPlan:
+    """What does not change from slab to slab for an engine's rules: their condition codes,
+    levels, delays and whether they latch."""
+
+    @classmethod
+    def of(cls, engine: "AlertEngine", rules: list[Rule]) -> "BatchPlan | Literal[False]":
+        """The plan, False when a rule is of a kind this module does not scan (exactly: a
+        subclass may observe differently)."""
+        return all(type(r) in _KINDS for r in rules) and cls(engine, rules)
+
+    def __init__(self, engine: "AlertEngine", rules: list[Rule]) -> None:
+        self.engine, self.rules = engine, rules
+        self.builders = [_KINDS[type(r)][1] for r in rules]
+        levels = [_KINDS[type(r)][0](r) for r in rules]
+        self.mode = np.array([x[0] for x in levels], np.int64)
+        self.on = np.array([x[1] for x in levels], np.float64)
+        self.off = np.array([x[2] for x in levels], np.float64)
+        self.on_delay = np.array([r.on_delay_ns for r in rules], np.int64)
+        self.off_delay = np.array([r.off_delay_ns for r in rules], np.int64)
+        self.latching = np.array([r.latching for r in rules], np.uint8)
 
 
 class TickBatch:
     """The rules of one engine over the ticks of ``inputs`` (:meth:`run`)."""
 
-    def __init__(self, engine: "AlertEngine", rules: list[Rule], inputs: TickInputs) -> None:
-        n = inputs.ends.shape[0]
+    def __init__(self, plan: BatchPlan, inputs: TickInputs) -> None:
+        engine, n = plan.engine, inputs.ends.shape[0]
         if n and int(inputs.ends[0]) <= engine.last_t_ns:
             raise ValueError(f"tick t_ns={int(inputs.ends[0])} is not after the previous "
                              f"evaluation ({engine.last_t_ns}); alert ticks must advance")
-        self.engine, self.rules, self.ends = engine, rules, inputs.ends
+        self.plan, self.engine, self.rules, self.ends = plan, engine, plan.rules, inputs.ends
         self.stop = np.zeros(n, bool)
-        rows = [_BUILDERS[type(r)](r, inputs, self.stop) for r in rules]
-        self.rows = rows
-        k = len(rules)
-        self.values = np.empty((k, n))
-        self.flags = np.zeros((k, n), np.uint8)
-        for i, row in enumerate(rows):
-            self.values[i] = row.values
+        self.rows = [build(r, inputs, self.stop) for build, r in zip(plan.builders, plan.rules)]
+        self.values = np.array([row.values for row in self.rows]).reshape(len(self.rows), n)
+        self.flags = np.zeros(self.values.shape, np.uint8)
+        for i, row in enumerate(self.rows):
             if row.flags is not None:
                 self.flags[i] = row.flags
-        self.mode = np.array([row.mode for row in rows], np.int64)
-        self.on = np.array([row.on for row in rows], np.float64)
-        self.off = np.array([row.off for row in rows], np.float64)
-        self.on_delay = np.array([r.on_delay_ns for r in rules], np.int64)
-        self.off_delay = np.array([r.off_delay_ns for r in rules], np.int64)
-        self.latching = np.array([r.latching for r in rules], np.uint8)
-        self.firing = np.zeros(k, np.uint8)
-        self.pending = np.zeros(k, np.int64)
-        self.clear = np.zeros(k, np.int64)
-        self.last_sent = np.zeros(k, np.int64)
-        self.reset_pending = np.zeros(k, np.uint8)
-        self.acked = np.zeros(k, np.uint8)
-        self.baseline = np.zeros(k, np.float64)
-        self.last_data = np.zeros(k, np.int64)
         self.reload()
 
     def run(self, tick: Callable[[int], None],
@@ -331,8 +333,9 @@ class TickBatch:
 
     def scan(self, j0: int, due_ns: int = NO_DUE) -> int:
         """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)."""
-        return int(scan_ticks(self.ends, self.values, self.flags, self.mode, self.on, self.off,
-                              self.on_delay, self.off_delay, self.latching,
+        p = self.plan
+        return int(scan_ticks(self.ends, self.values, self.flags, p.mode, p.on, p.off,
+                              p.on_delay, p.off_delay, p.latching,
                               self.engine._resend_ns, self.stop, due_ns, j0, self.firing,
                               self.pending, self.clear, self.last_sent, self.reset_pending,
                               self.acked, self.baseline, self.last_data))
@@ -352,12 +355,12 @@ class TickBatch:
 
     def reload(self) -> None:
         """Take the rules' firing state from the rule objects (after an ordinary tick)."""
-        for i, rule in enumerate(self.rules):
-            self.firing[i] = rule.firing
-            self.pending[i] = rule.pending_since_ns
-            self.clear[i] = rule.clear_since_ns
-            self.last_sent[i] = rule.last_sent_ns
-            self.reset_pending[i] = rule.reset_pending
-            self.acked[i] = bool(rule.acked_by)
-            self.baseline[i] = getattr(rule, "baseline", 0.0)
-        self.last_data[:] = -1
+        rules = self.rules
+        self.firing = np.array([r.firing for r in rules], np.uint8)
+        self.pending = np.array([r.pending_since_ns for r in rules], np.int64)
+        self.clear = np.array([r.clear_since_ns for r in rules], np.int64)
+        self.last_sent = np.array([r.last_sent_ns for r in rules], np.int64)
+        self.reset_pending = np.array([r.reset_pending for r in rules], np.uint8)
+        self.acked = np.array([bool(r.acked_by) for r in rules], np.uint8)
+        self.baseline = np.array([getattr(r, "baseline", 0.0) for r in rules], np.float64)
+        self.last_data = np.full(len(rules), -1, np.int64)

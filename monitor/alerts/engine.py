@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Literal, Mapping
 
-from monitor.alerts.batch import TickBatch, TickInputs, batchable
+from monitor.alerts.batch import BatchPlan, TickBatch, TickInputs
 from monitor.alerts.config import CABLE_COMPONENT, KIND_PARAMS, AlertsConfig, RuleConfig
 from monitor.alerts.records import AlertRecord
 from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, ConductorYield, Rule, TickStats
@@ -79,6 +79,9 @@ class AlertEngine:
             self._by_fp[fp] = r
             self._by_key[(r.name, r.target)] = r
         self.last_t_ns = -1
+        # what the batch path (tick_batch) needs of the rules, made on first use; False when
+        # a rule is of a kind it does not scan
+        self._batch_plan: BatchPlan | Literal[False] | None = None
         self._history: deque[dict[str, Any]] = deque(maxlen=config.history_limit)
 
     @classmethod
@@ -158,7 +161,9 @@ class AlertEngine:
     def tick_batch(self, inputs: TickInputs) -> TickBatch | None:
         """The rules over many ticks at once (:mod:`monitor.alerts.batch`; the same results
         as :meth:`evaluate` at each), None when a rule is of a kind it does not scan."""
-        return TickBatch(self, self._rules, inputs) if batchable(self._rules) else None
+        if self._batch_plan is None:
+            self._batch_plan = BatchPlan.of(self, self._rules)
+        return TickBatch(self._batch_plan, inputs) if self._batch_plan else None
 
     def _record(self, rule: Rule, event: str, t: int) -> AlertRecord:
         firing = event in ("fire", "resend")
