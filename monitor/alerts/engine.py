@@ -4,7 +4,10 @@ The pipeline builds one :class:`monitor.events.Observation` per tick (``[alerts]
 eval_interval_s`` of sensor time) and calls :meth:`AlertEngine.evaluate`, which returns only
 what changed: alerts that fired, cleared or were released by a reset, plus re-sends of active,
 unacknowledged alerts every ``resend_interval_s`` of sensor time. Nothing reads the wall clock,
-so a replay and the live daemon produce identical histories for the same samples.
+so a replay and the live daemon produce identical histories for the same samples. A slab of
+many ticks with no per-tick hook (a replay) goes through :meth:`AlertEngine.tick_batch`
+instead (:mod:`monitor.alerts.batch`), which calls :meth:`AlertEngine.evaluate` only at the
+ticks where something happens, with the same results.
 
 Operator actions (:meth:`AlertEngine.ack`, :meth:`AlertEngine.reset`) are recorded in the
 history with who, when (``at_ns``, as given by the caller) and why. A reset takes effect at
