@@ -43,6 +43,22 @@ validation and QC ~8 %; the read-ahead thread is idle 73 % of the run. Alert tic
 instead of 10 s cut the CPU from 18.4-19.7 to 14.0-15.3 s: a third of the CPU is per-tick
 Python, the rest per-sample numpy and compiled passes spread over a dozen stages.
 
+Alert ticks batched (measured 2026-11-25 18:40-19:05 UTC on the same machine, load average
+4-9 from other jobs: CPU times only, best of N): a replay slab's ticks go through
+monitor/alerts/batch.py (per-tick value arrays and one compiled scan of the firing state
+machine; an Observation and ``AlertEngine.evaluate`` only at the ticks where something
+happens; slabs of under 16 ticks go tick by tick: 33 of the 1-day log's 8,640 ticks). Cost of the alert ticks in the 1-day log of
+this script (in-process ``run_blocks``, CPU in ``Pipeline._evaluate_ticks`` less the damage
+split, the sea-state learner's tick stubbed out, best of 7, two interleaved rounds): main
+(7e8ba84) 14.0 / 14.2 us per tick, this build 5.0 / 4.7 us. The whole 1-day replay
+in-process (``prof.py time 7``, three interleaved rounds): main 0.650 / 0.715 / 0.631 CPU-s,
+this build 0.553 / 0.590 / 0.573 (-9 to -17 %). The 30-day log, ``buoymon replay`` (report,
+state and output identical to main's): main 22.86 / 22.38 CPU-s, this build 22.06 / 19.71
+(two interleaved pairs at load 7-9). What is left of the ~5 us a tick: setting the batch up
+(~0.3 ms a slab of ~145 ticks), the first tick's load figures rebuilt with the samples an
+earlier slab left, the committed damages handed to the sea-state learner (which still sees
+every tick), the 33 ordinary evaluations.
+
 Measured 2026-11-24 on the same machine (shared with other jobs), `--days 2 --baseline-days
 0.1`, warm compile cache, before / after QARTOD QC by default (issue 17: monitor.qartod on every
 stream, the over-break rule, the damage split): default config on one core 1.04 s / 1.18 s

@@ -129,6 +129,10 @@ class ForecastAlerts:
     def due(self, end_ns: int) -> bool:
         return any(f.due_ns <= end_ns for f in self.pending)
 
+    def next_due_ns(self) -> int | None:
+        """When the first pending forecast is due (None without one)."""
+        return min((f.due_ns for f in self.pending), default=None)
+
     def apply(self, end_ns: int, committed: Mapping[str, float],
               table: DamageRateTable) -> list[AlertRecord]:
         """At a tick end: project the newest due forecast (older due ones are superseded)."""

@@ -4,7 +4,10 @@ The pipeline builds one :class:`monitor.events.Observation` per tick (``[alerts]
 eval_interval_s`` of sensor time) and calls :meth:`AlertEngine.evaluate`, which returns only
 what changed: alerts that fired, cleared or were released by a reset, plus re-sends of active,
 unacknowledged alerts every ``resend_interval_s`` of sensor time. Nothing reads the wall clock,
-so a replay and the live daemon produce identical histories for the same samples.
+so a replay and the live daemon produce identical histories for the same samples. A slab of
+many ticks with no per-tick hook (a replay) goes through :meth:`AlertEngine.tick_batch`
+instead (:mod:`monitor.alerts.batch`), which calls :meth:`AlertEngine.evaluate` only at the
+ticks where something happens, with the same results.
 
 Operator actions (:meth:`AlertEngine.ack`, :meth:`AlertEngine.reset`) are recorded in the
 history with who, when (``at_ns``, as given by the caller) and why. A reset takes effect at
@@ -19,8 +22,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Literal, Mapping
 
+from monitor.alerts.batch import BatchPlan, TickBatch, TickInputs
 from monitor.alerts.config import CABLE_COMPONENT, KIND_PARAMS, AlertsConfig, RuleConfig
 from monitor.alerts.records import AlertRecord
 from monitor.alerts.rules import NS, RULE_CLASSES, ConductorStress, ConductorYield, Rule, TickStats
@@ -78,6 +82,9 @@ class AlertEngine:
             self._by_fp[fp] = r
             self._by_key[(r.name, r.target)] = r
         self.last_t_ns = -1
+        # what the batch path (tick_batch) needs of the rules, made on first use; False when
+        # a rule is of a kind it does not scan
+        self._batch_plan: BatchPlan | Literal[False] | None = None
         self._history: deque[dict[str, Any]] = deque(maxlen=config.history_limit)
 
     @classmethod
@@ -153,6 +160,13 @@ class AlertEngine:
             if event in ("reset", "rearm"):
                 rule.on_reset()
         return out
+
+    def tick_batch(self, inputs: TickInputs) -> TickBatch | None:
+        """The rules over many ticks at once (:mod:`monitor.alerts.batch`; the same results
+        as :meth:`evaluate` at each), None when a rule is of a kind it does not scan."""
+        if self._batch_plan is None:
+            self._batch_plan = BatchPlan.of(self, self._rules)
+        return TickBatch(self._batch_plan, inputs) if self._batch_plan else None
 
     def _record(self, rule: Rule, event: str, t: int) -> AlertRecord:
         firing = event in ("fire", "resend")

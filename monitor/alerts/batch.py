@@ -1,0 +1,366 @@
+"""Alert evaluation of many ticks at once: the replay path of :class:`~monitor.alerts.engine.
+AlertEngine` (issue 22: one Python call per rule per tick was a quarter of a replay's CPU).
+
+The pipeline hands the figures of a slab's ticks as arrays (:class:`TickInputs`); each rule
+instance becomes a row of per-tick values (NaN where the tick has no data for it) and a
+condition code, built by numpy (and a compiled pass over the load samples for slack snaps).
+:func:`scan_ticks` then runs the firing state machine of :meth:`Rule.step` over the ticks in
+one compiled loop and stops at the first tick where anything happens: a transition, a
+re-send, a pending reset, a cable replacement, or a tick the caller marks (a forecast due).
+That tick is evaluated the ordinary way (:meth:`AlertEngine.evaluate` on an Observation),
+so every record is built by the same code as in the live path; the quiet ticks before it
+only moved pending/clearing times and each rule's last value, which :meth:`TickBatch.sync`
+writes into the rule objects first.
+
+Bit-identity with the per-tick path holds because each row is the value its rule's
+``observe`` computes, by the same IEEE operations (tests/test_alerts_batch.py runs both).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from itertools import chain
+from typing import TYPE_CHECKING, Callable, Literal, Mapping
+
+import numpy as np
+
+from models._jit import kernel
+from monitor.alerts.rules import (NS, ConductorStress, ConductorYield, DamageFraction,
+                                  DamageRate, ModelResidual, RejectedRate, RemainingLife, Rule,
+                                  SlackSnap, Stale, TensionHigh)
+
+if TYPE_CHECKING:
+    from monitor.alerts.engine import AlertEngine
+
+NO_DUE = np.iinfo(np.int64).max  # no forecast due: scan_ticks never stops for one
+
+# condition codes of scan_ticks: value > on, value < on, value >= on, hysteresis (>= off
+# while firing, > on otherwise), value - baseline >= on (damage fraction), a given flag
+_ABOVE, _BELOW, _AT_LEAST, _HYSTERESIS, _ABOVE_BASELINE, _FLAG = range(6)
+
+
+@dataclass(frozen=True, eq=False)
+class StreamTicks:
+    """One sensor stream's health at each tick end, as the per-tick ``StreamObs``."""
+
+    last_t_ns: np.ndarray  # int64, 0 when no accepted sample yet
+    stale: np.ndarray  # bool
+    received: np.ndarray  # int64, samples received in the tick
+    rejected: np.ndarray  # int64, samples rejected in the tick
+
+
+@dataclass(frozen=True, eq=False)
+class TickInputs:
+    """What the rules observe at each of ``ends.shape[0]`` consecutive tick ends, as arrays
+    (NaN where the per-tick Observation has NaN). ``component(name, i)`` is a component's
+    figure ``i`` of the per-tick ComponentObs (0 damage, 1 committed, 2 rate per day,
+    3 remaining life days, 4 peak stress); it, ``stream(name)`` and ``load()`` (load samples
+    ``t, v`` and each tick's ``starts, stops`` in them) are asked only for what the rules
+    need."""
+
+    buoy_id: str
+    ends: np.ndarray  # int64
+    tension_max: np.ndarray
+    measured: np.ndarray
+    estimated: np.ndarray
+    component: Callable[[str, int], np.ndarray]
+    stream: Callable[[str], StreamTicks]
+    load: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+
+
+@kernel(inline="always")
+def _holds(mode, v, on, off, firing, baseline, flag):
+    """Whether a rule's condition holds for value ``v`` (the subclasses' ``holds``)."""
+    if mode == 0:
+        return v > on
+    if mode == 1:
+        return v < on
+    if mode == 2:
+        return v >= on
+    if mode == 3:
+        return v >= off if firing else v > on
+    if mode == 4:
+        return v - baseline >= on
+    return flag != 0
+
+
+@kernel()
+def scan_ticks(ends, values, flags, mode, on, off, on_delay, off_delay, latching, resend_ns,
+               stop, due_ns, j0, firing, pending, clear, last_sent, reset_pending, acked,
+               baseline, last_data):
+    """Run :meth:`Rule.step` and the engine's re-send test for every rule (row) from tick
+    ``j0`` on; return the first tick where one would return an event or a re-send is due
+    (or ``stop`` is set, or the tick ends at or after ``due_ns``), the tick count when none.
+    The ticks before it are applied: ``pending``/``clear`` move as in ``step`` and
+    ``last_data`` is the last tick with a value per rule; nothing else can change on them."""
+    n = ends.shape[0]
+    rules = mode.shape[0]
+    for j in range(j0, n):
+        t = ends[j]
+        if stop[j] or t >= due_ns:
+            return j
+        for r in range(rules):  # anything to report at this tick? (changes nothing)
+            v = values[r, j]
+            if v == v:
+                if reset_pending[r]:
+                    return j
+                if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
+                    if not firing[r]:
+                        p = pending[r] if pending[r] >= 0 else t
+                        if t - p >= on_delay[r]:
+                            return j
+                        continue  # a quiet rule has nothing to re-send
+                elif firing[r] and not latching[r]:
+                    c = clear[r] if clear[r] >= 0 else t
+                    if t - c >= off_delay[r]:
+                        return j
+            if resend_ns and firing[r] and not acked[r] and t - last_sent[r] >= resend_ns:
+                return j
+        for r in range(rules):  # a quiet tick: only the pending and clearing times move
+            v = values[r, j]
+            if v != v:
+                continue
+            last_data[r] = j
+            if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
+                if firing[r]:
+                    clear[r] = -1
+                elif pending[r] < 0:
+                    pending[r] = t
+            elif not firing[r]:
+                pending[r] = -1
+            elif not latching[r] and clear[r] < 0:
+                clear[r] = t
+    return n
+
+
+@kernel()
+def slack_snap_ticks(t, x, starts, stops, floor, snap_level, window_ns, last_slack):
+    """:meth:`SlackSnap.observe` over consecutive ticks: each tick's peak snap tension (0 when
+    none, NaN without samples) and the time of the last slack sample after it."""
+    n = starts.shape[0]
+    values = np.empty(n)
+    after = np.empty(n, np.int64)
+    last = last_slack
+    for k in range(n):
+        if stops[k] == starts[k]:
+            values[k] = np.nan
+        else:
+            peak = -np.inf
+            found = False
+            for i in range(starts[k], stops[k]):
+                xi = x[i]
+                if xi < floor and t[i] > last:
+                    last = t[i]
+                if xi >= snap_level and last >= 0 and t[i] - last <= window_ns:
+                    if not found or xi > peak:
+                        peak = xi
+                    found = True
+            values[k] = peak if found else 0.0
+        after[k] = last
+    return values, after
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) both kernels now, on empty input."""
+    f, i, u = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.uint8)
+    slack_snap_ticks(i, f, i, i, 0.0, 0.0, 0, -1)
+    scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), i, f, f, i, i, u, 0,
+               np.zeros(0, bool), NO_DUE, 0, u, i, i, i, u, u, f, i)
+
+
+class _Row:
+    """One rule instance over a slab: its values and flags per tick, and how to bring the
+    rule object to the end of tick ``j`` (``side``; its value through ``value_at``)."""
+
+    def __init__(self, values: np.ndarray, flags: np.ndarray | None = None,
+                 side: Callable[[int], None] | None = None,
+                 value_at: Callable[[int], float] | None = None) -> None:
+        self.values, self.flags, self.side = values, flags, side
+        self.value_at = value_at or (lambda j: float(values[j]))
+
+
+def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray) -> _Row:
+    committed = x.component(rule.target, 1)
+    # the accumulator restarted (committed damage went down): replacement, a reset tick
+    stop[0] |= committed[0] < rule.last_committed
+    stop[1:] |= committed[1:] < committed[:-1]
+
+    def side(j: int) -> None:
+        rule.last_committed = float(committed[j])
+    return _Row(x.component(rule.target, 0), side=side)
+
+
+def _component_figure(column: int) -> Callable[..., _Row]:
+    def build(rule: Rule, x: TickInputs, stop: np.ndarray) -> _Row:
+        return _Row(x.component(rule.target, column))
+    return build
+
+
+def _tension_high(rule: TensionHigh, x: TickInputs, stop: np.ndarray) -> _Row:
+    return _Row(x.tension_max)
+
+
+def _model_residual(rule: ModelResidual, x: TickInputs, stop: np.ndarray) -> _Row:
+    return _Row(np.abs(x.measured - x.estimated))
+
+
+def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray) -> _Row:
+    t, v, starts, stops = x.load()
+    values, after = slack_snap_ticks(t, v, starts, stops, float(rule.floor),
+                                     float(rule.snap_level), rule.window_ns, rule.last_slack_ns)
+
+    def side(j: int) -> None:
+        rule.last_slack_ns = int(after[j])
+    return _Row(values, side=side)
+
+
+def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
+    s = x.stream(rule.target)
+    ends = x.ends
+
+    def value_at(j: int) -> float:  # as observe: Python's int / int, correctly rounded
+        last = int(s.last_t_ns[j])
+        return (int(ends[j]) - last) / NS if last > 0 else math.inf
+    return _Row(np.zeros(ends.shape[0]), s.stale, value_at=value_at)
+
+
+def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
+    s = x.stream(rule.target)
+    ends = x.ends
+    new = s.received > 0
+    # the window's entries (t, rejected, received): those the rule holds, then one per tick
+    # with samples; the window at tick j is entries lo[j]..hi[j]-1
+    m = len(rule.ticks)
+    entries = np.empty((m + int(np.count_nonzero(new)), 3), np.int64)
+    entries[:m] = np.fromiter(chain.from_iterable(rule.ticks), np.int64, 3 * m).reshape(m, 3)
+    entries[m:, 0], entries[m:, 1], entries[m:, 2] = ends[new], s.rejected[new], s.received[new]
+    sums = np.zeros((entries.shape[0] + 1, 2), np.int64)
+    np.cumsum(entries[:, 1:], axis=0, out=sums[1:])
+    hi = m + np.cumsum(new)
+    lo = np.searchsorted(entries[:, 0], ends - rule.window_ns, side="right")
+    n_rej, n_rec = (sums[hi] - sums[lo]).T
+    # exact int -> float conversions (counts < 2**53): the same quotient as observe's
+    values = np.divide(n_rej, n_rec, out=np.full(ends.shape[0], math.nan), where=n_rec > 0)
+
+    def side(j: int) -> None:
+        rule.ticks = deque(map(tuple, entries[lo[j]:hi[j]].tolist()))
+        rule.rejected, rule.received = int(n_rej[j]), int(n_rec[j])
+    return _Row(values, side=side)
+
+
+def _level(code: int, on: str, off: str | None = None) -> Callable[[Rule], tuple]:
+    """A rule's condition: code, its level attribute and (hysteresis) its off level."""
+    return lambda r: (code, float(getattr(r, on)), float(getattr(r, off)) if off else math.nan)
+
+
+# per rule class: its condition (scan_ticks's code and levels) and its row builder
+_KINDS: Mapping[type, tuple[Callable[[Rule], tuple], Callable[..., _Row]]] = {
+    DamageFraction: (_level(_ABOVE_BASELINE, "threshold"), _damage_fraction),
+    DamageRate: (_level(_ABOVE, "threshold"), _component_figure(2)),
+    RemainingLife: (_level(_BELOW, "threshold"), _component_figure(3)),
+    ConductorStress: (_level(_ABOVE, "level"), _component_figure(4)),
+    ConductorYield: (_level(_ABOVE, "level"), _component_figure(4)),
+    TensionHigh: (_level(_HYSTERESIS, "on_level", "off_level"), _tension_high),
+    SlackSnap: (_level(_AT_LEAST, "snap_level"), _slack_snap),
+    Stale: (lambda r: (_FLAG, math.nan, math.nan), _stale),
+    RejectedRate: (_level(_ABOVE, "threshold"), _rejected_rate),
+    ModelResidual: (_level(_ABOVE, "threshold"), _model_residual),
+}
+
+
+class BatchPlan:
+    """What does not change from slab to slab for an engine's rules: their condition codes,
+    levels, delays and whether they latch."""
+
+    @classmethod
+    def of(cls, engine: "AlertEngine", rules: list[Rule]) -> "BatchPlan | Literal[False]":
+        """The plan, False when a rule is of a kind this module does not scan (exactly: a
+        subclass may observe differently)."""
+        return all(type(r) in _KINDS for r in rules) and cls(engine, rules)
+
+    def __init__(self, engine: "AlertEngine", rules: list[Rule]) -> None:
+        self.engine, self.rules = engine, rules
+        self.builders = [_KINDS[type(r)][1] for r in rules]
+        levels = [_KINDS[type(r)][0](r) for r in rules]
+        self.mode = np.array([x[0] for x in levels], np.int64)
+        self.on = np.array([x[1] for x in levels], np.float64)
+        self.off = np.array([x[2] for x in levels], np.float64)
+        self.on_delay = np.array([r.on_delay_ns for r in rules], np.int64)
+        self.off_delay = np.array([r.off_delay_ns for r in rules], np.int64)
+        self.latching = np.array([r.latching for r in rules], np.uint8)
+
+
+class TickBatch:
+    """The rules of one engine over the ticks of ``inputs`` (:meth:`run`)."""
+
+    def __init__(self, plan: BatchPlan, inputs: TickInputs) -> None:
+        engine, n = plan.engine, inputs.ends.shape[0]
+        if n and int(inputs.ends[0]) <= engine.last_t_ns:
+            raise ValueError(f"tick t_ns={int(inputs.ends[0])} is not after the previous "
+                             f"evaluation ({engine.last_t_ns}); alert ticks must advance")
+        self.plan, self.engine, self.rules, self.ends = plan, engine, plan.rules, inputs.ends
+        self.stop = np.zeros(n, bool)
+        self.rows = [build(r, inputs, self.stop) for build, r in zip(plan.builders, plan.rules)]
+        self.values = np.array([row.values for row in self.rows]).reshape(len(self.rows), n)
+        self.flags = np.zeros(self.values.shape, np.uint8)
+        for i, row in enumerate(self.rows):
+            if row.flags is not None:
+                self.flags[i] = row.flags
+        self.reload()
+
+    def run(self, tick: Callable[[int], None],
+            quiet: Callable[[int, int], None] | None = None,
+            next_due: Callable[[], int | None] | None = None) -> None:
+        """Evaluate every tick: ``tick(k)`` must pass the ``k``-th tick's Observation to
+        :meth:`AlertEngine.evaluate` (and may do more), and is called only for ticks where
+        something happens or that end at or after ``next_due()``; ``quiet(a, b)`` is told
+        of each run of ticks ``a..b-1`` in between, in order."""
+        j, n = 0, self.ends.shape[0]
+        while True:
+            due = next_due() if next_due is not None else None
+            stop = self.scan(j, NO_DUE if due is None else due)
+            if quiet is not None and stop > j:
+                quiet(j, stop)
+            if stop == n:
+                break
+            self.sync(stop)
+            tick(stop)
+            self.reload()
+            j = stop + 1
+        self.sync(n)
+
+    def scan(self, j0: int, due_ns: int = NO_DUE) -> int:
+        """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)."""
+        p = self.plan
+        return int(scan_ticks(self.ends, self.values, self.flags, p.mode, p.on, p.off,
+                              p.on_delay, p.off_delay, p.latching,
+                              self.engine._resend_ns, self.stop, due_ns, j0, self.firing,
+                              self.pending, self.clear, self.last_sent, self.reset_pending,
+                              self.acked, self.baseline, self.last_data))
+
+    def sync(self, j: int) -> None:
+        """Bring the rule objects and the engine to the end of tick ``j - 1``."""
+        if j == 0:
+            return
+        for i, (rule, row) in enumerate(zip(self.rules, self.rows)):
+            rule.pending_since_ns = int(self.pending[i])
+            rule.clear_since_ns = int(self.clear[i])
+            if self.last_data[i] >= 0:
+                rule.value = row.value_at(int(self.last_data[i]))
+            if row.side is not None:
+                row.side(j - 1)
+        self.engine.last_t_ns = int(self.ends[j - 1])
+
+    def reload(self) -> None:
+        """Take the rules' firing state from the rule objects (after an ordinary tick)."""
+        rules = self.rules
+        self.firing = np.array([r.firing for r in rules], np.uint8)
+        self.pending = np.array([r.pending_since_ns for r in rules], np.int64)
+        self.clear = np.array([r.clear_since_ns for r in rules], np.int64)
+        self.last_sent = np.array([r.last_sent_ns for r in rules], np.int64)
+        self.reset_pending = np.array([r.reset_pending for r in rules], np.uint8)
+        self.acked = np.array([bool(r.acked_by) for r in rules], np.uint8)
+        self.baseline = np.array([getattr(r, "baseline", 0.0) for r in rules], np.float64)
+        self.last_data = np.full(len(rules), -1, np.int64)
