@@ -13,6 +13,11 @@ monitor.components), so the same samples give the same committed damage and aler
 whichever driver cuts them into blocks. ``state()`` is complete and JSON-serialisable;
 ``Pipeline(config, state=s)`` continues exactly where ``s`` was taken.
 
+Stages: ``process`` is a stream stage (``ingest``: ordering to stresses) handing each slab
+(:class:`SlabIntake`) to a tick stage (``advance``: rainflow to sinks), each stage owning its
+state; the daemon runs them in turn, a replay may run the stream stage ahead on another
+thread (replay.stages), with the same results to the bit. ``state()`` is taken between slabs.
+
 Alert ticks: tick ``k`` covers sensor time ``((k-1) I, k I]`` with ``I = [alerts]
 eval_interval_s``. A tick is evaluated once the ordering watermark has passed its end (or, at
 ``flush()``, once the slowest stream's data has); the trailing partial tick of a log waits for
