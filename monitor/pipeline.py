@@ -629,7 +629,7 @@ class Pipeline:
         return SlabIntake(
             block, sensor, upto, tick_limit, streams, totals, span, n_acc, rejected,
             {s: self.validators[s].qc_counts() for s in streams} if self._qc_sinks else {},
-            t, v, src, stresses, {name: c.peak(stresses[name]) for name, c in self.components.items()},
+            t, v, src, stresses, {n: c.peak(stresses[n]) for n, c in self.components.items()},
             (e_t, e_v) if self._full_estimate else None,
             float(m_v[-1]) if m_t.shape[0] else None, float(e_v[-1]) if e_t.shape[0] else None,
             spectra)
@@ -642,9 +642,10 @@ class Pipeline:
                 hook(intake.block)
         t, v, src, stresses = intake.t, intake.v, intake.src, intake.stresses
         if intake.span is not None:
+            first, last = intake.span
             start, end = self.last["time_start_ns"], self.last["time_end_ns"]
-            self.last["time_start_ns"] = intake.span[0] if start is None else min(start, intake.span[0])
-            self.last["time_end_ns"] = intake.span[1] if end is None else max(end, intake.span[1])
+            self.last["time_start_ns"] = first if start is None else min(start, first)
+            self.last["time_end_ns"] = last if end is None else max(end, last)
         if intake.measured_N is not None:
             self.last["measured_N"] = intake.measured_N
         if intake.estimated_N is not None:

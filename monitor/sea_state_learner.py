@@ -143,7 +143,7 @@ class _WindowSpectra:
         st = state or {}
         self.names, self.window_ns = tuple(names), window_ns
         self.current = _Spectra(self.names, st.get("current"))
-        self._finished: list[_Spectra] = []
+        self._finished: list[tuple[int, _Spectra]] = []
         self.done: dict[int, _Spectra] = {
             int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
         self._open = self.current
@@ -165,21 +165,21 @@ class _WindowSpectra:
     def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         if self.current.index != k:
             if self.current.index is not None:
-                self._finished.append(self.current)
+                self._finished.append((self.current.index, self.current))
             self.current = _Spectra(self.names)
             self.current.index = k
         self.current.feed(t_ns, values)
 
-    def hand_over(self) -> tuple[list[_Spectra], _Spectra]:
+    def hand_over(self) -> tuple[list[tuple[int, _Spectra]], _Spectra]:
         """The windows finished since the last call, and a copy of the open one."""
         finished, self._finished = self._finished, []
         return finished, self.current.snapshot()
 
-    def receive(self, part: tuple[list[_Spectra], _Spectra]) -> None:
+    def receive(self, part: tuple[list[tuple[int, _Spectra]], _Spectra]) -> None:
         """Take a :meth:`hand_over` (in order)."""
         finished, self._open = part
-        for spectra in finished:
-            self.done[spectra.index] = spectra
+        for index, spectra in finished:
+            self.done[index] = spectra
 
     def take(self, k: int) -> _Spectra | None:
         """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""
