@@ -146,20 +146,33 @@ class Component:
 
     def stress(self, tension_N: np.ndarray, record: bool = True) -> np.ndarray:
         """Stress of the component under the load samples; records the peak and counts the
-        samples beyond yield (``record=False``: samples seen before, record nothing)."""
+        samples beyond yield (``record=False``: samples seen before, or recorded later with
+        :meth:`peak` and :meth:`record`)."""
         if self._bend is not None:
             stress = termination.termination_stress(tension_N, self._cable, self.cfg.lay, self._bend)
         elif self.cfg.kind == "conductor":
             stress = helix.conductor_stress(tension_N, self._cable, lay=self.cfg.lay)
         else:
             stress = tension_N / self.cfg.area_m2
-        if stress.shape[0] and record:
-            peak = float(stress.max())
-            self.max_stress_Pa = max(self.max_stress_Pa, peak)
-            limit = self.yield_stress_Pa
-            if limit is not None and peak > limit:  # the peak is known: count only when needed
-                self.samples_beyond_yield += int(np.count_nonzero(stress > limit))
+        if record:
+            self.record(*self.peak(stress))
         return stress
+
+    def peak(self, stress_Pa: np.ndarray) -> tuple[float, int]:
+        """The stress samples' peak (-inf if none) and how many exceed the yield stress
+        (pure: nothing is recorded)."""
+        if stress_Pa.shape[0] == 0:
+            return -math.inf, 0
+        peak = float(stress_Pa.max())
+        limit = self.yield_stress_Pa
+        if limit is not None and peak > limit:  # the peak is known: count only when needed
+            return peak, int(np.count_nonzero(stress_Pa > limit))
+        return peak, 0
+
+    def record(self, peak_Pa: float, beyond_yield: int) -> None:
+        """Record a :meth:`peak`."""
+        self.max_stress_Pa = max(self.max_stress_Pa, peak_Pa)
+        self.samples_beyond_yield += beyond_yield
 
     def feed(self, stress_Pa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Rainflow the next stress samples; returns the cycles they closed (kept pending)."""

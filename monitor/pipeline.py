@@ -13,6 +13,11 @@ monitor.components), so the same samples give the same committed damage and aler
 whichever driver cuts them into blocks. ``state()`` is complete and JSON-serialisable;
 ``Pipeline(config, state=s)`` continues exactly where ``s`` was taken.
 
+Stages: ``process`` is a stream stage (``ingest``: ordering to stresses) handing each slab
+(:class:`SlabIntake`) to a tick stage (``advance``: rainflow to sinks), each stage owning its
+state; the daemon runs them in turn, a replay may run the stream stage ahead on another
+thread (replay.stages), with the same results to the bit. ``state()`` is taken between slabs.
+
 Alert ticks: tick ``k`` covers sensor time ``((k-1) I, k I]`` with ``I = [alerts]
 eval_interval_s``. A tick is evaluated once the ordering watermark has passed its end (or, at
 ``flush()``, once the slowest stream's data has); the trailing partial tick of a log waits for
@@ -316,6 +321,47 @@ class _LazyStreams(Mapping[str, StreamObs]):
         return len(self._pipeline.validators)
 
 
+@dataclasses.dataclass(frozen=True, slots=True)
+class _Totals:
+    """A stream's validation totals after one slab's checks: what a tick reads of a stream
+    without samples in the slab (the validator itself may be a slab further on)."""
+
+    accepted: int
+    rejected: dict[str, int]
+    has_last: bool
+    last_t_ns: int
+
+    @classmethod
+    def of(cls, v: StreamValidator) -> "_Totals":
+        return cls(v.accepted, dict(v.rejected), v.has_last, v.last_t_ns)
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class SlabIntake:
+    """One slab as the stream stage (:meth:`Pipeline.ingest`) hands it to the tick stage
+    (:meth:`Pipeline.advance`): all the tick stage reads of the streams."""
+
+    block: SampleBlock | None  # the block given, for the sinks' block hooks (None: flush)
+    sensor: str  # the block's sensor, or "flush"
+    upto: int | None  # the ordering watermark the slab was taken up to (None: everything)
+    tick_limit: int | None  # the ticks ending at or before it are complete
+    streams: dict[str, _StreamSlab]
+    totals: dict[str, _Totals]  # every stream's, without the slab's copies
+    span: tuple[int, int] | None  # first and last accepted sample time
+    n_acc: int
+    rejected: dict[str, int]  # per reason, the copies included
+    qc: dict[str, Any]  # QC flag totals per stream of the slab, for sinks that want them
+    t: np.ndarray  # the fatigue load: times, tension, source
+    v: np.ndarray
+    src: np.ndarray
+    stresses: dict[str, np.ndarray]
+    peaks: dict[str, tuple[float, int]]  # per component (Component.peak)
+    estimate: tuple[np.ndarray, np.ndarray] | None  # the motion estimates, full-estimate mode
+    measured_N: float | None  # the slab's newest measured and estimated tension
+    estimated_N: float | None
+    spectra: Any  # the sea-state learner's inputs (SeaStateLearner.hand_over), or None
+
+
 class Pipeline:
     """The fatigue-monitoring core for one buoy. See the module docstring."""
 
@@ -352,6 +398,7 @@ class Pipeline:
         }
         self._stale_ns = {s: config.validate[s].stale_after_s * 1e9 for s in SENSOR_ORDER}
         self._idle_obs: dict[str, tuple[tuple, StreamObs]] = {}
+        self._totals: dict[str, _Totals] = {}  # the streams as the slab's ticks see them
         self.selector = LoadSelector(config.load, st.get("load"))
         # [load] motion_sensor = "auto": the first motion stream (imu or motion) to arrive
         # feeds the estimator from then on (None until one has)
@@ -384,8 +431,8 @@ class Pipeline:
         # the model-residual rule compares the tick means of the measured tension and of the
         # motion estimate over every motion sample, not only where the estimate feeds fatigue
         rule_kinds = getattr(self.alerts, "rule_kinds", None)
-        self._full_estimate = self.estimator is not None and (
-            rule_kinds is None or "model_residual" in rule_kinds())
+        self._residual_rule = rule_kinds is None or "model_residual" in rule_kinds()
+        self._full_estimate = self.estimator is not None and self._residual_rule
         lim = config.validate["tension"].fields["tension_N"]
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
@@ -438,18 +485,9 @@ class Pipeline:
         return cls(config, sinks, state, **kwargs)
 
     def process(self, block: SampleBlock) -> StepResult:
-        """Buffer one block and process everything the ordering watermark now allows."""
-        if block.buoy_id != self.buoy_id:
-            raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
-                             f"{self.buoy_id!r}")
-        if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
-                and self.config.load.source != "measured" and len(block)):
-            self._choose_motion(block.sensor)
-        self.reorder.push(block)
-        for hook in self._block_hooks:
-            hook(block)
-        upto = self.reorder.watermark()
-        return self._advance(block.sensor, upto, upto)
+        """Buffer one block and process everything the ordering watermark now allows (the
+        stream stage, then the tick stage: :meth:`ingest`, :meth:`advance`)."""
+        return self.advance(self.ingest(block))
 
     def _choose_motion(self, sensor: str) -> None:
         """``motion_sensor = "auto"``: ``sensor`` feeds the estimator from now on and gates the
@@ -459,8 +497,7 @@ class Pipeline:
         self.estimator = build_estimator(self.config, None, sensor)
         self.reorder.load_streams = tuple(s for s in self.reorder.load_streams
                                           if s not in MOTION_SENSORS or s == sensor)
-        rule_kinds = getattr(self.alerts, "rule_kinds", None)
-        self._full_estimate = rule_kinds is None or "model_residual" in rule_kinds()
+        self._full_estimate = self._residual_rule
 
     def load_problems(self) -> list[str]:
         """Why the fatigue chain has (or had) no load, in words ([] when it has one)."""
@@ -502,18 +539,46 @@ class Pipeline:
 
     def flush(self) -> StepResult:
         """End of input: process every buffered sample; evaluate ticks the data completes."""
-        return self._advance("flush", None, self.reorder.end_of_data())
+        return self.advance(self.ingest_end())
 
     def close(self) -> None:
         for sink in self.sinks:
             sink.close()
 
     # ------------------------------------------------------------------ core step
-    def _advance(self, sensor: str, upto: int | None, tick_limit: int | None) -> StepResult:
+    # Two stages, each owning its state (see SlabIntake). The stream stage: the ordering,
+    # validators (and QC), taken_upto, processed_ns, the motion sensor and estimator, the load
+    # selector, the tension statistics and the sea-state learner's inputs. The tick stage:
+    # the components' rainflow and Miner sums and peaks, the alerts, forecasts, the learner's
+    # windows and table, the damage split, the tick grid and whatever waits for the next tick,
+    # ``last``, the alert history and the sinks. The stream stage never reads the tick
+    # stage's state, and the tick stage reads the stream stage's only in the hand-over, so a
+    # replay may run the stream stage of the next slab while the tick stage runs
+    # (replay.stages); the results are the same to the bit.
+    def ingest(self, block: SampleBlock) -> SlabIntake:
+        """Stream stage of :meth:`process`: buffer the block and take the slab the ordering
+        watermark allows through the per-stream work."""
+        if block.buoy_id != self.buoy_id:
+            raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
+                             f"{self.buoy_id!r}")
+        if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
+                and self.config.load.source != "measured" and len(block)):
+            self._choose_motion(block.sensor)
+        self.reorder.push(block)
+        upto = self.reorder.watermark()
+        return self._ingest_slab(block, block.sensor, upto, upto)
+
+    def ingest_end(self) -> SlabIntake:
+        """Stream stage of :meth:`flush`: every buffered sample."""
+        return self._ingest_slab(None, "flush", None, self.reorder.end_of_data())
+
+    def _ingest_slab(self, block: SampleBlock | None, sensor: str, upto: int | None,
+                     tick_limit: int | None) -> SlabIntake:
         slab = self.reorder.take(upto)
         streams: dict[str, _StreamSlab] = {}
         n_acc = 0
         rejected = dict.fromkeys(REASONS, 0)
+        span: tuple[int, int] | None = None
         for s, (t, values) in slab.items():
             validator = self.validators[s]
             before = _StreamSlab.before(validator)
@@ -525,10 +590,7 @@ class Pipeline:
                 rejected[reason] += validator.rejected[reason] - n
             if info.acc_t.shape[0]:
                 first, last = int(info.acc_t[0]), int(info.acc_t[-1])
-                start = self.last["time_start_ns"]
-                self.last["time_start_ns"] = first if start is None else min(start, first)
-                end = self.last["time_end_ns"]
-                self.last["time_end_ns"] = last if end is None else max(end, last)
+                span = (first, last) if span is None else (min(span[0], first), max(span[1], last))
         m_t, m_v = np.zeros(0, np.int64), np.zeros(0)
         if "tension" in streams:
             m_t, m_v = streams["tension"].acc_t, streams["tension"].acc_values[0]
@@ -547,12 +609,8 @@ class Pipeline:
                 e_t, e_v, e_clamped = self.estimator.feed(info.acc_t, fields, want)
         t, v, src = self.selector.select(m_t, m_v, e_t, e_v, e_clamped)
         self.stats.add(v, src)
-        if m_t.shape[0]:
-            self.last["measured_N"] = float(m_v[-1])
-        if e_t.shape[0]:
-            self.last["estimated_N"] = float(e_v[-1])
-        stresses = {name: c.stress(v) for name, c in self.components.items()}
-        self.new_alerts = []
+        stresses = {name: c.stress(v, record=False) for name, c in self.components.items()}
+        spectra = None
         if self.sea_states is not None:  # before the ticks this slab completes
             for name, wanted in _SEA_STATE_FIELDS.items():
                 part = streams.get(name)
@@ -560,21 +618,54 @@ class Pipeline:
                     fields = dict(zip(SENSOR_FIELDS[name], part.acc_values))
                     getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
             self.sea_states.load(t, stresses)
-        closed = self._feed_by_tick(t, v, src, stresses, streams, tick_limit, (e_t, e_v))
-        for s, n in slab.copies.items():  # counted after the ticks: not in their counts
+            spectra = self.sea_states.hand_over()
+        # the ticks see every stream's totals without this slab's copies, counted after them
+        totals = {s: _Totals.of(val) for s, val in self.validators.items()}
+        for s, n in slab.copies.items():
             self.validators[s].rejected["duplicate"] += n
             rejected["duplicate"] += n
-        if t.shape[0]:
-            self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
         if upto is not None:
             self.processed_ns = max(self.processed_ns, upto)
-        now = upto if upto is not None else tick_limit
+        return SlabIntake(
+            block, sensor, upto, tick_limit, streams, totals, span, n_acc, rejected,
+            {s: self.validators[s].qc_counts() for s in streams} if self._qc_sinks else {},
+            t, v, src, stresses, {n: c.peak(stresses[n]) for n, c in self.components.items()},
+            (e_t, e_v) if self._full_estimate else None,
+            float(m_v[-1]) if m_t.shape[0] else None, float(e_v[-1]) if e_t.shape[0] else None,
+            spectra)
+
+    def advance(self, intake: SlabIntake) -> StepResult:
+        """Tick stage of :meth:`process` and :meth:`flush`, given their stream stage's
+        hand-over (in the same order): fatigue, the ticks the slab completes, the sinks."""
+        if intake.block is not None:
+            for hook in self._block_hooks:
+                hook(intake.block)
+        t, v, src, stresses = intake.t, intake.v, intake.src, intake.stresses
+        if intake.span is not None:
+            first, last = intake.span
+            start, end = self.last["time_start_ns"], self.last["time_end_ns"]
+            self.last["time_start_ns"] = first if start is None else min(start, first)
+            self.last["time_end_ns"] = last if end is None else max(end, last)
+        if intake.measured_N is not None:
+            self.last["measured_N"] = intake.measured_N
+        if intake.estimated_N is not None:
+            self.last["estimated_N"] = intake.estimated_N
+        for name, c in self.components.items():
+            c.record(*intake.peaks[name])
+        self.new_alerts = []
+        if self.sea_states is not None:
+            self.sea_states.receive(intake.spectra)
+        self._totals = intake.totals
+        closed = self._feed_by_tick(t, v, src, stresses, intake.streams, intake.tick_limit,
+                                    intake.estimate)
+        if t.shape[0]:
+            self.last["load_t_ns"], self.last["load_src"] = int(t[-1]), int(src[-1])
+        now = intake.upto if intake.upto is not None else intake.tick_limit
         if now is not None:
             self.last["now_ns"] = max(self.last["now_ns"], now)
         self.last["source"] = self._source_at(self.last["now_ns"])
-        step = self._step(sensor, t, v, stresses, closed, n_acc, rejected,
-                          {s: self.validators[s].qc_counts() for s in streams}
-                          if self._qc_sinks else {})
+        step = self._step(intake.sensor, t, v, stresses, closed, intake.n_acc, intake.rejected,
+                          intake.qc)
         for sink in self.sinks:
             sink.on_step(step)
         return step
@@ -604,7 +695,7 @@ class Pipeline:
 
     def _feed_by_tick(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                       stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
-                      tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray]
+                      tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray] | None
                       ) -> dict[str, list[np.ndarray]]:
         """Rainflow and Miner damage over the slab's whole ticks (each committed at its end),
         the alert rules at every tick end, and the samples after the last end kept pending;
@@ -622,7 +713,8 @@ class Pipeline:
 
     def _due_ticks(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                    stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
-                   tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray]) -> _SlabTicks:
+                   tick_limit: int | None, estimate: tuple[np.ndarray, np.ndarray] | None
+                   ) -> _SlabTicks:
         """The ticks this slab completes (those ending at or before ``tick_limit``; the grid
         starts at the first sample's tick) and, when they are evaluated, their load figures,
         stream health and mean motion estimates."""
@@ -643,7 +735,7 @@ class Pipeline:
             for info in streams.values():
                 info.prepare(ends)
             load = _TickLoad(v, src, stresses, np.append(0, cuts[:-2]), cuts[:-1])
-            if self._full_estimate:
+            if estimate is not None:
                 est_means = self._estimate_means(*estimate, ends)
         # python ints for the per-tick loop
         return _SlabTicks(ends, ends.tolist(), cuts.tolist(), next_tick, evaluate, load,
@@ -816,10 +908,11 @@ class Pipeline:
         self._evaluate(k, ticks.ends_l[k], tt, tv, tick, j, streams, figures, est_mean)
         return tick.n_meas[j], tick.n[j], tick.meas[j], est_mean
 
-    def _carry_estimate(self, estimate: tuple[np.ndarray, np.ndarray], ends: np.ndarray) -> None:
-        """Full-estimate mode: keep the motion estimates after the last tick end for the
-        tick still open."""
-        if not self._full_estimate:
+    def _carry_estimate(self, estimate: tuple[np.ndarray, np.ndarray] | None,
+                        ends: np.ndarray) -> None:
+        """Full-estimate mode (``estimate`` given): keep the motion estimates after the last
+        tick end for the tick still open."""
+        if estimate is None:
             return
         e_t, e_v = estimate
         rest = int(np.searchsorted(e_t, ends[-1], side="right")) if ends.shape[0] else 0
@@ -905,7 +998,7 @@ class Pipeline:
                     k: int) -> StreamObs:
         """Health of stream ``s`` at ``now`` (the end of the slab's ``k``-th tick, or any time
         when ``streams`` is None): totals up to ``now`` and counts within the tick."""
-        val = self.validators[s]
+        val = self.validators[s] if streams is None else self._totals[s]
         stale_ns = self._stale_ns[s]
         info = None if streams is None else streams.get(s)
         if info is not None:

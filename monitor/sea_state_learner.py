@@ -22,10 +22,17 @@ Everything is a function of the samples in sensor-time order: the pipeline feeds
 accepted waves samples and the load samples of each slab before the ticks the slab
 completes, and a window closes at a tick end, when every sample up to it has been seen; so
 the table is the same for any block split, and :meth:`state` restores it exactly.
+
+The inputs (the spectra of the open windows, the new waves samples) belong to the
+pipeline's stream stage, the windows' closing to its tick stage: the one hands a slab's
+inputs over (:meth:`SeaStateLearner.hand_over`) and the other takes them
+(:meth:`SeaStateLearner.receive`) before the slab's ticks, so the stream stage may already
+be feeding the next slab while the ticks close windows.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any, Mapping, Sequence
 
@@ -124,6 +131,13 @@ class _Spectra:
             return None
         return ss.hs, ss.tp
 
+    def snapshot(self) -> "_Spectra":
+        """A copy that later feeding leaves as it is: feed replaces the open segment's
+        arrays but adds into the PSD sums in place, so those are copied."""
+        out = copy.copy(self)
+        out.psd = {n: v.copy() for n, v in self.psd.items()}
+        return out
+
     def state(self) -> dict[str, Any]:
         return {"index": self.index, "fs": self.fs, "segments": self.segments,
                 "dropped": self.dropped, "t": self.t.tolist(),
@@ -169,7 +183,11 @@ def _add_rows(acc: np.ndarray, rows: np.ndarray) -> None:
 
 
 class _WindowSpectra:
-    """:class:`_Spectra` of each learning window for one set of signals fed together."""
+    """:class:`_Spectra` of each learning window for one set of signals fed together.
+
+    Feeding (:meth:`feed`) owns the open window (``current``) and the ones it finished since
+    :meth:`hand_over`; taking (:meth:`take`) owns the finished windows handed over (``done``)
+    and its copy of the open one as it was then."""
 
     def __init__(self, names: Sequence[str], window_ns: int,
                  state: Mapping[str, Any] | None = None) -> None:
@@ -178,8 +196,10 @@ class _WindowSpectra:
         self.current = _Spectra(self.names, st.get("current"))
         # room for a batch of at least one segment of every signal
         self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
+        self._finished: list[tuple[int, _Spectra]] = []
         self.done: dict[int, _Spectra] = {
             int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
+        self._open = self.current
 
     def feed(self, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         """Samples in time order; cut at window ends (window k: ((k-1) W, k W])."""
@@ -200,16 +220,27 @@ class _WindowSpectra:
     def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         if self.current.index != k:
             if self.current.index is not None:
-                self.done[self.current.index] = self.current
+                self._finished.append((self.current.index, self.current))
             self.current = _Spectra(self.names)
             self.current.index = k
         self.current.feed(t_ns, values, self.work)
 
+    def hand_over(self) -> tuple[list[tuple[int, _Spectra]], _Spectra]:
+        """The windows finished since the last call, and a copy of the open one."""
+        finished, self._finished = self._finished, []
+        return finished, self.current.snapshot()
+
+    def receive(self, part: tuple[list[tuple[int, _Spectra]], _Spectra]) -> None:
+        """Take a :meth:`hand_over` (in order)."""
+        finished, self._open = part
+        for index, spectra in finished:
+            self.done[index] = spectra
+
     def take(self, k: int) -> _Spectra | None:
         """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""
         out = self.done.pop(k, None)
-        if out is None and self.current.index == k:
-            out = self.current
+        if out is None and self._open.index == k:
+            out = self._open
         for old in [i for i in self.done if i < k]:
             del self.done[old]
         return out
@@ -260,6 +291,7 @@ class SeaStateLearner:
         self.covered_s = float(st.get("covered_s", 0.0))
         self.waves_t: list[int] = list(st.get("waves_t", []))
         self.waves_v: list[tuple[float, float]] = [tuple(v) for v in st.get("waves_v", [])]
+        self._new_waves: tuple[list[int], list[tuple[float, float]]] = ([], [])
         self.counts: dict[str, int] = {"windows": 0, "learned": 0, "no_sea_state": 0,
                                        "short": 0, "flagged": 0, "compared": 0,
                                        **st.get("counts", {})}
@@ -279,8 +311,8 @@ class SeaStateLearner:
 
     def waves(self, t_ns: np.ndarray, hs_m: np.ndarray, tp_s: np.ndarray) -> None:
         """Accepted ``waves`` samples of a slab."""
-        self.waves_t.extend(int(x) for x in t_ns.tolist())
-        self.waves_v.extend(zip(hs_m.tolist(), tp_s.tolist()))
+        self._new_waves[0].extend(int(x) for x in t_ns.tolist())
+        self._new_waves[1].extend(zip(hs_m.tolist(), tp_s.tolist()))
 
     def load(self, t_ns: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
         """The slab's load samples (time order) and each component's stress."""
@@ -293,6 +325,20 @@ class SeaStateLearner:
     def imu(self, t_ns: np.ndarray, accel_z_mps2: np.ndarray) -> None:
         """Accepted ``imu`` vertical accelerations of a slab."""
         self.accel.feed(t_ns, {"accel": accel_z_mps2})
+
+    def hand_over(self) -> tuple[Any, ...]:
+        """A slab's inputs, once fed, for :meth:`receive` (module docstring)."""
+        waves, self._new_waves = self._new_waves, ([], [])
+        return waves, self.stress.hand_over(), self.heave.hand_over(), self.accel.hand_over()
+
+    def receive(self, inputs: tuple[Any, ...]) -> None:
+        """A slab's :meth:`hand_over`, before its ticks (in slab order)."""
+        waves, stress, heave, accel = inputs
+        self.waves_t.extend(waves[0])
+        self.waves_v.extend(waves[1])
+        self.stress.receive(stress)
+        self.heave.receive(heave)
+        self.accel.receive(accel)
 
     def tick(self, end_ns: int, committed: Mapping[str, float], n_samples: int) -> None:
         """An alert tick ended at ``end_ns`` with these committed damages."""

@@ -10,13 +10,15 @@ gives the same committed damage as one pass, to the last bit.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import logging
+import os
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence, TextIO
+from typing import Any, Iterable, Iterator, Sequence, TextIO
 
 from models._jit import uncompiled
 from monitor.blocks import SampleBlock
@@ -25,6 +27,7 @@ from monitor.events import Sink
 from monitor.pipeline import Pipeline
 from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
+from replay.stages import ingest_ahead
 
 log = logging.getLogger(__name__)
 
@@ -164,46 +167,68 @@ def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | No
 def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | None = None,
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None,
-               forecasts: Sequence[tuple[str, Any, int]] = ()) -> tuple[Pipeline, ReplayResult]:
+               forecasts: Sequence[tuple[str, Any, int]] = (),
+               threads: bool | None = None) -> tuple[Pipeline, ReplayResult]:
     """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
     block, whose buoy id replaces the config's (with a warning); a continued state keeps its
     own buoy id, and a ValueError says so if the first block is of another buoy. Later blocks
     of other buoys are counted and skipped. ``forecasts`` (buoy id, JSON, due time ns), as
     recorded by the daemon (:mod:`replay.forecast_log`), are given to the pipeline before
-    the blocks: each is applied at its due tick, as it was live."""
-    pipeline: Pipeline | None = None
+    the blocks: each is applied at its due tick, as it was live. ``threads``: unless paced
+    (``speed``), the pipeline's stream stage runs on a second thread, ahead of its tick stage
+    (:mod:`replay.stages`; the same bits); by default when this process may use more than
+    one CPU (on one, the threads would only take turns)."""
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
-    origin: list[float] = []
     start = time.perf_counter()
     # a continued state keeps its buoy (it took the log's buoy id when it was first saved)
     state_buoy = state.get("buoy_id") if state is not None else None
     if isinstance(state_buoy, str) and state_buoy != config.buoy.id:
         config = config_with(config, buoy={**config.section("buoy"), "id": state_buoy})
-    for block in blocks:
-        if pipeline is None:
-            if block.buoy_id != config.buoy.id and state is not None:
-                raise ValueError(f"the state is for buoy {config.buoy.id!r}, the log for "
-                                 f"buoy {block.buoy_id!r}")
-            if block.buoy_id != config.buoy.id:
-                log.warning("log is for buoy %r, config for %r: replaying as %r",
-                            block.buoy_id, config.buoy.id, block.buoy_id)
-                config = config_with(config, buoy={**config.section("buoy"), "id": block.buoy_id})
-            pipeline = replay_pipeline(config, sinks, state)
-            _add_forecasts(pipeline, forecasts)
-        if block.buoy_id != pipeline.buoy_id:
-            ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
-            continue
-        if speed is not None:
-            _pace(block, speed, origin)
-        pipeline.process(block)
-        n_blocks += 1
-        n_samples += len(block)
-        if progress is not None:
-            progress.update(block.t_last_ns, n_samples)
-    if pipeline is None:
-        pipeline = replay_pipeline(config, sinks, state)
-    pipeline.flush()
+    source = iter(blocks)
+    first = next(source, None)
+    if first is not None:
+        if first.buoy_id != config.buoy.id and state is not None:
+            raise ValueError(f"the state is for buoy {config.buoy.id!r}, the log for "
+                             f"buoy {first.buoy_id!r}")
+        if first.buoy_id != config.buoy.id:
+            log.warning("log is for buoy %r, config for %r: replaying as %r",
+                        first.buoy_id, config.buoy.id, first.buoy_id)
+            config = config_with(config, buoy={**config.section("buoy"), "id": first.buoy_id})
+    pipeline = replay_pipeline(config, sinks, state)
+    if first is None:  # an empty log
+        pipeline.flush()
+        return pipeline, ReplayResult({}, 0, 0, time.perf_counter() - start, ignored)
+    _add_forecasts(pipeline, forecasts)
+
+    def own() -> Iterator[SampleBlock]:  # the pipeline's buoy's blocks (others counted)
+        for block in itertools.chain([first], source):
+            if block.buoy_id == pipeline.buoy_id:
+                yield block
+            else:
+                ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
+
+    if threads is None:
+        threads = len(os.sched_getaffinity(0)) > 1 if hasattr(os, "sched_getaffinity") else True
+    if threads and speed is None:
+        for intake in ingest_ahead(pipeline, own()):
+            pipeline.advance(intake)
+            if intake.block is not None:
+                n_blocks += 1
+                n_samples += len(intake.block)
+                if progress is not None:
+                    progress.update(intake.block.t_last_ns, n_samples)
+    else:
+        origin: list[float] = []
+        for block in own():
+            if speed is not None:
+                _pace(block, speed, origin)
+            pipeline.process(block)
+            n_blocks += 1
+            n_samples += len(block)
+            if progress is not None:
+                progress.update(block.t_last_ns, n_samples)
+        pipeline.flush()
     if progress is not None and n_samples:
         progress.update(pipeline.last["now_ns"], n_samples, force=True)
         progress.close()
