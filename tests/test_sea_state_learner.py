@@ -70,6 +70,7 @@ def feed_in(pieces: list[int], save_at: int | None = None) -> dict[int, object]:
         if i == save_at:
             spectra = _WindowSpectra(NAMES, W_NS, json.loads(json.dumps(spectra.state())))
         spectra.feed(t[a:b], {n: v[a:b] for n, v in x.items()})
+        spectra.receive(spectra.hand_over())  # the tick stage takes the finished windows
         for k in list(spectra.done):
             windows[k] = spectra.take(k)
     windows[spectra.current.index] = spectra.current
