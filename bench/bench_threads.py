@@ -8,22 +8,33 @@ run gave the same report and state bytes.
 usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N]
 
 Measured 2026-11-25 on the 2-core development machine, never quiet (other sessions' test
-suites: load average 2 to 9 on 2 cores, so the wall times measure them too), the 1-day bench
-log (/work/wt/_gold/day1.mcap: 1.73 M tension samples, 123 slabs), best / median wall and CPU
-seconds, sequential vs threaded, every run the same report and state bytes:
+suites: load average 1.4 to 9 on 2 cores, so the wall times measure them too), the 1-day
+bench log (/work/wt/_gold/day1.mcap: 1.73 M tension samples, 123 slabs), best / median wall
+and CPU seconds, sequential vs threaded, every run the same report and state bytes:
 
+* 19:29-19:31 UTC, load 1.4-1.9 (one other process using most of a core), 3 x 5 rounds:
+  wall 0.748 / 0.752 vs 0.757 / 0.843, 0.582 / 0.652 vs 0.643 / 0.793, 0.721 / 0.876 vs
+  0.717 / 0.961; CPU 0.680 / 0.715 vs 0.664 / 0.731, 0.634 / 0.643 vs 0.724 / 0.753,
+  0.684 / 0.706 vs 0.708 / 0.789;
+* 19:25 UTC, load 2.4-3.2, 15 rounds: wall 0.673 / 0.745 vs 0.695 / 0.796; CPU 0.607 /
+  0.640 vs 0.612 / 0.669;
 * 18:25 UTC, load 2.0-2.3, 5 rounds: wall 0.686 / 0.767 vs 0.715 / 0.829; CPU 0.672 / 0.703
-  vs 0.690 / 0.726 (threaded no faster: no free core at that load);
+  vs 0.690 / 0.726;
 * 18:40 UTC, load 5.0-5.3, 7 rounds: wall 1.431 / 1.732 vs 1.317 / 1.539; CPU 0.682 / 0.729
   vs 0.649 / 0.747;
 * 19:03 UTC, load 8.6-8.8, 7 rounds: wall 1.601 / 2.376 vs 1.471 / 2.175; CPU 0.679 / 0.704
   vs 0.681 / 0.709.
 
-The CPU is the same either way. Under load the threaded wall is 8-11 % lower, partly because
-two runnable threads get a larger share of a busy machine; the gain on a quiet machine is
-bounded by the GIL: of the ~0.26 CPU-s of the stream stage ~0.09 s are compiled ``nogil``
+At the lowest loads seen the threaded replay is no faster (median wall +7 to +22 %) and
+costs up to 17 % more CPU (the threads hand the GIL back and forth); only on a saturated
+machine is its wall 8-11 % lower, two runnable threads getting a larger share of it. The GIL
+bounds the gain: of the ~0.26 CPU-s of the stream stage ~0.09 s are compiled ``nogil``
 kernels (validation, QC, the estimator's filter and dynamics), of the ~0.29 s of the tick
-stage ~0.04 s, the rest Python glue and numpy that hold the GIL most of the time.
+stage ~0.04 s; the rest is Python glue and numpy that hold the GIL most of the time. So
+``run_blocks`` runs the stages in turn unless asked (``threads=True``). The same split on
+the 30-day benchmark log (``buoymon replay``, 19:00 UTC, load 6-9): threaded 22.1 CPU-s,
+64.8 s wall, peak RSS 232 MB; sequential 21.5 CPU-s, 78.1 s wall, 223 MB; report and state
+identical to the golden of main 7e8ba84 both ways.
 """
 
 from __future__ import annotations

@@ -15,8 +15,8 @@ whichever driver cuts them into blocks. ``state()`` is complete and JSON-seriali
 
 Stages: ``process`` is a stream stage (``ingest``: ordering to stresses) handing each slab
 (:class:`SlabIntake`) to a tick stage (``advance``: rainflow to sinks), each stage owning its
-state; the daemon runs them in turn, a replay may run the stream stage ahead on another
-thread (replay.stages), with the same results to the bit. ``state()`` is taken between slabs.
+state; ``process`` runs them in turn, and replay.stages can run the stream stage ahead on
+another thread with the same results to the bit. ``state()`` is taken between slabs.
 
 Alert ticks: tick ``k`` covers sensor time ``((k-1) I, k I]`` with ``I = [alerts]
 eval_interval_s``. A tick is evaluated once the ordering watermark has passed its end (or, at
@@ -552,9 +552,9 @@ class Pipeline:
     # the components' rainflow and Miner sums and peaks, the alerts, forecasts, the learner's
     # windows and table, the damage split, the tick grid and whatever waits for the next tick,
     # ``last``, the alert history and the sinks. The stream stage never reads the tick
-    # stage's state, and the tick stage reads the stream stage's only in the hand-over, so a
-    # replay may run the stream stage of the next slab while the tick stage runs
-    # (replay.stages); the results are the same to the bit.
+    # stage's state, and the tick stage reads the stream stage's only in the hand-over, so
+    # the stream stage of the next slab may run while the tick stage runs (replay.stages);
+    # the results are the same to the bit.
     def ingest(self, block: SampleBlock) -> SlabIntake:
         """Stream stage of :meth:`process`: buffer the block and take the slab the ordering
         watermark allows through the per-stream work."""

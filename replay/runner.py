@@ -13,7 +13,6 @@ import contextlib
 import itertools
 import json
 import logging
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -168,7 +167,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None,
                forecasts: Sequence[tuple[str, Any, int]] = (),
-               threads: bool | None = None) -> tuple[Pipeline, ReplayResult]:
+               threads: bool = False) -> tuple[Pipeline, ReplayResult]:
     """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
     block, whose buoy id replaces the config's (with a warning); a continued state keeps its
     own buoy id, and a ValueError says so if the first block is of another buoy. Later blocks
@@ -176,8 +175,9 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     recorded by the daemon (:mod:`replay.forecast_log`), are given to the pipeline before
     the blocks: each is applied at its due tick, as it was live. ``threads``: unless paced
     (``speed``), the pipeline's stream stage runs on a second thread, ahead of its tick stage
-    (:mod:`replay.stages`; the same bits); by default when this process may use more than
-    one CPU (on one, the threads would only take turns)."""
+    (:mod:`replay.stages`; the same bits). Off by default: on the shared 2-core machine it
+    did not shorten the wall time, the two stages' Python holding the GIL most of the time
+    (figures in bench/bench_stages.py)."""
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     start = time.perf_counter()
@@ -208,8 +208,6 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
             else:
                 ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
 
-    if threads is None:
-        threads = len(os.sched_getaffinity(0)) > 1 if hasattr(os, "sched_getaffinity") else True
     if threads and speed is None:
         for intake in ingest_ahead(pipeline, own()):
             pipeline.advance(intake)
