@@ -177,7 +177,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     (``speed``), the pipeline's stream stage runs on a second thread, ahead of its tick stage
     (:mod:`replay.stages`; the same bits). Off by default: on the shared 2-core machine it
     did not shorten the wall time, the two stages' Python holding the GIL most of the time
-    (figures in bench/bench_stages.py)."""
+    (figures in bench/bench_threads.py)."""
     n_blocks = n_samples = 0
     ignored: dict[str, int] = {}
     start = time.perf_counter()
