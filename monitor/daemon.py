@@ -50,6 +50,9 @@ _IDLE_WAIT_S = 0.2
 _MAX_TURN_S = 0.25  # longest stretch of queued work between periodic duties
 _RELEASE_EVERY_S = 600.0  # hand back the JIT compiler's pages (monitor.memory) this often
 _RECOVERY_TIMEOUT_S = 5.0  # longest wait for a publisher's cache to give back missed messages
+# at start: how long the sensor publishers found must stay the same before their backlogs are
+# taken (liveliness tokens of one bridge arrived within 0.42 s of each other, seen)
+_SETTLE_S = 0.5
 _RECONNECT_WAIT_S = 3.0  # at start: how long the checkpoint's sensor publishers may take to return
 _LOG_EVERY_S = 60.0  # a repeating fault (clock, checkpoint) is logged at most this often
 
@@ -499,13 +502,24 @@ class Daemon:
         """The sensor publishers alive now. The first time in a daemon life, wait (up to
         ``_RECONNECT_WAIT_S``) for the publishers the checkpoint knows to reconnect: their
         backlogs must be taken together, in time order."""
-        deadline = time.monotonic() + (_RECONNECT_WAIT_S if self._first_catch_up else 0.0)
+        first = self._first_catch_up
+        deadline = time.monotonic() + (_RECONNECT_WAIT_S if first else 0.0)
         self._first_catch_up = False
         expected = self.sequences.latest_sources()
+        settled: tuple[list[tuple[str, str]], float] | None = None  # found, since when
         while True:
             found = zenoh_io.sensor_publishers(self.session, self.buoy_id, _RECOVERY_TIMEOUT_S)
             streams = {(parse_sensor_topic(k)[1], src) for k, src in found}
-            if expected <= streams or time.monotonic() >= deadline:
+            now = time.monotonic()
+            if settled is None or settled[0] != found:
+                settled = (found, now)
+            # a first start (no publisher in the checkpoint) also waits until discovery has
+            # settled (the same publishers for _SETTLE_S): beside a running bridge it finds
+            # the streams one by one, and a stream's backlog taken after another's had been
+            # was all time_backwards (tension 182 of 23,743 samples accepted)
+            fresh = first and not expected
+            if (expected <= streams and (not fresh or now - settled[1] >= _SETTLE_S)) \
+                    or now >= deadline:
                 return found
             time.sleep(0.05)
 
@@ -544,13 +558,15 @@ class Daemon:
     def _record(self, key: str, payload: bytes, block: SampleBlock, recv_ns: int,
                 origin: zenoh_io.Origin | None, redelivered: bool) -> None:
         """Record a received sensor message; a redelivered one only if the recording may not
-        hold it yet (numbered after what the recording held at its last flush)."""
+        hold it yet (numbered after what the recording held at its last flush, and not
+        written in this life: a live message that a catch-up already took)."""
         rec = self.recorder
         if rec is None:
             return
         if origin is not None:
-            if redelivered and origin.sn <= self._flushed.get(block.sensor, {}).get(
-                    origin.source, -1):
+            if redelivered and origin.sn <= max(
+                    self._flushed.get(block.sensor, {}).get(origin.source, -1),
+                    self._recorded.get(block.sensor, {}).get(origin.source, -1)):
                 return
             self._recorded.setdefault(block.sensor, {})[origin.source] = origin.sn
         rec.write(key, payload, self.codec.channel_spec(block.sensor), recv_ns,

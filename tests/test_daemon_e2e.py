@@ -590,3 +590,65 @@ def test_run_refuses_an_invalid_config_naming_key_and_value(tmp_path, section, m
     logged = [json.loads(line) for line in proc.stderr.splitlines() if line.startswith("{")]
     assert any(message in entry["msg"] and entry["level"] == "error" for entry in logged), \
         proc.stderr
+
+
+def test_a_fresh_daemon_beside_a_running_publisher_takes_every_stream_s_backlog(tmp_path):
+    """A daemon started (no checkpoint) after a publisher of four streams has sent a
+    simulated 6 minutes: every stream's backlog is taken from the caches, in time order,
+    and equals a replay of the log. Was: the first catch-up took the backlog of whichever
+    publisher it had discovered first (liveliness tokens arrive one by one) and the other
+    streams' backlogs, taken next, were behind the ordering horizon: all time_backwards
+    (seen: tension 182 of 23,743 samples accepted, in about every other start)."""
+    port = free_port()
+    log = tmp_path / "sim.mcap"
+    sim = subprocess.run([sys.executable, "-m", "monitor.cli", "simulate", "-o", str(log),
+                          "--hours", "0.33", "--hs", "1.5", "--tp", str(TP_S), "--seed", "5"],
+                         env=ENV, capture_output=True, text=True, timeout=300)
+    assert sim.returncode == 0, sim.stderr
+    cfg = write_config(tmp_path, port)
+    config = load_config(cfg)
+    from_log = replayed_figures(config, [log])
+    n_blocks = sum(1 for _ in iter_blocks([str(log)], coalesce=False))
+    # the publisher sends at once into its caches and connects once the daemon listens
+    pub = subprocess.Popen([sys.executable, "-m", "replay.publish", str(log), "--connect",
+                            f"tcp/127.0.0.1:{port}", "--linger-s", "60"], env=ENV,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(4.0)  # all sent (unpaced), kept in the caches
+        d = start_daemon(cfg, tmp_path)
+        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == n_blocks,
+                         buoy=BUOY, timeout=120)
+        assert d.terminate() == 0
+    finally:
+        pub.kill()
+        pub.wait(30)
+    live = flushed_figures(config, checkpoint(tmp_path)["pipeline"])
+    for stream, figures in from_log["samples"].items():
+        assert live["samples"][stream] == figures, stream
+        assert figures["rejected"]["time_backwards"] == 0
+    assert committed(live) == committed(from_log) and committed(live)["conductor"] > 0
+
+
+def test_the_first_catch_up_waits_until_discovery_settles(monkeypatch):
+    """The race above, made exact: the publishers' liveliness is discovered one stream at a
+    time (tension first, the other three 0.4 s later, as seen). The first catch-up returns
+    all four; a later one (publishers appearing while serving) does not wait."""
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from monitor import daemon as daemon_mod  # noqa: PLC0415
+
+    keys = [f"buoy/{BUOY}/sensor/{s}" for s in ("gnss", "imu", "motion", "tension")]
+    start = time.monotonic()
+
+    def discovered(session, buoy_id, timeout_s):
+        late = time.monotonic() - start >= 0.4
+        return [(k, "z/1") for k in keys if late or k.endswith("tension")]
+
+    monkeypatch.setattr(daemon_mod.zenoh_io, "sensor_publishers", discovered)
+    fake = SimpleNamespace(_first_catch_up=True, session=None, buoy_id=BUOY,
+                           sequences=SimpleNamespace(latest_sources=set))
+    found = daemon_mod.Daemon._publishers_to_catch_up(fake)
+    assert [k for k, _ in found] == keys
+    assert time.monotonic() - start < daemon_mod._RECONNECT_WAIT_S
+    start = time.monotonic() + 10  # later: tension alone, at once
+    assert [k for k, _ in daemon_mod.Daemon._publishers_to_catch_up(fake)] == keys[3:]
