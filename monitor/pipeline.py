@@ -827,12 +827,13 @@ class Pipeline:
         learner, forecasts = self.sea_states, self.forecasts
         quiet, next_due = None, None
         if learner is not None and forecasts is not None:
-            committed = {name: [x[1] for x in f] for name, f in figures.items()}
+            load_n = np.array(n_load)
+
+            def committed(q: int) -> dict[str, float]:
+                return {name: f[q][1] for name, f in figures.items()}
 
             def quiet(a: int, b: int) -> None:  # the learner sees every tick
-                for q in range(a, b):
-                    learner.tick(ticks.ends_l[q], {name: c[q] for name, c in committed.items()},
-                                 n_load[q])
+                learner.ticks(ticks.ends, committed, load_n, a, b)
             next_due = forecasts.next_due_ns
 
         def tick(k: int) -> None:  # something happens: the ordinary evaluation

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -353,6 +353,30 @@ class SeaStateLearner:
             self.window_end = (end_ns // self.window_ns + 1) * self.window_ns
             self.start_damage = dict(committed)
             self.covered_s = 0.0
+
+    def ticks(self, ends: np.ndarray, committed: Callable[[int], Mapping[str, float]],
+              n_samples: np.ndarray, a: int, b: int) -> None:
+        """Ticks ``a..b-1`` of ``ends`` (increasing), as :meth:`tick` on each in turn with
+        ``committed(q)`` and ``n_samples[q]``: only the first tick and those closing a window
+        go through :meth:`tick` (and ask for ``committed``); the ticks between only add
+        ``tick_s`` to ``covered_s`` when they had samples, one addition after another in
+        order (``np.cumsum`` is a sequential sum), so the state is the same to the bit."""
+        q = a
+        if q < b and self.window_end is None:
+            self.tick(int(ends[q]), committed(q), int(n_samples[q]))
+            q += 1
+        while q < b:
+            assert self.window_end is not None  # set by the first tick
+            # the first tick at or after the window's end closes it: none before c does
+            c = min(b, max(q, int(np.searchsorted(ends, self.window_end))))
+            k = int(np.count_nonzero(n_samples[q:c]))
+            if k:
+                terms = np.full(k + 1, self.tick_s)
+                terms[0] = self.covered_s
+                self.covered_s = float(np.cumsum(terms)[-1])
+            if c < b:
+                self.tick(int(ends[c]), committed(c), int(n_samples[c]))
+            q = c + 1
 
     # ---- windows ---------------------------------------------------------------------------
 

@@ -112,3 +112,85 @@ def check_window_sums() -> None:
                     for n in NAMES:
                         assert np.array_equal(g.psd[n].view(np.int64),
                                               r["psd"][n].view(np.int64)), (name, k, n)
+
+
+TICK_S = 0.1  # 300 ticks a 30 s window; 0.1 s is inexact, so sums depend on their order
+TICK_NS = 100_000_000
+
+
+def tick_stream(seed: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Tick ends on the 0.1 s grid from late in a window, with a gap of two windows and more;
+    load samples per tick 0 to 2 (a third of the ticks without any) and none over one
+    whole window; each component's committed damage growing tick by tick."""
+    rng = np.random.default_rng(seed)
+    k = (10**10 // TICK_NS + 137 + np.arange(2400)).astype(np.int64)
+    k[1500:] += 700  # the gap
+    n = rng.integers(0, 3, k.size)
+    n[900:1200] = 0
+    damage = {c: np.cumsum(rng.uniform(0, 1e-6, k.size)) for c in NAMES}
+    return k * TICK_NS, n, damage
+
+
+def learner_with(state: dict | None = None):
+    from monitor.forecast_config import ForecastConfig  # noqa: PLC0415
+    from monitor.sea_state_learner import SeaStateLearner  # noqa: PLC0415
+    return SeaStateLearner(ForecastConfig(window_s=30.0), {c: None for c in NAMES}, TICK_S,
+                           state=state)
+
+
+def run_ticks(seed: int, batched: bool) -> tuple[object, int]:
+    """The stream in random slabs, a state save and restore after the third; in each slab
+    the waves samples, then runs of quiet ticks (:meth:`SeaStateLearner.ticks` when
+    ``batched``) between single ticks (:meth:`SeaStateLearner.tick`), as the pipeline's
+    batched alert path. Returns the learner and how often a committed dict was asked for."""
+    ends, n, damage = tick_stream(seed)
+    rng = np.random.default_rng(seed + 1)
+    learner, asked = learner_with(), 0
+
+    def committed(q: int) -> dict[str, float]:
+        nonlocal asked
+        asked += 1
+        return {c: float(d[a + q]) for c, d in damage.items()}
+
+    cuts = np.sort(rng.choice(np.arange(1, ends.size), 7, replace=False))
+    for i, (a, b) in enumerate(zip([0, *cuts.tolist()], [*cuts.tolist(), ends.size])):
+        if i == 3:
+            learner = learner_with(json.loads(json.dumps(learner.state())))
+        slab_t = ends[a:b]
+        wave_t = slab_t[::97] - 1
+        learner.waves(wave_t, 1.0 + (wave_t % 7) / 3.0, 6.0 + (wave_t % 5))
+        learner.receive(learner.hand_over())
+        events = np.sort(rng.choice(b - a, min(5, b - a), replace=False)).tolist()
+        j = 0
+        for stop in [*events, b - a]:
+            if batched:
+                learner.ticks(slab_t, committed, n[a:b], j, stop)
+            else:
+                for q in range(j, stop):
+                    learner.tick(int(slab_t[q]), committed(q), int(n[a + q]))
+            if stop < b - a:
+                learner.tick(int(slab_t[stop]), committed(stop), int(n[a + stop]))
+            j = stop + 1
+    return learner, asked
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_batched_ticks_are_the_per_tick_learner_to_the_bit(seed):
+    ref, asked_ref = run_ticks(seed, batched=False)
+    got, asked = run_ticks(seed, batched=True)
+    assert json.dumps(got.state(), sort_keys=True) == json.dumps(ref.state(), sort_keys=True)
+    assert got.covered_s.hex() == ref.covered_s.hex()
+    windows = {w["end_ns"] // TICK_NS: w["status"] for w in ref.history}
+    # the first tick is 63 before a window's end (too short), the samples-free stretch
+    # leaves the window ending at tick 1500 short, the gap closes the one ending at 1800
+    # and skips two
+    assert list(windows) == [300, 600, 900, 1200, 1500, 1800, 2700, 3000, 3300]
+    assert windows[300] == windows[1500] == "short"
+    assert list(windows.values()).count("learned") >= 6
+    assert asked_ref == 2400
+    assert asked <= 1 + 9 + 8 * 5  # the first tick, the closing ones and the single ones
+    # the order of the additions shows: 0.1 added n times is not n * 0.1
+    ends, n, _ = tick_stream(seed)
+    tail = int(np.count_nonzero(n[ends > ref.window_end - 30 * 10**9]))
+    assert ref.covered_s != tail * TICK_S
+    assert ref.covered_s == float(np.cumsum(np.full(tail, TICK_S))[-1])
