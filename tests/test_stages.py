@@ -230,3 +230,26 @@ def test_the_alert_batch_reads_an_idle_stream_as_handed_over_not_as_the_validato
             if a["rule"] == "any_stale" and a["labels"]["component"] == "gnss"]
     assert ("fire", 650) in gnss  # 399 s + 250 s, the first tick end after
     assert replay(ahead=True) == ([report, state], seen)
+
+
+def test_the_alert_batch_gives_the_per_tick_results_on_the_faulty_feed(sequential, monkeypatch):
+    """The same feed (a clock a day ahead, a stream stepping back, gaps, copies) without a
+    per-tick hook: every slab's ticks through the alert batch, which must give the report
+    and state of the per-tick path (the sequential fixture has a hook), and the stream stage
+    run ahead must give the same again."""
+    import monitor.pipeline
+
+    blocks, _, out, _ = sequential
+    monkeypatch.setattr(monitor.pipeline, "BATCH_MIN_TICKS", 1)
+    batches = []
+    evaluate_batch = monitor.pipeline.Pipeline._evaluate_batch
+    monkeypatch.setattr(monitor.pipeline.Pipeline, "_evaluate_batch",
+                        lambda self, *a: batches.append(1) or evaluate_batch(self, *a))
+    sink = StepsOnly()
+    pipeline, _ = run_blocks(CONFIG, iter(blocks), sinks=[sink])
+    assert len(batches) > 50
+    assert json.dumps([pipeline.report(), pipeline.state()], allow_nan=True).encode() == out
+    ahead = replay_pipeline(CONFIG, [StepsOnly()])
+    for intake in [ahead.ingest(b) for b in blocks] + [ahead.ingest_end()]:
+        ahead.advance(intake)
+    assert json.dumps([ahead.report(), ahead.state()], allow_nan=True).encode() == out
