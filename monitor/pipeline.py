@@ -863,8 +863,9 @@ class Pipeline:
     def _stream_ticks(self, s: str, ends: np.ndarray, streams: Mapping[str, _StreamSlab]
                       ) -> StreamTicks:
         """Health of stream ``s`` at each of the slab's tick ends, as ``_stream_one`` gives
-        it tick by tick (the first tick with the counts earlier slabs left for it)."""
-        val, n = self.validators[s], ends.shape[0]
+        it tick by tick (the first tick with the counts earlier slabs left for it). An idle
+        stream's totals are the hand-over's: the validator may be a slab further on."""
+        val, n = self._totals[s], ends.shape[0]
         info = streams.get(s)
         if info is None:  # nothing new on this stream
             has = np.full(n, val.has_last)

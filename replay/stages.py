@@ -6,8 +6,10 @@ estimator, the load, stresses, the learner's spectra) then its tick stage (``adv
 rainflow and Miner per tick, the alert rules, the sinks). Each stage owns its state and the
 tick stage reads the stream stage's only in the slab's hand-over (monitor.pipeline), so the
 stream stage may run ahead: the tick stage still gets every hand-over in order, and the
-results are the same to the bit as ``process`` block by block. The compiled kernels and large
-numpy operations release the GIL, so the two overlap on two cores.
+results are the same to the bit as ``process`` block by block. Only the ``nogil`` compiled
+kernels (validation, QC, the estimator) and some numpy operations release the GIL, so the
+two overlap little: ``run_blocks`` uses this only when asked (``threads=True``; figures in
+bench/bench_threads.py).
 """
 
 from __future__ import annotations

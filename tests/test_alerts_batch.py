@@ -270,3 +270,69 @@ def test_pipeline_replays_the_same_with_and_without_a_tick_hook(block_s, monkeyp
             ("stale", "clear"), ("rejected_rate", "fire"), ("conductor_stress", "resend"),
             } <= events, events
     assert any(a["acked_by"] == "ops" for a in history)
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_batch_equals_per_tick_at_the_levels_and_when_a_latched_condition_lapses(plain) -> None:
+    """The scan's quiet ticks alone (the random feed's events stop it at nearly every tick,
+    where the ordinary path corrects it): a peak tension exactly at the on level (not above:
+    no alert), above it or, while firing, below the off level for one tick (a pending or
+    clearing period that lapses), exactly at the off level (the deadband holds it), a damage
+    rate and a remaining life exactly at their thresholds, and a latched damage alert whose
+    condition stops holding (nothing moves, not even a clearing time: a latching rule only
+    clears by reset or replacement). Slabs end just after such ticks, so a pending or
+    clearing time the scan set wrongly would be in the state; each of those mutations of
+    scan_ticks fails this test."""
+    n = 120
+    ticks = Ticks(n, 7)
+    on, off = 0.5 * 45e3, 0.45 * 45e3
+    peaks = np.full(n, 15e3)
+    peaks[5] = on + 1.0  # above for one tick, shorter than the on-delay: pending, then not
+    peaks[10:14] = on  # at the on level: not above it
+    peaks[20:26] = on + 1.0  # fires after the 10-s on-delay
+    peaks[26:40] = off  # at the off level while firing: still holds
+    peaks[33] = off - 1.0  # below for one tick, shorter than the off-delay: clearing, then not
+    peaks[40:45] = off - 1.0  # clears after the 20-s off-delay
+    for k in range(3, 50):  # samples in every tick around the peaks
+        if not ticks.t[k].size:
+            ticks.t[k] = ticks.ends[k:k + 1] - 1
+    ticks.cut = [0, *np.cumsum([t.size for t in ticks.t]).tolist()]
+    for k in range(n):
+        if ticks.t[k].size:
+            ticks.x[k] = np.full(ticks.t[k].size, peaks[k])
+            ticks.tmax[k], ticks.meas[k] = peaks[k], peaks[k]
+    ticks.est = ticks.meas.copy()
+    c = ticks.comps["left"]
+    c[:, 1] = np.linspace(0.0, 0.03, n)  # committed: no replacement
+    c[:, 0] = c[:, 1]
+    c[95:110, 0] = 0.019  # below damage_warning's 0.02 after it fired at tick 80 (latched)
+    c[:, 2] = np.where(np.arange(n) % 3 == 0, 0.5, 0.1)  # damage rate exactly 0.5: not above
+    c[:, 3] = np.where(np.arange(n) % 4 == 1, 5.0, 50.0)  # remaining life exactly 5: not below
+    # only these rules, without re-sends: no other rule's events stop the scan, so its quiet
+    # ticks alone decide the pending and clearing times between the ticks of records
+    rules = {"rule": [{**r, "component": "left"} for r in RULES["rule"][:1] + [
+        r for r in RULES["rule"] if r["kind"] in ("remaining_life", "damage_rate")]]
+        + [r for r in RULES["rule"] if r["kind"] == "tension_high"]}
+    ref = AlertEngine.from_config(rules, "b1", COMPONENTS)
+    eng = AlertEngine.from_config(rules, "b1", COMPONENTS)
+    ref_out: list = []
+    out: list = []
+    for a, b in ((0, 11), (11, 28), (28, 81), (81, 98), (98, n)):
+        ref_out += [r for k in range(a, b) for r in ref.evaluate(ticks.obs(k))]
+        batch = eng.tick_batch(ticks.inputs(a, b))
+        assert batch is not None
+        if plain:
+            with uncompiled():
+                batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))))
+        else:
+            batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))))
+        assert json.dumps(eng.state()) == json.dumps(ref.state()), (a, b)
+    assert dump(out) == dump(ref_out)
+    high = [(r.event, int((r.at_ns - T0) // TICK) - 1) for r in ref_out
+            if r.kind == "tension_high" and r.event != "resend"]
+    assert high == [("fire", 21), ("clear", 42)]
+    assert not [r for r in ref_out if r.kind in ("damage_rate", "remaining_life")
+                and r.component == "left"]
+    warning = [(r.event, int((r.at_ns - T0) // TICK) - 1) for r in ref_out
+               if r.rule == "damage_warning" and r.component == "left"]
+    assert warning == [("fire", 80)]

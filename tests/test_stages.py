@@ -173,3 +173,83 @@ def test_an_error_in_the_tick_stage_stops_the_stream_stage(sequential):
     assert threading.active_count() == before
     # the stream stage stopped at most two slabs ahead, and the one it was working on
     assert 50 <= len(taken) <= 53
+
+
+class StepsOnly:
+    """What a sink without a per-tick hook sees: slabs of many ticks then go through the
+    alert batch."""
+
+    wants_qc = True
+
+    def __init__(self) -> None:
+        self._recorder = Recorder()
+        self.seen = self._recorder.seen
+
+    def on_block(self, block) -> None:
+        self._recorder.on_block(block)
+
+    def on_step(self, step) -> None:
+        self._recorder.on_step(step)
+
+    def close(self) -> None:
+        pass
+
+
+def test_the_alert_batch_reads_an_idle_stream_as_handed_over_not_as_the_validator_is_now():
+    """GNSS silent from 400 s to 800 s of a 20-minute feed in 200-s blocks (slabs of ~20
+    ticks: the alert batch), stale after 250 s: its last fix at 399 s makes it stale at the
+    650-s tick, in a slab without GNSS. With every slab's stream stage run before any tick
+    stage (as far ahead as ``ingest`` may run) the validator already holds the 800-s fixes;
+    the batch must still see the totals handed over with the slab."""
+    validate = CONFIG.section("validate")
+    alerts = CONFIG.section("alerts")
+    cfg = config_with(CONFIG, validate={**validate, "gnss": {**validate.get("gnss", {}),
+                                                             "stale_after_s": 250.0}},
+                      alerts={**alerts, "rule": [*alerts["rule"],
+                                                 {"kind": "stale", "name": "any_stale"}]})
+    blocks = blocks_interleaved(sea(1200, seed=3), 200)
+    t0 = blocks[0].t_first_ns
+    blocks = [b for b in blocks
+              if not (b.sensor == "gnss" and t0 + 300 * S <= b.t_first_ns < t0 + 800 * S)]
+
+    def replay(ahead: bool) -> tuple[dict, list[str]]:
+        sink = StepsOnly()
+        pipeline = replay_pipeline(cfg, [sink])
+        assert not pipeline._tick_hooks
+        if ahead:
+            for intake in [pipeline.ingest(b) for b in blocks] + [pipeline.ingest_end()]:
+                pipeline.advance(intake)
+        else:
+            for b in blocks:
+                pipeline.process(b)
+            pipeline.flush()
+        return json.loads(json.dumps([pipeline.report(), pipeline.state()])), sink.seen
+
+    (report, state), seen = replay(ahead=False)
+    gnss = [(a["event"], (a["at_ns"] - t0) // S) for a in report["alerts"]
+            if a["rule"] == "any_stale" and a["labels"]["component"] == "gnss"]
+    assert ("fire", 650) in gnss  # 399 s + 250 s, the first tick end after
+    assert replay(ahead=True) == ([report, state], seen)
+
+
+def test_the_alert_batch_gives_the_per_tick_results_on_the_faulty_feed(sequential, monkeypatch):
+    """The same feed (a clock a day ahead, a stream stepping back, gaps, copies) without a
+    per-tick hook: every slab's ticks through the alert batch, which must give the report
+    and state of the per-tick path (the sequential fixture has a hook), and the stream stage
+    run ahead must give the same again."""
+    import monitor.pipeline
+
+    blocks, _, out, _ = sequential
+    monkeypatch.setattr(monitor.pipeline, "BATCH_MIN_TICKS", 1)
+    batches = []
+    evaluate_batch = monitor.pipeline.Pipeline._evaluate_batch
+    monkeypatch.setattr(monitor.pipeline.Pipeline, "_evaluate_batch",
+                        lambda self, *a: batches.append(1) or evaluate_batch(self, *a))
+    sink = StepsOnly()
+    pipeline, _ = run_blocks(CONFIG, iter(blocks), sinks=[sink])
+    assert len(batches) > 50
+    assert json.dumps([pipeline.report(), pipeline.state()], allow_nan=True).encode() == out
+    ahead = replay_pipeline(CONFIG, [StepsOnly()])
+    for intake in [ahead.ingest(b) for b in blocks] + [ahead.ingest_end()]:
+        ahead.advance(intake)
+    assert json.dumps([ahead.report(), ahead.state()], allow_nan=True).encode() == out
