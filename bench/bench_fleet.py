@@ -17,7 +17,12 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Measured on the 2-core machine shared with other jobs, 2026-11-25, ``--buoys 4 --days 15``
+Measured 2026-11-25 19:43-19:48 UTC, ``--buoys 4 --days 15``, main 7e8ba84 (load 1.9-2.3)
+then this round's build (load 0.6-1.1): serial 43.9 -> 20.4 s wall, 47.1 -> 23.3 CPU-s =
+287 -> 142 CPU-s per buoy-year (target under 60: not reached); 2 workers 33.3 -> 13.9 s wall;
+reading alone 8.2 -> 6.2 CPU-s (26 % of the serial run).
+
+Earlier: Measured on the 2-core machine shared with other jobs, 2026-11-25, ``--buoys 4 --days 15``
 (compact logs). Earlier that day, load average 2.1, the build before issue 22 part 5: serial
 71.8 s wall, 32.4 CPU-s; 2 workers 54.9 s wall, workers 17.0 + 16.8 CPU-s; 197 CPU-s per buoy-year,
 reading 32 % of it. 16:45-16:49 UTC, load average 1.8-3.0, this build then main of the same

@@ -12,7 +12,29 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Measured 2026-11-25 16:49 UTC on the 2-core development machine (shared with other jobs,
+Measured 2026-11-25 19:45-19:50 UTC on the 2-core development machine, one run each, main
+7e8ba84 (load 2.0-2.4) then this build (load 0.6-1.7: the batched alert ticks, the per-tick
+commits in one compiled pass, the learner's reused periodogram buffers, the fused validation,
+QC, estimator and selector passes, fewer copies in ordering and merge), same 30-day log
+(51.84 M tension samples), default configuration, report and state identical to the last bit
+(a golden of this log written from main):
+
+* one core: main 27.65 s wall, 27.39 CPU-s, 1.87 M tension samples/s; this build 13.22 s wall,
+  13.18 CPU-s, 3.92 M/s (2.08 x less CPU); without alert rules 21.32 -> 11.49 s wall;
+* 2 cores: main 21.10 s wall (22.21 CPU-s), 2.46 M/s; this build 11.24 s wall (12.70 CPU-s),
+  4.61 M/s (230,553 x real time). The stream stage can run ahead on a second thread
+  (replay.stages, bench/bench_threads.py) but the two stages' Python holds the GIL most of
+  the time, so it is off: the 2-core figure is the read-ahead thread's overlap alone;
+* peak RSS 1 day 222 MB, 30 days 229 MB (+3.4 %; main 211 / 224 MB);
+* naive baseline 0.589 M/s (main's run 0.495): 6.7 x on one core (main 3.8 x), 7.8 x on 2.
+
+Targets (issue 22): 10 M/s wall on 2 cores and 10 x on one core: NOT reached. Where the time
+goes now (cProfile of the 1-day log, ~0.45 s): no single part above ~8 %: the rainflow/Miner
+tick kernel, the motion estimator's filter and jerk ODE (every IMU sample, though 60 of
+864,000 are estimated), QARTOD QC, the learner's FFTs, the reader's inflate/decode/merge, and
+~3,000 kernel dispatches and ~4,000 numpy reductions of per-slab glue.
+
+Earlier: Measured 2026-11-25 16:49 UTC on the 2-core development machine (shared with other jobs,
 load average 3.6-3.7 through the run, so the wall times measure them too: the CPU times are
 the comparable figures), this build (compact log format; payloads of buoymon's own regular
 layout decoded in one pass, monitor/codec_regular.py), 30-day log of 322 MB, 51.84 M tension
