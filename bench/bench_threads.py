@@ -12,6 +12,10 @@ suites: load average 1.4 to 9 on 2 cores, so the wall times measure them too), t
 bench log (/work/wt/_gold/day1.mcap: 1.73 M tension samples, 123 slabs), best / median wall
 and CPU seconds, sequential vs threaded, every run the same report and state bytes:
 
+* 20:07 UTC, the final merged build on a quiet machine (load 0.04-0.5), 5 rounds: wall
+  0.357 / 0.371 vs 0.414 / 0.463; CPU 0.431 / 0.443 vs 0.528 / 0.588: threaded 16 % slower
+  by wall, 22 % more CPU (the branches' speed-ups shrank the compiled share of each stage
+  further: the threads mostly trade the GIL);
 * 19:29-19:31 UTC, load 1.4-1.9 (one other process using most of a core), 3 x 5 rounds:
   wall 0.748 / 0.752 vs 0.757 / 0.843, 0.582 / 0.652 vs 0.643 / 0.793, 0.721 / 0.876 vs
   0.717 / 0.961; CPU 0.680 / 0.715 vs 0.664 / 0.731, 0.634 / 0.643 vs 0.724 / 0.753,
