@@ -17,10 +17,11 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Measured 2026-11-25 19:43-19:48 UTC, ``--buoys 4 --days 15``, main 7e8ba84 (load 1.9-2.3)
-then this round's build (load 0.6-1.1): serial 43.9 -> 20.4 s wall, 47.1 -> 23.3 CPU-s =
-287 -> 142 CPU-s per buoy-year (target under 60: not reached); 2 workers 33.3 -> 13.9 s wall;
-reading alone 8.2 -> 6.2 CPU-s (26 % of the serial run).
+Measured 2026-11-25, ``--buoys 4 --days 15``, main 7e8ba84 / this round's build, one run each
+at load 1.0-1.4 (20:11-20:13 UTC): serial 39.1 / 22.8 s wall, 45.3 / 27.8 CPU-s = 276 / 169
+CPU-s per buoy-year; 2 workers 21.6 / 14.4 s wall; reading alone 7.1 / 6.3 CPU-s. An earlier
+pair (19:43-19:48 UTC, main at load 2.3, this build at 0.6-1.1): 287 / 142 CPU-s per
+buoy-year. Target under 60: not reached.
 
 Earlier: Measured on the 2-core machine shared with other jobs, 2026-11-25, ``--buoys 4 --days 15``
 (compact logs). Earlier that day, load average 2.1, the build before issue 22 part 5: serial

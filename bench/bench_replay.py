@@ -12,21 +12,26 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Measured 2026-11-25 19:45-19:50 UTC on the 2-core development machine, one run each, main
-7e8ba84 (load 2.0-2.4) then this build (load 0.6-1.7: the batched alert ticks, the per-tick
-commits in one compiled pass, the learner's reused periodogram buffers, the fused validation,
-QC, estimator and selector passes, fewer copies in ordering and merge), same 30-day log
-(51.84 M tension samples), default configuration, report and state identical to the last bit
-(a golden of this log written from main):
+Measured 2026-11-25 on the 2-core development machine, same 30-day log (51.84 M tension
+samples), default configuration, report and state identical to the last bit (a golden of this
+log written from main 7e8ba84). This build: the batched alert ticks, the per-tick commits in
+one compiled pass, the learner's reused periodogram buffers, the fused validation, QC,
+estimator and selector passes, fewer copies in ordering and merge. Quiet machine (20:08-20:11
+UTC, load 0.3-1.2), main 7e8ba84 (warm compile cache) / this build, one run each:
 
-* one core: main 27.65 s wall, 27.39 CPU-s, 1.87 M tension samples/s; this build 13.22 s wall,
-  13.18 CPU-s, 3.92 M/s (2.08 x less CPU); without alert rules 21.32 -> 11.49 s wall;
-* 2 cores: main 21.10 s wall (22.21 CPU-s), 2.46 M/s; this build 11.24 s wall (12.70 CPU-s),
-  4.61 M/s (230,553 x real time). The stream stage can run ahead on a second thread
-  (replay.stages, bench/bench_threads.py) but the two stages' Python holds the GIL most of
-  the time, so it is off: the 2-core figure is the read-ahead thread's overlap alone;
-* peak RSS 1 day 222 MB, 30 days 229 MB (+3.4 %; main 211 / 224 MB);
-* naive baseline 0.589 M/s (main's run 0.495): 6.7 x on one core (main 3.8 x), 7.8 x on 2.
+* one core: 20.40 / 13.78 s wall, 20.39 / 13.78 CPU-s, 2.54 / 3.76 M tension samples/s
+  (1.48 x); without alert rules 18.91 / 12.82 s;
+* 2 cores: 18.57 / 12.14 s wall (21.36 / 14.59 CPU-s), 2.79 / 4.27 M/s (1.53 x; 213,490 x
+  real time). The stream stage can run ahead on a second thread (replay.stages,
+  bench/bench_threads.py) but the stages' Python holds the GIL most of the time, so it is
+  off: the 2-core figure is the read-ahead thread's overlap alone;
+* peak RSS 1 day / 30 days: 216 / 224 MB (+3.6 %) / 222 / 230 MB (+3.7 %);
+* naive baseline 0.484 / 0.543 M/s in the two runs: 5.2 / 6.9 x on one core, 5.8 / 7.9 x on 2.
+
+An earlier pair (19:45-19:50 UTC, main at load 2.0-2.4, this build at 0.6-1.7) gave main
+27.39 CPU-s on one core and 21.10 s wall on 2 cores against 13.18 CPU-s and 11.24 s (4.61
+M/s, 6.7 x the baseline on one core): the load inflated main's figures, the quiet pair is the
+fair one.
 
 Targets (issue 22): 10 M/s wall on 2 cores and 10 x on one core: NOT reached. Where the time
 goes now (cProfile of the 1-day log, ~0.45 s): no single part above ~8 %: the rainflow/Miner
