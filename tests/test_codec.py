@@ -12,6 +12,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor import codec
 from monitor.quanta import DEFAULT_QUANTA, parse_quanta, quanta
+from tests.byte_mutations import mutated
 
 T0 = 1_700_000_000_123_456_789
 V1_NUMBERS = (1, 2, 3, (4,), codec.DOUBLES)  # the v1 tension schema: packed doubles
@@ -300,17 +301,9 @@ def test_mutated_payloads_decode_consistently_or_raise_value_error():
     rejected = 0
     for k in range(3000):
         sensor, p = payloads[k % 2]
-        b = bytearray(p)
-        i = int(rng.integers(0, len(b)))
-        edit = k % 3
-        if edit == 0:
-            b[i] = int(rng.integers(0, 256))
-        elif edit == 1:
-            del b[i:i + int(rng.integers(1, 4))]
-        else:
-            b[i:i] = bytes(rng.integers(0, 256, 2).astype(np.uint8))
+        b = mutated(p, rng, k)
         try:
-            out = codec.decode_block("b", sensor, bytes(b))
+            out = codec.decode_block("b", sensor, b)
         except ValueError:
             rejected += 1
             continue

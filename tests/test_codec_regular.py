@@ -8,6 +8,7 @@ import numpy as np
 from monitor import codec
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.codec_regular import decode_regular
+from tests.byte_mutations import mutated
 
 T0 = 1_700_000_000_123_456_789
 
@@ -78,17 +79,9 @@ def test_mutated_payloads_the_fast_path_accepts_decode_as_the_general_kernel_doe
     accepted = 0
     for k in range(3000):
         sensor = ("tension", "imu")[k % 2]
-        b = bytearray(base[sensor])
-        i = int(rng.integers(0, len(b)))
-        edit = k % 3
-        if edit == 0:
-            b[i] = int(rng.integers(0, 256))
-        elif edit == 1:
-            del b[i:i + int(rng.integers(1, 4))]
-        else:
-            b[i:i] = bytes(rng.integers(0, 256, 2).astype(np.uint8))
+        b = mutated(base[sensor], rng, k)
         numbers = codec.DEFAULT_FIELD_NUMBERS[sensor]
-        buf, offs, lens = _batch([base[sensor], bytes(b)])
+        buf, offs, lens = _batch([base[sensor], b])
         fast = decode_regular(buf, offs, lens, numbers)
         if fast is not None:
             accepted += 1

@@ -340,35 +340,33 @@ def test_scrapes_are_answered_during_slow_checkpoints_and_failing_ones_are_alert
         assert d.terminate() == 0
 
 
-def test_metrics_port_in_use_is_a_clear_error_at_start(tmp_path):
+def _start_with_a_port_taken(tmp_path, which):
+    """`buoymon run` with its Zenoh listen port or its metrics port (``which``) already bound
+    by another socket; returns the finished process and the taken port."""
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         taken = busy.getsockname()[1]
+        zenoh, metrics = (taken, free_port()) if which == "zenoh" else (free_port(), taken)
         cfg = tmp_path / "cfg.toml"
         cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
-                       + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{free_port()}"]\n'
+                       + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{zenoh}"]\n'
                        f'[state]\npath = "{tmp_path / "state.sqlite"}"\n'
-                       f'[metrics]\nport = {taken}\n')
+                       f'[metrics]\nport = {metrics}\n')
         out = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
                              env=ENV, capture_output=True, text=True, timeout=300)
+    return out, taken
+
+
+def test_metrics_port_in_use_is_a_clear_error_at_start(tmp_path):
+    out, taken = _start_with_a_port_taken(tmp_path, "metrics")
     assert out.returncode == 2
     assert f"[metrics] cannot listen on 127.0.0.1:{taken}" in out.stderr
     assert "Traceback" not in out.stderr
 
 
 def test_zenoh_port_in_use_is_a_clear_error_at_start(tmp_path):
-    with socket.socket() as busy:
-        busy.bind(("127.0.0.1", 0))
-        busy.listen()
-        taken = busy.getsockname()[1]
-        cfg = tmp_path / "cfg.toml"
-        cfg.write_text((REPO / "monitor" / "vaps_seed004.toml").read_text()
-                       + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{taken}"]\n'
-                       f'[state]\npath = "{tmp_path / "state.sqlite"}"\n'
-                       f'[metrics]\nport = {free_port()}\n')
-        out = subprocess.run([sys.executable, "-m", "monitor.cli", "run", "--config", str(cfg)],
-                             env=ENV, capture_output=True, text=True, timeout=300)
+    out, taken = _start_with_a_port_taken(tmp_path, "zenoh")
     assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
     assert f"[zenoh] cannot open the session (listen ['tcp/127.0.0.1:{taken}'], connect [])" \
         in out.stderr and "Address already in use" in out.stderr

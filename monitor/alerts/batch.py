@@ -331,7 +331,7 @@ class TickBatch:
             j = stop + 1
         self.sync(n)
 
-    def scan(self, j0: int, due_ns: int = NO_DUE) -> int:
+    def scan(self, j0: int, due_ns: int) -> int:
         """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)."""
         p = self.plan
         return int(scan_ticks(self.ends, self.values, self.flags, p.mode, p.on, p.off,
