@@ -217,6 +217,7 @@ class _StreamSlab:
     # in all, whether a sample was ever accepted and the last accepted time (0 if not), and
     # rejected per reason in all (None without rejections in the slab)
     _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None]
+    tick_arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
@@ -250,11 +251,13 @@ class _StreamSlab:
         has = (k > 0) | has_last
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         last_t)
-        self.tick_arrays = (cut, rej_cut, k, last)  # for the alert batch (TickInputs)
+        received, rejected_tick = np.diff(cut, prepend=0), np.diff(rej_cut, prepend=0)
+        # for the alert batch (Pipeline._stream_ticks): samples received and rejected in each
+        # tick, whether one was ever accepted, the last accepted time
+        self.tick_arrays = (received, rejected_tick, has, last)
         # python ints: the per-tick reads below are then cheap
-        self._ticks = (np.diff(cut, prepend=0).tolist(), np.diff(rej_cut, prepend=0).tolist(),
-                       (accepted + k).tolist(), has.tolist(), np.where(has, last, 0).tolist(),
-                       by_reason)
+        self._ticks = (received.tolist(), rejected_tick.tolist(), (accepted + k).tolist(),
+                       has.tolist(), np.where(has, last, 0).tolist(), by_reason)
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
@@ -872,11 +875,8 @@ class Pipeline:
             last = np.full(n, val.last_t_ns, np.int64)
             received, rejected = np.zeros(n, np.int64), np.zeros(n, np.int64)
         else:
-            cut, rej_cut, n_acc, last = info.tick_arrays
-            has = (n_acc > 0) | info._before[2]
-            received, rejected = cut.copy(), rej_cut.copy()  # counts in each tick
-            received[1:] -= cut[:-1]
-            rejected[1:] -= rej_cut[:-1]
+            received, rejected, has, last = info.tick_arrays
+            received, rejected = received.copy(), rejected.copy()  # the first tick adds below
         if s in self.tick_counts:
             received[0] += self.tick_counts[s][0]
             rejected[0] += self.tick_counts[s][1]
