@@ -11,7 +11,9 @@ prints:
   busiest worker CPU is the speed-up the pool gives when each worker has a free core;
 * seconds per buoy-year (serial wall and CPU time / buoy-years): a cluster of W single-core
   workers reprocesses F buoy-years in about F x CPU-s per buoy-year / W seconds (one buoy per
-  task, so W <= buoys).
+  task, so W <= buoys). The serial run reads without the read-ahead thread, as every worker of
+  a pool that uses each core does (:func:`replay.fleet.pool_jobs`): the thread would add CPU
+  there and save no time, so the CPU per buoy-year is that of a fleet keeping every core busy.
 
 The machine is shared: the load average before each run is printed so a low figure can be
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
@@ -154,23 +156,29 @@ class ChildCpu:
 
 
 def timed_run(archives, config, workers: int) -> tuple[float, float, list[float], list]:
-    """(wall s, CPU s of this process, CPU s of each child process, reports)."""
-    from replay.fleet import run_fleet
+    """(wall s, CPU s of this process, CPU s of each child process, reports). One worker reads
+    without read-ahead (see the module doc); a pool follows :func:`replay.fleet.pool_jobs`."""
+    from dataclasses import replace
 
+    from replay.fleet import make_jobs, run_jobs
+
+    jobs = make_jobs(archives, config)
+    if workers == 1:
+        jobs = [replace(j, read_ahead=False) for j in jobs]
     print(f"  load average before the {workers}-worker run: {os.getloadavg()[0]:.2f}")
     start, cpu = time.perf_counter(), time.process_time()
     with ChildCpu() as children:
-        reports = run_fleet(archives, config, workers=workers)
+        reports = run_jobs(jobs, workers=workers)
     return time.perf_counter() - start, time.process_time() - cpu, children.per_process(), reports
 
 
 def read_only_cpu(archives) -> float:
-    """CPU seconds (all threads) to read every buoy's files as the replay does, no pipeline."""
+    """CPU seconds to read every buoy's files as the serial replay does, no pipeline."""
     from replay.reader import LogReader
 
     cpu = time.process_time()
     for a in archives:
-        for _ in LogReader(list(a.files)):
+        for _ in LogReader(list(a.files), read_ahead=False):
             pass
     return time.process_time() - cpu
 

@@ -51,13 +51,16 @@ class BuoyJob:
     """One task: a buoy's files and the configuration document to replay them with.
 
     The configuration travels as its raw TOML document (plain dicts) and is re-validated in the
-    worker, so a job pickles the same way for a process pool and for Dask.
+    worker, so a job pickles the same way for a process pool and for Dask. ``read_ahead``: the
+    reader's (:class:`replay.reader.LogReader`; None: its own rule, from the CPUs of the
+    process that runs the job; :func:`run_jobs` sets it for a pool).
     """
 
     buoy_id: str
     files: tuple[str, ...]
     config_raw: Mapping[str, Any]
     config_source: str
+    read_ahead: bool | None = None
 
 
 # ------------------------------------------------------------------------------ discovery
@@ -154,7 +157,7 @@ def replay_buoy(job: BuoyJob) -> dict[str, Any]:
     from replay.runner import read_summary, run_blocks
 
     config = parse_config(job.config_raw, source=job.config_source)
-    reader = LogReader(list(job.files))
+    reader = LogReader(list(job.files), read_ahead=job.read_ahead)
     ignored: dict[str, int] = {}
     pipeline, _ = run_blocks(config, _only_buoy(reader, job.buoy_id, ignored))
     report = build_report(pipeline.config, pipeline.report(), list(job.files),
@@ -182,13 +185,29 @@ def _run_serial(jobs: Sequence[BuoyJob], done: Callable[[str], None]) -> list[di
     return out
 
 
+def pool_jobs(jobs: Sequence[BuoyJob], processes: int, cpus: int | None = None
+              ) -> list[BuoyJob]:
+    """``jobs`` as ``processes`` local workers run them: each reads ahead only if the workers
+    leave a core free for its thread (:func:`replay.chunks.read_ahead_pays` with the parent's
+    ``cpus``, default its usable CPUs; the workers inherit its affinity). A job that says
+    already keeps its choice."""
+    from dataclasses import replace
+
+    from replay.chunks import read_ahead_pays
+
+    pays = read_ahead_pays(processes, cpus)
+    return [j if j.read_ahead is not None else replace(j, read_ahead=pays) for j in jobs]
+
+
 def _run_pool(jobs: Sequence[BuoyJob], workers: int, done: Callable[[str], None]
               ) -> list[dict[str, Any]]:
     from concurrent.futures import ProcessPoolExecutor, as_completed  # 25 ms: only for a pool
     from multiprocessing import get_context
 
     results: list[dict[str, Any] | None] = [None] * len(jobs)
-    with ProcessPoolExecutor(max_workers=min(workers, len(jobs)),
+    processes = min(workers, len(jobs))
+    jobs = pool_jobs(jobs, processes)
+    with ProcessPoolExecutor(max_workers=processes,
                              mp_context=get_context(MP_START_METHOD)) as pool:
         futures = {pool.submit(replay_buoy, jobs[i]): i for i in _largest_first(jobs)}
         for fut in as_completed(futures):

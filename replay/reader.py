@@ -6,9 +6,11 @@ chunks is read as far as it is intact. (An intact summary's copies of the channe
 are taken too, so a damaged chunk that held a channel's definition costs only its own
 messages.) Each chunk is decompressed once, its records located by a numba scan and all of
 its sensor payloads decoded in bulk (:func:`monitor.codec.decode_many`). With ``read_ahead``
-(the default) a worker thread does all that for the next chunk
-(:class:`replay.chunks.ReadAhead`; none of it holds the GIL) while the caller processes the
-blocks of the current one; the results are the same either way.
+a worker thread does all that for the next chunk (:class:`replay.chunks.ReadAhead`; none of
+it holds the GIL) while the caller processes the blocks of the current one; the results are
+the same either way. By default the reader reads ahead only when the process may use more
+than one CPU (:func:`replay.chunks.read_ahead_pays`: on one core the thread costs CPU and
+saves no time).
 This delivers millions of messages per second where ``mcap``'s per-message reader manages a
 few hundred thousand.
 
@@ -62,6 +64,7 @@ from os import PathLike
 from typing import Iterator, Sequence
 
 from monitor.blocks import SampleBlock
+from replay.chunks import read_ahead_pays
 from replay.log_files import expand_paths
 from replay.merge import StreamMerge
 from replay.salvage import FileSalvage, FileStats
@@ -75,24 +78,26 @@ class LogReader:
         coalesce: concatenate messages per topic and release (see module doc) for speed.
         reorder_window_s: sensor-time horizon within which out-of-order messages are sorted.
         read_ahead: inflate the next chunk in a worker thread while the caller processes the
-            blocks of the current one (same results; uses a second core).
+            blocks of the current one (same results; uses a second core). None (default):
+            only when the process may use more than one CPU
+            (:func:`replay.chunks.read_ahead_pays`).
 
     Iterate once; afterwards :attr:`stats` holds one :class:`FileStats` per file.
     """
 
     def __init__(self, paths: Sequence[str | PathLike] | str | PathLike, *, coalesce: bool = True,
-                 reorder_window_s: float = 60.0, read_ahead: bool = True):
+                 reorder_window_s: float = 60.0, read_ahead: bool | None = None):
         if isinstance(paths, (str, PathLike)):
             paths = [paths]
         if not reorder_window_s >= 0:
             raise ValueError(f"reorder_window_s = {reorder_window_s}: must be >= 0")
         self.paths = expand_paths(paths)
         self.coalesce = coalesce
-        self.read_ahead = read_ahead
+        self.read_ahead = read_ahead_pays() if read_ahead is None else read_ahead
         self.window_ns = int(round(reorder_window_s * 1e9))
         self.stats: list[FileStats] = []
         self._merge = StreamMerge(self.window_ns, coalesce)
-        self._files = FileSalvage(self._merge, read_ahead)
+        self._files = FileSalvage(self._merge, self.read_ahead)
 
     @property
     def ok(self) -> bool:

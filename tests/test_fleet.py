@@ -244,3 +244,22 @@ def test_cli_reads_a_file_without_summary_once_to_find_its_buoys(tmp_path, monke
     assert main(["replay", str(tmp_path), "--no-progress"]) == 0
     assert "fleet: 2 buoy(s)" in capsys.readouterr().out
     assert [Path(p).name for p in scanned] == ["b2.mcap"]
+
+
+def test_pool_workers_read_ahead_only_when_a_core_is_left_for_the_thread(serial):
+    """replay.fleet.pool_jobs: W workers on C usable CPUs read ahead only if C > W; a job
+    that already says keeps its choice."""
+    from dataclasses import replace
+
+    from replay.fleet import pool_jobs
+
+    archives, _ = serial
+    jobs = make_jobs(archives, fleet_config())
+    assert {j.read_ahead for j in jobs} == {None}  # serial: the reader's own rule
+    assert {j.read_ahead for j in pool_jobs(jobs, 2, cpus=2)} == {False}
+    assert {j.read_ahead for j in pool_jobs(jobs, 6, cpus=4)} == {False}
+    assert {j.read_ahead for j in pool_jobs(jobs, 2, cpus=4)} == {True}
+    fixed = [replace(jobs[0], read_ahead=True)] + jobs[1:]
+    assert [j.read_ahead for j in pool_jobs(fixed, 2, cpus=2)] == [True] + [False] * 5
+    assert [(j.buoy_id, j.files) for j in pool_jobs(jobs, 2, cpus=2)] == [
+        (j.buoy_id, j.files) for j in jobs]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import struct
 
 import numpy as np
@@ -391,3 +392,41 @@ def test_recorded_forecasts_before_the_damage_are_kept_and_the_loss_said(tmp_pat
         assert 0 < len(read_forecasts([cut])) < 6
     assert f"{cut}: damaged or not MCAP (EndOfFile)" in caplog.text
     assert f"{cut}: damaged or not MCAP ()" not in caplog.text
+
+
+@pytest.mark.parametrize("cpus, threads", [({0}, 0), ({3}, 0), ({0, 1}, 1), ({0, 2, 5}, 1)])
+def test_the_reader_reads_ahead_only_with_a_cpu_to_spare(log, monkeypatch, cpus, threads):
+    """Default rule (replay.chunks.read_ahead_pays): a process allowed one CPU reads in line
+    (the thread would cost CPU and save no time), one allowed more starts the thread."""
+    import replay.salvage
+
+    path, _, _ = log
+    started = []
+
+    class Counted(ReadAhead):
+        def __init__(self, *a):
+            started.append(1)
+            super().__init__(*a)
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(cpus))
+    monkeypatch.setattr(replay.salvage, "ReadAhead", Counted)
+    reader = LogReader(path, coalesce=False)
+    assert reader.read_ahead is (threads == 1)
+    blocks = list(reader)
+    assert len(started) == threads
+    assert len(blocks) == N_SECONDS
+    for k, b in enumerate(blocks):
+        assert np.array_equal(b.t_ns, T0 + k * S + np.arange(20) * (S // 20))
+        assert np.array_equal(b.fields["tension_N"], k * 20 + np.arange(20.0))
+    # an explicit choice wins over the rule
+    assert LogReader(path, read_ahead=True).read_ahead is True
+
+
+def test_read_ahead_pays_when_the_cpus_outnumber_the_replaying_processes():
+    from replay.chunks import read_ahead_pays
+
+    assert not read_ahead_pays(1, cpus=1)
+    assert read_ahead_pays(1, cpus=2)
+    assert not read_ahead_pays(2, cpus=2)  # a 2-worker pool on 2 cores: every core busy
+    assert read_ahead_pays(2, cpus=4)
+    assert not read_ahead_pays(8, cpus=4)
