@@ -28,92 +28,103 @@ from monitor.varint import read_varint, unzigzag
 
 
 @kernel(nogil=True)  # runs in the reader's read-ahead thread
-def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta):
+def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta, t, flat):
+    """Decode into ``t`` (cap,) and ``flat`` (nf * cap,): field j's values first at
+    ``flat[j * cap:]``, at the end moved to ``flat[j * total:]``; cap: :func:`_capacity`."""
     m = offs.shape[0]
     nf = tags.shape[0]
-    cap = 0
-    for k in range(m):
-        cap += lens[k]
-    cap = cap // nf + 1  # every sample takes at least one byte in each field
-    t = np.empty(cap, np.int64)
-    vals = np.empty((nf, cap), np.float64)
+    cap = t.shape[0]
     qv = np.empty(1, np.float64)
     qb = qv.view(np.uint8)
     nsamp = np.zeros(m, np.int64)
+    one = np.uint64(1)
     pos = 0
     for k in range(m):
         p = offs[k]
         end = p + lens[k]
         if p + 10 > end or buf[p] != tag_t0:
-            return False, nsamp, t, vals, pos
+            return False, nsamp, pos
         t0 = 0
         for i in range(8):
             t0 |= np.int64(buf[p + 1 + i]) << (8 * i)
         p += 9
         tag, p = read_varint(buf, p, end)
         if p < 0 or tag != tag_period:
-            return False, nsamp, t, vals, pos
+            return False, nsamp, pos
         period, p = read_varint(buf, p, end)
         if p < 0 or period <= 0:
-            return False, nsamp, t, vals, pos
+            return False, nsamp, pos
         n = -1
         for j in range(nf):
             tag, p = read_varint(buf, p, end)
             if p < 0 or tag != tags[j]:
-                return False, nsamp, t, vals, pos
+                return False, nsamp, pos
             ln, p = read_varint(buf, p, end)
             body_end = p + ln
             if p < 0 or body_end > end or p + 10 > body_end or buf[p] != tag_q:
-                return False, nsamp, t, vals, pos
+                return False, nsamp, pos
             qb[:] = buf[p + 1:p + 9]
             q = qv[0]
             if not (q > 0 and q < np.inf) or buf[p + 9] != tag_delta:
-                return False, nsamp, t, vals, pos
+                return False, nsamp, pos
             dl, a = read_varint(buf, p + 10, body_end)
             if a < 0 or a + dl != body_end or dl == 0 or buf[body_end - 1] >= 0x80:
-                return False, nsamp, t, vals, pos
-            # the hot loop: the deltas of one field, straight to values
-            out = vals[j]
-            i = pos
+                return False, nsamp, pos
+            # the hot loop: the deltas of one field, straight to values. Unsigned positions:
+            # numba then adds no wrap-around of negative indices to each access (14 % of it)
+            base = np.uint64(j * cap)
+            i = np.uint64(pos)
+            stop = np.uint64(cap)
             acc = 0
-            s = a
-            last = body_end - 1
-            while s < body_end:
-                if i >= cap:
-                    return False, nsamp, t, vals, pos
+            s = np.uint64(a)
+            end_u = np.uint64(body_end)
+            last = end_u - one
+            while s < end_u:
+                if i >= stop:
+                    return False, nsamp, pos
                 # one- and two-byte varints without a branch on the length (their mix is
                 # the data's: a branch on it mispredicts); longer ones in a loop
                 b0 = np.int64(buf[s])
-                b1 = np.int64(buf[min(s + 1, last)])
+                b1 = np.int64(buf[min(s + one, last)])
                 c0 = b0 >> 7
                 z = (b0 & 0x7F) | (((b1 & 0x7F) << 7) * c0)
-                s += 1 + c0
+                s += np.uint64(1 + c0)
                 if c0 & (b1 >> 7):
                     shift = 14
                     while True:
                         byte = np.int64(buf[s])
-                        s += 1
+                        s += one
                         z |= (byte & 0x7F) << shift
                         if byte < 0x80:
                             break
                         shift += 7
                         if shift >= 63:  # overlong: let the general kernel say so
-                            return False, nsamp, t, vals, pos
+                            return False, nsamp, pos
                 acc += unzigzag(z)
-                out[i] = acc * q
-                i += 1
+                flat[base + i] = acc * q
+                i += one
+            got = np.int64(i) - pos
             if n < 0:
-                n = i - pos
-            elif i - pos != n:
-                return False, nsamp, t, vals, pos
+                n = got
+            elif got != n:
+                return False, nsamp, pos
             p = body_end
         if p != end or n < 2:
-            return False, nsamp, t, vals, pos
+            return False, nsamp, pos
         for i in range(n):
             t[pos + i] = t0 + i * period
         nsamp[k] = n
         pos += n
-    return True, nsamp, t, vals, pos
+    # the rows to their final place (each moves down: copying upwards is safe)
+    for j in range(1, nf):
+        for i in range(pos):
+            flat[j * pos + i] = flat[j * cap + i]
+    return True, nsamp, pos
+
+
+def _capacity(lens: np.ndarray, nf: int) -> int:
+    """Samples a batch of payloads can hold at most: each takes at least a byte per field."""
+    return int(lens.sum()) // nf + 1
 
 
 def _tag(field: int, wire_type: int) -> int:
@@ -129,12 +140,17 @@ def decode_regular(buf: np.ndarray, offs: np.ndarray, lens: np.ndarray, numbers:
     fn_t0, fn_period, _, fn_vals, sub = numbers
     if offs.shape[0] == 0 or sub[0] < 0 or sub[1] < 0 or fn_period < 0 or not fn_vals:
         return None
-    ok, nsamp, t, vals, total = _decode_regular(
+    nf = len(fn_vals)
+    cap = _capacity(lens, nf)
+    t, flat = np.empty(cap, np.int64), np.empty(nf * cap, np.float64)
+    ok, nsamp, total = _decode_regular(
         buf, offs, lens, _tag(fn_t0, 1), _tag(fn_period, 0),
-        np.array([_tag(f, 2) for f in fn_vals], np.int64), _tag(sub[0], 1), _tag(sub[1], 2))
+        np.array([_tag(f, 2) for f in fn_vals], np.int64), _tag(sub[0], 1), _tag(sub[1], 2),
+        t, flat)
     if not ok:
         return None
-    # copies: views would keep the over-allocated arrays (a bound: every sample takes at least
-    # one byte per field) alive for as long as the pipeline buffers the samples
-    return (np.zeros(offs.shape[0], np.int8), nsamp, t[:total].copy(),
-            np.ascontiguousarray(vals[:, :total]))
+    # shrunk in place (realloc), not copied: views of the over-allocated arrays would keep
+    # them alive for as long as the pipeline buffers the samples
+    t.resize(total, refcheck=False)
+    flat.resize(nf * total, refcheck=False)
+    return np.zeros(offs.shape[0], np.int8), nsamp, t, flat.reshape(nf, total)

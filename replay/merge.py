@@ -13,7 +13,7 @@ import numpy as np
 
 from monitor import codec
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
-from replay.mcap_scan import Digest
+from replay.mcap_scan import Digest, distinct
 from replay.salvage import FileContext, FileStats
 
 
@@ -191,7 +191,7 @@ class StreamMerge:
         blocks = [b for a, z in zip(cuts[:-1], cuts[1:])
                   for b in self._blocks({k: v[a:z] for k, v in rel.items()}, rank)]
         # compact: keep only the held-back samples
-        for s in np.unique(tab["stream"]).tolist():
+        for s in distinct(tab["stream"]):
             mine = keep["stream"] == s
             keep["start"][mine] = self._streams[s].keep_only(keep["start"][mine],
                                                              keep["n"][mine])
@@ -200,7 +200,7 @@ class StreamMerge:
 
     def _blocks(self, rel: dict, rank: np.ndarray) -> list[SampleBlock]:
         out: list[tuple[int, int, int, SampleBlock]] = []
-        for s in np.unique(rel["stream"]).tolist():
+        for s in distinct(rel["stream"]):
             mine = np.flatnonzero(rel["stream"] == s)
             stream = self._streams[s]
             names = list(SENSOR_FIELDS[stream.sensor])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from models._jit import uncompiled
 from monitor import codec
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.codec_regular import decode_regular
@@ -88,3 +89,68 @@ def test_mutated_payloads_the_fast_path_accepts_decode_as_the_general_kernel_doe
             assert _same(fast, _general(buf, offs, lens, numbers))
     # value bytes edited in place stay regular: many mutants take the fast path
     assert 300 < accepted < 2500
+
+
+def _generic_class(sensor: str):
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(codec.file_descriptor_set(sensor)).file:
+        pool.Add(fd)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(codec.schema_name(sensor)))
+
+
+# sint64 deltas by varint length: 1, 2, 3 bytes, up to 9 (the one-pass decoder's limit), and
+# the extremes, whose zigzag needs 10 bytes (left to the general kernel)
+_DELTA_RANGES = ((-64, 63), (-8192, 8191), (-2**20, 2**20 - 1), (-2**62, 2**62 - 1))
+_EXTREMES = (-2**63, 2**63 - 1, -2**62 - 1, 2**62)
+
+
+def test_random_payloads_of_the_reference_encoder_decode_as_protobuf_reads_them():
+    """Payloads serialized by the protobuf runtime from random messages (varints of every
+    length, overflowing sums, tiny and huge quanta): the decoder's times and values are the
+    reference decode's (protobuf parse, then docs/LOG_FORMAT.md's recipe) to the last bit,
+    and the one-pass path takes every batch without a 10-byte varint."""
+    rng = np.random.default_rng(2026)
+    fast_batches = 0
+    for trial in range(60):
+        sensor = ("tension", "imu")[trial % 2]
+        cls, names = _generic_class(sensor), SENSOR_FIELDS[sensor]
+        extreme = trial % 5 == 4
+        payloads, want_t, want_v = [], [], []
+        for _ in range(int(rng.integers(1, 7))):
+            n = int(rng.integers(2, 80))
+            m = cls(t0_ns=int(rng.integers(1, 2**62)), period_ns=int(rng.integers(1, 2**40)))
+            for f in names:
+                lo, hi = _DELTA_RANGES[int(rng.integers(0, 4))] if trial % 3 else (-64, 8191)
+                d = rng.integers(lo, hi, n, endpoint=True)
+                if extreme:
+                    d[rng.integers(0, n)] = rng.choice(_EXTREMES)
+                q = getattr(m, f)
+                q.quantum = float(rng.choice([0.1, 1e-4, 3.0, 5e-324, 1e300]))
+                q.delta.extend(d.tolist())
+            payloads.append(m.SerializeToString())
+            ref = cls.FromString(payloads[-1])
+            with np.errstate(over="ignore"):
+                want_t.append(ref.t0_ns + ref.period_ns * np.arange(n, dtype=np.int64))
+                want_v.append([np.cumsum(np.array(getattr(ref, f).delta, np.int64))
+                               .astype(np.float64) * getattr(ref, f).quantum for f in names])
+        buf, offs, lens = _batch(payloads)
+        numbers = codec.DEFAULT_FIELD_NUMBERS[sensor]
+        status, nsamp, t, vals = codec.decode_many(buf, offs, lens, numbers)
+        assert (status == codec.OK).all()
+        assert nsamp.tolist() == [w.shape[0] for w in want_t]
+        assert t.tolist() == np.concatenate(want_t).tolist()
+        want = np.concatenate([np.array(v) for v in want_v], axis=1)
+        assert vals.shape == want.shape and vals.tobytes() == want.tobytes()
+        fast = decode_regular(buf, offs, lens, numbers)
+        assert (fast is None) == extreme
+        if fast is not None:
+            fast_batches += 1
+            assert fast[3].flags.c_contiguous
+            assert _same(fast, (status, nsamp, t, vals))
+        if trial < 5:  # the kernel as plain Python (small jobs run it so) gives the same
+            with uncompiled():
+                plain = decode_regular(buf, offs, lens, numbers)
+            assert (plain is None) == extreme and (extreme or _same(plain, fast))
+    assert fast_batches == 48
