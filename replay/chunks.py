@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import os
 import struct
-import zlib
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import zstandard
+# zlib's CRC-32, computed with carry-less multiplication (ISA-L): 26 GB/s against zlib's
+# 1.6-3 GB/s, which cost 0.15 CPU-s of reading the 30-day benchmark log; 1 ms to import
+from isal.isal_zlib import crc32
 
 from monitor.mcap_file import OP_CHUNK, OP_MESSAGE_INDEX
 
@@ -78,12 +80,12 @@ def inflate(content: bytes, cut: bool, dctx: zstandard.ZstdDecompressor) -> Infl
                             error="file cut inside a chunk (nothing decompressible)")
         return Inflated(None, t_lo, t_hi, error=f"chunk does not decompress: {e}", indexed=True)
     if cut:
-        whole = len(raw) == usize and crc != 0 and zlib.crc32(raw) == crc
+        whole = len(raw) == usize and crc != 0 and crc32(raw) == crc
         return Inflated(raw, t_lo, t_hi, cut=not whole)
     if len(raw) != usize:
         return Inflated(None, t_lo, t_hi, error=f"chunk size {len(raw)} != {usize} declared",
                         indexed=True)
-    if crc != 0 and zlib.crc32(raw) != crc:
+    if crc != 0 and crc32(raw) != crc:
         return Inflated(None, t_lo, t_hi, error="bad chunk CRC", indexed=True)
     return Inflated(raw, t_lo, t_hi)
 
