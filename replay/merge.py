@@ -44,7 +44,7 @@ class _Stream:
         contiguous in it (usual)."""
         if start.shape[0] == 0:
             return np.empty(0, np.int64), np.empty((self.nf, 0))
-        if np.array_equal(start[1:], start[:-1] + n[:-1]):
+        if (start[1:] == start[:-1] + n[:-1]).all():
             return self._span(int(start[0]), int(start[-1] + n[-1]))
         t, v = self._span(0, self.length)  # out of read order (rare): join, then gather
         idx = _gather_index(start, n)
@@ -130,19 +130,22 @@ class StreamMerge:
             status, n, t, vals = (decoded if decoded is not None
                                   else codec.decode_many(buf, doff[sel], dlen[sel], numbers))
             good = status == codec.OK
-            st.bad_payloads += int(sel.shape[0] - good.sum())
-            sel, n = sel[good], n[good]
+            bad = sel.shape[0] - int(np.count_nonzero(good))
+            if bad:  # (usually none: no copies then)
+                st.bad_payloads += bad
+                sel, n = sel[good], n[good]
             stream = self._streams[sidx]
             start = stream.add(t, vals) + np.cumsum(n) - n
             topic = stream.topic
             st.messages_by_topic[topic] = st.messages_by_topic.get(topic, 0) + sel.shape[0]
             st.messages += sel.shape[0]
             st.samples += int(n.sum())
+            p_sel = pub[sel]
             if sel.shape[0]:
-                lo, hi = int(pub[sel].min()), int(pub[sel].max())
+                lo, hi = int(p_sel.min()), int(p_sel.max())
                 st.first_ns = lo if st.first_ns is None else min(st.first_ns, lo)
                 st.last_ns = hi if st.last_ns is None else max(st.last_ns, hi)
-            parts.append({"stream": np.full(sel.shape[0], sidx, np.int64), "pub": pub[sel],
+            parts.append({"stream": np.full(sel.shape[0], sidx, np.int64), "pub": p_sel,
                           "log": log[sel], "start": start, "n": n, "seq": seq[sel]})
         for p in parts:
             late = p["pub"] <= self._released_to
@@ -183,7 +186,7 @@ class StreamMerge:
         # canonical order: publish time, topic, read order
         rank = np.argsort(np.argsort([s.topic for s in self._streams]))
         order = np.lexsort((rel["seq"], rank[rel["stream"]], rel["pub"]))
-        rel = {k: v[order] for k, v in rel.items()}
+        rel = {k: v[order] for k, v in rel.items() if k != "seq"}  # seq: done with
         # a release is as long as a chunk: cut it into spans of at most COALESCE_S of sensor
         # time, so no coalesced block runs ahead of the other streams by more than that
         span = (rel["pub"] - rel["pub"][0]) // COALESCE_NS if rel["pub"].shape[0] else rel["pub"]
