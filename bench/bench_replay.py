@@ -5,8 +5,9 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
 
 * replay: ``replay.reader.LogReader`` -> ``Pipeline`` with the default configuration, in a
   child process so its peak RSS is its own; pinned to one CPU (the issue's "on one core":
-  the reader's read-ahead thread then shares that core) and, for the wall-clock figure a user
-  sees, on every core; tension samples per second and times real time;
+  the reader then reads in line, without its read-ahead thread, by the rule of
+  replay.chunks.read_ahead_pays) and, for the wall-clock figure a user sees, on every core;
+  tension samples per second and times real time;
 * peak memory of a 1-day replay against the N-day one (must stay within 10 %);
 * the naive baseline: decode message by message with mcap's reader, then
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
@@ -32,6 +33,15 @@ An earlier pair (19:45-19:50 UTC, main at load 2.0-2.4, this build at 0.6-1.7) g
 27.39 CPU-s on one core and 21.10 s wall on 2 cores against 13.18 CPU-s and 11.24 s (4.61
 M/s, 6.7 x the baseline on one core): the load inflated main's figures, the quiet pair is the
 fair one.
+
+Reading (measured 2026-11-25 21:34-21:46 UTC on the 2-core machine shared with other jobs,
+load 3.7-6.2: CPU times only): in-process ``LogReader(..., read_ahead=False)``, pinned to one
+CPU, no pipeline, best of 3 (30-day) / 7 (1-day), main c8bad01 and this build interleaved in 3
+rounds: 30-day log 2.53-2.94 -> 1.93-2.21 CPU-s, 1-day log 0.080-0.093 -> 0.058-0.068 (a count
+per value instead of np.unique per run of records, unsigned positions in the one-pass decoder,
+ISA-L's CRC-32, fewer copies in the merge). The whole 30-day replay on one core, in-process,
+one run each at load 5.5: 13.02 CPU-s (main: read-ahead thread on one core) -> 11.82 (the
+reader starts no thread when the process has one CPU).
 
 Targets (issue 22): 10 M/s wall on 2 cores and 10 x on one core: NOT reached. Where the time
 goes now (cProfile of the 1-day log, ~0.45 s): no single part above ~8 %: the rainflow/Miner
@@ -181,7 +191,7 @@ def _stub_qc() -> None:
 
 def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> None:
     """Run in a child process: replay, print figures as JSON (with this process's peak RSS).
-    ``one_core`` pins the process (and so the reader's read-ahead thread) to one CPU."""
+    ``one_core`` pins the process to one CPU (the reader then starts no read-ahead thread)."""
     if one_core:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     if not qc:
