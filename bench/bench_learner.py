@@ -62,51 +62,80 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def record(log: Path) -> list[tuple[str, tuple]]:
-    """The learner's constructor arguments and every call the pipeline makes to it."""
+def record(log: Path) -> tuple[list[tuple[str, tuple]], str]:
+    """The learner's constructor arguments and every call the pipeline makes to it, and the
+    pipeline's learner's final state (JSON)."""
     import monitor.pipeline as pipeline
     from monitor.config import default_config
     from replay.reader import LogReader
     from replay.runner import run_blocks
 
     calls: list[tuple[str, tuple]] = []
+    inside: list[bool] = []  # within a ticks() call
+    built: list = []  # the learner the pipeline built
     base = pipeline.SeaStateLearner
 
     class Recorder(base):  # type: ignore[misc, valid-type]
         def __init__(self, *args):
             calls.append(("__init__", copy.deepcopy(args)))
             super().__init__(*args)
+            built.append(self)
 
     def recorded(name):
         method = getattr(base, name)
 
         def call(self, *args):
-            calls.append((name, copy.deepcopy(args)))
+            if not inside:  # not a tick that ticks() makes itself
+                calls.append((name, copy.deepcopy(args) if name != "receive" else ()))
             return method(self, *args)
         return call
 
-    for name in ("waves", "load", "motion", "imu", "tick"):
+    def ticks(self, ends, committed, n_samples, a, b):
+        asked: dict[int, dict[str, float]] = {}  # the committed damages the learner asks for
+
+        def ask(q):
+            asked[q] = dict(committed(q))
+            return asked[q]
+        calls.append(("ticks", (ends.copy(), asked, n_samples.copy(), a, b)))
+        inside.append(True)
+        try:
+            return base.ticks(self, ends, ask, n_samples, a, b)
+        finally:
+            inside.pop()
+
+    for name in ("waves", "load", "motion", "imu", "tick", "hand_over", "receive"):
         setattr(Recorder, name, recorded(name))
+    setattr(Recorder, "ticks", ticks)
     setattr(pipeline, "SeaStateLearner", Recorder)  # the class the pipeline builds
     try:
         run_blocks(default_config(), LogReader([log]))
     finally:
         setattr(pipeline, "SeaStateLearner", base)
-    return calls
+    return calls, json.dumps(built[-1].state(), sort_keys=True)
 
 
 def replay_learner(calls, timed: dict[str, float] | None = None):
-    """A fresh learner fed the recorded calls; ``timed``: CPU per method (load, imu, tick)."""
+    """A fresh learner fed the recorded calls; ``timed``: CPU per method (load, imu, ticks,
+    ...)."""
     from monitor.sea_state_learner import SeaStateLearner
 
     learner = SeaStateLearner(*calls[0][1])
     windows: list[dict] = []
+    handed: list = []  # hand_over results not yet received (the pipeline's slab queue)
     for name, args in calls[1:]:
         start = time.process_time() if timed is not None else 0.0
-        getattr(learner, name)(*args)
+        if name == "hand_over":
+            handed.append(learner.hand_over())
+        elif name == "receive":
+            learner.receive(handed.pop(0))
+        elif name == "ticks":
+            ends, asked, n_samples, a, b = args
+            learner.ticks(ends, asked.__getitem__, n_samples, a, b)
+        else:
+            getattr(learner, name)(*args)
         if timed is not None:
             timed[name] = timed.get(name, 0.0) + time.process_time() - start
-        if name == "tick":
+        if name in ("tick", "ticks"):
             windows += learner.take_windows()
     return learner, windows
 
@@ -123,10 +152,12 @@ def main() -> None:
 
             log = Path(tmp) / "day.mcap"
             write_log(log, 1.0)
-        calls = record(log)
-    counts = {n: sum(c[0] == n for c in calls) for n in ("load", "imu", "motion", "tick")}
+        calls, pipeline_state = record(log)
+    counts = {n: sum(c[0] == n for c in calls) for n in ("load", "imu", "motion", "ticks")}
     print(f"recorded: {counts}")
     learner, windows = replay_learner(calls)  # warm: imports, the quadrature grid
+    # the calls replayed give the pipeline's learner to the bit
+    assert json.dumps(learner.state(), sort_keys=True) == pipeline_state
     expect = json.dumps([learner.state(), windows], sort_keys=True)
     best, split = float("inf"), dict[str, float]()
     for _ in range(args.repeat):
