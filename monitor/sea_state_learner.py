@@ -40,6 +40,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
+from models.fatigue._spectral_loops import steady_segments
 from models.fatigue.spectral import Periodograms, damage_rate_from_psd
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
@@ -88,20 +89,17 @@ class _Spectra:
             self.t = np.concatenate([self.t, t])
             self.x = {n: np.concatenate([self.x[n], stresses[n]]) for n in self.names}
             return
-        # segment j is samples [j S, (j + 1) S) of the open ones and t: only the first
-        # starts among the open ones
-        ends = np.arange(SEGMENT - 1 - nc, full - nc, SEGMENT)
-        starts = t[np.maximum(ends - (SEGMENT - 1), 0)]
-        if nc:
-            starts[0] = self.t[0]
-        spans = (t[ends] - starts) / 1e9
-        fs = np.where(spans > 0, (SEGMENT - 1) / np.where(spans > 0, spans, 1.0), np.nan)
-        if self.fs is None and np.isfinite(fs).any():
-            self.fs = float(fs[np.isfinite(fs)][0])
-        good = np.isfinite(fs) & (np.abs(fs / (self.fs or 1.0) - 1.0) <= _RATE_TOLERANCE)
-        self.dropped += int(np.count_nonzero(~good))
-        taken = np.flatnonzero(good)
-        if taken.shape[0]:
+        count = full // SEGMENT
+        taken = np.empty(count, np.int64)
+        # a segment spanning a gap (its rate off the window's first) is dropped
+        kept, fs = steady_segments(t, nc, int(self.t[0]) if nc else 0, count, SEGMENT,
+                                   math.nan if self.fs is None else self.fs, _RATE_TOLERANCE,
+                                   taken)
+        if self.fs is None and math.isfinite(fs):
+            self.fs = float(fs)
+        self.dropped += count - kept
+        taken = taken[:kept]
+        if kept:
             rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
                 _segments(rows[i], taken, self.x[n], stresses[n])
@@ -122,7 +120,10 @@ class _Spectra:
         return self.rows[:, self.filled:self.filled + m]
 
     def summed(self, work: Periodograms) -> "_Spectra":
-        """Itself with every kept segment added to the sums (in ``work``'s buffers)."""
+        """Itself with every kept segment added to the sums (in ``work``'s buffers; the
+        sums are a new array: a snapshot may share the old one)."""
+        if self.added < self.filled:
+            self.acc = self.acc.copy()
         per = work.max_rows // len(self.names)  # segments of each signal per batch
         for a in range(self.added, self.filled, per):
             b = min(a + per, self.filled)
@@ -169,11 +170,9 @@ class _Spectra:
 
     def snapshot(self) -> "_Spectra":
         """A copy that later feeding leaves as it is: feed replaces the open segment's
-        arrays and writes kept segments past the copy's, but the sums are added in place,
-        so those are copied."""
-        out = copy.copy(self)
-        out.acc = self.acc.copy()
-        return out
+        arrays and writes kept segments past the copy's, and :meth:`summed` replaces the
+        sums, so the copy shares every array."""
+        return copy.copy(self)
 
     def state(self) -> dict[str, Any]:
         return {"index": self.index, "fs": self.fs, "segments": self.segments,

@@ -200,3 +200,30 @@ def weighted_sum(w, density, dpc):
     for k in range(n):
         terms[k] = w[k] * density[k] * dpc[k]
     return pairwise_sum(terms)
+
+
+@compile_loop
+def steady_segments(t, n_open, t_open, n_seg, size, fs_ref, tolerance, taken):
+    """Which of the ``n_seg`` segments of ``size`` samples of a stream are at its rate:
+    segment ``j`` is samples ``[j size, (j + 1) size)`` of ``n_open`` earlier samples (the
+    first at time ``t_open``) followed by ``t`` (int64 ns). A segment's rate is
+    ``(size - 1) / span`` (NaN for a span <= 0); the reference rate is ``fs_ref``, or if that
+    is NaN the first finite one; a segment is taken if its rate is within ``tolerance``
+    (relative) of the reference. Writes the indices taken to ``taken``; returns (their
+    count, the reference rate). numpy's expressions, element by element:
+    ``spans = (t_end - t_start) / 1e9``, ``fs = (size - 1) / spans``,
+    ``abs(fs / fs_ref - 1.0) <= tolerance``."""
+    fs = np.empty(n_seg)
+    for j in range(n_seg):
+        end = size - 1 - n_open + j * size
+        start = t_open if (j == 0 and n_open > 0) else t[max(end - (size - 1), 0)]
+        span = (t[end] - start) / 1e9
+        fs[j] = (size - 1) / span if span > 0 else np.nan
+        if math.isnan(fs_ref) and math.isfinite(fs[j]):
+            fs_ref = fs[j]
+    n = 0
+    for j in range(n_seg):
+        if math.isfinite(fs[j]) and abs(fs[j] / fs_ref - 1.0) <= tolerance:
+            taken[n] = j
+            n += 1
+    return n, fs_ref
