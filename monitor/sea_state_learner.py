@@ -59,7 +59,12 @@ class _Spectra:
     Feeding keeps each whole segment (``rows``: signal x segment x sample); the
     periodograms are added to the sums (``acc``) when the window's spectrum is asked for
     (:meth:`summed`), all the kept segments in a few large batches rather than a small one
-    per slab; the additions are the same, one segment after another in time order."""
+    per slab; the additions are the same, one segment after another in time order.
+
+    Signals whose samples have all been equal to the bit so far (``same[i]``: the first
+    such signal; components of the same stress, as the default conductor and termination
+    are) keep and transform their segments once: same inputs, same operations, same bits.
+    """
 
     def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None,
                  room: int = 0) -> None:
@@ -80,6 +85,9 @@ class _Spectra:
         # (feeding only writes rows past its own ``filled``; a full buffer is replaced)
         self.rows = np.empty((len(self.names), room, SEGMENT))
         self.added = self.filled = 0
+        # a new window's signals are taken as one until their samples differ; a restored
+        # one's as different (replaced, never changed in place: a snapshot shares it)
+        self.same = [0] * len(self.names) if state is None else list(range(len(self.names)))
 
     def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
         """Samples in time order: every segment they complete is kept for the sums."""
@@ -99,14 +107,29 @@ class _Spectra:
             self.fs = float(fs)
         self.dropped += count - kept
         taken = taken[:kept]
+        self._part(stresses)
         if kept:
             rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
-                _segments(rows[i], taken, self.x[n], stresses[n])
+                if self.same[i] == i:
+                    _segments(rows[i], taken, self.x[n], stresses[n])
             self.filled += taken.shape[0]
         self.segments += taken.shape[0]
         self.t = t[full - nc:].astype(np.int64)
         self.x = {n: stresses[n][full - nc:].astype(float) for n in self.names}
+
+    def _part(self, stresses: Mapping[str, np.ndarray]) -> None:
+        """Signals taken as one whose new samples differ get their own kept segments (a copy
+        of the ones they shared; their sums so far are equal)."""
+        if all(j == i for i, j in enumerate(self.same)):
+            return
+        same = list(self.same)
+        for i, n in enumerate(self.names):
+            j = same[i]
+            if j != i and not _same_bits(stresses[n], stresses[self.names[j]]):
+                self.rows[i, self.added:self.filled] = self.rows[j, self.added:self.filled]
+                same[i] = i
+        self.same = same
 
     def _room(self, m: int) -> np.ndarray:
         """The rows for ``m`` more segments (a larger buffer when full: the kept segments
@@ -122,12 +145,18 @@ class _Spectra:
     def summed(self, work: Periodograms) -> "_Spectra":
         """Itself with every kept segment added to the sums (in ``work``'s buffers; the
         sums are a new array: a snapshot may share the old one)."""
-        if self.added < self.filled:
-            self.acc = self.acc.copy()
-        per = work.max_rows // len(self.names)  # segments of each signal per batch
-        for a in range(self.added, self.filled, per):
-            b = min(a + per, self.filled)
-            work.add(self.rows, a, b, self.fs, self.acc)  # type: ignore[arg-type]
+        if self.added == self.filled:
+            return self
+        self.acc = self.acc.copy()
+        own = [i for i, j in enumerate(self.same) if i == j]
+        for lo, hi in _runs(own):  # signals lo..hi-1 together
+            per = work.max_rows // (hi - lo)  # segments of each signal per batch
+            for a in range(self.added, self.filled, per):
+                b = min(a + per, self.filled)
+                work.add(self.rows[lo:hi], a, b, self.fs,  # type: ignore[arg-type]
+                         self.acc[lo:hi])
+        for i, j in enumerate(self.same):
+            self.acc[i] = self.acc[j]
         self.added = self.filled
         return self
 
@@ -195,6 +224,27 @@ def _omega4(fs: float) -> np.ndarray:
     w4 = (2.0 * np.pi * _frequencies(fs)) ** 4
     w4.flags.writeable = False
     return w4
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two signals' samples are equal to the bit as float64 (NaN, -0.0 included)."""
+    if a is b:
+        return True
+    if a.shape != b.shape:
+        return False
+    return bool(np.array_equal(np.ascontiguousarray(a, float).view(np.int64),
+                               np.ascontiguousarray(b, float).view(np.int64)))
+
+
+def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
+    """Runs of consecutive increasing ``indices`` as (first, last + 1)."""
+    out: list[tuple[int, int]] = []
+    for i in indices:
+        if out and out[-1][1] == i:
+            out[-1] = (out[-1][0], i + 1)
+        else:
+            out.append((i, i + 1))
+    return out
 
 
 def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray) -> None:
@@ -308,6 +358,9 @@ class SeaStateLearner:
         self.cfg = cfg
         self.curves = dict(curves)
         self.names = tuple(curves)
+        # each component's first one with an equal S-N curve: equal spectra, equal damage
+        curve_list = list(self.curves.values())
+        self._same_curve = [curve_list.index(c) for c in curve_list]
         self.window_ns = int(round(cfg.window_s * 1e9))
         self.tick_s = tick_s
         st = state or {}
@@ -446,8 +499,15 @@ class SeaStateLearner:
         start = end - self.window_ns
         spectra = self.stress.take(end // self.window_ns)
         rainflow = {n: committed[n] - self.start_damage.get(n, committed[n]) for n in self.names}
-        dirlik = {n: (spectra.dirlik_rate(n, self.curves[n]) * self.covered_s
-                      if spectra is not None else math.nan) for n in self.names}
+        rates: dict[tuple[int, int], float] = {}  # per (spectrum, curve): equal ones once
+        for i, n in enumerate(self.names):
+            if spectra is not None:
+                key = (spectra.same[i], self._same_curve[i])
+                if key not in rates:
+                    rates[key] = spectra.dirlik_rate(n, self.curves[n])
+        dirlik = {n: (rates[(spectra.same[i], self._same_curve[i])] * self.covered_s
+                      if spectra is not None else math.nan)
+                  for i, n in enumerate(self.names)}
         flagged = []
         for n in self.names:
             a, b = rainflow[n], dirlik[n]
