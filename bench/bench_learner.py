@@ -1,49 +1,48 @@
-"""The sea-state learner's own cost (monitor.sea_state_learner, issue 22 part 3).
+"""The sea-state learner's own cost (monitor.sea_state_learner, issue 22 parts 3 and 5).
 
 Writes the 1-day log of ``bench_replay.py`` (20 Hz tension, 10 Hz IMU), replays it once
-through the pipeline with the learner's inputs recorded as the pipeline gives them (the
-slabs' load stresses and IMU accelerations, every alert tick), then feeds those inputs to a
-fresh learner again and again: CPU time best of N, split into the Welch feed of the load and
-IMU slabs, the window closes (Dirlik damage of each component, the sea state, the table),
-and the rest of the ticks. Prints those, and checks the learned table and windows are the
-same each time.
+through the pipeline with the learner's calls recorded as the pipeline makes them (the
+slabs' load stresses and IMU accelerations, the hand-over of each slab's inputs and their
+taking, the ticks with the committed damages the learner asks for), checks that feeding
+those calls to a fresh learner gives the pipeline's learner state to the bit, then feeds
+them again and again: CPU time best of N, split per method (the Welch feed of the load and
+IMU slabs; ``ticks``, which closes the windows: periodograms, Dirlik damage of each
+component, the sea state, the table). Prints those, and checks the learned table and
+windows are the same each time.
 
-Measured 2026-11-25 18:40-19:20 UTC on the 2-core development machine (AMD EPYC, shared
-with up to 8 other jobs: load average 4-9, so only best-of-N CPU times compare), runs of main
-7e8ba84 and of this build interleaved:
+Measured 2026-11-25 21:20-21:30 UTC on the 2-core development machine (shared with other
+jobs, load average 3.5-4.8: only best-of-N CPU times compare), main c8bad01 and this build
+interleaved, on the lead's 1-day golden log (48 windows, 123 load and 60 IMU slabs):
 
-- this script on the lead's 1-day golden log (same generator; 48 windows, 123 load and 60
-  IMU slabs, 8,640 ticks), learner alone, best of 9: main 0.131 / 0.132 CPU-s, this build
-  0.088 / 0.078 (-33 to -41 %); with per-call timers, load feed 53 -> 30 ms, IMU feed
-  25 -> 17 ms, ticks with the window closes 47-50 -> 41-42 ms (of which ~17 ms are the timers
-  themselves); default run (log written by this script): 0.071 CPU-s;
-- inside an in-process replay of that log (best of 5, the methods timed in place; before the
-  row-sum kernel): load feed 54 -> 30 ms, IMU feed 33 -> 21 ms, window closes 50 -> 36 ms
-  (Dirlik 39 -> 25 ms): the learner ~137 -> ~86 ms of the replay's 0.695 -> 0.601 CPU-s;
-- the whole replay (``/work/wt/_notes/prof.py time 7``, three interleaved pairs at load 8):
-  main best 0.710 / 0.676 / 0.704 CPU-s (medians 0.76-0.81), this build 0.655 / 0.624 /
-  0.644 (medians 0.67-0.69): -8 % best, -13 to -15 % median;
-- the 30-day benchmark log, one ``buoymon replay`` each at load 9: main 22.56 CPU-s, this
-  build 21.13 and 20.38 (report and state identical to main's to the last bit); peak RSS
-  217 MB / 230 and 222 MB (1 day: 206-207 / 208-210 MB: the kept buffers, ~2 MB).
+- learner alone, best of 7: main 0.059 / 0.065 / 0.068 CPU-s, this build 0.037 / 0.035 /
+  0.050 (-40 to -45 % in the quieter pairs); per method (best of 7, with timers): load feed
+  24-26 -> 5.5-6.3 ms, IMU feed 11-13 -> 2.8-3.2 ms, ticks 23-27 -> 24-26 ms (the
+  periodograms moved there: computed when a window is taken);
+- the whole replay in process (``/work/wt/_notes/prof.py time 7``): main best 0.412 / 0.413
+  CPU-s, this build 0.390 / 0.370; on one core without the read-ahead thread (``taskset -c
+  0``, best of 5): main 0.403 / 0.391 / 0.439, this build 0.388 / 0.366 / 0.397 (-4 to -10 %);
+- the 30-day benchmark log (``/work/wt/_notes/golden30.sh``, load ~4.6): report and state
+  identical to main's to the last bit, 14.5 CPU-s for the whole command, 232 MB peak RSS.
 
-Where the time went: fresh slab-sized temporaries (a few hundred kB: the concatenated slab,
-each numpy step's output) were new pages for the allocator each call, and their page faults
-cost several times the arithmetic ((x - mean) * w on 35 x 1024 samples: 280 us fresh, 25 us
-in place). The periodograms now run in buffers kept between calls
-(models.fatigue.spectral.Periodograms), both components in one batch; a batch's rows are
-added to the window's sum by one compiled loop (35 rows: 42 us as a numpy call per row,
-8.5 us); the Dirlik integration reuses its quadrature grid.
+The 3x asked of the learner is not reached: about 1.6-1.8x. What it costs now (1 day,
+best of 5, timers around the parts): numpy's FFT of the 2,530 kept segments and their
+complex ``abs`` (~8 ms, numpy's own SIMD code: anything else gives other bits), the
+detrend/window loop (numpy's pairwise mean replicated, ~1.8 ms), the copy of each
+segment into the window's rows (~2.6 ms), the S-N curve's damage per quadrature node
+(``SNCurve.damage_per_cycle``, ~2.7 ms: log and exp per node), the IMU sea state
+(``models.waves.sea_state_from_psd``, ~2.7 ms) and the table's update
+(``models.sea_state_table``, ~2 ms), then Python glue (~8 ms). Earlier builds of this
+script recorded ``tick`` but not ``ticks``, ``hand_over`` or ``receive``, so their closes
+saw no spectra: their "ticks" figures left the Dirlik integration out.
 
-What is left (each the same bits as before, so kept as it is): pocketfft's transforms (~2 us
-per 1,024-sample segment, ~4,200 a day; ``scipy.fft.rfft`` gives the same bits but took 273
-against 147 us for 70 segments) and numpy's complex ``abs`` (its SIMD hypot: a compiled
-kernel would give other bits); a few elementwise passes over a batch (square, scale, double:
-~2 ms a day, which a fused kernel would save but then run per row in numpy when small
-replays run uncompiled); the per-slab rate checks (~20 small numpy calls); the Dirlik
-density and the S-N curve's damage per cycle on 5,600 quadrature nodes per window and
-component (~0.1 ms each); the sea state from the IMU spectrum and the table's update at each
-close (models.waves, models.sea_state_table); the ticks' own Python (~0.1 us each).
+What changed: a window's segments are kept as they complete and transformed when the
+window is taken, one batch per window instead of one per slab
+(``models.fatigue.spectral.Periodograms.add``); the detrend/window, power sums, segment
+rate checks, spectral moments, Dirlik density and damage sum are compiled loops with
+numpy's bits (``models.fatigue._spectral_loops``: numpy's pairwise summation replicated;
+numpy's exp, FFT and complex abs kept); the frequency terms of the moments are cached per
+grid; components whose stresses are equal to the bit (the default conductor and its
+termination) are transformed and integrated once.
 
 Run: ``python bench/bench_learner.py [--repeat N] [--log PATH]``.
 """
