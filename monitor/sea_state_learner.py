@@ -283,6 +283,7 @@ class _WindowSpectra:
         self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
         self._room = 0  # segments a window kept at most so far: a new one's first buffer
         self._finished: list[tuple[int, _Spectra]] = []
+        self._copy: _Spectra | None = None  # the open window as last handed over
         self.done: dict[int, _Spectra] = {
             int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
         self._open = self.current
@@ -291,6 +292,7 @@ class _WindowSpectra:
         """Samples in time order; cut at window ends (window k: ((k-1) W, k W])."""
         if t_ns.shape[0] == 0:
             return
+        self._copy = None
         w = self.window_ns
         first, last = -(-int(t_ns[0]) // w), -(-int(t_ns[-1]) // w)
         if first == last:  # the usual case: the slab lies in one window
@@ -313,9 +315,12 @@ class _WindowSpectra:
         self.current.feed(t_ns, values)
 
     def hand_over(self) -> tuple[list[tuple[int, _Spectra]], _Spectra]:
-        """The windows finished since the last call, and a copy of the open one."""
+        """The windows finished since the last call, and a copy of the open one (the last
+        call's copy again if nothing was fed since)."""
         finished, self._finished = self._finished, []
-        return finished, self.current.snapshot()
+        if self._copy is None:
+            self._copy = self.current.snapshot()
+        return finished, self._copy
 
     def receive(self, part: tuple[list[tuple[int, _Spectra]], _Spectra]) -> None:
         """Take a :meth:`hand_over` (in order)."""
