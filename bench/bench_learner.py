@@ -10,21 +10,26 @@ IMU slabs; ``ticks``, which closes the windows: periodograms, Dirlik damage of e
 component, the sea state, the table). Prints those, and checks the learned table and
 windows are the same each time.
 
-Measured 2026-11-25 21:20-21:30 UTC on the 2-core development machine (shared with other
-jobs, load average 3.5-4.8: only best-of-N CPU times compare), main c8bad01 and this build
-interleaved, on the lead's 1-day golden log (48 windows, 123 load and 60 IMU slabs):
+Measured 2026-11-25 21:20-21:50 UTC on the 2-core development machine (shared with other
+jobs, load average 3.5-6.8: only best-of-N CPU times compare), main c8bad01 and this build
+(87ebf8d) interleaved, on the lead's 1-day golden log (48 windows, 123 load and 60 IMU
+slabs):
 
-- learner alone, best of 7: main 0.059 / 0.065 / 0.068 CPU-s, this build 0.037 / 0.035 /
-  0.050 (-40 to -45 % in the quieter pairs); per method (best of 7, with timers): load feed
-  24-26 -> 5.5-6.3 ms, IMU feed 11-13 -> 2.8-3.2 ms, ticks 23-27 -> 24-26 ms (the
-  periodograms moved there: computed when a window is taken);
-- the whole replay in process (``/work/wt/_notes/prof.py time 7``): main best 0.412 / 0.413
-  CPU-s, this build 0.390 / 0.370; on one core without the read-ahead thread (``taskset -c
-  0``, best of 5): main 0.403 / 0.391 / 0.439, this build 0.388 / 0.366 / 0.397 (-4 to -10 %);
-- the 30-day benchmark log (``/work/wt/_notes/golden30.sh``, load ~4.6): report and state
-  identical to main's to the last bit, 14.5 CPU-s for the whole command, 232 MB peak RSS.
+- learner alone, best of 7, six pairs: main 0.059 / 0.065 / 0.068 / 0.069 / 0.084 / 0.063
+  CPU-s, this build 0.033 / 0.034 / 0.035 / 0.050 / 0.035 / 0.035 (about -45 %, 1.8x);
+  per method (with timers): load feed 24-28 -> 6-7.6 ms, IMU feed 12-14.5 -> 2.9-4.1 ms,
+  hand-over 1.8-2.7 -> 0.9-1.4 ms, ticks 24-30 -> 23-35 ms (the periodograms moved there:
+  computed when a window is taken);
+- the whole replay in process (``/work/wt/_notes/prof.py time 7``), four pairs: main best
+  0.412 / 0.413 / 0.415 / 0.449 CPU-s, this build 0.390 / 0.370 / 0.362 / 0.426; on one
+  core without the read-ahead thread (``taskset -c 0``, best of 5), five pairs: main 0.403 /
+  0.391 / 0.439 / 0.443 / 0.437, this build 0.388 / 0.366 / 0.397 / 0.439 / 0.389 (-1 to
+  -13 %, about 0.03 CPU-s a day);
+- the 30-day benchmark log (``/work/wt/_notes/golden30.sh``, load 4.6-6.5): report and state
+  identical to main's to the last bit; 14.5-15.7 CPU-s for the whole command under that
+  load, 227-232 MB peak RSS.
 
-The 3x asked of the learner is not reached: about 1.6-1.8x. What it costs now (1 day,
+The 3x asked of the learner is not reached: about 1.8x. What it costs now (1 day,
 best of 5, timers around the parts): numpy's FFT of the 2,530 kept segments and their
 complex ``abs`` (~8 ms, numpy's own SIMD code: anything else gives other bits), the
 detrend/window loop (numpy's pairwise mean replicated, ~1.8 ms), the copy of each
