@@ -91,6 +91,7 @@ class _Spectra:
 
     def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
         """Samples in time order: every segment they complete is kept for the sums."""
+        self._part(stresses)  # every sample compared, the open segment's too
         nc = self.t.shape[0]  # the open segment's samples come first
         full = (nc + t.shape[0]) // SEGMENT * SEGMENT  # of the open and new samples
         if not full:
@@ -107,7 +108,6 @@ class _Spectra:
             self.fs = float(fs)
         self.dropped += count - kept
         taken = taken[:kept]
-        self._part(stresses)
         if kept:
             rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
