@@ -12,8 +12,8 @@ windows are the same each time.
 
 Measured 2026-11-25 21:20-21:50 UTC on the 2-core development machine (shared with other
 jobs, load average 3.5-6.8: only best-of-N CPU times compare), main c8bad01 and this build
-(87ebf8d) interleaved, on the lead's 1-day golden log (48 windows, 123 load and 60 IMU
-slabs):
+(87ebf8d; later commits add only a comparison per slab) interleaved, on the lead's 1-day
+golden log (48 windows, 123 load and 60 IMU slabs):
 
 - learner alone, best of 7, six pairs: main 0.059 / 0.065 / 0.068 / 0.069 / 0.084 / 0.063
   CPU-s, this build 0.033 / 0.034 / 0.035 / 0.050 / 0.035 / 0.035 (about -45 %, 1.8x);
