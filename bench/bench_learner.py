@@ -1,49 +1,53 @@
-"""The sea-state learner's own cost (monitor.sea_state_learner, issue 22 part 3).
+"""The sea-state learner's own cost (monitor.sea_state_learner, issue 22 parts 3 and 5).
 
 Writes the 1-day log of ``bench_replay.py`` (20 Hz tension, 10 Hz IMU), replays it once
-through the pipeline with the learner's inputs recorded as the pipeline gives them (the
-slabs' load stresses and IMU accelerations, every alert tick), then feeds those inputs to a
-fresh learner again and again: CPU time best of N, split into the Welch feed of the load and
-IMU slabs, the window closes (Dirlik damage of each component, the sea state, the table),
-and the rest of the ticks. Prints those, and checks the learned table and windows are the
-same each time.
+through the pipeline with the learner's calls recorded as the pipeline makes them (the
+slabs' load stresses and IMU accelerations, the hand-over of each slab's inputs and their
+taking, the ticks with the committed damages the learner asks for), checks that feeding
+those calls to a fresh learner gives the pipeline's learner state to the bit, then feeds
+them again and again: CPU time best of N, split per method (the Welch feed of the load and
+IMU slabs; ``ticks``, which closes the windows: periodograms, Dirlik damage of each
+component, the sea state, the table). Prints those, and checks the learned table and
+windows are the same each time.
 
-Measured 2026-11-25 18:40-19:20 UTC on the 2-core development machine (AMD EPYC, shared
-with up to 8 other jobs: load average 4-9, so only best-of-N CPU times compare), runs of main
-7e8ba84 and of this build interleaved:
+Measured 2026-11-25 21:20-21:50 UTC on the 2-core development machine (shared with other
+jobs, load average 3.5-6.8: only best-of-N CPU times compare), main c8bad01 and this build
+(87ebf8d; later commits add only a comparison per slab) interleaved, on the lead's 1-day
+golden log (48 windows, 123 load and 60 IMU slabs):
 
-- this script on the lead's 1-day golden log (same generator; 48 windows, 123 load and 60
-  IMU slabs, 8,640 ticks), learner alone, best of 9: main 0.131 / 0.132 CPU-s, this build
-  0.088 / 0.078 (-33 to -41 %); with per-call timers, load feed 53 -> 30 ms, IMU feed
-  25 -> 17 ms, ticks with the window closes 47-50 -> 41-42 ms (of which ~17 ms are the timers
-  themselves); default run (log written by this script): 0.071 CPU-s;
-- inside an in-process replay of that log (best of 5, the methods timed in place; before the
-  row-sum kernel): load feed 54 -> 30 ms, IMU feed 33 -> 21 ms, window closes 50 -> 36 ms
-  (Dirlik 39 -> 25 ms): the learner ~137 -> ~86 ms of the replay's 0.695 -> 0.601 CPU-s;
-- the whole replay (``/work/wt/_notes/prof.py time 7``, three interleaved pairs at load 8):
-  main best 0.710 / 0.676 / 0.704 CPU-s (medians 0.76-0.81), this build 0.655 / 0.624 /
-  0.644 (medians 0.67-0.69): -8 % best, -13 to -15 % median;
-- the 30-day benchmark log, one ``buoymon replay`` each at load 9: main 22.56 CPU-s, this
-  build 21.13 and 20.38 (report and state identical to main's to the last bit); peak RSS
-  217 MB / 230 and 222 MB (1 day: 206-207 / 208-210 MB: the kept buffers, ~2 MB).
+- learner alone, best of 7, six pairs: main 0.059 / 0.065 / 0.068 / 0.069 / 0.084 / 0.063
+  CPU-s, this build 0.033 / 0.034 / 0.035 / 0.050 / 0.035 / 0.035 (about -45 %, 1.8x);
+  per method (with timers): load feed 24-28 -> 6-7.6 ms, IMU feed 12-14.5 -> 2.9-4.1 ms,
+  hand-over 1.8-2.7 -> 0.9-1.4 ms, ticks 24-30 -> 23-35 ms (the periodograms moved there:
+  computed when a window is taken);
+- the whole replay in process (``/work/wt/_notes/prof.py time 7``), four pairs: main best
+  0.412 / 0.413 / 0.415 / 0.449 CPU-s, this build 0.390 / 0.370 / 0.362 / 0.426; on one
+  core without the read-ahead thread (``taskset -c 0``, best of 5), five pairs: main 0.403 /
+  0.391 / 0.439 / 0.443 / 0.437, this build 0.388 / 0.366 / 0.397 / 0.439 / 0.389 (-1 to
+  -13 %, about 0.03 CPU-s a day);
+- the 30-day benchmark log (``/work/wt/_notes/golden30.sh``, load 4.6-6.5): report and state
+  identical to main's to the last bit; 14.5-15.7 CPU-s for the whole command under that
+  load, 227-232 MB peak RSS.
 
-Where the time went: fresh slab-sized temporaries (a few hundred kB: the concatenated slab,
-each numpy step's output) were new pages for the allocator each call, and their page faults
-cost several times the arithmetic ((x - mean) * w on 35 x 1024 samples: 280 us fresh, 25 us
-in place). The periodograms now run in buffers kept between calls
-(models.fatigue.spectral.Periodograms), both components in one batch; a batch's rows are
-added to the window's sum by one compiled loop (35 rows: 42 us as a numpy call per row,
-8.5 us); the Dirlik integration reuses its quadrature grid.
+The 3x asked of the learner is not reached: about 1.8x. What it costs now (1 day,
+best of 5, timers around the parts): numpy's FFT of the 2,530 kept segments and their
+complex ``abs`` (~8 ms, numpy's own SIMD code: anything else gives other bits), the
+detrend/window loop (numpy's pairwise mean replicated, ~1.8 ms), the copy of each
+segment into the window's rows (~2.6 ms), the S-N curve's damage per quadrature node
+(``SNCurve.damage_per_cycle``, ~2.7 ms: log and exp per node), the IMU sea state
+(``models.waves.sea_state_from_psd``, ~2.7 ms) and the table's update
+(``models.sea_state_table``, ~2 ms), then Python glue (~8 ms). Earlier builds of this
+script recorded ``tick`` but not ``ticks``, ``hand_over`` or ``receive``, so their closes
+saw no spectra: their "ticks" figures left the Dirlik integration out.
 
-What is left (each the same bits as before, so kept as it is): pocketfft's transforms (~2 us
-per 1,024-sample segment, ~4,200 a day; ``scipy.fft.rfft`` gives the same bits but took 273
-against 147 us for 70 segments) and numpy's complex ``abs`` (its SIMD hypot: a compiled
-kernel would give other bits); a few elementwise passes over a batch (square, scale, double:
-~2 ms a day, which a fused kernel would save but then run per row in numpy when small
-replays run uncompiled); the per-slab rate checks (~20 small numpy calls); the Dirlik
-density and the S-N curve's damage per cycle on 5,600 quadrature nodes per window and
-component (~0.1 ms each); the sea state from the IMU spectrum and the table's update at each
-close (models.waves, models.sea_state_table); the ticks' own Python (~0.1 us each).
+What changed: a window's segments are kept as they complete and transformed when the
+window is taken, one batch per window instead of one per slab
+(``models.fatigue.spectral.Periodograms.add``); the detrend/window, power sums, segment
+rate checks, spectral moments, Dirlik density and damage sum are compiled loops with
+numpy's bits (``models.fatigue._spectral_loops``: numpy's pairwise summation replicated;
+numpy's exp, FFT and complex abs kept); the frequency terms of the moments are cached per
+grid; components whose stresses are equal to the bit (the default conductor and its
+termination) are transformed and integrated once.
 
 Run: ``python bench/bench_learner.py [--repeat N] [--log PATH]``.
 """
@@ -62,51 +66,80 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def record(log: Path) -> list[tuple[str, tuple]]:
-    """The learner's constructor arguments and every call the pipeline makes to it."""
+def record(log: Path) -> tuple[list[tuple[str, tuple]], str]:
+    """The learner's constructor arguments and every call the pipeline makes to it, and the
+    pipeline's learner's final state (JSON)."""
     import monitor.pipeline as pipeline
     from monitor.config import default_config
     from replay.reader import LogReader
     from replay.runner import run_blocks
 
     calls: list[tuple[str, tuple]] = []
+    inside: list[bool] = []  # within a ticks() call
+    built: list = []  # the learner the pipeline built
     base = pipeline.SeaStateLearner
 
     class Recorder(base):  # type: ignore[misc, valid-type]
         def __init__(self, *args):
             calls.append(("__init__", copy.deepcopy(args)))
             super().__init__(*args)
+            built.append(self)
 
     def recorded(name):
         method = getattr(base, name)
 
         def call(self, *args):
-            calls.append((name, copy.deepcopy(args)))
+            if not inside:  # not a tick that ticks() makes itself
+                calls.append((name, copy.deepcopy(args) if name != "receive" else ()))
             return method(self, *args)
         return call
 
-    for name in ("waves", "load", "motion", "imu", "tick"):
+    def ticks(self, ends, committed, n_samples, a, b):
+        asked: dict[int, dict[str, float]] = {}  # the committed damages the learner asks for
+
+        def ask(q):
+            asked[q] = dict(committed(q))
+            return asked[q]
+        calls.append(("ticks", (ends.copy(), asked, n_samples.copy(), a, b)))
+        inside.append(True)
+        try:
+            return base.ticks(self, ends, ask, n_samples, a, b)
+        finally:
+            inside.pop()
+
+    for name in ("waves", "load", "motion", "imu", "tick", "hand_over", "receive"):
         setattr(Recorder, name, recorded(name))
+    setattr(Recorder, "ticks", ticks)
     setattr(pipeline, "SeaStateLearner", Recorder)  # the class the pipeline builds
     try:
         run_blocks(default_config(), LogReader([log]))
     finally:
         setattr(pipeline, "SeaStateLearner", base)
-    return calls
+    return calls, json.dumps(built[-1].state(), sort_keys=True)
 
 
 def replay_learner(calls, timed: dict[str, float] | None = None):
-    """A fresh learner fed the recorded calls; ``timed``: CPU per method (load, imu, tick)."""
+    """A fresh learner fed the recorded calls; ``timed``: CPU per method (load, imu, ticks,
+    ...)."""
     from monitor.sea_state_learner import SeaStateLearner
 
     learner = SeaStateLearner(*calls[0][1])
     windows: list[dict] = []
+    handed: list = []  # hand_over results not yet received (the pipeline's slab queue)
     for name, args in calls[1:]:
         start = time.process_time() if timed is not None else 0.0
-        getattr(learner, name)(*args)
+        if name == "hand_over":
+            handed.append(learner.hand_over())
+        elif name == "receive":
+            learner.receive(handed.pop(0))
+        elif name == "ticks":
+            ends, asked, n_samples, a, b = args
+            learner.ticks(ends, asked.__getitem__, n_samples, a, b)
+        else:
+            getattr(learner, name)(*args)
         if timed is not None:
             timed[name] = timed.get(name, 0.0) + time.process_time() - start
-        if name == "tick":
+        if name in ("tick", "ticks"):
             windows += learner.take_windows()
     return learner, windows
 
@@ -123,10 +156,12 @@ def main() -> None:
 
             log = Path(tmp) / "day.mcap"
             write_log(log, 1.0)
-        calls = record(log)
-    counts = {n: sum(c[0] == n for c in calls) for n in ("load", "imu", "motion", "tick")}
+        calls, pipeline_state = record(log)
+    counts = {n: sum(c[0] == n for c in calls) for n in ("load", "imu", "motion", "ticks")}
     print(f"recorded: {counts}")
     learner, windows = replay_learner(calls)  # warm: imports, the quadrature grid
+    # the calls replayed give the pipeline's learner to the bit
+    assert json.dumps(learner.state(), sort_keys=True) == pipeline_state
     expect = json.dumps([learner.state(), windows], sort_keys=True)
     best, split = float("inf"), dict[str, float]()
     for _ in range(args.repeat):

@@ -33,13 +33,14 @@ be feeding the next slab while the ticks close windows.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from models._jit import kernel
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
+from models.fatigue._spectral_loops import steady_segments
 from models.fatigue.spectral import Periodograms, damage_rate_from_psd
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
@@ -53,9 +54,20 @@ _BATCH_ROWS = 128  # segments transformed per batch (buffers of about 2.6 MB per
 
 
 class _Spectra:
-    """Welch PSD sums of one window's stress, per component, segment by segment."""
+    """Welch PSD sums of one window's stress, per component, segment by segment.
 
-    def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None) -> None:
+    Feeding keeps each whole segment (``rows``: signal x segment x sample); the
+    periodograms are added to the sums (``acc``) when the window's spectrum is asked for
+    (:meth:`summed`), all the kept segments in a few large batches rather than a small one
+    per slab; the additions are the same, one segment after another in time order.
+
+    Signals whose samples have all been equal to the bit so far (``same[i]``: the first
+    such signal; components of the same stress, as the default conductor and termination
+    are) keep and transform their segments once: same inputs, same operations, same bits.
+    """
+
+    def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None,
+                 room: int = 0) -> None:
         st = state or {}
         self.names = tuple(names)
         self.index: int | None = st.get("index")
@@ -64,49 +76,103 @@ class _Spectra:
         self.dropped = int(st.get("dropped", 0))
         self.t = np.array(st.get("t", []), np.int64)  # the open segment's samples
         self.x = {n: np.array(st.get("x", {}).get(n, []), float) for n in self.names}
-        self.psd = {n: np.array(v, float) for n, v in st.get("psd", {}).items()}
+        psd = st.get("psd", {})
+        # the sums of the segments added so far (a sum starts at 0.0: 0.0 + p is p)
+        self.acc = np.zeros((len(self.names), SEGMENT // 2 + 1))
+        if psd:
+            self.acc[:] = [psd[n] for n in self.names]
+        # segments kept, rows[:, added:filled] not yet added; a snapshot shares the buffer
+        # (feeding only writes rows past its own ``filled``; a full buffer is replaced)
+        self.rows = np.empty((len(self.names), room, SEGMENT))
+        self.added = self.filled = 0
+        # a new window's signals are taken as one until their samples differ; a restored
+        # one's as different (replaced, never changed in place: a snapshot shares it)
+        self.same = [0] * len(self.names) if state is None else list(range(len(self.names)))
 
-    def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray],
-             work: Periodograms) -> None:
-        """Samples in time order: every segment they complete is added to the sums."""
+    def feed(self, t: np.ndarray, stresses: Mapping[str, np.ndarray]) -> None:
+        """Samples in time order: every segment they complete is kept for the sums."""
+        self._part(stresses)  # every sample compared, the open segment's too
         nc = self.t.shape[0]  # the open segment's samples come first
         full = (nc + t.shape[0]) // SEGMENT * SEGMENT  # of the open and new samples
         if not full:
             self.t = np.concatenate([self.t, t])
             self.x = {n: np.concatenate([self.x[n], stresses[n]]) for n in self.names}
             return
-        # segment j is samples [j S, (j + 1) S) of the open ones and t: only the first
-        # starts among the open ones
-        ends = np.arange(SEGMENT - 1 - nc, full - nc, SEGMENT)
-        starts = t[np.maximum(ends - (SEGMENT - 1), 0)]
-        if nc:
-            starts[0] = self.t[0]
-        spans = (t[ends] - starts) / 1e9
-        fs = np.where(spans > 0, (SEGMENT - 1) / np.where(spans > 0, spans, 1.0), np.nan)
-        if self.fs is None and np.isfinite(fs).any():
-            self.fs = float(fs[np.isfinite(fs)][0])
-        good = np.isfinite(fs) & (np.abs(fs / (self.fs or 1.0) - 1.0) <= _RATE_TOLERANCE)
-        self.dropped += int(np.count_nonzero(~good))
-        taken = np.flatnonzero(good)
-        per = work.max_rows // len(self.names)  # segments of each component per batch
-        for a in range(0, taken.shape[0], per):
-            js = taken[a:a + per]
-            m = js.shape[0]
-            rows = work.rows(len(self.names) * m)
+        count = full // SEGMENT
+        taken = np.empty(count, np.int64)
+        # a segment spanning a gap (its rate off the window's first) is dropped
+        kept, fs = steady_segments(t, nc, int(self.t[0]) if nc else 0, count, SEGMENT,
+                                   math.nan if self.fs is None else self.fs, _RATE_TOLERANCE,
+                                   taken)
+        if self.fs is None and math.isfinite(fs):
+            self.fs = float(fs)
+        self.dropped += count - kept
+        taken = taken[:kept]
+        if kept:
+            rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
-                _segments(rows[i * m:(i + 1) * m], js, self.x[n], stresses[n])
-            psd = work.compute(len(self.names) * m, self.fs)  # type: ignore[arg-type]
-            for i, n in enumerate(self.names):
-                self.psd[n] = _sum_in_order(self.psd.get(n), psd[i * m:(i + 1) * m])
+                if self.same[i] == i:
+                    _segments(rows[i], taken, self.x[n], stresses[n])
+            self.filled += taken.shape[0]
         self.segments += taken.shape[0]
         self.t = t[full - nc:].astype(np.int64)
         self.x = {n: stresses[n][full - nc:].astype(float) for n in self.names}
+
+    def _part(self, stresses: Mapping[str, np.ndarray]) -> None:
+        """Signals taken as one whose new samples differ get their own kept segments (a copy
+        of the ones they shared; their sums so far are equal)."""
+        if all(j == i for i, j in enumerate(self.same)):
+            return
+        same = list(self.same)
+        for i, n in enumerate(self.names):
+            j = same[i]
+            if j != i and not _same_bits(stresses[n], stresses[self.names[j]]):
+                self.rows[i, self.added:self.filled] = self.rows[j, self.added:self.filled]
+                same[i] = i
+        self.same = same
+
+    def _room(self, m: int) -> np.ndarray:
+        """The rows for ``m`` more segments (a larger buffer when full: the kept segments
+        not yet added move to its start)."""
+        if self.filled + m > self.rows.shape[1]:
+            keep = self.rows[:, self.added:self.filled]
+            rows = np.empty((len(self.names), max(2 * self.rows.shape[1], keep.shape[1] + m),
+                             SEGMENT))
+            rows[:, :keep.shape[1]] = keep
+            self.rows, self.added, self.filled = rows, 0, keep.shape[1]
+        return self.rows[:, self.filled:self.filled + m]
+
+    def summed(self, work: Periodograms) -> "_Spectra":
+        """Itself with every kept segment added to the sums (in ``work``'s buffers; the
+        sums are a new array: a snapshot may share the old one)."""
+        if self.added == self.filled:
+            return self
+        self.acc = self.acc.copy()
+        own = [i for i, j in enumerate(self.same) if i == j]
+        for lo, hi in _runs(own):  # signals lo..hi-1 together
+            per = work.max_rows // (hi - lo)  # segments of each signal per batch
+            for a in range(self.added, self.filled, per):
+                b = min(a + per, self.filled)
+                work.add(self.rows[lo:hi], a, b, self.fs,  # type: ignore[arg-type]
+                         self.acc[lo:hi])
+        for i, j in enumerate(self.same):
+            self.acc[i] = self.acc[j]
+        self.added = self.filled
+        return self
+
+    def sums(self) -> dict[str, np.ndarray]:
+        """The PSD sum of each signal (empty before the first segment)."""
+        if not self.segments:
+            return {}
+        if self.added < self.filled:
+            self.summed(Periodograms(SEGMENT, _BATCH_ROWS))
+        return {n: self.acc[i] for i, n in enumerate(self.names)}
 
     def mean_psd(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
         """(frequencies, mean PSD) of the window, None without a whole segment."""
         if not self.segments or self.fs is None:
             return None
-        return np.fft.rfftfreq(SEGMENT, 1.0 / self.fs), self.psd[name] / self.segments
+        return _frequencies(self.fs), self.sums()[name] / self.segments
 
     def dirlik_rate(self, name: str, curve: Any) -> float:
         """Damage per second from the window's mean PSD (NaN without a whole segment)."""
@@ -124,7 +190,7 @@ class _Spectra:
         f, psd = spec
         if accel:
             with np.errstate(divide="ignore"):
-                psd = np.where(f > 0, psd / (2.0 * np.pi * f) ** 4, 0.0)
+                psd = np.where(f > 0, psd / _omega4(self.fs), 0.0)  # type: ignore[arg-type]
         try:
             ss = sea_state_from_psd(f, psd, f_max=min(_WAVE_F_MAX_HZ, float(f[-1])))
         except ValueError:  # too short a segment for the band, or no wave energy
@@ -133,16 +199,52 @@ class _Spectra:
 
     def snapshot(self) -> "_Spectra":
         """A copy that later feeding leaves as it is: feed replaces the open segment's
-        arrays but adds into the PSD sums in place, so those are copied."""
-        out = copy.copy(self)
-        out.psd = {n: v.copy() for n, v in self.psd.items()}
-        return out
+        arrays and writes kept segments past the copy's, and :meth:`summed` replaces the
+        sums, so the copy shares every array."""
+        return copy.copy(self)
 
     def state(self) -> dict[str, Any]:
         return {"index": self.index, "fs": self.fs, "segments": self.segments,
                 "dropped": self.dropped, "t": self.t.tolist(),
                 "x": {n: v.tolist() for n, v in self.x.items()},
-                "psd": {n: v.tolist() for n, v in self.psd.items()}}
+                "psd": {n: v.tolist() for n, v in self.sums().items()}}
+
+
+@functools.lru_cache(maxsize=8)
+def _frequencies(fs: float) -> np.ndarray:
+    """The segments' PSD frequencies at ``fs`` (read-only; a window's rate rarely changes)."""
+    f = np.fft.rfftfreq(SEGMENT, 1.0 / fs)
+    f.flags.writeable = False
+    return f
+
+
+@functools.lru_cache(maxsize=8)
+def _omega4(fs: float) -> np.ndarray:
+    """``(2 pi f)^4`` of :func:`_frequencies` (read-only)."""
+    w4 = (2.0 * np.pi * _frequencies(fs)) ** 4
+    w4.flags.writeable = False
+    return w4
+
+
+def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two signals' samples are equal to the bit as float64 (NaN, -0.0 included)."""
+    if a is b:
+        return True
+    if a.shape != b.shape:
+        return False
+    return bool(np.array_equal(np.ascontiguousarray(a, float).view(np.int64),
+                               np.ascontiguousarray(b, float).view(np.int64)))
+
+
+def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
+    """Runs of consecutive increasing ``indices`` as (first, last + 1)."""
+    out: list[tuple[int, int]] = []
+    for i in indices:
+        if out and out[-1][1] == i:
+            out[-1] = (out[-1][0], i + 1)
+        else:
+            out.append((i, i + 1))
+    return out
 
 
 def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray) -> None:
@@ -164,30 +266,13 @@ def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray
         out[:] = body[js - js[0]]
 
 
-def _sum_in_order(acc: np.ndarray | None, rows: np.ndarray) -> np.ndarray:
-    """``acc`` plus each row in turn (from the first row without ``acc``): one addition per
-    segment in time order, so a window's sum is the same for any block split."""
-    if acc is None:
-        acc, rows = rows[0].copy(), rows[1:]
-    _add_rows(acc, rows)
-    return acc
-
-
-@kernel()
-def _add_rows(acc: np.ndarray, rows: np.ndarray) -> None:
-    """``acc += row`` for each row in order, in place: as plain Python numpy's add per row,
-    compiled one loop (a numpy call per segment cost more than its 513 additions); the same
-    IEEE additions in the same order either way."""
-    for i in range(rows.shape[0]):
-        acc += rows[i]
-
-
 class _WindowSpectra:
     """:class:`_Spectra` of each learning window for one set of signals fed together.
 
     Feeding (:meth:`feed`) owns the open window (``current``) and the ones it finished since
     :meth:`hand_over`; taking (:meth:`take`) owns the finished windows handed over (``done``)
-    and its copy of the open one as it was then."""
+    and its copy of the open one as it was then, and computes the periodograms of the
+    window it takes (in ``work``)."""
 
     def __init__(self, names: Sequence[str], window_ns: int,
                  state: Mapping[str, Any] | None = None) -> None:
@@ -196,7 +281,9 @@ class _WindowSpectra:
         self.current = _Spectra(self.names, st.get("current"))
         # room for a batch of at least one segment of every signal
         self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
+        self._room = 0  # segments a window kept at most so far: a new one's first buffer
         self._finished: list[tuple[int, _Spectra]] = []
+        self._copy: _Spectra | None = None  # the open window as last handed over
         self.done: dict[int, _Spectra] = {
             int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
         self._open = self.current
@@ -205,6 +292,7 @@ class _WindowSpectra:
         """Samples in time order; cut at window ends (window k: ((k-1) W, k W])."""
         if t_ns.shape[0] == 0:
             return
+        self._copy = None
         w = self.window_ns
         first, last = -(-int(t_ns[0]) // w), -(-int(t_ns[-1]) // w)
         if first == last:  # the usual case: the slab lies in one window
@@ -221,14 +309,18 @@ class _WindowSpectra:
         if self.current.index != k:
             if self.current.index is not None:
                 self._finished.append((self.current.index, self.current))
-            self.current = _Spectra(self.names)
+                self._room = max(self._room, self.current.filled)
+            self.current = _Spectra(self.names, room=self._room)
             self.current.index = k
-        self.current.feed(t_ns, values, self.work)
+        self.current.feed(t_ns, values)
 
     def hand_over(self) -> tuple[list[tuple[int, _Spectra]], _Spectra]:
-        """The windows finished since the last call, and a copy of the open one."""
+        """The windows finished since the last call, and a copy of the open one (the last
+        call's copy again if nothing was fed since)."""
         finished, self._finished = self._finished, []
-        return finished, self.current.snapshot()
+        if self._copy is None:
+            self._copy = self.current.snapshot()
+        return finished, self._copy
 
     def receive(self, part: tuple[list[tuple[int, _Spectra]], _Spectra]) -> None:
         """Take a :meth:`hand_over` (in order)."""
@@ -243,7 +335,7 @@ class _WindowSpectra:
             out = self._open
         for old in [i for i in self.done if i < k]:
             del self.done[old]
-        return out
+        return None if out is None else out.summed(self.work)
 
     def state(self) -> dict[str, Any]:
         return {"current": self.current.state(),
@@ -271,6 +363,9 @@ class SeaStateLearner:
         self.cfg = cfg
         self.curves = dict(curves)
         self.names = tuple(curves)
+        # each component's first one with an equal S-N curve: equal spectra, equal damage
+        curve_list = list(self.curves.values())
+        self._same_curve = [curve_list.index(c) for c in curve_list]
         self.window_ns = int(round(cfg.window_s * 1e9))
         self.tick_s = tick_s
         st = state or {}
@@ -303,9 +398,16 @@ class SeaStateLearner:
         self.new_windows: list[dict[str, Any]] = []  # closed since the last take_windows()
 
     def warm_up(self) -> None:
-        """Run the compiled kernel once on throwaway arrays (a process's first numba call
-        costs a second or more; :meth:`monitor.pipeline.Pipeline._warm_up`)."""
-        _add_rows(np.zeros(2), np.ones((2, 2)))
+        """Run the compiled kernels once on throwaway data (a process's first numba call
+        costs a second or more; :meth:`monitor.pipeline.Pipeline._warm_up`): a window's
+        periodograms and the Dirlik damage of its spectrum."""
+        t = np.arange(SEGMENT, dtype=np.int64) * 50_000_000  # 20 Hz
+        x = np.sin(np.arange(SEGMENT) * 0.3)
+        spectra = _Spectra(self.names)
+        spectra.feed(t, {n: x for n in self.names})
+        spectra.summed(Periodograms(SEGMENT, max(2, len(self.names))))
+        for n in self.names:
+            spectra.dirlik_rate(n, self.curves[n])
 
     # ---- inputs, in sensor-time order ------------------------------------------------------
 
@@ -402,8 +504,15 @@ class SeaStateLearner:
         start = end - self.window_ns
         spectra = self.stress.take(end // self.window_ns)
         rainflow = {n: committed[n] - self.start_damage.get(n, committed[n]) for n in self.names}
-        dirlik = {n: (spectra.dirlik_rate(n, self.curves[n]) * self.covered_s
-                      if spectra is not None else math.nan) for n in self.names}
+        rates: dict[tuple[int, int], float] = {}  # per (spectrum, curve): equal ones once
+        for i, n in enumerate(self.names):
+            if spectra is not None:
+                key = (spectra.same[i], self._same_curve[i])
+                if key not in rates:
+                    rates[key] = spectra.dirlik_rate(n, self.curves[n])
+        dirlik = {n: (rates[(spectra.same[i], self._same_curve[i])] * self.covered_s
+                      if spectra is not None else math.nan)
+                  for i, n in enumerate(self.names)}
         flagged = []
         for n in self.names:
             a, b = rainflow[n], dirlik[n]

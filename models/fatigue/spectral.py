@@ -40,6 +40,8 @@ from typing import Literal, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from models.fatigue import _spectral_loops as loops
+
 Method = Literal["dirlik", "tovo_benasciutti"]
 METHODS: tuple[Method, ...] = ("dirlik", "tovo_benasciutti")
 
@@ -95,23 +97,41 @@ def spectral_moments(f_hz: ArrayLike, psd: ArrayLike) -> SpectralMoments:
     method divides by m0, m2 and m4).
     """
     f = np.asarray(f_hz, dtype=float)
-    g = np.asarray(psd, dtype=float)
+    g = np.ascontiguousarray(psd, dtype=float)
     if f.ndim != 1 or f.shape != g.shape or f.size < 2:
         raise ValueError("f_hz and psd must be 1-D arrays of the same length >= 2")
-    if not (np.isfinite(f).all() and np.isfinite(g).all()) or (np.diff(f) <= 0).any():
+    f_ok, f_negative, powers, steps = _frequency_terms(f.tobytes())
+    m_arr = np.empty(4)
+    bad_g = loops.psd_moments(powers, g, steps, m_arr) if f_ok else 0
+    if not f_ok or bad_g == 1:
         raise ValueError("f_hz must be finite and increasing, psd finite")
-    if (g < 0).any() or (f < 0).any():
+    if bad_g == 2 or f_negative:
         raise ValueError("a one-sided PSD has f >= 0 and psd >= 0")
-    w = 2.0 * np.pi * f
-    # the four integrals as the rows of one (each row its own sum: the bits of one by one)
-    y = np.empty((4, f.size))
-    for row, i in zip(y, (0, 1, 2, 4)):
-        np.multiply(w**i, g, out=row)
-    m = np.trapezoid(y, f).tolist()
+    m = m_arr.tolist()
     if not all(v > 0 for v in m):
         raise ValueError("the spectrum has no variance or no frequency content (m0, m2 or "
                          "m4 is 0)")
     return SpectralMoments(*m)
+
+
+# a pure function of the frequencies, memoised: a stream of spectra (the learner's windows)
+# shares one grid, and its checks and powers were a third of a call
+@functools.lru_cache(maxsize=8)
+def _frequency_terms(f_bytes: bytes) -> tuple[bool, bool, NDArray[np.float64],
+                                               NDArray[np.float64]]:
+    """For the frequencies ``f_bytes`` (float64): whether they are finite and increasing,
+    whether any is negative, the rows ``(2 pi f)^i`` for i = 0, 1, 2, 4 (numpy's powers)
+    and ``np.diff(f)``, the trapezoidal rule's steps (read-only arrays)."""
+    f = np.frombuffer(f_bytes, dtype=np.float64)
+    ok = bool(np.isfinite(f).all() and not (np.diff(f) <= 0).any())
+    w = 2.0 * np.pi * f
+    powers = np.empty((4, f.size))
+    for row, i in zip(powers, (0, 1, 2, 4)):
+        row[:] = w**i
+    steps = np.diff(f)
+    for a in (powers, steps):
+        a.flags.writeable = False
+    return ok, bool((f < 0).any()), powers, steps
 
 
 def dirlik_coefficients(mom: SpectralMoments) -> tuple[float, float, float, float, float]:
@@ -138,9 +158,14 @@ def _dirlik_density(z: NDArray[np.float64], mom: SpectralMoments,
     """Dirlik's density of Z = S / (2 sigma) per cycle (integrates to 1); ``parts``:
     :func:`_gauss_parts` of ``z``."""
     d1, d2, d3, q, r = dirlik_coefficients(mom)
-    neg_z2, rayleigh = parts
-    return (d1 / q * np.exp(-z / q) + d2 * z / r**2 * np.exp(neg_z2 / (2.0 * r**2))
-            + d3 * z * rayleigh)
+    flat = [np.ascontiguousarray(a, dtype=float).reshape(-1) for a in (z, *parts)]
+    # numpy's exp between two loops doing the rest with numpy's bits (_spectral_loops)
+    e1, e2, out = (np.empty_like(flat[0]) for _ in range(3))
+    loops.dirlik_exponents(flat[0], flat[1], q, 2.0 * r**2, e1, e2)
+    np.exp(e1, out=e1)
+    np.exp(e2, out=e2)
+    loops.dirlik_combine(flat[0], flat[2], d1 / q, d2, r**2, d3, e1, e2, out)
+    return out.reshape(np.shape(z))
 
 
 def tovo_benasciutti_b(mom: SpectralMoments) -> float:
@@ -194,7 +219,7 @@ def damage_rate(curve: DamageCurve, mom: SpectralMoments,
     z, w, parts = _quadrature(60.0 * max(1.0, _scale(mom, method)))
     dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
     density = _density(method)(z, mom, parts)
-    return cycle_rate_hz(mom, method) * float(np.sum(w * density * dpc))
+    return cycle_rate_hz(mom, method) * loops.weighted_sum(w, density, dpc)
 
 
 # a pure function of z_max, memoised: a stream of spectra (the learner's windows) is
@@ -282,17 +307,38 @@ class Periodograms:
     def compute(self, m: int, fs_hz: float) -> NDArray[np.float64]:
         """The PSD of each of the first ``m`` rows filled (a view of a buffer the next call
         overwrites; the input rows are overwritten too)."""
-        if not (math.isfinite(fs_hz) and fs_hz > 0):
-            raise ValueError(f"Periodograms.compute: fs = {fs_hz!r}: must be finite and > 0")
         x = self.rows(m)
-        np.subtract(x, x.mean(axis=1, keepdims=True), out=x)
-        np.multiply(x, self.window, out=x)
-        psd = np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
+        psd = self._magnitudes(x[None], 0, m, fs_hz)
         np.square(psd, out=psd)
         psd /= fs_hz * self.window_power
         n = self.n
         psd[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
         return psd
+
+    def add(self, segments: NDArray[np.float64], first: int, last: int, fs_hz: float,
+            sums: NDArray[np.float64]) -> None:
+        """Add the PSD of each segment ``segments[c, first:last]`` (``c`` a signal; at most
+        ``max_rows`` segments in all) to ``sums[c]``, one segment after another in order:
+        the bits of :meth:`compute` on those rows followed by ``sums[c] += psd`` per row."""
+        m = segments.shape[0] * (last - first)
+        if not 1 <= m <= self.max_rows:
+            raise ValueError(f"Periodograms.add: {m} segments: need 1 <= m <= max_rows = "
+                             f"{self.max_rows}")
+        mags = self._magnitudes(segments, first, last, fs_hz)
+        add = loops.add_power_odd if self.n % 2 else loops.add_power
+        add(sums, mags, fs_hz * self.window_power, last - first)
+
+    def _magnitudes(self, segments: NDArray[np.float64], first: int, last: int,
+                    fs_hz: float) -> NDArray[np.float64]:
+        """``|rfft|`` of each segment ``segments[c, first:last]`` (signal by signal), its
+        mean removed and the window applied (numpy's transform and complex ``abs``, in the
+        buffers)."""
+        if not (math.isfinite(fs_hz) and fs_hz > 0):
+            raise ValueError(f"Periodograms: fs = {fs_hz!r}: must be finite and > 0")
+        m = segments.shape[0] * (last - first)
+        x = self.rows(m)
+        loops.detrend_window(segments, first, last, self.window, x)
+        return np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
 
 
 def segment_psds(segments: ArrayLike, fs_hz: float

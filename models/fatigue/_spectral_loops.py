@@ -1,0 +1,229 @@
+"""Compiled loops of the spectral path (``models.fatigue.spectral``), each giving the bits of
+the numpy expressions it replaces, so a stream of spectra costs one call where it cost ten.
+
+Bit-identity rests on three things:
+
+* elementwise steps are the same IEEE-754 operations in the same order (no fast-math: no
+  contraction into fused multiply-adds, no reassociation; ``models._jit``);
+* every sum numpy computed with ``np.sum`` / ``mean`` / ``trapezoid`` along a contiguous
+  axis is :func:`pairwise_sum`, numpy's own pairwise summation (``DOUBLE_pairwise_sum`` in
+  ``numpy/_core/src/umath/loops_utils.h.src``: 8 running sums in blocks of up to 128, halves
+  cut at multiples of 8) added to the reduction's initial 0.0;
+* what numpy computes with its own SIMD code (``exp``, complex ``abs``, the FFT, ``power``)
+  stays numpy's: the callers run those between the loops here.
+
+tests/test_spectral_loops.py checks each loop against the numpy expression, compiled and as
+plain Python, on random and edge-case inputs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models._jit import compile_loop, jitable
+
+_BLOCK = 128  # numpy's PW_BLOCKSIZE
+
+
+@jitable
+def _block_sum(a, lo, n):
+    """numpy's pairwise sum of ``a[lo:lo + n]`` for ``n <= 128``: sequential below 8
+    values, else 8 running sums combined pairwise, then the remainder."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    top = n - n % 8
+    while i < top:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@jitable
+def _pairwise(a, lo, n):
+    """numpy's pairwise sum of ``a[lo:lo + n]``: above 128 values the sum of the two halves
+    (the first cut at a multiple of 8), left first. numpy recurses; this walks the same tree
+    with a stack (numba compiles no recursion through these helpers): each node is visited
+    to push its left half, then its right half, then to add the two sums."""
+    if n <= _BLOCK:
+        return _block_sum(a, lo, n)
+    node_lo = np.empty(64, np.int64)  # depth <= log2(n / 128) + 1: 64 is any array
+    node_n = np.empty(64, np.int64)
+    node_visits = np.zeros(64, np.int64)
+    sums = np.empty(64)
+    depth, held = 1, 0
+    node_lo[0], node_n[0] = lo, n
+    while depth:
+        top = depth - 1
+        m = node_n[top]
+        if m <= _BLOCK:
+            sums[held] = _block_sum(a, node_lo[top], m)
+            held += 1
+            depth -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        visits = node_visits[top]
+        node_visits[top] = visits + 1
+        if visits == 2:  # both halves summed: replace them by their sum
+            held -= 1
+            sums[held - 1] = sums[held - 1] + sums[held]
+            depth -= 1
+        else:
+            node_lo[depth] = node_lo[top] + (0 if visits == 0 else half)
+            node_n[depth] = half if visits == 0 else m - half
+            node_visits[depth] = 0
+            depth += 1
+    return sums[0]
+
+
+@jitable
+def pairwise_sum(a):
+    """``np.sum(a)`` of a contiguous 1-D float64 array, to the bit (0.0 + numpy's pairwise
+    sum: the reduction starts from add's identity)."""
+    return 0.0 + _pairwise(a, 0, a.shape[0])
+
+
+@compile_loop
+def detrend_window(src, first, last, window, out):
+    """``out`` rows = ``(x - x.mean()) * window`` of the rows ``src[c, first:last]`` of each
+    signal ``c`` in turn (signal by signal, segment by segment): numpy's
+    ``np.subtract(x, x.mean(axis=1, keepdims=True)); np.multiply(x, window)``."""
+    n = window.shape[0]
+    k = 0
+    for c in range(src.shape[0]):
+        for j in range(first, last):
+            row = src[c, j]
+            mean = pairwise_sum(row) / n
+            for i in range(n):
+                out[k, i] = (row[i] - mean) * window[i]
+            k += 1
+
+
+@compile_loop
+def add_power(acc, mags, scale, rows_per_signal):
+    """Add each row's one-sided PSD ``|X|^2 / scale`` (doubled but at DC and, for an even
+    segment, Nyquist) into ``acc`` of its signal, row after row in order: signal ``c`` has
+    rows ``[c m, (c + 1) m)`` of ``mags`` (``m = rows_per_signal``), numpy's
+    ``np.square(psd); psd /= scale; psd[:, 1:top] *= 2.0`` then ``acc += row`` per row. The
+    doubled bins are ``1 .. acc.shape[1] - 2`` for an even segment (``odd`` False)."""
+    nb = mags.shape[1]
+    for c in range(acc.shape[0]):
+        for j in range(c * rows_per_signal, (c + 1) * rows_per_signal):
+            for i in range(nb):
+                p = mags[j, i] * mags[j, i]
+                p = p / scale
+                if 0 < i < nb - 1:
+                    p = p * 2.0
+                acc[c, i] += p
+
+
+@compile_loop
+def add_power_odd(acc, mags, scale, rows_per_signal):
+    """:func:`add_power` for an odd segment length (no Nyquist bin: every bin but DC is
+    doubled)."""
+    nb = mags.shape[1]
+    for c in range(acc.shape[0]):
+        for j in range(c * rows_per_signal, (c + 1) * rows_per_signal):
+            for i in range(nb):
+                p = mags[j, i] * mags[j, i]
+                p = p / scale
+                if i > 0:
+                    p = p * 2.0
+                acc[c, i] += p
+
+
+@compile_loop
+def psd_moments(wpow, g, d, out):
+    """``np.trapezoid(y, f)`` of the rows ``y[i] = wpow[i] * g`` (``d = np.diff(f)``) into
+    ``out``: per row ``(d * (y[1:] + y[:-1]) / 2.0).sum()``. Returns 0, or 1 if ``g`` has a
+    non-finite value, 2 if a negative one (checked first: nothing is computed then)."""
+    n = g.shape[0]
+    for k in range(n):
+        if not math.isfinite(g[k]):
+            return 1
+    for k in range(n):
+        if g[k] < 0.0:
+            return 2
+    terms = np.empty(n - 1)
+    for r in range(wpow.shape[0]):
+        prev = wpow[r, 0] * g[0]
+        for k in range(n - 1):
+            y = wpow[r, k + 1] * g[k + 1]
+            terms[k] = d[k] * (y + prev) / 2.0
+            prev = y
+        out[r] = pairwise_sum(terms)
+    return 0
+
+
+@compile_loop
+def dirlik_exponents(z, neg_z2, q, two_r2, e1, e2):
+    """The exponents of Dirlik's density: ``e1 = -z / q``, ``e2 = neg_z2 / two_r2`` (numpy's
+    ``np.exp`` is applied by the caller)."""
+    for k in range(z.shape[0]):
+        e1[k] = -z[k] / q
+        e2[k] = neg_z2[k] / two_r2
+
+
+@compile_loop
+def dirlik_combine(z, rayleigh, d1_q, d2, r2, d3, e1, e2, out):
+    """Dirlik's density from the exponentials: ``d1 / q * e1 + d2 * z / r**2 * e2
+    + d3 * z * rayleigh``, left to right as numpy evaluates it (``d1_q = d1 / q``,
+    ``r2 = r**2`` are the caller's scalars)."""
+    for k in range(z.shape[0]):
+        out[k] = (d1_q * e1[k] + d2 * z[k] / r2 * e2[k]) + d3 * z[k] * rayleigh[k]
+
+
+@compile_loop
+def weighted_sum(w, density, dpc):
+    """``np.sum(w * density * dpc)``."""
+    n = w.shape[0]
+    terms = np.empty(n)
+    for k in range(n):
+        terms[k] = w[k] * density[k] * dpc[k]
+    return pairwise_sum(terms)
+
+
+@compile_loop
+def steady_segments(t, n_open, t_open, n_seg, size, fs_ref, tolerance, taken):
+    """Which of the ``n_seg`` segments of ``size`` samples of a stream are at its rate:
+    segment ``j`` is samples ``[j size, (j + 1) size)`` of ``n_open`` earlier samples (the
+    first at time ``t_open``) followed by ``t`` (int64 ns). A segment's rate is
+    ``(size - 1) / span`` (NaN for a span <= 0); the reference rate is ``fs_ref``, or if that
+    is NaN the first finite one; a segment is taken if its rate is within ``tolerance``
+    (relative) of the reference. Writes the indices taken to ``taken``; returns (their
+    count, the reference rate). numpy's expressions, element by element:
+    ``spans = (t_end - t_start) / 1e9``, ``fs = (size - 1) / spans``,
+    ``abs(fs / fs_ref - 1.0) <= tolerance``."""
+    fs = np.empty(n_seg)
+    for j in range(n_seg):
+        end = size - 1 - n_open + j * size
+        start = t_open if (j == 0 and n_open > 0) else t[max(end - (size - 1), 0)]
+        span = (t[end] - start) / 1e9
+        fs[j] = (size - 1) / span if span > 0 else np.nan
+        if math.isnan(fs_ref) and math.isfinite(fs[j]):
+            fs_ref = fs[j]
+    n = 0
+    for j in range(n_seg):
+        if math.isfinite(fs[j]) and abs(fs[j] / fs_ref - 1.0) <= tolerance:
+            taken[n] = j
+            n += 1
+    return n, fs_ref
