@@ -589,8 +589,10 @@ class MotionTensionEstimator:
         # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
         idx = np.arange(n) if want is None else np.flatnonzero(want)
         x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
-        x_off = np.hypot(c.span + x[idx], y[idx]) - c.span
-        t_qs, h, v, qflags = self.quasi_static(x_off, z[idx])
+        if idx.shape[0] < n:  # (every sample wanted: the rows themselves, no copies)
+            x, y, z = x[idx], y[idx], z[idx]
+        x_off = np.hypot(c.span + x, y) - c.span
+        t_qs, h, v, qflags = self.quasi_static(x_off, z)
         _wanted(p, idx, np.ascontiguousarray(t_qs, dtype=float),
                 np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(v, dtype=float),
                 np.ascontiguousarray(qflags, dtype=np.uint8), c.span, c.dt, self._axial_mode,
