@@ -372,15 +372,15 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
         f4 += ft[i] == 4
     counts[0, 0], counts[0, 1], counts[1, 0], counts[1, 1] = g3, g4, s3, s4
     counts[2, 0], counts[2, 1], counts[3, 0], counts[3, 1] = r3, r4, f3, f4
-    for i in range(max(0, n - cap), n):
-        ring_t[ring_head] = t[i]
-        for f in range(nf):
-            ring_x[f, ring_head] = x[f, i]
-        ring_head += 1
-        if ring_head == cap:
-            ring_head = 0
-        if ring_n < cap:
-            ring_n += 1
+    # the newest samples into the memory: up to its end, then on from its start (copies)
+    a = max(0, n - cap)
+    first = min(n - a, cap - ring_head)
+    ring_t[ring_head:ring_head + first] = t[a:a + first]
+    ring_x[:, ring_head:ring_head + first] = x[:, a:a + first]
+    ring_t[:n - a - first] = t[a + first:]
+    ring_x[:, :n - a - first] = x[:, a + first:]
+    ring_head = (ring_head + n - a) % cap
+    ring_n = min(ring_n + n - a, cap)
     return True, flags, spike_prev, counts, ring_head, ring_n
 
 
