@@ -17,6 +17,13 @@ replay warms the caches and is not counted). Stages:
                     default configuration one sample per slab is wanted)
 ``selector``        LoadSelector.needed + select (per estimated sample)
 ``stress``          Component.stress (every component)
+``ticks``           models.fatigue.commit_ticks: rainflow, Miner and residue damage of the
+                    slab's whole alert ticks (every component; per stress sample)
+``tick_load``       the slab's per-tick load figures (pipeline._TickLoad; per load sample)
+``damage_split``    DamageSplit.ticks (per evaluated tick)
+
+The replays read without the read-ahead thread (``read_ahead=False``): a stage's CPU clock
+would otherwise count the reader thread's work done meanwhile.
 
 Measured 2026-11-25 19:10 UTC on the 2-core Xeon shared with 7 other jobs (load 7: figures
 are best of 5 and move by 10-20 % between runs), 1-day bench log, main at 7e8ba84 against
@@ -32,6 +39,29 @@ the branch estval at d96e0e6, two rounds run one after the other (the range of t
     stress          6.6-6.7       1.9             6.7-8.0        1.9-2.3
     replay CPU     0.636-0.637 s                 0.585-0.601 s
 
+Measured 2026-11-25 21:52 UTC on the 2-core AMD EPYC (lscpu) shared with other jobs (load
+5.7-6.3: figures move by 10-20 % between runs), ``taskset -c 0``, 1-day bench log, best of
+5, main c8bad01 against the branch stream at f8f680c (this script on both), three rounds
+interleaved (the range of the three):
+
+    stage          main c8bad01                  stream f8f680c
+    validate       25.8-30.6 ms  10.0-11.8 ns    23.9-25.9 ms   9.2-10.0 ns per sample
+      qc           16.6-19.4      6.4-7.5        (the usual block's QC runs inside
+                                                  validate's one compiled call)
+    estimator      35.9-41.8     41.6-48.4       34.0-36.3     39.4-42.0
+    ticks          31.8-36.1      9.2-10.5       27.8-29.7      8.1-8.6 (per stress sample)
+    tick_load       9.8-13.4      5.6-7.7         8.3-9.9       4.8-5.7
+    damage_split    7.6-8.8       878-1014        3.4-3.7       398-432 (per tick)
+    replay CPU     0.375-0.442 s                 0.389-0.422 s
+
+The 30-day bench log in process on one core (``read_ahead=False``, after a warm-up replay),
+main c8bad01 then this branch, then the other way round, 22:04 UTC (load 2.4-3.5): main
+11.13 and 11.83 CPU-s, this branch 10.69 and 10.93 CPU-s.
+
+The compiled loops alone, on their calls captured from the same replay (same bits checked):
+the ticks pass 7.6 -> 6.1 ns per stress sample, the estimator's ``_advance`` 24.5 -> 19.3 ns
+per IMU sample, the QC fast kernel 5.5 -> 5.1 ns per sample.
+
 Run: PYTHONPATH=. python bench/bench_stages.py [LOG] [N]
 """
 
@@ -42,7 +72,9 @@ import time
 from collections import defaultdict
 
 from models import estimator, imu
-from monitor import check_factor, components, load_source, qartod, validate
+from models import fatigue
+from monitor import (check_factor, components, damage_split, load_source, pipeline, qartod,
+                     validate)
 from monitor.config import default_config
 from replay.reader import LogReader
 from replay.runner import run_blocks
@@ -80,6 +112,9 @@ def main() -> None:
     _timed(load_source.LoadSelector, "needed", "selector", lambda a, o: 0)
     _timed(load_source.LoadSelector, "select", "selector", lambda a, o: a[3].shape[0])
     _timed(components.Component, "stress", "stress", lambda a, o: a[1].shape[0])
+    _timed(fatigue, "commit_ticks", "ticks", lambda a, o: a[3][-1] if len(a[3]) else 0)
+    _timed(pipeline._TickLoad, "__init__", "tick_load", lambda a, o: a[1].shape[0])
+    _timed(damage_split.DamageSplit, "ticks", "damage_split", lambda a, o: len(a[2]))
     cfg = default_config()
     best: dict[str, tuple[int, int]] = {}
     total = []
@@ -87,7 +122,7 @@ def main() -> None:
         cpu.clear()
         samples.clear()
         t0 = time.process_time()
-        run_blocks(cfg, LogReader([log]))
+        run_blocks(cfg, LogReader([log], read_ahead=False))
         if rep:
             total.append(time.process_time() - t0)
             for k, v in cpu.items():

@@ -46,7 +46,7 @@ from models.dynamics import (
     form_parameter,
     jerk_step,
 )
-from models.imu import DisplacementIntegrator, sos_step
+from models.imu import DisplacementIntegrator
 
 
 class Flag(enum.IntFlag):
@@ -274,8 +274,47 @@ def _as_block(name: str, value: ArrayLike, n: int | None,
 _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 
 
-# no IMU integration in _advance: positions given
-_NO_ACCEL, _NO_SOS, _NO_ZI = np.empty(0), np.empty((0, 6)), np.empty((3, 0, 2))
+# no IMU integration in _advance: positions given (memory of the right shape, never used)
+_NO_ACCEL, _NO_SOS, _NO_ZI = np.empty(0), np.zeros((2, 6)), np.zeros((3, 2, 2))
+
+
+_CHUNK = 256  # samples whose chords are taken in one vectorised pass
+
+
+@kernel(inline="always")
+def _section(c, s, v, z0, z1):
+    """:func:`models.imu.sos_step`'s arithmetic for section ``s`` (coefficients ``c``: b0, b1,
+    b2, a1, a2 of each section in turn) with its memory ``z0, z1``: (output, z0, z1)."""
+    b0, b1, b2, a1, a2 = c[5 * s], c[5 * s + 1], c[5 * s + 2], c[5 * s + 3], c[5 * s + 4]
+    y = b0 * v + z0
+    return y, b1 * v - a1 * y + z1, b2 * v - a2 * y
+
+
+@kernel(inline="always")
+def _integrate(c, m, ax, ay, az, i, p):
+    """Sample ``i`` of the accelerations through both sections of each channel into
+    p[:, i + 2]; ``m``: the memory (channel x, y, z; section 0, 1; z0, z1), returned
+    updated (a tuple: it stays in registers)."""
+    v, x0, x1 = _section(c, 0, ax[i], m[0], m[1])
+    p[0, i + 2], x2, x3 = _section(c, 1, v, m[2], m[3])
+    v, y0, y1 = _section(c, 0, ay[i], m[4], m[5])
+    p[1, i + 2], y2, y3 = _section(c, 1, v, m[6], m[7])
+    v, z0, z1 = _section(c, 0, az[i], m[8], m[9])
+    p[2, i + 2], z2, z3 = _section(c, 1, v, m[10], m[11])
+    return (x0, x1, x2, x3, y0, y1, y2, y3, z0, z1, z2, z3)
+
+
+@kernel(inline="always")
+def _chords(p, a, b, span, height, out):
+    """out[i - a] = |anchor -> fairlead| of the positions p[:, i + 2] for i in [a, b) (a
+    branch-free loop: the square roots vectorise)."""
+    for i in range(a, b):
+        j = i + 2
+        xs = span + p[0, j]
+        ys = p[1, j]
+        hor = math.sqrt(xs * xs + ys * ys)
+        zc = height + p[2, j]
+        out[i - a] = math.sqrt(hor * hor + zc * zc)
 
 
 @kernel()
@@ -289,8 +328,14 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
     p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
     ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
     ``ax, ay, az`` hold the block's n IMU accelerations, integrated here sample by sample
-    (:func:`models.imu.sos_step`, the integrator's sections ``sos`` and memory ``zi``): the
-    filter's chains of operations then overlap the jerk ODE's in one loop.
+    through the integrator's two second-order sections ``sos`` (its fourth-order high-pass)
+    with memory ``zi`` (:func:`models.imu.sos_step`'s operations, the memory in registers).
+
+    Speed: the jerk ODE is one chain of dependent operations (a square root and a division
+    per sample: its latency sets the pace), so the rest runs beside it: the samples go in
+    chunks, a chunk's chords in one vectorised pass, then its jerk steps in one loop with
+    the next chunk's integration (independent of them). Every value is computed by the same
+    operations from the same inputs as one sample after the other: the same bits.
     """
     n = total.size
     integrate = az.size == n
@@ -300,39 +345,54 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
             bad |= ((ax[i] - ax[i]) != 0.0) | ((ay[i] - ay[i]) != 0.0) | ((az[i] - az[i]) != 0.0)
         if bad:
             return False, y0
-        p[0, 2] = sos_step(sos, zi, 0, ax[0])
-        p[1, 2] = sos_step(sos, zi, 1, ay[0])
-        p[2, 2] = sos_step(sos, zi, 2, az[0])
-    if fresh:
-        for c in range(3):
-            p[c, 0] = p[c, 2]
-            p[c, 1] = p[c, 2]
-    inv_dt = 1.0 / dt
-    y = y0
-    xs = span + p[0, 1]
-    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
     for i in range(n):
-        j = i + 2
-        if integrate and i > 0:
-            p[0, j] = sos_step(sos, zi, 0, ax[i])
-            p[1, j] = sos_step(sos, zi, 1, ay[i])
-            p[2, j] = sos_step(sos, zi, 2, az[i])
-        d_i = 0.0
-        if drag_on:
-            xs = span + p[0, j]
-            ys = p[1, j]
-            hor = math.sqrt(xs * xs + ys * ys)
-            zc = height + p[2, j]
-            chord = math.sqrt(hor * hor + zc * zc)
-            y = jerk_step(y, (chord - chord_prev) * inv_dt, drag_b)
-            chord_prev = chord
-            d_i = drag_k * y
-        drag[i] = d_i
         total[i] = math.nan
         qs[i] = math.nan
         axial[i] = 0.0
         angle[i] = math.nan
         flags[i] = 0
+    # the sections' coefficients and memory in registers (stores into ``p`` could alias them)
+    c = (sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5],
+         sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5])
+    m = (zi[0, 0, 0], zi[0, 0, 1], zi[0, 1, 0], zi[0, 1, 1],
+         zi[1, 0, 0], zi[1, 0, 1], zi[1, 1, 0], zi[1, 1, 1],
+         zi[2, 0, 0], zi[2, 0, 1], zi[2, 1, 0], zi[2, 1, 1])
+    ahead = min(_CHUNK, n) if integrate else 0  # samples integrated ahead of the jerk steps
+    for i in range(ahead):
+        m = _integrate(c, m, ax, ay, az, i, p)
+    if fresh:
+        for ch in range(3):
+            p[ch, 0] = p[ch, 2]
+            p[ch, 1] = p[ch, 2]
+    inv_dt = 1.0 / dt
+    y = y0
+    xs = span + p[0, 1]
+    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
+    chord = np.empty(min(_CHUNK, n))
+    for a in range(0, n, _CHUNK):
+        size = min(_CHUNK, n - a)
+        nxt = min(_CHUNK, n - ahead) if integrate else 0  # the next chunk's (at most size)
+        if drag_on:
+            _chords(p, a, a + size, span, height, chord)
+            for k in range(size):
+                y = jerk_step(y, (chord[k] - chord_prev) * inv_dt, drag_b)
+                chord_prev = chord[k]
+                drag[a + k] = drag_k * y
+                if k < nxt:
+                    m = _integrate(c, m, ax, ay, az, ahead + k, p)
+        else:
+            for k in range(size):
+                drag[a + k] = 0.0
+            for k in range(nxt):
+                m = _integrate(c, m, ax, ay, az, ahead + k, p)
+        ahead += nxt
+    if integrate:
+        k = 0
+        for ch in range(3):
+            for sec in range(2):
+                zi[ch, sec, 0] = m[k]
+                zi[ch, sec, 1] = m[k + 1]
+                k += 2
     return True, y
 
 
@@ -516,6 +576,8 @@ class MotionTensionEstimator:
         else:
             accel, imu = integrate
             sos, zi = imu.loop_state()
+            if sos.shape[0] != 2:  # _advance holds the two sections' memory in registers
+                raise ValueError(f"the IMU integrator has {sos.shape[0]} sections, not 2")
         total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
                                          np.empty(n))
         flags = np.empty(n, np.uint8)
@@ -527,8 +589,10 @@ class MotionTensionEstimator:
         # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
         idx = np.arange(n) if want is None else np.flatnonzero(want)
         x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
-        x_off = np.hypot(c.span + x[idx], y[idx]) - c.span
-        t_qs, h, v, qflags = self.quasi_static(x_off, z[idx])
+        if idx.shape[0] < n:  # (every sample wanted: the rows themselves, no copies)
+            x, y, z = x[idx], y[idx], z[idx]
+        x_off = np.hypot(c.span + x, y) - c.span
+        t_qs, h, v, qflags = self.quasi_static(x_off, z)
         _wanted(p, idx, np.ascontiguousarray(t_qs, dtype=float),
                 np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(v, dtype=float),
                 np.ascontiguousarray(qflags, dtype=np.uint8), c.span, c.dt, self._axial_mode,

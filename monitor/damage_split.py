@@ -27,6 +27,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from models._jit import kernel
+
 ASSUMED_ERROR = 0.30
 MIN_CAL_TICKS = 30
 MIN_CAL_N = 100.0
@@ -49,23 +51,15 @@ class DamageSplit:
         """Evaluated ticks in time order: each component's committed damage at each tick's
         end, and per tick ``(measured samples, samples, mean measured tension, mean
         estimate)`` (the means NaN when absent)."""
-        n_meas, n, meas, est = (np.array(c, dtype=np.float64) for c in zip(*rows))
-        frac = np.divide(n_meas, n, out=np.zeros_like(n), where=n > 0)
-        for name, values in committed.items():
-            p = self.parts[name]
-            v = np.array(values, dtype=np.float64)
-            delta = np.diff(v, prepend=p["committed"])
-            delta[delta < 0] = 0.0  # (a reset)
-            p["committed"] = float(v[-1])
-            # sequential sums (a cumulative sum adds in order, as a loop would): the same
-            # figures for any split of the ticks into slabs
-            p["measured"] = _running_sum(p["measured"], delta * frac)
-            p["estimated"] = _running_sum(p["estimated"], delta * (1.0 - frac))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cal = (meas >= MIN_CAL_N) & ~np.isnan(est)
-            rel = (est[cal] - meas[cal]) / meas[cal]
-        self.cal_n += int(rel.shape[0])
-        self.cal_sum_sq = _running_sum(self.cal_sum_sq, rel * rel)
+        names = list(committed)
+        parts = np.array([[self.parts[n]["committed"], self.parts[n]["measured"],
+                           self.parts[n]["estimated"]] for n in names], dtype=np.float64)
+        cal = np.array([self.cal_n, self.cal_sum_sq], dtype=np.float64)
+        _split_ticks(np.array(rows, dtype=np.float64).reshape(-1, 4),
+                     np.array([committed[n] for n in names], dtype=np.float64), parts, cal)
+        for name, (c, m, e) in zip(names, parts.tolist()):
+            self.parts[name].update(committed=c, measured=m, estimated=e)
+        self.cal_n, self.cal_sum_sq = int(cal[0]), float(cal[1])
 
     def relative_error(self) -> tuple[float, str]:
         """``(u, "residual" | "assumed")``: see the module docstring."""
@@ -92,9 +86,34 @@ class DamageSplit:
                 "cal_sum_sq": self.cal_sum_sq}
 
 
-def _running_sum(start: float, terms: np.ndarray) -> float:
-    """``start + terms[0] + terms[1] + ...`` added left to right (np.sum would add pairwise,
-    so a split of the terms would change the last bits)."""
-    if terms.shape[0] == 0:
-        return start
-    return float(np.cumsum(np.concatenate(([start], terms)))[-1])
+@kernel()
+def _split_ticks(rows, committed, parts, cal):  # pragma: no cover - compiled
+    """:meth:`DamageSplit.ticks` over arrays: ``rows`` (ticks, 4), ``committed``
+    (components, ticks); ``parts`` (components: committed, measured, estimated) and ``cal``
+    (ticks calibrated on, sum of squares) are updated in place. Every sum runs left to
+    right, one tick after the other (a pairwise sum would change the last bits with the
+    split of the ticks into slabs)."""
+    k = rows.shape[0]
+    for c in range(committed.shape[0]):
+        last = parts[c, 0]
+        measured = parts[c, 1]
+        estimated = parts[c, 2]
+        for i in range(k):
+            n = rows[i, 1]
+            frac = rows[i, 0] / n if n > 0 else 0.0
+            delta = committed[c, i] - last
+            if delta < 0:
+                delta = 0.0  # (a reset)
+            last = committed[c, i]
+            measured += delta * frac
+            estimated += delta * (1.0 - frac)
+        parts[c, 0] = last
+        parts[c, 1] = measured
+        parts[c, 2] = estimated
+    for i in range(k):
+        meas = rows[i, 2]
+        est = rows[i, 3]
+        if meas >= MIN_CAL_N and not np.isnan(est):
+            rel = (est - meas) / meas
+            cal[0] += 1.0
+            cal[1] += rel * rel

@@ -112,9 +112,12 @@ class _TickLoad:
                  starts: np.ndarray, stops: np.ndarray) -> None:
         n = stops - starts
         full = np.flatnonzero(n > 0)
+        every = full.shape[0] == n.shape[0]  # (the usual slab: no tick without samples)
 
         def per_tick(values: np.ndarray, empty: float = math.nan) -> list[Any]:
             """The non-empty ticks' values as a list over all ticks."""
+            if every:
+                return values.tolist()
             out = np.full(n.shape[0], empty, dtype=values.dtype)
             out[full] = values
             return out.tolist()
@@ -127,9 +130,14 @@ class _TickLoad:
                      for name, s in stresses.items()}
         measured = src[span] == MEASURED
         count = n[full]
-        n_meas = np.add.reduceat(measured.astype(np.int64), at)
         mean = np.add.reduceat(v[span], at) / count
-        self.n, self.n_meas = n.tolist(), per_tick(n_meas, 0)  # samples, and of them measured
+        self.n = n.tolist()  # samples, and of them measured (n_meas)
+        if measured.all():  # one source, the load cell (the usual case)
+            self.n_meas, self.meas = per_tick(count, 0), per_tick(mean)
+            self.est = per_tick(np.full(count.shape[0], math.nan))
+            return
+        n_meas = np.add.reduceat(measured, at, dtype=np.int64)
+        self.n_meas = per_tick(n_meas, 0)
         # a tick of one source (the usual case): the mean of its samples is that source's
         self.meas = per_tick(np.where(n_meas == count, mean, math.nan))
         self.est = per_tick(np.where(n_meas == 0, mean, math.nan))

@@ -372,15 +372,15 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
         f4 += ft[i] == 4
     counts[0, 0], counts[0, 1], counts[1, 0], counts[1, 1] = g3, g4, s3, s4
     counts[2, 0], counts[2, 1], counts[3, 0], counts[3, 1] = r3, r4, f3, f4
-    for i in range(max(0, n - cap), n):
-        ring_t[ring_head] = t[i]
-        for f in range(nf):
-            ring_x[f, ring_head] = x[f, i]
-        ring_head += 1
-        if ring_head == cap:
-            ring_head = 0
-        if ring_n < cap:
-            ring_n += 1
+    # the newest samples into the memory: up to its end, then on from its start (copies)
+    a = max(0, n - cap)
+    first = min(n - a, cap - ring_head)
+    ring_t[ring_head:ring_head + first] = t[a:a + first]
+    ring_x[:, ring_head:ring_head + first] = x[:, a:a + first]
+    ring_t[:n - a - first] = t[a + first:]
+    ring_x[:, :n - a - first] = x[:, a + first:]
+    ring_head = (ring_head + n - a) % cap
+    ring_n = min(ring_n + n - a, cap)
     return True, flags, spike_prev, counts, ring_head, ring_n
 
 
@@ -434,17 +434,13 @@ class StreamQC:
         before ``i`` (0 for the stream's first). Counts suspect / fail / missing per test."""
         values = np.ascontiguousarray(values, dtype=np.float64)
         ok = False
-        if self.n_seen >= 2 and self._loc == 0 and t_ns.shape[0]:
+        if self.fast_ready and t_ns.shape[0]:
             ok, flags, spike_prev, counts, head, ring_n = _qc_fast(
                 t_ns, values, self._p, np.int64(self.prev_t), self.prev, self.prev2,
                 self.ring_t, self.ring_x, np.int64(self.ring_head), np.int64(self.ring_n),
                 np.int64(self.first_t))
             if ok:
-                n = t_ns.shape[0]
-                self.prev2 = values[:, -2].copy() if n >= 2 else self.prev.copy()
-                self.prev = values[:, -1].copy()
-                self.prev_t, self.n_seen = int(t_ns[-1]), self.n_seen + n
-                self.ring_head, self.ring_n = int(head), int(ring_n)
+                self.took_fast(t_ns, values, head, ring_n)
         if not ok:
             flags, spike_prev, counts, prev_t, n_seen, head, ring_n, first_t = _qc(
                 t_ns, values, self._p, self._loc, np.int64(self.prev_t), self.prev,
@@ -458,14 +454,43 @@ class StreamQC:
                              np.count_nonzero(flags[CHECK] == MISSING)]
         if t_ns.shape[0]:
             flags[SPIKE] = NOT_EVALUATED  # a sample's own spike flag is not known yet
-            for name in self.tests():
-                suspect, fail, missing = counts[TESTS.index(name)].tolist()
-                if suspect or fail or missing:
-                    c = self.counts[name]
-                    c["suspect"] += suspect
-                    c["fail"] += fail
-                    c["missing"] += missing
+            self.add_counts(counts)
         return flags, spike_prev
+
+    @property
+    def params(self) -> np.ndarray:
+        """The kernels' thresholds per field (see :func:`_params`)."""
+        return self._p
+
+    @property
+    def has_check_factor(self) -> bool:
+        return self._cf is not None
+
+    @property
+    def fast_ready(self) -> bool:
+        """Blocks of finite values go through :func:`_qc_fast` (two samples seen, no
+        location test)."""
+        return self.n_seen >= 2 and self._loc == 0
+
+    def took_fast(self, t_ns: np.ndarray, values: np.ndarray, head: int, ring_n: int) -> None:
+        """The memory after :func:`_qc_fast` took the samples ``t_ns, values`` (its ring
+        position ``head, ring_n``)."""
+        n = t_ns.shape[0]
+        self.prev2 = values[:, -2].copy() if n >= 2 else self.prev.copy()
+        self.prev = values[:, -1].copy()
+        self.prev_t, self.n_seen = int(t_ns[-1]), self.n_seen + n
+        self.ring_head, self.ring_n = int(head), int(ring_n)
+
+    def add_counts(self, counts: np.ndarray) -> None:
+        """Add a kernel's flag counts (tests x suspect, fail, missing) of this stream's tests."""
+        rows = counts.tolist()
+        for name in self.tests():
+            suspect, fail, missing = rows[TESTS.index(name)]
+            if suspect or fail or missing:
+                c = self.counts[name]
+                c["suspect"] += suspect
+                c["fail"] += fail
+                c["missing"] += missing
 
     def count(self, test: str, suspect: int, fail: int) -> None:
         """Add flags of a test computed outside the kernel (the motion watch circle)."""

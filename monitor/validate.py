@@ -56,7 +56,7 @@ import numpy as np
 from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
-from monitor.qartod import CHECK, FAIL, FLAT, StreamQC
+from monitor.qartod import CHECK, FAIL, FLAT, StreamQC, _qc_fast
 
 ACCEPTED = 0
 REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
@@ -173,6 +173,37 @@ def _fail_codes(flags):  # pragma: no cover - compiled
     return code
 
 
+@kernel(nogil=True)
+def _check_usual(t, values, floor_t, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n,
+                 first_t, lo, hi, rate, last_t, last_v, has_last):  # pragma: no cover
+    """:meth:`StreamValidator.check` of the usual block in one call: every value finite, the
+    times increasing and later than both the stream's last QC'd sample ``prev_t`` and
+    ``floor_t``, the QC memory ready for :func:`monitor.qartod._qc_fast` (its arguments
+    ``p`` .. ``first_t``; no location or check-factor test). Then the QC flags
+    (``_qc_fast``), the QC fails that reject (``_fail_codes``) and the verdicts
+    (``_validate``, no repeated times): the same calls as the general path, without three
+    dispatches and a pass over the values. Returns (ok, QC counts, ring head, ring count,
+    codes, counts, last_t, has_last); ok False: not such a block, nothing changed."""
+    n = t.shape[0]
+    usual = n > 0 and t[0] > prev_t and t[0] > floor_t
+    for i in range(1, n):
+        usual &= t[i] > t[i - 1]
+    none = np.zeros(0, np.int8)
+    if not usual:
+        return (False, np.zeros((1, 3), np.int64), ring_head, ring_n, none,
+                np.zeros(0, np.int64), last_t, has_last)
+    ok, flags, _, qc_counts, ring_head, ring_n = _qc_fast(t, values, p, prev_t, prev, prev2,
+                                                         ring_t, ring_x, ring_head, ring_n,
+                                                         first_t)
+    if not ok:  # a value is not finite (nothing changed)
+        return (False, qc_counts, ring_head, ring_n, none, np.zeros(0, np.int64), last_t,
+                has_last)
+    codes, counts, last_t, has_last = _validate(t, values, lo, hi, rate, last_t, last_v,
+                                                has_last, floor_t, _fail_codes(flags),
+                                                np.zeros(n, np.bool_))
+    return True, qc_counts, ring_head, ring_n, codes, counts, last_t, has_last
+
+
 class StreamValidator:
     """Validates one sensor stream; keeps its counters and last accepted sample."""
 
@@ -210,6 +241,18 @@ class StreamValidator:
         if values.shape != (len(self.fields), n):
             raise ValueError(f"{self.sensor}: values of shape {values.shape} for {n} times "
                              f"and {len(self.fields)} fields")
+        qc = self.qc
+        if qc.fast_ready and not qc.has_check_factor and self._watch is None and n:
+            values = np.ascontiguousarray(values, dtype=np.float64)
+            ok, qc_counts, head, ring_n, codes, counts, last_t, has_last = _check_usual(
+                t_ns, values, np.int64(floor_ns), qc.params, np.int64(qc.prev_t), qc.prev,
+                qc.prev2, qc.ring_t, qc.ring_x, np.int64(qc.ring_head), np.int64(qc.ring_n),
+                np.int64(qc.first_t), self._lo, self._hi, self._rate,
+                np.int64(self.last_t_ns), self.last_values, self.has_last)
+            if ok:  # the usual block: QC and verdicts in one call
+                qc.took_fast(t_ns, values, head, ring_n)
+                qc.add_counts(qc_counts)
+                return self._took(codes, counts, last_t, has_last)
         # the QARTOD tests see each sample later than the stream's last one, once
         seen = self.qc.prev_t if self.qc.n_seen else np.iinfo(np.int64).min
         repeat = np.zeros(n, np.bool_)  # the time of the newest sample seen before it
@@ -245,6 +288,12 @@ class StreamValidator:
             np.int64(self.last_t_ns), self.last_values, self.has_last, np.int64(floor_ns),
             qc_code, repeat,
         )
+        return self._took(codes, counts, last_t, has_last)
+
+    def _took(self, codes: np.ndarray, counts: np.ndarray, last_t: int,
+              has_last: bool) -> np.ndarray:
+        """Adopt :func:`_validate`'s verdict counts and last accepted sample; returns the
+        verdicts."""
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
         counts = counts.tolist()
         self.accepted += counts[0]

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
 import pytest
 
+from models._jit import uncompiled
 from monitor.damage_split import ASSUMED_ERROR, MIN_CAL_TICKS, DamageSplit
 
 NAN = math.nan
@@ -51,18 +53,30 @@ def test_the_band_is_calibrated_on_the_measured_estimated_residual_by_hand():
     assert f["estimated_high"] == pytest.approx((1 + math.sqrt(0.039)) ** 3, rel=1e-12)  # 1.7170
 
 
-def test_sums_run_left_to_right_so_any_slab_split_gives_the_same_bits():
+@pytest.mark.parametrize("plain", [False, True])
+def test_sums_run_left_to_right_so_any_slab_split_gives_the_same_bits(plain):
+    """The compiled pass (and the same as plain Python) against the loop it stands for, with
+    resets (a committed damage that drops) and ticks without samples."""
+    with uncompiled() if plain else contextlib.nullcontext():
+        _sums_left_to_right()
+
+
+def _sums_left_to_right():
     rng = np.random.default_rng(7)
     committed = np.cumsum(rng.random(500) * 10.0 ** rng.integers(-12, 0, 500)).tolist()
+    committed[300] = committed[299] / 2  # a reset: no negative damage is attributed
     rows = [(int(k), 4, float(m), float(e)) for k, m, e in
             zip(rng.integers(0, 5, 500), rng.uniform(50, 5000, 500), rng.uniform(0, 6000, 500))]
+    rows[10] = (0, 0, NAN, NAN)  # a tick without samples
+    rows[11] = (0, 3, NAN, 700.0)
     one = DamageSplit({"c": 4.5})
     one.ticks({"c": committed}, rows)
     measured = estimated = cal = 0.0
     last = 0.0
     for c, (k, n, m, e) in zip(committed, rows):  # the loop the sums stand for
-        measured += (c - last) * (k / n)
-        estimated += (c - last) * (1.0 - k / n)
+        frac = k / n if n else 0.0
+        measured += max(c - last, 0.0) * frac
+        estimated += max(c - last, 0.0) * (1.0 - frac)
         if m >= 100.0:
             cal += ((e - m) / m) ** 2
         last = c

@@ -1,6 +1,7 @@
 """Motion -> tension estimator: quasi-static limit, dynamic increments, flags, state, IMU path."""
 
 import dataclasses
+import itertools
 import json
 import math
 from pathlib import Path
@@ -254,19 +255,31 @@ def test_catenary_estimator_options_and_errors():
         config(ea=math.inf, axial_model="infinite")
 
 
-def test_imu_integrated_in_the_estimator_loop_equals_the_integrator(vaps):
-    # heading None integrates inside the estimator's loop; a heading (0 deg: the identity
-    # rotation) goes through models.imu.DisplacementIntegrator.update first: the same bits
+@pytest.mark.parametrize("jerk", [True, False])
+def test_imu_integrated_in_the_estimator_loop_equals_the_integrator(vaps, jerk):
+    # heading None integrates inside the estimator's loop (in chunks of 256 samples, the
+    # next chunk integrated beside the jerk steps); a heading (0 deg: the identity rotation)
+    # goes through models.imu.DisplacementIntegrator.update first: the same bits, for blocks
+    # of one sample, of a chunk and around it, of several chunks, with and without jerk
     cfg, qs = vaps
+    if not jerk:
+        cfg = dataclasses.replace(cfg, drag=None)
     m = waves.buoy_motion(1.5, 5.25, 300.0, DT, seed=4, depth=23.0, direction_deg=30.0)
     fused, separate = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
-    for i in range(0, m.t.size, 777):
-        sl = slice(i, i + 777)
+    i = 0
+    for size in itertools.cycle([777, 1, 2, 255, 256, 257, 513]):
+        if i >= m.t.size:
+            break
+        sl = slice(i, i + size)
         a = fused.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl])
         b = separate.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], heading_deg=0.0)
         for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)):
             np.testing.assert_array_equal(x, y)
+        i += size
     assert fused.state.to_dict() == separate.state.to_dict()
+    if not jerk:
+        assert not np.any(a.drag)
+        return
     assert np.isfinite(a.tension).all() and np.std(a.drag) > 0
     # a NaN acceleration is named and changes nothing
     before = fused.state.to_dict()

@@ -45,9 +45,10 @@ def test_commit_ticks_equals_feed_and_add_cycles_per_tick():
     assert commit_ticks(StreamingRainflow(), MinerAccumulator(goodman), stress, stops, times) is None
 
 
-def _per_tick(stress, stops, times, sn):
+def _per_tick(stress, stops, times, sn, edges=None):
     """The oracle: feed + add_cycles + the accumulator's properties, tick by tick."""
-    rf, mi = StreamingRainflow(), MinerAccumulator(sn, rate_window_s=86400.0, rate_buckets=24)
+    rf, mi = StreamingRainflow(), MinerAccumulator(sn, edges, rate_window_s=86400.0,
+                                                   rate_buckets=24)
     rows, start = [], 0
     for stop, t in zip(stops, times):
         mi.add_cycles(*rf.feed(stress[start:stop]), time_s=t)
@@ -91,5 +92,36 @@ def test_tick_dating_over_days_equals_add_cycles(plain):
     assert rows[305][1] == 0.0 < rows[330][1]  # the quiet spell emptied the window
     assert rows[-1][2] > 1.0 and rows[-1][3] == 0.0  # life used up
     assert mi.damage_rate_per_day == oracle.damage_rate_per_day
+    mi.set_provisional_from(rf)
+    assert json.dumps(mi.state()) == json.dumps(oracle.state())
+
+
+@pytest.mark.parametrize("edges", [None, [0.0, 5e6, 10e6, 20e6, 40e6, 80e6, 300e6]])
+def test_tick_groups_stack_growth_and_long_residues_equal_the_per_tick_calls(edges):
+    """More ticks than one group of the compiled pass (models.fatigue._loops.TICK_GROUP), a
+    stack outgrowing its storage mid-slab and residues too long to buffer a whole group
+    (RESIDUE_ROOM): committed damage, rates, residue damage, histogram (uniform edges and
+    not) and closed cycles equal the per-tick feed + add_cycles + residue_damage's bits."""
+    rng = np.random.default_rng(5)
+    n = 20_000
+    # a diverging run (every sample a turning point, no cycle closes: the stack grows to
+    # n / 2 points, past the counter's first storage), then a noisy sine closing cycles
+    grow = 60e6 + np.linspace(1e5, 50e6, n // 2) * (-1.0) ** np.arange(n // 2)
+    wave = 60e6 + 5e6 * np.sin(np.arange(n // 2) / 4.0) + rng.normal(0, 2e6, n // 2)
+    stress = np.concatenate([grow, wave])
+    stops = np.minimum(np.cumsum(rng.integers(0, 100, 400)), n).tolist()
+    stops[-1] = n
+    times = (1.7e9 + 10.0 * np.arange(1, len(stops) + 1)).tolist()
+    sn = SNCurve.vaps_copper()
+    rows, oracle = _per_tick(stress, stops, times, sn, edges)
+    rf, mi = StreamingRainflow(), MinerAccumulator(sn, edges, rate_window_s=86400.0,
+                                                   rate_buckets=24)
+    storage = rf._st.shape[0]
+    run = commit_ticks(rf, mi, stress, stops, times)
+    got = list(zip(run.committed.tolist(), run.rate_per_day.tolist(), run.damage.tolist(),
+                   run.life_days.tolist()))
+    assert got == rows
+    assert rf._st.shape[0] > storage and run.ranges.shape[0] > 1000  # grown; cycles closed
+    assert len(set(run.residue.tolist())) > 100 and run.residue[-1] > 1.0  # the long residue
     mi.set_provisional_from(rf)
     assert json.dumps(mi.state()) == json.dumps(oracle.state())

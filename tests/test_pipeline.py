@@ -484,3 +484,34 @@ def test_a_sensor_clock_jumping_years_ahead_costs_what_its_data_costs():
 
 def committed_of(p: Pipeline) -> dict:
     return {n: c["damage_committed"] for n, c in p.report()["components"].items()}
+
+
+@pytest.mark.parametrize("sources", ["measured", "mixed"])
+def test_tick_load_figures_equal_the_tick_by_tick_reductions(sources):
+    """_TickLoad's one pass over a slab (the load cell alone, or mixed with estimates; ticks
+    without samples between) equals each tick reduced on its own: max, min, peak stresses,
+    sample counts and each source's mean as one reduceat segment."""
+    from monitor.load_source import ESTIMATED, MEASURED
+    from monitor.pipeline import _seq_mean, _TickLoad
+
+    rng = np.random.default_rng(11)
+    v = 20_000 + rng.normal(0, 3_000, 4_000)
+    src = np.full(v.shape, MEASURED, np.int8)
+    if sources == "mixed":
+        src[rng.random(v.shape[0]) < 0.3] = ESTIMATED
+        src[1_000:1_200] = ESTIMATED  # a tick of estimates alone
+    stress = {"a": v * 1e3, "b": -v}
+    edges = np.r_[0, np.sort(rng.integers(0, 4_000, 40)), 4_000]
+    edges[5:8] = edges[5]  # ticks without samples
+    starts, stops = edges[:-1], edges[1:]
+    load = _TickLoad(v, src, stress, starts, stops)
+    for k, (a, b) in enumerate(zip(starts.tolist(), stops.tolist())):
+        x, m = v[a:b], src[a:b] == MEASURED
+        assert load.n[k] == b - a and load.n_meas[k] == int(m.sum())
+        if a == b:
+            assert math.isnan(load.vmax[k]) and math.isnan(load.meas[k])
+            continue
+        assert (load.vmax[k], load.vmin[k]) == (x.max(), x.min())
+        assert load.smax["a"][k] == (x * 1e3).max() and load.smax["b"][k] == (-x).max()
+        for got, want in ((load.meas[k], _seq_mean(x[m])), (load.est[k], _seq_mean(x[~m]))):
+            assert got == want or (math.isnan(got) and math.isnan(want))

@@ -135,3 +135,28 @@ def test_flat_line_memory_is_bounded_and_saved():
     # suspect once 1 s of flat data is there; fail never (the window is cut to the memory)
     assert (flags[3][:10] == 1).all() and (flags[3][11:] == 3).all()
     assert len(qc.state()["ring_t"]) == FLAT_MEMORY
+
+
+def test_fast_blocks_longer_than_the_flat_memory_equal_the_general_kernel(monkeypatch):
+    """Blocks of finite values (the fast kernel) from one sample to past the flat-line
+    memory, so its ring wraps anywhere, over a sea with stuck stretches (the flat-line scan
+    reads back through the ring): the flags, counts and saved memory of the sample-by-sample
+    general kernel."""
+    rng = np.random.default_rng(9)
+    n = 3 * FLAT_MEMORY + 700
+    t, x = record(n, 9)
+    x = np.where(np.isfinite(x), x, 0.5)
+    for k in rng.integers(0, n - 400, 12):
+        x[k:k + 300] = x[k] + rng.uniform(0, 0.005, 300)  # stuck: flat-line scans
+    f = FieldLimits(-10, 10, 3.0, flat_tolerance=0.01, flat_suspect_s=30.0, flat_fail_s=200.0)
+    values = np.stack([x, -0.5 * x])
+    cuts = np.cumsum(rng.choice([1, 2, 57, 900, FLAT_MEMORY + 300], 40))
+    cuts = sorted(set(cuts[cuts < n].tolist()))
+    fast, qc_fast = streamed(t, values, cuts, ((f, f),))
+    assert qc_fast.ring_n == FLAT_MEMORY and (fast[3] == 4).any() and (fast[3] == 3).any()
+    import monitor.qartod
+
+    monkeypatch.setattr(monitor.qartod, "_qc_fast", lambda *a: (False,) + (None,) * 5)
+    general, qc_general = streamed(t, values, cuts, ((f, f),))
+    np.testing.assert_array_equal(fast, general)
+    assert qc_fast.counts == qc_general.counts and qc_fast.state() == qc_general.state()

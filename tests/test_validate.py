@@ -1,10 +1,13 @@
 """Sample validation: one test per rejection reason, split invariance, spike recovery."""
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
+import pytest
 
-from monitor.config import FieldLimits, SensorLimits
+from monitor.config import FieldLimits, SensorLimits, default_config
 from monitor.validate import REASONS, StreamValidator
 
 S = 1_000_000_000
@@ -185,3 +188,76 @@ def test_runs_of_accepted_samples_give_the_sequential_verdicts():
     accepted = np.flatnonzero(np.array(ref) == 0)
     assert has_last and last_t == t[accepted[-1]]
     np.testing.assert_array_equal(last_v, values[:, accepted[-1]])
+
+
+SHARED = next((p / "shared" for p in Path(__file__).resolve().parents
+               if (p / "shared/realdata").is_dir()), None)
+
+
+def _blocks_through(sensor, t, values, cuts, monkeypatch, general):
+    """Verdicts of a stream cut into blocks at ``cuts`` (the default limits of ``sensor``),
+    the usual blocks through the one-call path, or (``general``) every block through the
+    separate QC and validation calls; and how many took the one call."""
+    import monitor.validate as validate
+
+    usual = validate._check_usual
+    took = [0]
+
+    def spy(*args):
+        out = (None,) if general else usual(*args)
+        took[0] += bool(out[0])
+        return (False,) + (None,) * 7 if general else out
+
+    monkeypatch.setattr(validate, "_check_usual", spy)
+    val = StreamValidator(sensor, default_config().validate[sensor])
+    codes = [val.check(t[a:b], values[:, a:b], NEVER).tolist()
+             for a, b in zip(cuts[:-1], cuts[1:])]
+    monkeypatch.setattr(validate, "_check_usual", usual)
+    return codes, json.dumps(val.state()), val.qc_counts(), took[0]
+
+
+def _one_call_equals_separate(sensor, t, values, cuts, monkeypatch):
+    fused = _blocks_through(sensor, t, values, cuts, monkeypatch, general=False)
+    separate = _blocks_through(sensor, t, values, cuts, monkeypatch, general=True)
+    assert fused[:3] == separate[:3]
+    assert separate[3] == 0 and fused[3] >= len(cuts) // 2  # the one call did most blocks
+    return fused
+
+
+def test_the_usual_block_in_one_call_equals_the_separate_qc_and_validation(monkeypatch):
+    """Tension at 20 Hz with NaN, infinities, spikes, a flat (stuck) stretch past the fail
+    window, repeated and backward times, cut into random blocks: the one-call path of the
+    usual block gives the verdicts, QC counts and state of the separate calls."""
+    rng = np.random.default_rng(3)
+    n = 40_000
+    t = np.arange(n, dtype=np.int64) * 50_000_000
+    v = 20_000 + 3_000 * np.sin(np.arange(n) / 40.0) + rng.normal(0, 200, n)
+    v[rng.integers(0, n, 30)] = math.nan
+    v[rng.integers(0, n, 5)] = math.inf
+    v[rng.integers(0, n, 40)] += 30_000  # spikes
+    v[10_000:23_000] = 21_000.0  # stuck for 650 s: flat-line suspect, then fail
+    dup = rng.integers(1, n, 20)
+    t[dup] = t[dup - 1]  # repeated times
+    t[30_000:30_010] -= 2 * S  # a burst from the past
+    cuts = np.unique(np.r_[0, rng.integers(1, n, 150), n]).tolist()
+    codes, _, qc, _ = _one_call_equals_separate("tension", t, v[None, :], cuts, monkeypatch)
+    flat = [c for block in codes for c in block].count(REASONS.index("flat_line") + 1)
+    assert flat > 0 and qc["flat_line"]["suspect"] > 0 and qc["spike"]["fail"] > 0
+
+
+@pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
+def test_the_one_call_path_on_real_records(monkeypatch):
+    """The Maine end-line load cell (tension, real gaps and hauls) and the Spotter's
+    displacements fed as a three-field IMU stream: one call equals the separate calls."""
+    lc = np.genfromtxt(SHARED / "realdata/maine_endline_loadcell/lc_data.csv", delimiter=",",
+                       skip_header=1, usecols=(1, 2))
+    t = np.rint(lc[:, 0] * 1e9).astype(np.int64)
+    cuts = list(range(0, t.shape[0], 997)) + [t.shape[0]]
+    _one_call_equals_separate("tension", t, lc[:, 1][None, :] * 4.4482216152605, cuts,
+                              monkeypatch)
+    d = np.genfromtxt(SHARED / "realdata/spotter_clallam_1945/0026_FLT.CSV", delimiter=",",
+                      skip_header=1, usecols=(1, 2, 3, 4))
+    t = np.rint((d[:, 0] - d[0, 0]) * 1e9).astype(np.int64)
+    cuts = list(range(0, t.shape[0], 1500)) + [t.shape[0]]
+    _one_call_equals_separate("imu", t, np.ascontiguousarray(d[:, 1:].T / 1000.0), cuts,
+                              monkeypatch)

@@ -314,35 +314,55 @@ def damage_loop(ranges, counts, params):
 
 
 @jitable
+def _bin(table, r, inv_width, guess):
+    """The histogram bin of range ``r``: ``lo`` with edges[lo] <= r < edges[lo + 1], the
+    overflow bin from the top edge on, -1 below the first edge. ``guess`` (a bin) is tried
+    first: consecutive cycles mostly fall in the same bin."""
+    nb = table.shape[1]
+    if r >= table[0, nb - 1]:
+        return nb - 1
+    if not r >= table[0, 0]:
+        return -1
+    if guess < nb - 1 and r >= table[0, guess] and r < table[0, guess + 1]:
+        return guess
+    if inv_width > 0.0:  # uniform edges: direct index, then exact against the edges
+        lo = min(int((r - table[0, 0]) * inv_width), nb - 2)
+        while r < table[0, lo]:
+            lo -= 1
+        while r >= table[0, lo + 1]:
+            lo += 1
+        return lo
+    lo = 0
+    hi = nb - 1
+    while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
+        mid = (lo + hi) >> 1
+        if r >= table[0, mid]:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@jitable
 def _commit_damage(ranges, counts, d, table, inv_width, committed):
     """Add d[:n] to ``committed`` one by one in order and bin the ranges; returns
-    (committed, cycles)."""
-    nb = table.shape[1]
-    top = table[0, nb - 1]
+    (committed, cycles). The count of the bin last added to is held in a register (one
+    bin mostly takes run after run of cycles: a store and reload per cycle would chain
+    them); each bin still adds its counts one by one in order."""
+    cur = 0
+    held = table[1, 0]
     cycles = 0.0
     for i in range(ranges.shape[0]):
         committed += d[i]
         cycles += counts[i]
-        r = ranges[i]
-        if r >= top:
-            table[1, nb - 1] += counts[i]
-        elif r >= table[0, 0]:
-            if inv_width > 0.0:  # uniform edges: direct index, then exact against the edges
-                lo = min(int((r - table[0, 0]) * inv_width), nb - 2)
-                while r < table[0, lo]:
-                    lo -= 1
-                while r >= table[0, lo + 1]:
-                    lo += 1
-            else:
-                lo = 0
-                hi = nb - 1
-                while hi - lo > 1:  # bisection: edges[lo] <= r < edges[hi]
-                    mid = (lo + hi) >> 1
-                    if r >= table[0, mid]:
-                        lo = mid
-                    else:
-                        hi = mid
-            table[1, lo] += counts[i]
+        b = _bin(table, ranges[i], inv_width, cur)
+        if b >= 0:
+            if b != cur:
+                table[1, cur] = held
+                cur = b
+                held = table[1, b]
+            held += counts[i]
+    table[1, cur] = held
     return committed, cycles
 
 
@@ -447,6 +467,18 @@ def residue_loop(st, params):
 
 
 # -------------------------------------------------------------------- ticks
+TICK_GROUP = 64  # ticks counted before their cycles' damage is evaluated in one pass
+RESIDUE_ROOM = 1 << 15  # residue cycles buffered per group (a group ends early past it)
+
+
+@jitable
+def _grown(a, n, size):
+    """``a`` in a new array of ``size`` with its first ``n`` values."""
+    out = np.empty(size)
+    out[:n] = a[:n]
+    return out
+
+
 def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_c,
                out_r, out_m, nc, t_committed, t_cycles, t_residue, residue):
     """Whole alert ticks of stresses ``x``: tick k takes x[stops[k - 1]:stops[k]] (from 0
@@ -457,6 +489,11 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
 
     The same computations in the same order as ``feed_loop`` per tick, then
     ``commit_loop`` of the pending and closed cycles, then ``residue_loop``: the same bits.
+    The ticks go in groups: a group's samples are counted tick by tick, keeping the number
+    of cycles closed and each tick end's residue cycles; then the damage of all of them is
+    evaluated in long vectorised passes (a tick closes some 40 cycles, too few for the
+    vector loops), and committed and summed tick by tick in order (a cycle's damage does
+    not depend on the others, so the bits are those of the tick-by-tick calls).
     Starts at tick ``k``, writing closed cycles from ``out_r[nc]``/``out_m[nc]``; returns
     (k, nc, committed), k < len(stops) when tick k may not fit the stack storage (grow it
     and call again from there), or k = -1 if x holds a NaN or inf (nothing changed).
@@ -469,30 +506,64 @@ def ticks_loop(x, stops, k, st, params, table, inv_width, committed, pre_r, pre_
     ln_s = np.empty(CHUNK)
     d = np.empty(CHUNK)
     ones = np.ones(out_r.shape[0])
-    scratch = np.empty((6, 64))  # the residue's scratch, grown when the residue is longer
+    dc = np.empty(out_r.shape[0])  # the closed cycles' damage
+    tick_nc = np.empty(TICK_GROUP + 1, np.int64)  # cycles closed before each tick of a group
+    tick_res = np.zeros(TICK_GROUP + 1, np.int64)  # residue cycles buffered before each tick
+    room = 64 * TICK_GROUP
+    # the residue cycles' ranges, means, counts and damage (pts: scratch)
+    rr, rm, rc, rd = np.empty(room), np.empty(room), np.empty(room), np.empty(room)
+    pts = np.empty(64)
     start = stops[k - 1] if k > 0 else 0
-    while k < n_ticks:
-        stop = stops[k]
-        if int(st[NS]) + (stop - start) > limit:  # the whole tick must fit the storage
-            break
+    full = False
+    while k < n_ticks and not full:
+        g0 = k
         first = nc
-        _, nc = _count(st, x, start, stop, tp, out_r, out_m, nc)
-        cycles = 0.0
-        if k == 0 and pre_r.shape[0] > 0:
-            committed, cycles = _commit_chunks(pre_r, pre_c, params, table, inv_width, committed,
-                                               ln_s, d)
-        committed, more = _commit_chunks(out_r[first:nc], ones[first:nc], params, table,
-                                         inv_width, committed, ln_s, d)
-        t_committed[k] = committed
-        t_cycles[k] = cycles + more
-        if residue:
-            ns = int(st[NS])
-            if ns + 1 > scratch.shape[1]:
-                scratch = np.empty((6, 2 * (ns + 1)))
-            t_residue[k] = _residue_damage(st, params, scratch[0], scratch[1], scratch[2],
-                                           scratch[3], scratch[4], scratch[5])
-        start = stop
-        k += 1
+        tick_nc[0] = nc
+        nres = 0
+        while k < n_ticks and k - g0 < TICK_GROUP:
+            stop = stops[k]
+            if int(st[NS]) + (stop - start) > limit:  # the whole tick must fit the storage
+                full = True
+                break
+            need = min(int(st[NS]) + (stop - start), limit) + 1  # the residue's length at most
+            if residue and nres + need > room:
+                if k > g0 and nres + need > RESIDUE_ROOM:
+                    break  # the group ends here
+                room = 2 * (nres + need)
+                rr, rc = _grown(rr, nres, room), _grown(rc, nres, room)
+                rm, rd = np.empty(room), np.empty(room)  # (means are not needed past the count)
+            _, nc = _count(st, x, start, stop, tp, out_r, out_m, nc)
+            tick_nc[k - g0 + 1] = nc
+            if residue:
+                ns = int(st[NS])
+                if ns + 1 > pts.shape[0]:
+                    pts = np.empty(2 * (ns + 1))
+                nres += _residue_cycles(st, pts, rr[nres:], rm[nres:], rc[nres:])
+                tick_res[k - g0 + 1] = nres
+            start = stop
+            k += 1
+        for i in range(first, nc, CHUNK):
+            end = min(i + CHUNK, nc)
+            _cycle_damage(out_r[i:end], ones[i:end], params, ln_s, dc[i:end])
+        for i in range(0, nres, CHUNK):
+            end = min(i + CHUNK, nres)
+            _cycle_damage(rr[i:end], rc[i:end], params, ln_s, rd[i:end])
+        for j in range(k - g0):
+            cycles = 0.0
+            if g0 + j == 0 and pre_r.shape[0] > 0:
+                committed, cycles = _commit_chunks(pre_r, pre_c, params, table, inv_width,
+                                                   committed, ln_s, d)
+            a = tick_nc[j]
+            b = tick_nc[j + 1]
+            committed, more = _commit_damage(out_r[a:b], ones[a:b], dc[a:b], table, inv_width,
+                                             committed)
+            t_committed[g0 + j] = committed
+            t_cycles[g0 + j] = cycles + more
+            if residue:  # summed in counting order, as _residue_damage does
+                total = 0.0
+                for i in range(tick_res[j], tick_res[j + 1]):
+                    total += rd[i]
+                t_residue[g0 + j] = total
     return k, nc, committed
 
 
