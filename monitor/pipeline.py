@@ -843,7 +843,7 @@ class Pipeline:
             self._note_load(t, src, ticks.cuts[k])
             tt, tv, _, tick_load, j = first if k == 0 else self._tick_view(k, t, v, src, ticks)
             self._evaluate(k, ticks.ends_l[k], tt, tv, tick_load, j, streams, figures, est[k])
-        batch.run(tick, quiet, next_due)
+        batch.run(tick, self._emit, quiet, next_due)
         self._note_load(t, src, ticks.cuts[n - 1])
         self.open_tick = _NO_LOAD
         return list(zip(n_meas, n_load, meas, est))
@@ -985,6 +985,11 @@ class Pipeline:
             learner.tick(end, committed, load.n[j])
             if forecasts.due(end):
                 records = [*records, *forecasts.apply(end, committed, learner.table)]
+        self._emit(records)
+
+    def _emit(self, records: list[Any]) -> None:
+        """Alert records (a tick's, or the re-sends of a run of quiet ticks), in order, for
+        the step's result and the alert history."""
         for rec in records:
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))
