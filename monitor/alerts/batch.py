@@ -24,7 +24,6 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from itertools import chain
 from typing import TYPE_CHECKING, Callable, Literal, Mapping
 
 import numpy as np
@@ -172,10 +171,50 @@ def slack_snap_ticks(t, x, starts, stops, floor, snap_level, window_ns, last_sla
     return values, after
 
 
+@kernel()
+def rejected_rate_ticks(held, ends, received, rejected, window_ns):
+    """:meth:`RejectedRate.observe` over consecutive ticks, from the window entries the rule
+    holds (``held``: rows t, rejected, received): each tick's rate (NaN without samples in
+    the window), and the window after it as rows ``lo..hi-1`` of the returned entries with
+    its totals. Counts are integers below 2**53, so the quotient is observe's (Python's
+    correctly rounded int / int)."""
+    n, m = ends.shape[0], held.shape[0]
+    entries = np.empty((m + n, 3), np.int64)
+    n_rej, n_rec = 0, 0
+    for i in range(m):
+        entries[i] = held[i]
+        n_rej += held[i, 1]
+        n_rec += held[i, 2]
+    values = np.empty(n)
+    lo_at = np.empty(n, np.int64)
+    hi_at = np.empty(n, np.int64)
+    rej_at = np.empty(n, np.int64)
+    rec_at = np.empty(n, np.int64)
+    lo, hi = 0, m
+    for k in range(n):
+        t = ends[k]
+        if received[k]:
+            entries[hi, 0] = t
+            entries[hi, 1] = rejected[k]
+            entries[hi, 2] = received[k]
+            hi += 1
+            n_rej += rejected[k]
+            n_rec += received[k]
+        horizon = t - window_ns
+        while lo < hi and entries[lo, 0] <= horizon:
+            n_rej -= entries[lo, 1]
+            n_rec -= entries[lo, 2]
+            lo += 1
+        values[k] = n_rej / n_rec if n_rec else np.nan
+        lo_at[k], hi_at[k], rej_at[k], rec_at[k] = lo, hi, n_rej, n_rec
+    return values, entries, lo_at, hi_at, rej_at, rec_at
+
+
 def warm_up() -> None:
-    """Compile (or load from numba's cache) both kernels now, on empty input."""
+    """Compile (or load from numba's cache) the kernels now, on empty input."""
     f, i, u = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.uint8)
     slack_snap_ticks(i, f, i, i, 0.0, 0.0, 0, -1)
+    rejected_rate_ticks(np.zeros((0, 3), np.int64), i, i, i, 0)
     scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), i, f, f, i, i, u, 0,
                np.zeros(0, bool), NO_DUE, 0, u, i, i, i, u, u, f, i, np.zeros((0, 3), np.int64))
 
@@ -238,21 +277,9 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
 
 def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
     s = x.stream(rule.target)
-    ends = x.ends
-    new = s.received > 0
-    # the window's entries (t, rejected, received): those the rule holds, then one per tick
-    # with samples; the window at tick j is entries lo[j]..hi[j]-1
-    m = len(rule.ticks)
-    entries = np.empty((m + int(np.count_nonzero(new)), 3), np.int64)
-    entries[:m] = np.fromiter(chain.from_iterable(rule.ticks), np.int64, 3 * m).reshape(m, 3)
-    entries[m:, 0], entries[m:, 1], entries[m:, 2] = ends[new], s.rejected[new], s.received[new]
-    sums = np.zeros((entries.shape[0] + 1, 2), np.int64)
-    np.cumsum(entries[:, 1:], axis=0, out=sums[1:])
-    hi = m + np.cumsum(new)
-    lo = np.searchsorted(entries[:, 0], ends - rule.window_ns, side="right")
-    n_rej, n_rec = (sums[hi] - sums[lo]).T
-    # exact int -> float conversions (counts < 2**53): the same quotient as observe's
-    values = np.divide(n_rej, n_rec, out=np.full(ends.shape[0], math.nan), where=n_rec > 0)
+    held = np.array(rule.ticks, np.int64).reshape(len(rule.ticks), 3)
+    values, entries, lo, hi, n_rej, n_rec = rejected_rate_ticks(
+        held, x.ends, s.received, s.rejected, rule.window_ns)
 
     def side(j: int) -> None:
         rule.ticks = deque(map(tuple, entries[lo[j]:hi[j]].tolist()))
