@@ -213,11 +213,13 @@ class _TensionStats:
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
-    # set by prepare(): per tick end, samples received and rejected in the tick, accepted
-    # in all, whether a sample was ever accepted and the last accepted time (0 if not), and
-    # rejected per reason in all (None without rejections in the slab)
-    _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None]
+    # per tick end of the last prepare(): samples received and rejected in the tick, whether
+    # a sample was ever accepted and the last accepted time (the alert batch reads these,
+    # Pipeline._stream_ticks); as lists for tick() (made on its first call: the batch path
+    # evaluates few ticks the ordinary way) also accepted in all, rejected per reason in
+    # all (None without rejections in the slab)
     tick_arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None] | None
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
@@ -240,11 +242,8 @@ class _StreamSlab:
 
     def prepare(self, ends: np.ndarray) -> None:
         """Vectorised health at every tick end of this slab (counts and last time)."""
-        accepted, rejected, has_last, last_t = self._before
-        by_reason = None
-        if self.rej_t.shape[0]:
-            by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
-                                  for i in range(1, len(REASONS) + 1)]).tolist()
+        self._ends = ends
+        has_last, last_t = self._before[2], self._before[3]
         cut = np.searchsorted(self.t, ends, side="right")
         rej_cut = np.searchsorted(self.rej_t, ends, side="right")
         k = np.searchsorted(self.acc_t, ends, side="right")
@@ -252,17 +251,29 @@ class _StreamSlab:
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         last_t)
         received, rejected_tick = np.diff(cut, prepend=0), np.diff(rej_cut, prepend=0)
-        # for the alert batch (Pipeline._stream_ticks): samples received and rejected in each
-        # tick, whether one was ever accepted, the last accepted time
         self.tick_arrays = (received, rejected_tick, has, last)
-        # python ints: the per-tick reads below are then cheap
-        self._ticks = (received.tolist(), rejected_tick.tolist(), (accepted + k).tolist(),
-                       has.tolist(), np.where(has, last, 0).tolist(), by_reason)
+        self._accepted_upto = k
+        self._ticks = None
+
+    def _tick_lists(self) -> tuple[list[int], list[int], list[int], list[bool], list[int],
+                                   list[list[int]] | None]:
+        """The prepared health as python ints (the per-tick reads are then cheap)."""
+        if self._ticks is None:
+            received, rejected_tick, has, last = self.tick_arrays
+            by_reason = None
+            if self.rej_t.shape[0]:
+                by_reason = np.stack([
+                    np.searchsorted(self.t[self.codes == i], self._ends, side="right")
+                    for i in range(1, len(REASONS) + 1)]).tolist()
+            self._ticks = (received.tolist(), rejected_tick.tolist(),
+                           (self._before[0] + self._accepted_upto).tolist(), has.tolist(),
+                           np.where(has, last, 0).tolist(), by_reason)
+        return self._ticks
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
         (the caller adds what earlier slabs contributed to the same tick) for ``k = 0``."""
-        received, rejected_tick, accepted, has_last, last, by_reason = self._ticks
+        received, rejected_tick, accepted, has_last, last, by_reason = self._tick_lists()
         last_t, rejected = last[k], self._before[1]
         if by_reason is not None:
             rejected = {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)}
