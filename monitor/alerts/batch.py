@@ -216,7 +216,7 @@ def warm_up() -> None:
     slack_snap_ticks(i, f, i, i, 0.0, 0.0, 0, -1)
     rejected_rate_ticks(np.zeros((0, 3), np.int64), i, i, i, 0)
     scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), i, f, f, i, i, u, 0,
-               np.zeros(0, bool), NO_DUE, 0, u, i, i, i, u, u, f, i, np.zeros((0, 3), np.int64))
+               np.zeros(0, bool), NO_DUE, 0, i, i, i, i, i, i, f, i, np.zeros((0, 3), np.int64))
 
 
 class _Row:
@@ -340,12 +340,13 @@ class TickBatch:
         self.plan, self.engine, self.rules, self.ends = plan, engine, plan.rules, inputs.ends
         self.stop = np.zeros(n, bool)
         self.rows = [build(r, inputs, self.stop) for build, r in zip(plan.builders, plan.rules)]
-        self.values = np.array([row.values for row in self.rows]).reshape(len(self.rows), n)
-        self.flags = np.zeros(self.values.shape, np.uint8)
-        self.sent = np.empty((len(self.rows) * n, 3), np.int64)  # at most one per rule and tick
+        self.values = np.empty((len(self.rows), n))
+        self.flags = np.zeros((len(self.rows), n), np.uint8)
         for i, row in enumerate(self.rows):
+            self.values[i] = row.values
             if row.flags is not None:
                 self.flags[i] = row.flags
+        self.sent = np.empty((len(self.rows) * n, 3), np.int64)  # at most one per rule and tick
         self.reload()
 
     def run(self, tick: Callable[[int], None], sent: Callable[[list[AlertRecord]], None],
@@ -400,12 +401,13 @@ class TickBatch:
         """Bring the rule objects and the engine to the end of tick ``j - 1``."""
         if j == 0:
             return
+        pending, clear, last_sent, last_data = (
+            a.tolist() for a in (self.pending, self.clear, self.last_sent, self.last_data))
         for i, (rule, row) in enumerate(zip(self.rules, self.rows)):
-            rule.pending_since_ns = int(self.pending[i])
-            rule.clear_since_ns = int(self.clear[i])
-            if self.last_data[i] >= 0:
-                rule.value = row.value_at(int(self.last_data[i]))
-            rule.last_sent_ns = int(self.last_sent[i])
+            rule.pending_since_ns, rule.clear_since_ns = pending[i], clear[i]
+            rule.last_sent_ns = last_sent[i]
+            if last_data[i] >= 0:
+                rule.value = row.value_at(last_data[i])
             if row.side is not None:
                 row.side(j - 1)
         self.engine.last_t_ns = int(self.ends[j - 1])
@@ -413,11 +415,9 @@ class TickBatch:
     def reload(self) -> None:
         """Take the rules' firing state from the rule objects (after an ordinary tick)."""
         rules = self.rules
-        self.firing = np.array([r.firing for r in rules], np.uint8)
-        self.pending = np.array([r.pending_since_ns for r in rules], np.int64)
-        self.clear = np.array([r.clear_since_ns for r in rules], np.int64)
-        self.last_sent = np.array([r.last_sent_ns for r in rules], np.int64)
-        self.reset_pending = np.array([r.reset_pending for r in rules], np.uint8)
-        self.acked = np.array([bool(r.acked_by) for r in rules], np.uint8)
+        # one array, a row per field (contiguous: the scan writes into the rows)
+        (self.firing, self.pending, self.clear, self.last_sent, self.reset_pending, self.acked,
+         self.last_data) = np.array(
+            [(r.firing, r.pending_since_ns, r.clear_since_ns, r.last_sent_ns, r.reset_pending,
+              r.acked_by != "", -1) for r in rules], np.int64).reshape(len(rules), 7).T.copy()
         self.baseline = np.array([getattr(r, "baseline", 0.0) for r in rules], np.float64)
-        self.last_data = np.full(len(rules), -1, np.int64)
