@@ -338,3 +338,44 @@ def test_batch_equals_per_tick_at_the_levels_and_when_a_latched_condition_lapses
     warning = [(r.event, int((r.at_ns - T0) // TICK) - 1) for r in ref_out
                if r.rule == "damage_warning" and r.component == "left"]
     assert warning == [("fire", 80)]
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_rejected_rate_through_silences_longer_than_its_window(plain) -> None:
+    """A stream whose samples stop for longer than the 60-s window: the window empties and
+    the rule has no value (not a zero rate), so nothing moves. Quiet (1 % rejected), then
+    silent (its value stays 1 %); 20 % rejected for two ticks (a pending period starts: the
+    on-delay is 120 s), silent for 80 s (still pending once the window is empty), 20 % again
+    (fires 120 s after the period began), silent (still firing, re-sent every 30 s), clean
+    (clears at once: the window holds no rejections). Slabs end inside the silences, so the window, value and pending time
+    the batch leaves in the rule are in the compared state."""
+    n = 60
+    ticks = Ticks(n, 8)
+    s = ticks.streams["tension"]
+    s.received[:] = 100
+    s.rejected[:] = 20
+    s.rejected[:10] = 1
+    s.rejected[45:] = 0
+    for a, b in ((10, 20), (22, 30), (31, 45)):
+        s.received[a:b] = 0
+        s.rejected[a:b] = 0
+    rules = {"resend_interval_s": 30, "rule": [
+        {"kind": "rejected_rate", "component": "tension", "threshold": 0.05, "window_s": 60,
+         "on_delay_s": 120}]}
+    ref = AlertEngine.from_config(rules, "b1", COMPONENTS)
+    eng = AlertEngine.from_config(rules, "b1", COMPONENTS)
+    ref_out: list = []
+    out: list = []
+    for a, b in ((0, 19), (19, 29), (29, n)):
+        ref_out += [r for k in range(a, b) for r in ref.evaluate(ticks.obs(k))]
+        batch = eng.tick_batch(ticks.inputs(a, b))
+        if plain:
+            with uncompiled():
+                batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))), out.extend)
+        else:
+            batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))), out.extend)
+        assert json.dumps(eng.state()) == json.dumps(ref.state()), (a, b)
+    assert dump(out) == dump(ref_out)
+    assert [(r.event, int((r.at_ns - T0) // TICK) - 1) for r in ref_out] == [
+        ("fire", 32), ("resend", 35), ("resend", 38), ("resend", 41), ("resend", 44),
+        ("clear", 45)]
