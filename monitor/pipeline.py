@@ -246,8 +246,11 @@ class _StreamSlab:
         self._ends = ends
         has_last, last_t = self._before[2], self._before[3]
         cut = np.searchsorted(self.t, ends, side="right")
-        rej_cut = np.searchsorted(self.rej_t, ends, side="right")
-        k = np.searchsorted(self.acc_t, ends, side="right")
+        if self.rej_t.shape[0]:
+            rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+            k = np.searchsorted(self.acc_t, ends, side="right")
+        else:  # the usual case: every sample accepted
+            rej_cut, k = np.zeros(ends.shape[0], np.int64), cut
         has = (k > 0) | has_last
         last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
                         last_t)

@@ -22,7 +22,6 @@ Bit-identity with the per-tick path holds because each row is the value its rule
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Literal, Mapping
 
@@ -277,13 +276,11 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
 
 def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
     s = x.stream(rule.target)
-    held = np.array(rule.ticks, np.int64).reshape(len(rule.ticks), 3)
     values, entries, lo, hi, n_rej, n_rec = rejected_rate_ticks(
-        held, x.ends, s.received, s.rejected, rule.window_ns)
+        rule.window(), x.ends, s.received, s.rejected, rule.window_ns)
 
     def side(j: int) -> None:
-        rule.ticks = deque(map(tuple, entries[lo[j]:hi[j]].tolist()))
-        rule.rejected, rule.received = int(n_rej[j]), int(n_rec[j])
+        rule.set_window(entries[lo[j]:hi[j]], int(n_rej[j]), int(n_rec[j]))
     return _Row(values, side=side)
 
 
