@@ -786,6 +786,8 @@ class Pipeline:
         alert rules, all ticks at once when nothing needs an observation per tick; the
         damage split of the evaluated ticks."""
         split = None
+        # each component's committed damage at each tick end (a list or an array)
+        committed: Mapping[str, Any]
         if ticks.evaluate and not self._tick_hooks and ticks.n >= BATCH_MIN_TICKS:
             split = self._evaluate_batch(t, v, src, streams, ticks, figures)
         if split is not None:
@@ -808,8 +810,7 @@ class Pipeline:
     def _evaluate_batch(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                         streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
                         figures: Mapping[str, list[tuple[float, float, float, float]]]
-                        ) -> tuple[list[tuple[int, int, float, float]],
-                                   dict[str, np.ndarray]] | None:
+                        ) -> tuple[list[tuple[int, int, float, float]], Mapping[str, Any]] | None:
         """The slab's ticks through the alert engine's batch (:mod:`monitor.alerts.batch`):
         only the ticks where something happens get an Observation; the sea-state learner
         still sees every tick. Returns the damage-split rows and each component's committed
