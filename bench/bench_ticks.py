@@ -152,13 +152,19 @@ def _alert_batch(reps: int, runs: int, pipeline, figures, load, t_cut, v_cut, cu
                        np.zeros(N_TICKS, np.int64), np.zeros(N_TICKS, np.int64))
     starts = np.append(0, cuts[:-1])
 
-    def component(name: str, i: int) -> np.ndarray:  # as the pipeline builds the columns
-        return np.array([f[i] for f in figures[name]]) if i < 4 else np.array(load.smax[name])
-    inputs = TickInputs(
-        buoy_id=engine.buoy_id, ends=ends, tension_max=np.array(load.vmax),
-        measured=np.array(load.meas), estimated=np.array(load.est), component=component,
-        stream=lambda s: tension if s == "tension" else idle,
-        load=lambda: (t_cut, v_cut, starts, cuts))
+    def inputs() -> TickInputs:  # as the pipeline makes them for a slab
+        columns: dict[tuple[str, int], np.ndarray] = {}
+
+        def component(name: str, i: int) -> np.ndarray:
+            if (name, i) not in columns:
+                columns[name, i] = (np.array([f[i] for f in figures[name]]) if i < 4
+                                    else np.array(load.smax[name]))
+            return columns[name, i]
+        return TickInputs(
+            buoy_id=engine.buoy_id, ends=ends, tension_max=np.array(load.vmax),
+            measured=np.array(load.meas), estimated=np.array(load.est), component=component,
+            stream=lambda s: tension if s == "tension" else idle,
+            load=lambda: (t_cut, v_cut, starts, cuts))
 
     def obs(k: int) -> Observation:
         a, b = int(starts[k]), int(cuts[k])
@@ -175,7 +181,7 @@ def _alert_batch(reps: int, runs: int, pipeline, figures, load, t_cut, v_cut, cu
         for _ in range(reps):
             eng = AlertEngine.from_state(state)
             start = time.process_time()
-            batch = eng.tick_batch(inputs)
+            batch = eng.tick_batch(inputs())
             tick = lambda k, eng=eng: eng.evaluate(obs(k))  # noqa: E731
             if "sent" in inspect.signature(batch.run).parameters:
                 batch.run(tick, list)  # this build: re-sends come back as records
