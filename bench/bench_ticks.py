@@ -14,10 +14,19 @@ CPU time per tick (best of ``--runs`` passes over ``--reps`` slabs) of
   at every tick end, as the rules ask for it);
 - ``estimate_means``: the mean motion estimate per tick (``Pipeline._estimate_means``);
 - ``damage_split``: the committed damage split by load source (``DamageSplit.ticks``, with
-  the per-tick committed damages ``Pipeline._evaluate_ticks`` gathers for it).
+  the per-tick committed damages ``Pipeline._evaluate_ticks`` gathers for it);
+- ``alert_batch``: the default rules over the slab through the alert engine's batch
+  (``AlertEngine.tick_batch`` and its ``run``, the slab's inputs made as the pipeline makes
+  them, the ordinary evaluations it asks for included), with the six rule instances the
+  30-day benchmark log has firing from its second day, each re-sent hourly at staggered
+  times: three re-sends in the slab (that log averages 2.2 per slab).
 
 ``--repo`` runs the same figures on another checkout (e.g. main) for a before/after in one
-session: the parts' interfaces are the same there.
+session: the parts' interfaces are the same there. ``--replay LOG`` instead replays a log
+in-process (default configuration, no read-ahead thread) and prints the CPU seconds of the
+alert-tick stage: ``Pipeline._due_ticks`` and ``_evaluate_ticks``, within them the sea-state
+learner's windows and the damage split, and ``alerts``, the rest (best of ``--runs`` by
+due + evaluate).
 
 Measured 2026-11-25 19:07 UTC on the shared 2-core Xeon (Emerald Rapids, 2.3 GHz, load
 average 8 from other work), CPU us per tick, best of 7, two interleaved sessions
@@ -38,6 +47,28 @@ went from about 4 to 0.3 us per tick. In the 1-day replay itself (thread CPU of
 of which the compiled pass is 30-32 ms both times. ``tick_load`` is now six ``reduceat``
 passes over the slab's samples (data-bound), ``stream_health`` the ``StreamObs`` each
 rule's tick asks for, ``damage_split`` three numpy passes per component and slab.
+
+Alert batch (branch alerts, issue 22 parts 3 and 5), measured 2026-11-25 21:48-21:55 UTC on
+the same machine, load average 3.7-6.7 from other workers (CPU times; interleaved, main at
+c8bad01 = before). ``alert_batch``, CPU us per tick, best of 7 x 20 slabs, two sessions:
+before 4.19 / 3.09, after 1.68 / 1.50 (2.1-2.5 x). What went: the re-sends (most of the
+ordinary evaluations of a long replay: 1,900 of 1,950 in the 30-day log) are made in the
+compiled scan and built from the rule, without an Observation; the rejected-rate window in
+one compiled pass and kept as an array between slabs; the firing state read and written in
+one go. ``--replay /tmp/perf_bench/log_30d.mcap`` (bench_replay.py's 30-day log, 1,785
+batch slabs), one run each, three interleaved pairs, CPU s before / after:
+
+    due + evaluate     3.46 / 2.79   3.19 / 2.71   3.23 / 2.67
+    learner + split    1.32 / 1.32   1.25 / 1.30   1.28 / 1.29
+    alerts (the rest)  2.14 / 1.47   1.95 / 1.41   1.95 / 1.38
+
+(an earlier pair at load 1.2-2.8, 21:20 UTC, with the first three changes only: alerts
+1.84 / 1.37 and 1.90 / 1.36). The brief's 2.5 x of the stage's ~3.9 CPU-s (cProfile) is NOT
+reached: a third of the stage is the sea-state learner's window closes (Dirlik spectra,
+about 1.0 s) and the damage split (0.25 s), which this work does not touch, and of
+``alerts`` about 0.5 s is ``_TickLoad`` (the slab's and the first tick's per-tick figures)
+and 0.2 s turning the components' per-tick figure tuples into the rules' columns (cheaper
+if ``Component.run_ticks`` handed its arrays).
 """
 
 from __future__ import annotations
