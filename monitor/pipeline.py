@@ -214,12 +214,10 @@ class _TensionStats:
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
-    # per tick end of the last prepare(): samples received and rejected in the tick, whether
-    # a sample was ever accepted and the last accepted time (the alert batch reads these,
-    # Pipeline._stream_ticks); as lists for tick() (made on its first call: the batch path
-    # evaluates few ticks the ordinary way) also accepted in all, rejected per reason in
-    # all (None without rejections in the slab)
-    tick_arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    # the health at the tick ends of the last prepare(), made when first read (only the
+    # streams a rule looks at are): arrays (tick_arrays), and lists for tick() (the batch
+    # path evaluates few ticks the ordinary way)
+    _arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
     _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None] | None
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
@@ -242,21 +240,27 @@ class _StreamSlab:
                 self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
 
     def prepare(self, ends: np.ndarray) -> None:
-        """Vectorised health at every tick end of this slab (counts and last time)."""
-        self._ends = ends
-        has_last, last_t = self._before[2], self._before[3]
-        cut = np.searchsorted(self.t, ends, side="right")
-        if self.rej_t.shape[0]:
-            rej_cut = np.searchsorted(self.rej_t, ends, side="right")
-            k = np.searchsorted(self.acc_t, ends, side="right")
-        else:  # the usual case: every sample accepted
-            rej_cut, k = np.zeros(ends.shape[0], np.int64), cut
-        has = (k > 0) | has_last
-        last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
-                        last_t)
-        self.tick_arrays = (_counts(cut), _counts(rej_cut), has, last)
-        self._accepted_upto = k
-        self._ticks = None
+        """Health at every tick end of this slab (counts and last time) from now on."""
+        self._ends, self._arrays, self._ticks = ends, None, None
+
+    @property
+    def tick_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per prepared tick end: samples received and rejected in the tick, whether a sample
+        was ever accepted, the last accepted time (vectorised)."""
+        if self._arrays is None:
+            ends = self._ends
+            cut = np.searchsorted(self.t, ends, side="right")
+            if self.rej_t.shape[0]:
+                rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+                k = np.searchsorted(self.acc_t, ends, side="right")
+            else:  # the usual case: every sample accepted
+                rej_cut, k = np.zeros(ends.shape[0], np.int64), cut
+            has = (k > 0) | self._before[2]
+            last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0]
+                            else 0, self._before[3])
+            self._arrays = (_counts(cut), _counts(rej_cut), has, last)
+            self._accepted_upto = k
+        return self._arrays
 
     def _tick_lists(self) -> tuple[list[int], list[int], list[int], list[bool], list[int],
                                    list[list[int]] | None]:
