@@ -48,27 +48,33 @@ of which the compiled pass is 30-32 ms both times. ``tick_load`` is now six ``re
 passes over the slab's samples (data-bound), ``stream_health`` the ``StreamObs`` each
 rule's tick asks for, ``damage_split`` three numpy passes per component and slab.
 
-Alert batch (branch alerts, issue 22 parts 3 and 5), measured 2026-11-25 21:48-21:55 UTC on
-the same machine, load average 3.7-6.7 from other workers (CPU times; interleaved, main at
-c8bad01 = before). ``alert_batch``, CPU us per tick, best of 7 x 20 slabs, two sessions:
-before 4.19 / 3.09, after 1.68 / 1.50 (2.1-2.5 x). What went: the re-sends (most of the
-ordinary evaluations of a long replay: 1,900 of 1,950 in the 30-day log) are made in the
-compiled scan and built from the rule, without an Observation; the rejected-rate window in
-one compiled pass and kept as an array between slabs; the firing state read and written in
-one go. ``--replay /tmp/perf_bench/log_30d.mcap`` (bench_replay.py's 30-day log, 1,785
-batch slabs), one run each, three interleaved pairs, CPU s before / after:
+Alert batch (branch alerts, issue 22 parts 3 and 5), measured 2026-11-25 on the same
+machine (CPU times; interleaved; main at c8bad01 = before). ``alert_batch``, CPU us per
+tick, best of 7 x 20 slabs: before 4.19 / 3.09 / 2.73, after 1.68 / 1.50 / 1.40 (three
+sessions, 21:48-22:06 UTC, load average 2-6.7 from other workers: about 2 x). What went:
+the re-sends (most of the ordinary evaluations of a long replay: 1,900 of 1,950 in the
+30-day log) are made in the compiled scan and built from the rule, without an Observation;
+the rejected-rate window in one compiled pass, kept as an array between slabs; the firing
+state read and written in one go; a stream's per-tick health computed only for the streams
+a rule reads. ``--replay /tmp/perf_bench/log_30d.mcap`` (bench_replay.py's 30-day log,
+1,785 batch slabs), one run each, three interleaved pairs at 22:10-22:14 UTC, load average
+1.3-2.1, CPU s before / after:
 
-    due + evaluate     3.46 / 2.79   3.19 / 2.71   3.23 / 2.67
-    learner + split    1.32 / 1.32   1.25 / 1.30   1.28 / 1.29
-    alerts (the rest)  2.14 / 1.47   1.95 / 1.41   1.95 / 1.38
+    replay             12.41 / 11.24   14.84 / 11.16   11.98 / 11.81
+    due                 0.72 / 0.40     0.90 / 0.42     0.69 / 0.44
+    due + evaluate      3.15 / 2.33     3.89 / 2.35     2.98 / 2.48
+    learner + split     1.25 / 1.20     1.50 / 1.17     1.19 / 1.22
+    alerts (the rest)   1.90 / 1.14     2.39 / 1.19     1.79 / 1.26
 
-(an earlier pair at load 1.2-2.8, 21:20 UTC, with the first three changes only: alerts
-1.84 / 1.37 and 1.90 / 1.36). The brief's 2.5 x of the stage's ~3.9 CPU-s (cProfile) is NOT
-reached: a third of the stage is the sea-state learner's window closes (Dirlik spectra,
-about 1.0 s) and the damage split (0.25 s), which this work does not touch, and of
-``alerts`` about 0.5 s is ``_TickLoad`` (the slab's and the first tick's per-tick figures)
-and 0.2 s turning the components' per-tick figure tuples into the rules' columns (cheaper
-if ``Component.run_ticks`` handed its arrays).
+(main's second run was slowed by other work: its learner too). Earlier pairs at load 4-6.7
+(21:48-21:55, before the last two changes): alerts 2.14 / 1.47, 1.95 / 1.41, 1.95 / 1.38.
+The brief's 2.5 x of the stage's ~3.9 CPU-s (cProfile; 2.98-3.15 s without it) is NOT
+reached: best of each, due + evaluate 2.98 -> 2.33 (1.28 x), alerts 1.79 -> 1.14 (1.57 x),
+due 0.69 -> 0.40 (1.7 x). A third of the stage is the sea-state learner's window closes
+(Dirlik spectra, about 1.0 s) and the damage split (0.23 s), which this work does not
+touch, and of ``alerts`` about 0.5 s is ``_TickLoad`` (the slab's and its first tick's
+per-tick figures) and 0.1-0.2 s turning the components' per-tick figure tuples into the
+rules' columns (cheaper if ``Component.run_ticks`` handed its arrays).
 """
 
 from __future__ import annotations
