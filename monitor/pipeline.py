@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Protocol, Sequence
 
@@ -221,11 +222,11 @@ class _TensionStats:
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
-    # set by prepare(): per tick end, samples received and rejected in the tick, accepted
-    # in all, whether a sample was ever accepted and the last accepted time (0 if not), and
-    # rejected per reason in all (None without rejections in the slab)
-    _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None]
-    tick_arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    # the health at the tick ends of the last prepare(), made when first read (only the
+    # streams a rule looks at are): arrays (tick_arrays), and lists for tick() (the batch
+    # path evaluates few ticks the ordinary way)
+    _arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
+    _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None] | None
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
                  validator_before: tuple[int, dict[str, int], bool, int]) -> None:
@@ -247,36 +248,61 @@ class _StreamSlab:
                 self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
 
     def prepare(self, ends: np.ndarray) -> None:
-        """Vectorised health at every tick end of this slab (counts and last time)."""
-        accepted, rejected, has_last, last_t = self._before
-        by_reason = None
-        if self.rej_t.shape[0]:
-            by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
-                                  for i in range(1, len(REASONS) + 1)]).tolist()
-        cut = np.searchsorted(self.t, ends, side="right")
-        rej_cut = np.searchsorted(self.rej_t, ends, side="right")
-        k = np.searchsorted(self.acc_t, ends, side="right")
-        has = (k > 0) | has_last
-        last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0] else 0,
-                        last_t)
-        received, rejected_tick = np.diff(cut, prepend=0), np.diff(rej_cut, prepend=0)
-        # for the alert batch (Pipeline._stream_ticks): samples received and rejected in each
-        # tick, whether one was ever accepted, the last accepted time
-        self.tick_arrays = (received, rejected_tick, has, last)
-        # python ints: the per-tick reads below are then cheap
-        self._ticks = (received.tolist(), rejected_tick.tolist(), (accepted + k).tolist(),
-                       has.tolist(), np.where(has, last, 0).tolist(), by_reason)
+        """Health at every tick end of this slab (counts and last time) from now on."""
+        self._ends, self._arrays, self._ticks = ends, None, None
+
+    @property
+    def tick_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per prepared tick end: samples received and rejected in the tick, whether a sample
+        was ever accepted, the last accepted time (vectorised)."""
+        if self._arrays is None:
+            ends = self._ends
+            cut = np.searchsorted(self.t, ends, side="right")
+            if self.rej_t.shape[0]:
+                rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+                k = np.searchsorted(self.acc_t, ends, side="right")
+            else:  # the usual case: every sample accepted
+                rej_cut, k = np.zeros(ends.shape[0], np.int64), cut
+            has = (k > 0) | self._before[2]
+            last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0]
+                            else 0, self._before[3])
+            self._arrays = (_counts(cut), _counts(rej_cut), has, last)
+            self._accepted_upto = k
+        return self._arrays
+
+    def _tick_lists(self) -> tuple[list[int], list[int], list[int], list[bool], list[int],
+                                   list[list[int]] | None]:
+        """The prepared health as python ints (the per-tick reads are then cheap)."""
+        if self._ticks is None:
+            received, rejected_tick, has, last = self.tick_arrays
+            by_reason = None
+            if self.rej_t.shape[0]:
+                by_reason = np.stack([
+                    np.searchsorted(self.t[self.codes == i], self._ends, side="right")
+                    for i in range(1, len(REASONS) + 1)]).tolist()
+            self._ticks = (received.tolist(), rejected_tick.tolist(),
+                           (self._before[0] + self._accepted_upto).tolist(), has.tolist(),
+                           np.where(has, last, 0).tolist(), by_reason)
+        return self._ticks
 
     def tick(self, k: int, now: int, stale_ns: float) -> StreamObs:
         """Health at the ``k``-th prepared tick end; the tick's counts start at the slab start
         (the caller adds what earlier slabs contributed to the same tick) for ``k = 0``."""
-        received, rejected_tick, accepted, has_last, last, by_reason = self._ticks
+        received, rejected_tick, accepted, has_last, last, by_reason = self._tick_lists()
         last_t, rejected = last[k], self._before[1]
         if by_reason is not None:
             rejected = {r: rejected[r] + by_reason[i][k] for i, r in enumerate(REASONS)}
         # positional (the fields' order): keywords cost 60 % more per call, at every tick
         return StreamObs(last_t, not has_last[k] or now - last_t > stale_ns, accepted[k],
                          rejected, rejected_tick[k], received[k])
+
+
+def _counts(cut: np.ndarray) -> np.ndarray:
+    """Each tick's count from the cumulative counts at the tick ends (``np.diff`` with
+    ``prepend=0``, at a fraction of its cost)."""
+    out = cut.copy()
+    np.subtract(cut[1:], cut[:-1], out=out[1:])
+    return out
 
 
 @dataclasses.dataclass(slots=True)
@@ -771,11 +797,16 @@ class Pipeline:
         """Each tick end in turn: the newest load sample so far, then (when evaluated) the
         alert rules, all ticks at once when nothing needs an observation per tick; the
         damage split of the evaluated ticks."""
-        split_rows = None
+        split = None
+        # each component's committed damage at each tick end (a list or an array)
+        committed: Mapping[str, Any]
         if ticks.evaluate and not self._tick_hooks and ticks.n >= BATCH_MIN_TICKS:
-            split_rows = self._evaluate_batch(t, v, src, streams, ticks, figures)
-        if split_rows is None:
+            split = self._evaluate_batch(t, v, src, streams, ticks, figures)
+        if split is not None:
+            split_rows, committed = split
+        else:
             split_rows = []  # per evaluated tick
+            committed = {n: [f[k][1] for k in range(ticks.n)] for n, f in figures.items()}
             start = 0
             for k in range(ticks.n):
                 stop = ticks.cuts[k]
@@ -786,17 +817,17 @@ class Pipeline:
                 self.open_tick = _NO_LOAD
                 start = stop
         if split_rows:
-            self.damage_split.ticks({n: [f[k][1] for k in range(ticks.n)]
-                                     for n, f in figures.items()}, split_rows)
+            self.damage_split.ticks(committed, split_rows)
 
     def _evaluate_batch(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                         streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
                         figures: Mapping[str, list[tuple[float, float, float, float]]]
-                        ) -> list[tuple[int, int, float, float]] | None:
+                        ) -> tuple[list[tuple[int, int, float, float]], Mapping[str, Any]] | None:
         """The slab's ticks through the alert engine's batch (:mod:`monitor.alerts.batch`):
         only the ticks where something happens get an Observation; the sea-state learner
-        still sees every tick. Returns the damage-split rows, None when the engine has no
-        batch for these rules (the caller then evaluates tick by tick)."""
+        still sees every tick. Returns the damage-split rows and each component's committed
+        damage per tick, None when the engine has no batch for these rules (the caller then
+        evaluates tick by tick)."""
         tick_batch = getattr(self.alerts, "tick_batch", None)
         if tick_batch is None:
             return None
@@ -817,7 +848,7 @@ class Pipeline:
         def component(name: str, i: int) -> np.ndarray:
             if (name, i) not in columns:
                 if i < 4:
-                    col = np.array([f[i] for f in figures[name]])
+                    col = np.fromiter(map(itemgetter(i), figures[name]), np.float64, n)
                 else:
                     col = np.array(load.smax[name])
                     col[0] = load0.smax[name][j0]
@@ -851,10 +882,10 @@ class Pipeline:
             self._note_load(t, src, ticks.cuts[k])
             tt, tv, _, tick_load, j = first if k == 0 else self._tick_view(k, t, v, src, ticks)
             self._evaluate(k, ticks.ends_l[k], tt, tv, tick_load, j, streams, figures, est[k])
-        batch.run(tick, quiet, next_due)
+        batch.run(tick, self._emit, quiet, next_due)
         self._note_load(t, src, ticks.cuts[n - 1])
         self.open_tick = _NO_LOAD
-        return list(zip(n_meas, n_load, meas, est))
+        return list(zip(n_meas, n_load, meas, est)), {name: component(name, 1) for name in figures}
 
     def _note_load(self, t: np.ndarray, src: np.ndarray, stop: int) -> None:
         """The newest load sample is the one before index ``stop`` of the slab (if any)."""
@@ -993,6 +1024,11 @@ class Pipeline:
             learner.tick(end, committed, load.n[j])
             if forecasts.due(end):
                 records = [*records, *forecasts.apply(end, committed, learner.table)]
+        self._emit(records)
+
+    def _emit(self, records: list[Any]) -> None:
+        """Alert records (a tick's, or the re-sends of a run of quiet ticks), in order, for
+        the step's result and the alert history."""
         for rec in records:
             self.new_alerts.append(rec)
             self.alert_history.append(alert_to_dict(rec))

@@ -4,13 +4,16 @@ AlertEngine` (issue 22: one Python call per rule per tick was a quarter of a rep
 The pipeline hands the figures of a slab's ticks as arrays (:class:`TickInputs`); each rule
 instance becomes a row of per-tick values (NaN where the tick has no data for it) and a
 condition code, built by numpy (and a compiled pass over the load samples for slack snaps).
-:func:`scan_ticks` then runs the firing state machine of :meth:`Rule.step` over the ticks in
-one compiled loop and stops at the first tick where anything happens: a transition, a
-re-send, a pending reset, a cable replacement, or a tick the caller marks (a forecast due).
-That tick is evaluated the ordinary way (:meth:`AlertEngine.evaluate` on an Observation),
-so every record is built by the same code as in the live path; the quiet ticks before it
-only moved pending/clearing times and each rule's last value, which :meth:`TickBatch.sync`
-writes into the rule objects first.
+:func:`scan_ticks` then runs the firing state machine of :meth:`Rule.step` and the engine's
+re-send test over the ticks in one compiled loop and stops at the first tick where a rule
+would change state: a transition, a pending reset, a cable replacement, or a tick the
+caller marks (a forecast due). That tick is evaluated the ordinary way
+(:meth:`AlertEngine.evaluate` on an Observation), so every transition record is built by
+the same code as in the live path; the quiet ticks before it only moved pending/clearing
+times, each rule's last value and the re-send times, which :meth:`TickBatch.sync` writes
+into the rule objects first. Their re-sends (a firing rule's record again, every
+``resend_interval_s``: most of the records of a long replay) are built from the rule and
+its value at that tick by the engine's own ``_record``, with no Observation.
 
 Bit-identity with the per-tick path holds because each row is the value its rule's
 ``observe`` computes, by the same IEEE operations (tests/test_alerts_batch.py runs both).
@@ -19,9 +22,7 @@ Bit-identity with the per-tick path holds because each row is the value its rule
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
-from itertools import chain
 from typing import TYPE_CHECKING, Callable, Literal, Mapping
 
 import numpy as np
@@ -33,6 +34,7 @@ from monitor.alerts.rules import (NS, ConductorStress, ConductorYield, DamageFra
 
 if TYPE_CHECKING:
     from monitor.alerts.engine import AlertEngine
+    from monitor.alerts.records import AlertRecord
 
 NO_DUE = np.iinfo(np.int64).max  # no forecast due: scan_ticks never stops for one
 
@@ -89,50 +91,56 @@ def _holds(mode, v, on, off, firing, baseline, flag):
 @kernel()
 def scan_ticks(ends, values, flags, mode, on, off, on_delay, off_delay, latching, resend_ns,
                stop, due_ns, j0, firing, pending, clear, last_sent, reset_pending, acked,
-               baseline, last_data):
+               baseline, last_data, sent):
     """Run :meth:`Rule.step` and the engine's re-send test for every rule (row) from tick
-    ``j0`` on; return the first tick where one would return an event or a re-send is due
-    (or ``stop`` is set, or the tick ends at or after ``due_ns``), the tick count when none.
-    The ticks before it are applied: ``pending``/``clear`` move as in ``step`` and
-    ``last_data`` is the last tick with a value per rule; nothing else can change on them."""
+    ``j0`` on; return the first tick where one would return an event (or ``stop`` is set, or
+    the tick ends at or after ``due_ns``), the tick count when none, and how many re-sends
+    the ticks before it made. Those ticks are applied: ``pending``/``clear`` move as in
+    ``step``, ``last_data`` is the last tick with a value per rule, and each re-send due is
+    a row (tick, rule, the rule's ``last_data`` then) of ``sent`` with ``last_sent`` moved
+    to its tick, in the engine's order (tick by tick, rule by rule); nothing else can
+    change on them."""
     n = ends.shape[0]
     rules = mode.shape[0]
+    m = 0
     for j in range(j0, n):
         t = ends[j]
         if stop[j] or t >= due_ns:
-            return j
-        for r in range(rules):  # anything to report at this tick? (changes nothing)
+            return j, m
+        for r in range(rules):  # a transition at this tick? (changes nothing)
             v = values[r, j]
             if v == v:
                 if reset_pending[r]:
-                    return j
+                    return j, m
                 if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
                     if not firing[r]:
                         p = pending[r] if pending[r] >= 0 else t
                         if t - p >= on_delay[r]:
-                            return j
-                        continue  # a quiet rule has nothing to re-send
+                            return j, m
                 elif firing[r] and not latching[r]:
                     c = clear[r] if clear[r] >= 0 else t
                     if t - c >= off_delay[r]:
-                        return j
-            if resend_ns and firing[r] and not acked[r] and t - last_sent[r] >= resend_ns:
-                return j
-        for r in range(rules):  # a quiet tick: only the pending and clearing times move
+                        return j, m
+        for r in range(rules):  # none: the pending and clearing times move, re-sends go
             v = values[r, j]
-            if v != v:
-                continue
-            last_data[r] = j
-            if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
-                if firing[r]:
-                    clear[r] = -1
-                elif pending[r] < 0:
-                    pending[r] = t
-            elif not firing[r]:
-                pending[r] = -1
-            elif not latching[r] and clear[r] < 0:
-                clear[r] = t
-    return n
+            if v == v:
+                last_data[r] = j
+                if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
+                    if firing[r]:
+                        clear[r] = -1
+                    elif pending[r] < 0:
+                        pending[r] = t
+                elif not firing[r]:
+                    pending[r] = -1
+                elif not latching[r] and clear[r] < 0:
+                    clear[r] = t
+            if resend_ns and firing[r] and not acked[r] and t - last_sent[r] >= resend_ns:
+                sent[m, 0] = j
+                sent[m, 1] = r
+                sent[m, 2] = last_data[r]
+                m += 1
+                last_sent[r] = t
+    return n, m
 
 
 @kernel()
@@ -162,12 +170,52 @@ def slack_snap_ticks(t, x, starts, stops, floor, snap_level, window_ns, last_sla
     return values, after
 
 
+@kernel()
+def rejected_rate_ticks(held, ends, received, rejected, window_ns):
+    """:meth:`RejectedRate.observe` over consecutive ticks, from the window entries the rule
+    holds (``held``: rows t, rejected, received): each tick's rate (NaN without samples in
+    the window), and the window after it as rows ``lo..hi-1`` of the returned entries with
+    its totals. Counts are integers below 2**53, so the quotient is observe's (Python's
+    correctly rounded int / int)."""
+    n, m = ends.shape[0], held.shape[0]
+    entries = np.empty((m + n, 3), np.int64)
+    n_rej, n_rec = 0, 0
+    for i in range(m):
+        entries[i] = held[i]
+        n_rej += held[i, 1]
+        n_rec += held[i, 2]
+    values = np.empty(n)
+    lo_at = np.empty(n, np.int64)
+    hi_at = np.empty(n, np.int64)
+    rej_at = np.empty(n, np.int64)
+    rec_at = np.empty(n, np.int64)
+    lo, hi = 0, m
+    for k in range(n):
+        t = ends[k]
+        if received[k]:
+            entries[hi, 0] = t
+            entries[hi, 1] = rejected[k]
+            entries[hi, 2] = received[k]
+            hi += 1
+            n_rej += rejected[k]
+            n_rec += received[k]
+        horizon = t - window_ns
+        while lo < hi and entries[lo, 0] <= horizon:
+            n_rej -= entries[lo, 1]
+            n_rec -= entries[lo, 2]
+            lo += 1
+        values[k] = n_rej / n_rec if n_rec else np.nan
+        lo_at[k], hi_at[k], rej_at[k], rec_at[k] = lo, hi, n_rej, n_rec
+    return values, entries, lo_at, hi_at, rej_at, rec_at
+
+
 def warm_up() -> None:
-    """Compile (or load from numba's cache) both kernels now, on empty input."""
+    """Compile (or load from numba's cache) the kernels now, on empty input."""
     f, i, u = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.uint8)
     slack_snap_ticks(i, f, i, i, 0.0, 0.0, 0, -1)
+    rejected_rate_ticks(np.zeros((0, 3), np.int64), i, i, i, 0)
     scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), i, f, f, i, i, u, 0,
-               np.zeros(0, bool), NO_DUE, 0, u, i, i, i, u, u, f, i)
+               np.zeros(0, bool), NO_DUE, 0, i, i, i, i, i, i, f, i, np.zeros((0, 3), np.int64))
 
 
 class _Row:
@@ -228,25 +276,11 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
 
 def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
     s = x.stream(rule.target)
-    ends = x.ends
-    new = s.received > 0
-    # the window's entries (t, rejected, received): those the rule holds, then one per tick
-    # with samples; the window at tick j is entries lo[j]..hi[j]-1
-    m = len(rule.ticks)
-    entries = np.empty((m + int(np.count_nonzero(new)), 3), np.int64)
-    entries[:m] = np.fromiter(chain.from_iterable(rule.ticks), np.int64, 3 * m).reshape(m, 3)
-    entries[m:, 0], entries[m:, 1], entries[m:, 2] = ends[new], s.rejected[new], s.received[new]
-    sums = np.zeros((entries.shape[0] + 1, 2), np.int64)
-    np.cumsum(entries[:, 1:], axis=0, out=sums[1:])
-    hi = m + np.cumsum(new)
-    lo = np.searchsorted(entries[:, 0], ends - rule.window_ns, side="right")
-    n_rej, n_rec = (sums[hi] - sums[lo]).T
-    # exact int -> float conversions (counts < 2**53): the same quotient as observe's
-    values = np.divide(n_rej, n_rec, out=np.full(ends.shape[0], math.nan), where=n_rec > 0)
+    values, entries, lo, hi, n_rej, n_rec = rejected_rate_ticks(
+        rule.window(), x.ends, s.received, s.rejected, rule.window_ns)
 
     def side(j: int) -> None:
-        rule.ticks = deque(map(tuple, entries[lo[j]:hi[j]].tolist()))
-        rule.rejected, rule.received = int(n_rej[j]), int(n_rec[j])
+        rule.set_window(entries[lo[j]:hi[j]], int(n_rej[j]), int(n_rec[j]))
     return _Row(values, side=side)
 
 
@@ -303,26 +337,32 @@ class TickBatch:
         self.plan, self.engine, self.rules, self.ends = plan, engine, plan.rules, inputs.ends
         self.stop = np.zeros(n, bool)
         self.rows = [build(r, inputs, self.stop) for build, r in zip(plan.builders, plan.rules)]
-        self.values = np.array([row.values for row in self.rows]).reshape(len(self.rows), n)
-        self.flags = np.zeros(self.values.shape, np.uint8)
+        self.values = np.empty((len(self.rows), n))
+        self.flags = np.zeros((len(self.rows), n), np.uint8)
         for i, row in enumerate(self.rows):
+            self.values[i] = row.values
             if row.flags is not None:
                 self.flags[i] = row.flags
+        self.sent = np.empty((len(self.rows) * n, 3), np.int64)  # at most one per rule and tick
         self.reload()
 
-    def run(self, tick: Callable[[int], None],
+    def run(self, tick: Callable[[int], None], sent: Callable[[list[AlertRecord]], None],
             quiet: Callable[[int, int], None] | None = None,
             next_due: Callable[[], int | None] | None = None) -> None:
         """Evaluate every tick: ``tick(k)`` must pass the ``k``-th tick's Observation to
         :meth:`AlertEngine.evaluate` (and may do more), and is called only for ticks where
         something happens or that end at or after ``next_due()``; ``quiet(a, b)`` is told
-        of each run of ticks ``a..b-1`` in between, in order."""
+        of each run of ticks ``a..b-1`` in between, in order, and ``sent`` gets the re-sends
+        those ticks made (the records :meth:`AlertEngine.evaluate` would have returned
+        there), before the next ``tick``."""
         j, n = 0, self.ends.shape[0]
         while True:
             due = next_due() if next_due is not None else None
-            stop = self.scan(j, NO_DUE if due is None else due)
+            stop, m = self.scan(j, NO_DUE if due is None else due)
             if quiet is not None and stop > j:
                 quiet(j, stop)
+            if m:
+                sent(self._resends(m))
             if stop == n:
                 break
             self.sync(stop)
@@ -331,24 +371,40 @@ class TickBatch:
             j = stop + 1
         self.sync(n)
 
-    def scan(self, j0: int, due_ns: int) -> int:
-        """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)."""
+    def scan(self, j0: int, due_ns: int) -> tuple[int, int]:
+        """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)
+        and how many re-sends they made (rows of ``self.sent``)."""
         p = self.plan
-        return int(scan_ticks(self.ends, self.values, self.flags, p.mode, p.on, p.off,
-                              p.on_delay, p.off_delay, p.latching,
-                              self.engine._resend_ns, self.stop, due_ns, j0, self.firing,
-                              self.pending, self.clear, self.last_sent, self.reset_pending,
-                              self.acked, self.baseline, self.last_data))
+        stop, m = scan_ticks(self.ends, self.values, self.flags, p.mode, p.on, p.off,
+                             p.on_delay, p.off_delay, p.latching,
+                             self.engine._resend_ns, self.stop, due_ns, j0, self.firing,
+                             self.pending, self.clear, self.last_sent, self.reset_pending,
+                             self.acked, self.baseline, self.last_data, self.sent)
+        return int(stop), int(m)
+
+    def _resends(self, m: int) -> list[AlertRecord]:
+        """The records of the first ``m`` re-sends of the last scan, each with its rule's
+        value as of its tick (the rule objects are otherwise as then: a re-send needs a
+        firing rule, and its record reads nothing a quiet tick moves)."""
+        out = []
+        for j, r, d in self.sent[:m].tolist():
+            rule = self.rules[r]
+            if d >= 0:  # else the value before the scan: the rule's own
+                rule.value = self.rows[r].value_at(d)
+            out.append(self.engine._record(rule, "resend", int(self.ends[j])))
+        return out
 
     def sync(self, j: int) -> None:
         """Bring the rule objects and the engine to the end of tick ``j - 1``."""
         if j == 0:
             return
+        pending, clear, last_sent, last_data = (
+            a.tolist() for a in (self.pending, self.clear, self.last_sent, self.last_data))
         for i, (rule, row) in enumerate(zip(self.rules, self.rows)):
-            rule.pending_since_ns = int(self.pending[i])
-            rule.clear_since_ns = int(self.clear[i])
-            if self.last_data[i] >= 0:
-                rule.value = row.value_at(int(self.last_data[i]))
+            rule.pending_since_ns, rule.clear_since_ns = pending[i], clear[i]
+            rule.last_sent_ns = last_sent[i]
+            if last_data[i] >= 0:
+                rule.value = row.value_at(last_data[i])
             if row.side is not None:
                 row.side(j - 1)
         self.engine.last_t_ns = int(self.ends[j - 1])
@@ -356,11 +412,9 @@ class TickBatch:
     def reload(self) -> None:
         """Take the rules' firing state from the rule objects (after an ordinary tick)."""
         rules = self.rules
-        self.firing = np.array([r.firing for r in rules], np.uint8)
-        self.pending = np.array([r.pending_since_ns for r in rules], np.int64)
-        self.clear = np.array([r.clear_since_ns for r in rules], np.int64)
-        self.last_sent = np.array([r.last_sent_ns for r in rules], np.int64)
-        self.reset_pending = np.array([r.reset_pending for r in rules], np.uint8)
-        self.acked = np.array([bool(r.acked_by) for r in rules], np.uint8)
+        # one array, a row per field (contiguous: the scan writes into the rows)
+        (self.firing, self.pending, self.clear, self.last_sent, self.reset_pending, self.acked,
+         self.last_data) = np.array(
+            [(r.firing, r.pending_since_ns, r.clear_since_ns, r.last_sent_ns, r.reset_pending,
+              r.acked_by != "", -1) for r in rules], np.int64).reshape(len(rules), 7).T.copy()
         self.baseline = np.array([getattr(r, "baseline", 0.0) for r in rules], np.float64)
-        self.last_data = np.full(len(rules), -1, np.int64)

@@ -15,6 +15,7 @@ The JSON forms:
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -70,7 +71,13 @@ def fingerprint(labels: Mapping[str, str]) -> str:
     change between processes, so a fingerprint in a state file or an operator's ``ack``
     still matches after a restart.
     """
-    text = "\n".join(f"{k}={labels[k]}" for k in sorted(labels))
+    return _digest("\n".join(f"{k}={labels[k]}" for k in sorted(labels)))
+
+
+@functools.lru_cache(maxsize=4096)
+def _digest(text: str) -> str:
+    """The fingerprint of a label text; cached (a pure function of it): a long replay makes
+    thousands of records (re-sends) of the same few alert instances."""
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
 

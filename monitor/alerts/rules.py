@@ -446,22 +446,49 @@ class RejectedRate(Rule):
     def __init__(self, cfg: RuleConfig, target: str) -> None:
         super().__init__(cfg, target)
         self.window_ns = int(round(cfg.params["window_s"] * NS))
-        self.ticks: deque[tuple[int, int, int]] = deque()  # (t_ns, rejected, received)
+        # the window's entries (t_ns, rejected, received), oldest first: a deque, or (after
+        # the replay batch, monitor.alerts.batch, moved the window) rows of an int64 array
+        # turned into the deque only when something reads it
+        self._ticks: deque[tuple[int, int, int]] | None = deque()
+        self._held = np.zeros((0, 3), np.int64)
         self.rejected = 0
         self.received = 0
+
+    @property
+    def ticks(self) -> deque[tuple[int, int, int]]:
+        """The window's entries (t_ns, rejected, received), oldest first."""
+        if self._ticks is None:
+            self._ticks = deque(map(tuple, self._held.tolist()))
+        return self._ticks
+
+    @ticks.setter
+    def ticks(self, entries: deque[tuple[int, int, int]]) -> None:
+        self._ticks = entries
+
+    def window(self) -> np.ndarray:
+        """The window's entries as rows of an int64 array."""
+        if self._ticks is None:
+            return self._held
+        return np.array(self._ticks, np.int64).reshape(len(self._ticks), 3)
+
+    def set_window(self, entries: np.ndarray, rejected: int, received: int) -> None:
+        """Set the window to ``entries`` (rows t_ns, rejected, received) and its totals."""
+        self._ticks, self._held = None, entries
+        self.rejected, self.received = rejected, received
 
     def observe(self, obs: Observation, tick: TickStats) -> float | None:
         s = obs.streams.get(self.target)
         if s is None:
             return None
         t = obs.t_ns
+        ticks = self.ticks
         if s.received_in_tick:
-            self.ticks.append((t, s.rejected_in_tick, s.received_in_tick))
+            ticks.append((t, s.rejected_in_tick, s.received_in_tick))
             self.rejected += s.rejected_in_tick
             self.received += s.received_in_tick
         horizon = t - self.window_ns
-        while self.ticks and self.ticks[0][0] <= horizon:
-            _, rej, rec = self.ticks.popleft()
+        while ticks and ticks[0][0] <= horizon:
+            _, rej, rec = ticks.popleft()
             self.rejected -= rej
             self.received -= rec
         return self.rejected / self.received if self.received else None
