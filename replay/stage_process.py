@@ -1,0 +1,258 @@
+"""The replay's reading and stream stage in a child process, its tick stage in this one: the
+second core does half the work of one log.
+
+``Pipeline.ingest`` (the stream stage) never reads the tick stage's state and the tick stage
+reads the stream stage's only in the slab's hand-over (monitor.pipeline), so a forked child
+can read the log and run the stream stage on its own copy of the pipeline while this process
+runs ``Pipeline.advance`` on the hand-overs, in order; at the end the child sends its stream
+stage's objects back and this pipeline takes them, so its report and state are those of one
+process to the last bit. Threads cannot do this (replay.stages): both stages' Python holds
+the GIL most of the time.
+
+The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5) with
+its arrays sent out of band through a pipe and read straight into fresh buffers (two copies
+of about 90 MB per day of default streams: the block itself only when a sink has a block
+hook, a stream's slab without the accepted values the tick stage never reads). The pipe's
+buffer (1 MB) and the slab the child is working on are all the child can be ahead, so memory
+stays flat in log length.
+
+A child that fails sends its exception, raised here; a child that dies (killed, out of
+memory) closes the pipe: :class:`ChildDied` here, nothing saved (``--state`` is written only
+after a complete replay), nothing left running. An exception here (a sink) closes the pipe,
+which stops the child at its next send.
+
+When it is used (:func:`child_pays`): this process may run on at least two CPUs and the
+logs inflate to at least :data:`CHILD_MIN_BYTES` (figures in bench/bench_threads.py).
+"""
+
+from __future__ import annotations
+
+import copyreg
+import fcntl
+import importlib
+import io
+import itertools
+import logging
+import multiprocessing
+import os
+import pickle
+import traceback
+import types
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Sequence
+
+import numpy as np
+
+from monitor.blocks import SampleBlock
+from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
+
+log = logging.getLogger(__name__)
+
+# Logs inflating to less than this replay in one process: forking and the hand-over cost
+# more than they save on a few minutes of data (bench/bench_threads.py).
+CHILD_MIN_BYTES = 20_000_000
+_PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
+
+# The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
+_STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
+                 "estimator", "selector", "stats", "_full_estimate")
+_LEARNER_FEEDS = ("stress", "heave", "accel")  # the sea-state learner's feeding side
+
+
+class ChildDied(RuntimeError):
+    """The child process reading the log ended without a word (killed, out of memory)."""
+
+
+def child_pays(files: Sequence[Path]) -> bool:
+    """Whether to replay these logs with the reading and stream stage in a child process:
+    at least two CPUs for this process and at least :data:`CHILD_MIN_BYTES` of data."""
+    from replay.log_files import inflated_size
+
+    if len(os.sched_getaffinity(0)) < 2:
+        return False
+    size = inflated_size(files)
+    return size is not None and size >= CHILD_MIN_BYTES
+
+
+# ---------------------------------------------------------------------------------- pickling
+def _stream_slab(t: np.ndarray, codes: np.ndarray, acc_t: np.ndarray | None,
+                 rej_t: np.ndarray, before: tuple) -> _StreamSlab:
+    """A stream's slab as the tick stage reads it (its accepted values are the stream
+    stage's: left out)."""
+    slab = _StreamSlab.__new__(_StreamSlab)
+    slab.t, slab.codes, slab.rej_t, slab._before = t, codes, rej_t, before
+    slab.acc_t = t if acc_t is None else acc_t
+    slab.acc_values = None
+    return slab
+
+
+def _reduce_stream_slab(s: _StreamSlab) -> tuple:
+    return _stream_slab, (s.t, s.codes, None if s.acc_t is s.t else s.acc_t, s.rej_t, s._before)
+
+
+class _Pickler(pickle.Pickler):
+    dispatch_table = copyreg.dispatch_table.copy()
+    dispatch_table[_StreamSlab] = _reduce_stream_slab
+    # the estimator keeps the model modules it calls
+    dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
+
+
+def _send(fd: int, kind: str, obj: Any) -> None:
+    """``(kind, obj)`` as a header (the pickle without its arrays' data, their sizes) and
+    then each array's bytes."""
+    buffers: list[pickle.PickleBuffer] = []
+    meta = io.BytesIO()
+    _Pickler(meta, protocol=5, buffer_callback=buffers.append).dump(obj)
+    raws = [b.raw() for b in buffers]
+    header = pickle.dumps((kind, meta.getvalue(), [r.nbytes for r in raws]), protocol=5)
+    _write(fd, len(header).to_bytes(8, "little"))
+    _write(fd, header)
+    for raw in raws:
+        _write(fd, raw)
+
+
+def _write(fd: int, data: Any) -> None:
+    view = memoryview(data).cast("B")
+    while view.nbytes:
+        view = view[os.write(fd, view):]
+
+
+def _read_into(fd: int, buf: Any) -> None:
+    view = memoryview(buf).cast("B")
+    while view.nbytes:
+        n = os.readv(fd, [view])
+        if n == 0:
+            raise EOFError
+        view = view[n:]
+
+
+def _receive(fd: int) -> tuple[str, Any]:
+    size = np.empty(8, np.uint8)
+    _read_into(fd, size)
+    header = np.empty(int.from_bytes(size.tobytes(), "little"), np.uint8)
+    _read_into(fd, header)
+    kind, meta, sizes = pickle.loads(header)
+    buffers = [np.empty(n, np.uint8) for n in sizes]  # writable: the arrays are the tick stage's
+    for buf in buffers:
+        _read_into(fd, buf)
+    return kind, pickle.loads(meta, buffers=buffers)
+
+
+# ---------------------------------------------------------------------------------- the child
+class WantsQc:
+    """Stands for the parent's sinks in the child's pipeline: whether one reads the slab's QC
+    counts (Pipeline computes them only then). The child calls no sink."""
+
+    def __init__(self, wants_qc: bool) -> None:
+        self.wants_qc = wants_qc
+
+    def close(self) -> None:
+        pass
+
+
+def _stream_state(pipeline: Pipeline) -> dict[str, Any]:
+    learner = pipeline.sea_states
+    return {"pipeline": {a: getattr(pipeline, a) for a in _STREAM_ATTRS},
+            "learner": None if learner is None else {
+                "_new_waves": learner._new_waves,
+                **{f: (getattr(learner, f).current, getattr(learner, f)._finished)
+                   for f in _LEARNER_FEEDS}}}
+
+
+def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
+    """Give ``pipeline`` the stream stage's objects of the child's pipeline."""
+    for attr, value in state["pipeline"].items():
+        setattr(pipeline, attr, value)
+    if state["learner"] is not None:
+        learner = pipeline.sea_states
+        learner._new_waves = state["learner"]["_new_waves"]
+        for f in _LEARNER_FEEDS:
+            feed = getattr(learner, f)
+            feed.current, feed._finished = state["learner"][f]
+
+
+def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline: Any,
+           send_blocks: bool, reader: Any) -> None:
+    """The child: read, send the first block's buoy id, run the stream stage, send the
+    hand-overs, then the stream stage's state, the blocks of other buoys and the reader's
+    statistics."""
+    os.close(other_fd)  # the parent's end: a parent gone then fails the next send
+    try:
+        source = iter(blocks)
+        first = next(source, None)
+        _send(fd, "first", None if first is None else first.buoy_id)
+        ignored: dict[str, int] = {}
+        streams = None
+        if first is not None:
+            pipeline = make_pipeline(first.buoy_id)
+            for block in itertools.chain([first], source):
+                if block.buoy_id != pipeline.buoy_id:
+                    ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
+                    continue
+                intake = pipeline.ingest(block)
+                done = (len(block), block.t_last_ns)
+                if not send_blocks:
+                    intake = _without_block(intake)
+                _send(fd, "slab", (intake, done))
+            _send(fd, "slab", (pipeline.ingest_end(), None))
+            streams = _stream_state(pipeline)
+        _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
+    except BrokenPipeError:  # the parent stopped reading: it has its own exception
+        pass
+    except BaseException as exc:  # noqa: BLE001 - handed to the parent
+        try:
+            pickle.dumps(exc)
+        except Exception:  # noqa: BLE001 - an exception that does not pickle: its text
+            exc = RuntimeError("".join(traceback.format_exception(exc)))
+        try:
+            _send(fd, "error", exc)
+        except BrokenPipeError:
+            pass
+    finally:
+        os.close(fd)
+
+
+def _without_block(intake: SlabIntake) -> SlabIntake:
+    """The hand-over without its block (no sink reads it here: send no samples twice)."""
+    import dataclasses
+
+    return dataclasses.replace(intake, block=None)
+
+
+# --------------------------------------------------------------------------------- the parent
+def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool
+                 ) -> Iterator[tuple[str, Any]]:
+    """Read ``blocks`` and run the stream stage in a forked child; yields, in order,
+    ``("first", buoy id or None)``, then ``("slab", (intake, (samples, last time) or None
+    for the flush))`` per slab and ``("end", (stream state or None, ignored blocks, reader
+    statistics))``. ``make_pipeline(buoy_id)`` builds the child's pipeline (as the caller
+    builds its own); ``send_blocks``: the intakes carry their blocks. The child's exception
+    is raised here; :class:`ChildDied` if it ends without a word. Closing the generator
+    stops the child."""
+    read_fd, write_fd = os.pipe()
+    fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
+    ctx = multiprocessing.get_context("fork")
+    child = ctx.Process(target=_child, name="buoymon-stream",
+                        args=(write_fd, read_fd, blocks, make_pipeline, send_blocks,
+                              blocks if hasattr(blocks, "stats") else None), daemon=True)
+    child.start()
+    os.close(write_fd)
+    try:
+        while True:
+            try:
+                kind, obj = _receive(read_fd)
+            except EOFError:
+                child.join(5)
+                raise ChildDied(f"the replay's reading process ended without finishing the "
+                                f"log (exit code {child.exitcode})") from None
+            if kind == "error":
+                raise obj
+            yield kind, obj
+            if kind == "end":
+                return
+    finally:
+        os.close(read_fd)  # the child's next send fails: it stops
+        child.join(5)
+        if child.is_alive():
+            child.kill()
+            child.join()
