@@ -90,6 +90,10 @@ def _reduce_stream_slab(s: _StreamSlab) -> tuple:
     return _stream_slab, (s.t, s.codes, None if s.acc_t is s.t else s.acc_t, s.rej_t, s._before)
 
 
+def _no_block() -> None:
+    return None
+
+
 class _Pickler(pickle.Pickler):
     dispatch_table = copyreg.dispatch_table.copy()
     dispatch_table[_StreamSlab] = _reduce_stream_slab
@@ -97,12 +101,18 @@ class _Pickler(pickle.Pickler):
     dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
 
 
-def _send(fd: int, kind: str, obj: Any) -> None:
+class _BlocklessPickler(_Pickler):
+    """Sends a hand-over's block as None: no sink here reads it (no samples sent twice)."""
+
+    dispatch_table = {**_Pickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
+
+
+def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
     """``(kind, obj)`` as a header (the pickle without its arrays' data, their sizes) and
     then each array's bytes."""
     buffers: list[pickle.PickleBuffer] = []
     meta = io.BytesIO()
-    _Pickler(meta, protocol=5, buffer_callback=buffers.append).dump(obj)
+    pickler(meta, protocol=5, buffer_callback=buffers.append).dump(obj)
     raws = [b.raw() for b in buffers]
     header = pickle.dumps((kind, meta.getvalue(), [r.nbytes for r in raws]), protocol=5)
     _write(fd, len(header).to_bytes(8, "little"))
@@ -183,17 +193,15 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
         _send(fd, "first", None if first is None else first.buoy_id)
         ignored: dict[str, int] = {}
         streams = None
+        pickler = _Pickler if send_blocks else _BlocklessPickler
         if first is not None:
             pipeline = make_pipeline(first.buoy_id)
             for block in itertools.chain([first], source):
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
                     continue
-                intake = pipeline.ingest(block)
-                done = (len(block), block.t_last_ns)
-                if not send_blocks:
-                    intake = _without_block(intake)
-                _send(fd, "slab", (intake, done))
+                _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
+                      pickler)
             _send(fd, "slab", (pipeline.ingest_end(), None))
             streams = _stream_state(pipeline)
         _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
@@ -210,13 +218,6 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
             pass
     finally:
         os.close(fd)
-
-
-def _without_block(intake: SlabIntake) -> SlabIntake:
-    """The hand-over without its block (no sink reads it here: send no samples twice)."""
-    import dataclasses
-
-    return dataclasses.replace(intake, block=None)
 
 
 # --------------------------------------------------------------------------------- the parent
