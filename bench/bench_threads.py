@@ -46,6 +46,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import time
 
@@ -53,36 +54,55 @@ from monitor.config import default_config
 from replay.reader import LogReader
 from replay.runner import run_blocks
 
+# mode: (the reader's read-ahead thread, the stream stage on a thread, in a child process)
+MODES = {"turn": (True, False, False), "turn-no-ra": (False, False, False),
+         "threads": (True, True, False), "child": (False, False, True),
+         "child-ra": (True, False, True)}
 
-def replay(log: str, threads: bool) -> tuple[float, float, bytes]:
-    """(wall s, CPU s, report and state bytes) of one replay."""
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def replay(log: str, mode: str) -> tuple[float, float, float, bytes]:
+    """(wall s, this process's CPU s, the child's CPU s, report and state bytes) of one
+    replay."""
+    read_ahead, threads, child = MODES[mode]
     cfg = default_config()
-    wall, cpu = time.perf_counter(), time.process_time()
-    pipeline, _ = run_blocks(cfg, LogReader([log]), threads=threads)
+    wall, cpu, kids = time.perf_counter(), time.process_time(), _children_cpu()
+    pipeline, _ = run_blocks(cfg, LogReader([log], read_ahead=read_ahead), threads=threads,
+                             child=child)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     out = json.dumps([pipeline.report(), pipeline.state()], allow_nan=True).encode()
-    return wall, cpu, out
+    return wall, cpu, _children_cpu() - kids, out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("log")
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--modes", default="turn,turn-no-ra,threads,child,child-ra",
+                    help=f"comma-separated, of {', '.join(MODES)}")
     args = ap.parse_args()
-    replay(args.log, True)  # warm: compile cache, model cache, page cache
-    print(f"load average before: {os.getloadavg()}")
-    runs: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    modes = args.modes.split(",")
+    for mode in modes:  # warm: compile cache, model cache, page cache
+        replay(args.log, mode)
+    print(f"load average before: {os.getloadavg()}, CPUs {len(os.sched_getaffinity(0))}")
+    runs: dict[str, list[tuple[float, float, float]]] = {m: [] for m in modes}
     outputs = set()
     for _ in range(args.rounds):
-        for threads in (False, True):
-            wall, cpu, out = replay(args.log, threads)
-            runs[threads].append((wall, cpu))
+        for mode in modes:
+            *figures, out = replay(args.log, mode)
+            runs[mode].append(tuple(figures))
             outputs.add(out)
     print(f"load average after:  {os.getloadavg()}")
-    for threads, label in ((False, "sequential"), (True, "threaded  ")):
-        walls, cpus = zip(*runs[threads])
-        print(f"{label} wall best {min(walls):.3f} median {statistics.median(walls):.3f} s, "
-              f"CPU best {min(cpus):.3f} median {statistics.median(cpus):.3f} s")
+    for mode in modes:
+        walls, cpus, kids = zip(*runs[mode])
+        print(f"{mode:11s} wall best {min(walls):.3f} median {statistics.median(walls):.3f} s, "
+              f"CPU best {min(cpus):.3f} median {statistics.median(cpus):.3f} s"
+              + (f", child CPU best {min(kids):.3f} median {statistics.median(kids):.3f} s"
+                 if MODES[mode][2] else ""))
     print("report and state identical in every run" if len(outputs) == 1
           else f"DIFFERENT outputs: {len(outputs)}")
 

@@ -261,6 +261,9 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
         return replay_pipeline(_log_config(config, state, buoy_id, warn=False),
                                [WantsQc(wants_qc)], state)
 
+    # before the fork: the compiled kernels both processes call are loaded once (the
+    # pipeline's warm-up; about 0.3 s of CPU each would load them again)
+    child_pipeline(config.buoy.id)
     n_blocks = n_samples = 0
     messages = run_in_child(blocks, child_pipeline,
                             send_blocks=any(hasattr(s, "on_block") for s in sinks))

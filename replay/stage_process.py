@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import copyreg
 import fcntl
+import gc
 import importlib
 import io
 import itertools
@@ -236,7 +237,13 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     child = ctx.Process(target=_child, name="buoymon-stream",
                         args=(write_fd, read_fd, blocks, make_pipeline, send_blocks,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)
-    child.start()
+    # the child's garbage collections then skip the objects it inherits: they would write
+    # to every one of them, copying each page of this process's heap
+    gc.freeze()
+    try:
+        child.start()
+    finally:
+        gc.unfreeze()
     os.close(write_fd)
     try:
         while True:
