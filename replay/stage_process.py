@@ -37,6 +37,8 @@ import logging
 import multiprocessing
 import os
 import pickle
+import queue
+import threading
 import traceback
 import types
 from pathlib import Path
@@ -53,6 +55,7 @@ log = logging.getLogger(__name__)
 # more than they save on a few minutes of data (bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
+AHEAD = 4  # hand-overs the child may have packed and not yet written (memory: that many slabs)
 
 # The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
 _STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
@@ -108,18 +111,56 @@ class _BlocklessPickler(_Pickler):
     dispatch_table = {**_Pickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
 
 
-def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
-    """``(kind, obj)`` as a header (the pickle without its arrays' data, their sizes) and
-    then each array's bytes."""
+def _pack(kind: str, obj: Any, pickler: type[pickle.Pickler]) -> list[Any]:
+    """``(kind, obj)`` as the byte strings to send: the header's length, the header (the
+    pickle without its arrays' data, their sizes), each array's bytes (not copied)."""
     buffers: list[pickle.PickleBuffer] = []
     meta = io.BytesIO()
     pickler(meta, protocol=5, buffer_callback=buffers.append).dump(obj)
     raws = [b.raw() for b in buffers]
     header = pickle.dumps((kind, meta.getvalue(), [r.nbytes for r in raws]), protocol=5)
-    _write(fd, len(header).to_bytes(8, "little"))
-    _write(fd, header)
-    for raw in raws:
-        _write(fd, raw)
+    return [len(header).to_bytes(8, "little"), header, *raws]
+
+
+class _Sender:
+    """Writes the packed messages to the pipe on a thread, up to :data:`AHEAD` behind: the
+    child computes on while the parent is not reading (the pipe alone holds about one slab;
+    on a loaded machine each wait for the parent to be scheduled would stall the child).
+    The writes hold no GIL. :meth:`send` raises BrokenPipeError once the parent is gone."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.queue: queue.Queue = queue.Queue(maxsize=AHEAD)
+        self.broken = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="buoymon-send", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while (parts := self.queue.get()) is not None:
+            try:
+                for part in parts:
+                    _write(self.fd, part)
+            except BrokenPipeError:
+                self.broken.set()
+                return
+
+    def send(self, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
+        self._put(_pack(kind, obj, pickler))
+
+    def _put(self, item: list[Any] | None) -> None:
+        while not self.broken.is_set():
+            try:
+                self.queue.put(item, timeout=0.05)
+                return
+            except queue.Full:
+                continue
+        raise BrokenPipeError
+
+    def close(self) -> None:
+        """Wait for everything sent to be written."""
+        if not self.broken.is_set():
+            self._put(None)
+        self.thread.join()
 
 
 def _write(fd: int, data: Any) -> None:
@@ -188,10 +229,11 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
     hand-overs, then the stream stage's state, the blocks of other buoys and the reader's
     statistics."""
     os.close(other_fd)  # the parent's end: a parent gone then fails the next send
+    sender = _Sender(fd)
     try:
         source = iter(blocks)
         first = next(source, None)
-        _send(fd, "first", None if first is None else first.buoy_id)
+        sender.send("first", None if first is None else first.buoy_id)
         ignored: dict[str, int] = {}
         streams = None
         pickler = _Pickler if send_blocks else _BlocklessPickler
@@ -201,11 +243,11 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
                     continue
-                _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
-                      pickler)
-            _send(fd, "slab", (pipeline.ingest_end(), None))
+                sender.send("slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
+                            pickler)
+            sender.send("slab", (pipeline.ingest_end(), None))
             streams = _stream_state(pipeline)
-        _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
+        sender.send("end", (streams, ignored, getattr(reader, "stats", None)))
     except BrokenPipeError:  # the parent stopped reading: it has its own exception
         pass
     except BaseException as exc:  # noqa: BLE001 - handed to the parent
@@ -214,10 +256,11 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
         except Exception:  # noqa: BLE001 - an exception that does not pickle: its text
             exc = RuntimeError("".join(traceback.format_exception(exc)))
         try:
-            _send(fd, "error", exc)
+            sender.send("error", exc)
         except BrokenPipeError:
             pass
     finally:
+        sender.close()
         os.close(fd)
 
 
