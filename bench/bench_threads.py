@@ -5,7 +5,7 @@ after a warm-up replay), alternating sequential and threaded runs, and prints th
 median wall and CPU seconds of each, the load average before and after, and whether every
 run gave the same report and state bytes.
 
-usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N]
+usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N] [--modes M,..] [--warm-log L]
 
 Measured 2026-11-25 on the 2-core development machine, never quiet (other sessions' test
 suites: load average 1.4 to 9 on 2 cores, so the wall times measure them too), the 1-day
@@ -84,10 +84,11 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--modes", default="turn,turn-no-ra,threads,child,child-ra",
                     help=f"comma-separated, of {', '.join(MODES)}")
+    ap.add_argument("--warm-log", help="warm up on this log (default: LOG itself)")
     args = ap.parse_args()
     modes = args.modes.split(",")
     for mode in modes:  # warm: compile cache, model cache, page cache
-        replay(args.log, mode)
+        replay(args.warm_log or args.log, mode)
     print(f"load average before: {os.getloadavg()}, CPUs {len(os.sched_getaffinity(0))}")
     runs: dict[str, list[tuple[float, float, float]]] = {m: [] for m in modes}
     outputs = set()

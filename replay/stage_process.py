@@ -280,8 +280,9 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     child = ctx.Process(target=_child, name="buoymon-stream",
                         args=(write_fd, read_fd, blocks, make_pipeline, send_blocks,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)
-    # the child's garbage collections then skip the objects it inherits: they would write
-    # to every one of them, copying each page of this process's heap
+    # (multiprocessing flushes the standard streams before it forks: nothing this process
+    # buffered is written twice.) The child's garbage collections then skip the objects it
+    # inherits: they would write to every one of them, copying each page of this heap
     gc.freeze()
     try:
         child.start()
