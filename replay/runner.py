@@ -253,7 +253,7 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
                     forecasts: Sequence[tuple[str, Any, int]], start: float
                     ) -> tuple[Pipeline, ReplayResult]:
     """:func:`run_blocks` with the reading and the stream stage in a child process."""
-    from replay.stage_process import WantsQc, run_in_child, take_stream_state
+    from replay.stage_process import WantsQc, intake_of, run_in_child, take_stream_state
 
     wants_qc = any(getattr(s, "wants_qc", False) for s in sinks)
 
@@ -278,8 +278,8 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
             if kind == "end":
                 stream_state, ignored, stats = message
                 break
-            intake, done = message
-            pipeline.advance(intake)
+            fields, done = message
+            pipeline.advance(intake_of(fields, pipeline.components))
             if done is not None:
                 n_blocks += 1
                 n_samples += done[0]

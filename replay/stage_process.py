@@ -10,10 +10,11 @@ process to the last bit. Threads cannot do this (replay.stages): both stages' Py
 the GIL most of the time.
 
 The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5) with
-its arrays sent out of band through a pipe and read straight into fresh buffers (two copies
-of about 90 MB per day of default streams: the block itself only when a sink has a block
-hook, a stream's slab without the accepted values the tick stage never reads). The pipe's
-buffer (1 MB) and the slab the child is working on are all the child can be ahead, so memory
+its arrays sent out of band through a pipe and read straight into fresh buffers (46 MB a day
+of the default streams, copied twice: the block itself only when a sink has a block hook, a
+stream's slab without the accepted values the tick stage never reads, the components'
+stresses computed again here). The pipe's buffer (1 MB), the child's sender thread's
+:data:`AHEAD` slabs and the slab it is working on are all the child can be ahead, so memory
 stays flat in log length.
 
 A child that fails sends its exception, raised here; a child that dies (killed, out of
@@ -28,12 +29,12 @@ logs inflate to at least :data:`CHILD_MIN_BYTES` (figures in bench/bench_threads
 from __future__ import annotations
 
 import copyreg
+import dataclasses
 import fcntl
 import gc
 import importlib
 import io
 import itertools
-import logging
 import multiprocessing
 import os
 import pickle
@@ -42,14 +43,13 @@ import threading
 import traceback
 import types
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence
+from typing import Any, Generator, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from monitor.blocks import SampleBlock
+from monitor.components import Component
 from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
-
-log = logging.getLogger(__name__)
 
 # Logs inflating to less than this replay in one process: forking and the hand-over cost
 # more than they save on a few minutes of data (bench/bench_threads.py).
@@ -86,7 +86,7 @@ def _stream_slab(t: np.ndarray, codes: np.ndarray, acc_t: np.ndarray | None,
     slab = _StreamSlab.__new__(_StreamSlab)
     slab.t, slab.codes, slab.rej_t, slab._before = t, codes, rej_t, before
     slab.acc_t = t if acc_t is None else acc_t
-    slab.acc_values = None
+    slab.acc_values = None  # type: ignore[assignment]  # read here, it fails loudly
     return slab
 
 
@@ -98,9 +98,30 @@ def _no_block() -> None:
     return None
 
 
+# A hand-over travels as the tuple of its fields, without the components' stresses: the
+# parent computes them again from the load (3 ms of CPU a day of data, against 28 MB a day
+# to copy twice; the same function of the same samples: the same bits).
+_INTAKE_FIELDS = tuple(f.name for f in dataclasses.fields(SlabIntake))
+_STRESSES, _LOAD = _INTAKE_FIELDS.index("stresses"), _INTAKE_FIELDS.index("v")
+
+
+def _reduce_intake(intake: SlabIntake) -> tuple:
+    fields = [getattr(intake, name) for name in _INTAKE_FIELDS]
+    fields[_STRESSES] = None
+    return tuple, (fields,)
+
+
+def intake_of(fields: tuple, components: Mapping[str, Component]) -> SlabIntake:
+    """The hand-over the child sent as ``fields``, with the stresses of ``components``."""
+    stresses = {name: c.stress(fields[_LOAD], record=False) for name, c in components.items()}
+    head, tail = fields[:_STRESSES], fields[_STRESSES + 1:]
+    return SlabIntake(*head, stresses, *tail)  # type: ignore[call-arg]
+
+
 class _Pickler(pickle.Pickler):
     dispatch_table = copyreg.dispatch_table.copy()
     dispatch_table[_StreamSlab] = _reduce_stream_slab
+    dispatch_table[SlabIntake] = _reduce_intake
     # the estimator keeps the model modules it calls
     dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
 
@@ -179,9 +200,9 @@ def _read_into(fd: int, buf: Any) -> None:
 
 
 def _receive(fd: int) -> tuple[str, Any]:
-    size = np.empty(8, np.uint8)
+    size = bytearray(8)
     _read_into(fd, size)
-    header = np.empty(int.from_bytes(size.tobytes(), "little"), np.uint8)
+    header = bytearray(int.from_bytes(size, "little"))
     _read_into(fd, header)
     kind, meta, sizes = pickle.loads(header)
     buffers = [np.empty(n, np.uint8) for n in sizes]  # writable: the arrays are the tick stage's
@@ -197,6 +218,9 @@ class WantsQc:
 
     def __init__(self, wants_qc: bool) -> None:
         self.wants_qc = wants_qc
+
+    def on_step(self, step: Any) -> None:  # the tick stage's: never runs in the child
+        pass
 
     def close(self) -> None:
         pass
@@ -215,8 +239,8 @@ def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
     """Give ``pipeline`` the stream stage's objects of the child's pipeline."""
     for attr, value in state["pipeline"].items():
         setattr(pipeline, attr, value)
-    if state["learner"] is not None:
-        learner = pipeline.sea_states
+    learner = pipeline.sea_states
+    if state["learner"] is not None and learner is not None:
         learner._new_waves = state["learner"]["_new_waves"]
         for f in _LEARNER_FEEDS:
             feed = getattr(learner, f)
@@ -266,10 +290,10 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
 
 # --------------------------------------------------------------------------------- the parent
 def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool
-                 ) -> Iterator[tuple[str, Any]]:
+                 ) -> Generator[tuple[str, Any], None, None]:
     """Read ``blocks`` and run the stream stage in a forked child; yields, in order,
-    ``("first", buoy id or None)``, then ``("slab", (intake, (samples, last time) or None
-    for the flush))`` per slab and ``("end", (stream state or None, ignored blocks, reader
+    ``("first", buoy id or None)``, then ``("slab", (the intake's fields (:func:`intake_of`),
+    (samples, last time) or None for the flush))`` per slab and ``("end", (stream state or None, ignored blocks, reader
     statistics))``. ``make_pipeline(buoy_id)`` builds the child's pipeline (as the caller
     builds its own); ``send_blocks``: the intakes carry their blocks. The child's exception
     is raised here; :class:`ChildDied` if it ends without a word. Closing the generator
