@@ -1,11 +1,59 @@
-"""The replay's stream stage on a second thread (replay.stages) against both stages in turn.
+"""The second core in a replay of one log: the stream stage on a second thread
+(replay.stages), or the reading and the stream stage in a child process
+(replay.stage_process), against both stages in turn in one process.
 
-Replays one log in-process (``replay.runner.run_blocks`` with the default configuration,
-after a warm-up replay), alternating sequential and threaded runs, and prints the best and
-median wall and CPU seconds of each, the load average before and after, and whether every
-run gave the same report and state bytes.
+Replays one log (``replay.runner.run_blocks`` with the default configuration, after a
+warm-up replay of every mode), the modes interleaved round by round, and prints the best and
+median wall and CPU seconds of each (a child's CPU apart), the load average before and after,
+and whether every run gave the same report and state bytes. Modes: ``turn`` (one process,
+the reader's read-ahead thread), ``turn-no-ra`` (one thread), ``threads``, ``child`` (the
+child reads on its own thread), ``child-ra`` (the child with its read-ahead thread: what
+``buoymon replay`` runs on 2 CPUs).
 
 usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N] [--modes M,..] [--warm-log L]
+
+The child process (2026-11-25 21:20-22:45 UTC, same machine, never quiet: load average 3.7
+to 6.9 from other sessions' test suites, so every wall time below measures them too; the
+quiet-machine figures are still to be taken):
+
+* Where one process's time goes, 1-day log, one core, in-process per slab (load 2.6):
+  reading 0.085, stream stage (``ingest``) 0.135, tick stage (``advance``) 0.135 CPU-s. So a
+  child that reads and runs the stream stage carries ~60 % of the work, the tick stage ~40 %.
+* The hand-over, per day of the default streams: pickled as they are 162 MB (the block
+  55 MB, the stream slabs' accepted values 35 MB that the tick stage never reads, the
+  components' stresses 28 MB); sent without those (a block only when a sink has a block
+  hook; the stresses computed again by the tick stage's process: 3 ms a day) 46 MB. A pipe
+  moves 72 MB in 0.008 CPU-s (writer) / 0.012 (reader); what the hand-over costs is pickling
+  (~0.02-0.04 CPU-s a day in the child) and receiving into fresh buffers and unpickling
+  (0.055 -> 0.040 CPU-s a day with the stresses left out).
+* 1-day log, 5 rounds, load 3.7-3.9 (first build, before the sender thread and the stresses
+  change): wall best / median ``turn`` 0.345 / 0.467, ``turn-no-ra`` 0.379 / 0.460,
+  ``threads`` 0.426 / 0.686, ``child`` 0.600 / 0.716, ``child-ra`` 0.437 / 0.696 s; CPU
+  ``turn`` 0.398, the child modes 0.237 here + 0.331 in the child.
+* 1-day log, 5 rounds, load 6.6 (final build): ``turn-no-ra`` 0.927 / 1.159, ``child``
+  1.144 / 1.319, ``child-ra`` 1.080 / 1.377 s wall; CPU 0.404 against 0.230 + 0.351.
+* 30-day benchmark log (/tmp/perf_bench/log_30d.mcap, 51.8 M tension samples), one round,
+  load 6.6-6.9 (build e20d987, the stresses still sent): ``turn`` 33.86 s wall, 14.80 CPU-s;
+  ``child-ra`` 33.74 s wall, 7.73 CPU-s here + 9.90 in the child. As ``buoymon replay`` runs
+  it (``replay_logs`` in a fresh process, load 6.2, final build): 32.03 s
+  wall, 7.23 + 9.40 CPU-s; peak RSS 188 MB here + 154 MB in the child, against 177 + 146 MB
+  for the 1-day log (+6.2 % / +5.2 %, +5.8 % together; the two share the libraries and
+  compiled kernels, so together they hold less than the sum); report and state identical
+  to the golden of main 7e8ba84 (golden30.sh).
+* A fresh process (``replay_logs`` of the 1-day log, load 4.3-5.0): one process 1.00-1.22
+  CPU-s; with the child 0.86-0.94 + 0.95-1.06 while both loaded the compiled kernels, 0.91-
+  1.05 + 0.45-0.55 once the pipeline is built (and its kernels loaded) before the fork.
+
+Reading: on a saturated machine the child buys nothing (the wall is the CPU share, and the
+split costs ~12-19 % more CPU: the hand-over, and each process's own copy of what it
+touches); what it buys on a quiet one follows from the CPU split: the child's ~0.25-0.30
+CPU-s a day of the 1-day log's 0.37 (its read-ahead thread can take the inflate and decode
+to the other core when the tick stage waits) and the tick stage's ~0.26, so ~0.27-0.30 s of
+wall a day against ~0.37-0.40: about 8-9 s for the 30-day log against 12.14 s, short of
+the 5.2 s target (which needs ~0.17 s a day: the work itself must shrink). The quiet-machine
+pair (``turn`` against ``child-ra`` on the 30-day log) is still to be measured.
+
+The threads, earlier:
 
 Measured 2026-11-25 on the 2-core development machine, never quiet (other sessions' test
 suites: load average 1.4 to 9 on 2 cores, so the wall times measure them too), the 1-day
