@@ -176,7 +176,8 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     the blocks: each is applied at its due tick, as it was live. Unless paced (``speed``):
     ``child``: the blocks are read and the pipeline's stream stage runs in a forked child
     process, its tick stage here (:mod:`replay.stage_process`; the same bits; a reader's
-    ``stats`` are brought back); ``threads``: the stream stage runs on a second thread
+    ``stats`` are brought back; until the end this pipeline's stream-stage objects, which
+    only its status, report and state read, are those it started with); ``threads``: the stream stage runs on a second thread
     (:mod:`replay.stages`; the same bits), which does not shorten the wall time, the two
     stages' Python holding the GIL most of the time (figures in bench/bench_threads.py)."""
     start = time.perf_counter()

@@ -163,3 +163,32 @@ def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkey
     assert child_pays([log])
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {1})
     assert not child_pays([log])  # one CPU: one process
+
+
+def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path, feed,
+                                                                         monkeypatch, capsys):
+    from monitor.pipeline import Pipeline
+    from replay.writer import LogWriter
+
+    log, state = tmp_path / "in.mcap", tmp_path / "state.json"
+    with LogWriter(log) as w:
+        for b in feed:
+            w.write_block(b)
+    assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 0
+    saved = state.read_bytes()
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    parent, ingest = os.getpid(), Pipeline.ingest
+
+    def dying(self, block):  # in the child only: as if the kernel's OOM killer struck
+        if os.getpid() != parent:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return ingest(self, block)
+
+    monkeypatch.setattr(Pipeline, "ingest", dying)
+    capsys.readouterr()
+    assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "reading process ended without finishing the log (exit code -9)" in err
+    assert "no report or state written" in err
+    assert state.read_bytes() == saved
+    assert multiprocessing.active_children() == []
