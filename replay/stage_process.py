@@ -22,8 +22,9 @@ memory) closes the pipe: :class:`ChildDied` here, nothing saved (``--state`` is 
 after a complete replay), nothing left running. An exception here (a sink) closes the pipe,
 which stops the child at its next send.
 
-When it is used (:func:`child_pays`): this process may run on at least two CPUs and the
-logs inflate to at least :data:`CHILD_MIN_BYTES` (figures in bench/bench_threads.py).
+When it is used (:func:`child_pays`): on Linux, when this process may run on at least two
+CPUs and the logs inflate to at least :data:`CHILD_MIN_BYTES` (figures in
+bench/bench_threads.py).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ import multiprocessing
 import os
 import pickle
 import queue
+import sys
 import threading
 import traceback
 import types
@@ -69,10 +71,12 @@ class ChildDied(RuntimeError):
 
 def child_pays(files: Sequence[Path]) -> bool:
     """Whether to replay these logs with the reading and stream stage in a child process:
-    at least two CPUs for this process and at least :data:`CHILD_MIN_BYTES` of data."""
+    on Linux, with at least two CPUs for this process and at least :data:`CHILD_MIN_BYTES`
+    of data."""
     from replay.log_files import inflated_size
 
-    if len(os.sched_getaffinity(0)) < 2:
+    # fork, CPU affinity and pipe sizes as Linux has them (elsewhere: one process)
+    if not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2:
         return False
     size = inflated_size(files)
     return size is not None and size >= CHILD_MIN_BYTES

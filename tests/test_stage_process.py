@@ -163,6 +163,9 @@ def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkey
     assert child_pays([log])
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {1})
     assert not child_pays([log])  # one CPU: one process
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process.sys, "platform", "darwin")
+    assert not child_pays([log])  # not Linux: one process
 
 
 def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path, feed,
