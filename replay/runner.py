@@ -359,7 +359,9 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
         child = speed is None and child_pays(files)
-        source = LogReader(files, coalesce=speed is None)
+        # the child reads on its one thread: a read-ahead thread there waits for the GIL
+        # (bench/bench_threads.py)
+        source = LogReader(files, coalesce=speed is None, read_ahead=not child)
         history = ReportHistory() if plot_fields else None
         all_sinks = [*sinks, history] if history is not None else list(sinks)
         pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,

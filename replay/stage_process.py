@@ -13,9 +13,8 @@ The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (proto
 its arrays sent out of band through a pipe and read straight into fresh buffers (46 MB a day
 of the default streams, copied twice: the block itself only when a sink has a block hook, a
 stream's slab without the accepted values the tick stage never reads, the components'
-stresses computed again here). The pipe's buffer (1 MB), the child's sender thread's
-:data:`AHEAD` slabs and the slab it is working on are all the child can be ahead, so memory
-stays flat in log length.
+stresses computed again here). The pipe's buffer (1 MB) and the slab the child is working
+on are all the child can be ahead, so memory stays flat in log length.
 
 A child that fails sends its exception, raised here; a child that dies (killed, out of
 memory) closes the pipe: :class:`ChildDied` here, nothing saved (``--state`` is written only
@@ -39,9 +38,7 @@ import itertools
 import multiprocessing
 import os
 import pickle
-import queue
 import sys
-import threading
 import traceback
 import types
 from pathlib import Path
@@ -57,7 +54,6 @@ from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
 # more than they save on a few minutes of data (bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
-AHEAD = 4  # hand-overs the child may have packed and not yet written (memory: that many slabs)
 
 # The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
 _STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
@@ -147,51 +143,17 @@ def _pack(kind: str, obj: Any, pickler: type[pickle.Pickler]) -> list[Any]:
     return [len(header).to_bytes(8, "little"), header, *raws]
 
 
-class _Sender:
-    """Writes the packed messages to the pipe on a thread, up to :data:`AHEAD` behind: the
-    child computes on while the parent is not reading (the pipe alone holds about one slab;
-    on a loaded machine each wait for the parent to be scheduled would stall the child).
-    The writes hold no GIL. :meth:`send` raises BrokenPipeError once the parent is gone."""
-
-    def __init__(self, fd: int) -> None:
-        self.fd = fd
-        self.queue: queue.Queue = queue.Queue(maxsize=AHEAD)
-        self.broken = threading.Event()
-        self.thread = threading.Thread(target=self._run, name="buoymon-send", daemon=True)
-        self.thread.start()
-
-    def _run(self) -> None:
-        while (parts := self.queue.get()) is not None:
-            try:
-                for part in parts:
-                    _write(self.fd, part)
-            except BrokenPipeError:
-                self.broken.set()
-                return
-
-    def send(self, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
-        self._put(_pack(kind, obj, pickler))
-
-    def _put(self, item: list[Any] | None) -> None:
-        while not self.broken.is_set():
-            try:
-                self.queue.put(item, timeout=0.05)
-                return
-            except queue.Full:
-                continue
-        raise BrokenPipeError
-
-    def close(self) -> None:
-        """Wait for everything sent to be written."""
-        if not self.broken.is_set():
-            self._put(None)
-        self.thread.join()
-
-
-def _write(fd: int, data: Any) -> None:
-    view = memoryview(data).cast("B")
-    while view.nbytes:
-        view = view[os.write(fd, view):]
+def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
+    """``(kind, obj)`` written in one system call (the pipe blocks until it holds it all;
+    no thread: a writer thread waited for the GIL at every write, and the parent for it)."""
+    parts = [memoryview(p).cast("B") for p in _pack(kind, obj, pickler)]
+    while parts:
+        n = os.writev(fd, parts)
+        while parts and n >= parts[0].nbytes:
+            n -= parts[0].nbytes
+            parts.pop(0)
+        if parts:
+            parts[0] = parts[0][n:]
 
 
 def _read_into(fd: int, buf: Any) -> None:
@@ -257,11 +219,10 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
     hand-overs, then the stream stage's state, the blocks of other buoys and the reader's
     statistics."""
     os.close(other_fd)  # the parent's end: a parent gone then fails the next send
-    sender = _Sender(fd)
     try:
         source = iter(blocks)
         first = next(source, None)
-        sender.send("first", None if first is None else first.buoy_id)
+        _send(fd, "first", None if first is None else first.buoy_id)
         ignored: dict[str, int] = {}
         streams = None
         pickler = _Pickler if send_blocks else _BlocklessPickler
@@ -271,11 +232,11 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
                     continue
-                sender.send("slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
-                            pickler)
-            sender.send("slab", (pipeline.ingest_end(), None))
+                _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
+                      pickler)
+            _send(fd, "slab", (pipeline.ingest_end(), None))
             streams = _stream_state(pipeline)
-        sender.send("end", (streams, ignored, getattr(reader, "stats", None)))
+        _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
     except BrokenPipeError:  # the parent stopped reading: it has its own exception
         pass
     except BaseException as exc:  # noqa: BLE001 - handed to the parent
@@ -284,11 +245,10 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
         except Exception:  # noqa: BLE001 - an exception that does not pickle: its text
             exc = RuntimeError("".join(traceback.format_exception(exc)))
         try:
-            sender.send("error", exc)
+            _send(fd, "error", exc)
         except BrokenPipeError:
             pass
     finally:
-        sender.close()
         os.close(fd)
 
 
