@@ -5,53 +5,60 @@
 Replays one log (``replay.runner.run_blocks`` with the default configuration, after a
 warm-up replay of every mode), the modes interleaved round by round, and prints the best and
 median wall and CPU seconds of each (a child's CPU apart), the load average before and after,
-and whether every run gave the same report and state bytes. Modes: ``turn`` (one process,
-the reader's read-ahead thread), ``turn-no-ra`` (one thread), ``threads``, ``child`` (the
-child reads on its own thread), ``child-ra`` (the child with its read-ahead thread: what
-``buoymon replay`` runs on 2 CPUs).
+and whether every run gave the same report and state bytes.
 
 usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N] [--modes M,..] [--warm-log L]
 
-The child process (2026-11-25 21:20-22:45 UTC, same machine, never quiet: load average 3.7
-to 6.9 from other sessions' test suites, so every wall time below measures them too; the
-quiet-machine figures are still to be taken):
+Modes: ``turn`` (one process, the reader's read-ahead thread), ``turn-no-ra`` (one thread),
+``threads``, ``child`` (the child reads on its one thread: what ``buoymon replay`` runs on 2
+CPUs), ``child-ra`` (the child with a read-ahead thread).
 
-* Where one process's time goes, 1-day log, one core, in-process per slab (load 2.6):
-  reading 0.085, stream stage (``ingest``) 0.135, tick stage (``advance``) 0.135 CPU-s. So a
-  child that reads and runs the stream stage carries ~60 % of the work, the tick stage ~40 %.
-* The hand-over, per day of the default streams: pickled as they are 162 MB (the block
-  55 MB, the stream slabs' accepted values 35 MB that the tick stage never reads, the
-  components' stresses 28 MB); sent without those (a block only when a sink has a block
-  hook; the stresses computed again by the tick stage's process: 3 ms a day) 46 MB. A pipe
-  moves 72 MB in 0.008 CPU-s (writer) / 0.012 (reader); what the hand-over costs is pickling
-  (~0.02-0.04 CPU-s a day in the child) and receiving into fresh buffers and unpickling
-  (0.055 -> 0.040 CPU-s a day with the stresses left out).
-* 1-day log, 5 rounds, load 3.7-3.9 (first build, before the sender thread and the stresses
-  change): wall best / median ``turn`` 0.345 / 0.467, ``turn-no-ra`` 0.379 / 0.460,
-  ``threads`` 0.426 / 0.686, ``child`` 0.600 / 0.716, ``child-ra`` 0.437 / 0.696 s; CPU
-  ``turn`` 0.398, the child modes 0.237 here + 0.331 in the child.
-* 1-day log, 5 rounds, load 6.6 (final build): ``turn-no-ra`` 0.927 / 1.159, ``child``
-  1.144 / 1.319, ``child-ra`` 1.080 / 1.377 s wall; CPU 0.404 against 0.230 + 0.351.
-* 30-day benchmark log (/tmp/perf_bench/log_30d.mcap, 51.8 M tension samples), one round,
-  load 6.6-6.9 (build e20d987, the stresses still sent): ``turn`` 33.86 s wall, 14.80 CPU-s;
-  ``child-ra`` 33.74 s wall, 7.73 CPU-s here + 9.90 in the child. As ``buoymon replay`` runs
-  it (``replay_logs`` in a fresh process, load 6.2, final build): 32.03 s
-  wall, 7.23 + 9.40 CPU-s; peak RSS 188 MB here + 154 MB in the child, against 177 + 146 MB
-  for the 1-day log (+6.2 % / +5.2 %, +5.8 % together; the two share the libraries and
-  compiled kernels, so together they hold less than the sum); report and state identical
-  to the golden of main 7e8ba84 (golden30.sh).
-* A fresh process (``replay_logs`` of the 1-day log, load 4.3-5.0): one process 1.00-1.22
-  CPU-s; with the child 0.86-0.94 + 0.95-1.06 while both loaded the compiled kernels, 0.91-
-  1.05 + 0.45-0.55 once the pipeline is built (and its kernels loaded) before the fork.
+The child process, measured 2026-11-25 on the 2-core development machine (Xeon, shared with
+other sessions), the 1-day bench log (/work/wt/_gold/day1.mcap, 1.73 M tension samples) and
+the 30-day benchmark log (/tmp/perf_bench/log_30d.mcap, 51.84 M), report and state identical
+in every run and to the golden of main 7e8ba84 (golden.sh, golden30.sh):
 
-Reading: on a saturated machine the child buys nothing (the wall is the CPU share, and the
-split costs ~12-19 % more CPU: the hand-over, and each process's own copy of what it
-touches); what it buys on a quiet one follows from the CPU split: the child's ~0.25-0.30
-CPU-s a day of the 1-day log's 0.37 (its read-ahead thread can take the inflate and decode
-to the other core when the tick stage waits) and the tick stage's ~0.26, so ~0.27-0.30 s of
-wall a day against ~0.37-0.40: about 8-9 s for the 30-day log against 12.14 s, short of
-the 5.2 s target (which needs ~0.17 s a day: the work itself must shrink). The quiet-machine
-pair (``turn`` against ``child-ra`` on the 30-day log) is still to be measured.
+* Final build, fairly quiet machine (22:05-22:09 UTC, load 1.2-2.1 with this benchmark's own
+  two processes; nothing else in ``top``):
+  - 30-day log, one round each, in-process after a warm-up: ``turn`` 10.99 s wall (12.33
+    CPU-s), ``child`` 7.73 s wall (5.67 CPU-s here + 7.64 in the child): -30 % wall, 6.7 M
+    tension samples/s against 4.7; an earlier round at load 1.4-2.1: ``turn`` 11.83 s.
+    ``child-ra`` 8.27 s against ``child`` 8.25 s in the same round: the read-ahead thread
+    buys nothing in the child (it waits for the GIL), so the child reads on its own thread.
+  - 30-day log as ``buoymon replay`` runs it (``replay_logs`` in a fresh process): 8.37 s
+    wall, 6.13 + 7.66 CPU-s, 6.2 M tension samples/s; the CLI (imports, report) 10.05 s.
+    Peak RSS 188 MB here + 137 MB in the child, against 177 + 133-135 MB for the 1-day log
+    (+6.4 % / +2-3 %, +4.6 % together; the two share the libraries and kernels, so together
+    they hold less than the sum); one process: ~220 MB.
+  - 1-day log, 7 rounds, wall best / median: ``turn`` 0.291 / 0.329, ``turn-no-ra`` 0.344 /
+    0.386, ``threads`` 0.342 / 0.429, ``child`` 0.302 / 0.321 s (CPU 0.180 + 0.290 in the
+    child against 0.361): even at one day (the fork and a fresh child's first slabs); in a
+    fresh process (``replay_logs``, 3 pairs) 0.89-0.95 s with the child, 0.90-0.97 s
+    without: :data:`replay.stage_process.CHILD_MIN_BYTES` (20 MB, about a day of the
+    default streams) is where it starts to pay.
+* The critical path is the child (reading and stream stage, ~0.25 CPU-s a day) against the
+  tick stage's ~0.19: 10 M tension samples/s (5.2 s for the 30-day log) would need the
+  child's work itself to shrink by a third, or part of the stream stage (the sea-state
+  learner's spectra, ~1.5 s of the 30-day log) to move to the tick stage's process.
+* Where one process's time goes, 1-day log, one core, per stage (load 2.6): reading 0.085,
+  stream stage (``ingest``) 0.135, tick stage (``advance``) 0.135 CPU-s.
+* The hand-over, a day of the default streams: pickled as they are 162 MB (the block 55 MB,
+  the stream slabs' accepted values 35 MB that the tick stage never reads, the components'
+  stresses 28 MB); sent without those (a block only when a sink has a block hook, the
+  stresses computed again by the tick stage's process: 3 ms a day) 46 MB. A pipe moves 72 MB
+  in 0.008 CPU-s (writer) / 0.012 (reader); the costs are pickling (~0.01-0.02 CPU-s a day
+  in the child) and receiving into fresh buffers and unpickling (0.055 -> 0.040 CPU-s a day
+  without the stresses).
+* What did not work: a writer thread in the child (up to 4 slabs queued) and the child's
+  read-ahead thread: each write waited for the GIL and the parent for the write; the 30-day
+  log took 11.3 s (``child``) and 13.9 s (``child-ra``) wall at load 1.4-2.1 against
+  ``turn``'s 11.8; writing each hand-over in one ``writev`` from the child's one thread gave
+  the 7.7 s above. Loading the kernels in both processes after the fork cost the child
+  ~0.5 CPU-s in a fresh process: the pipeline is built (its kernels loaded) before the fork.
+* On a saturated machine (load 6-7, 21:45-21:51 UTC, the writer-thread build) the child buys
+  nothing: ``turn`` 33.86 s, ``child-ra`` 33.74 s wall (14.80 against 7.73 + 9.90 CPU-s): the
+  wall is then this job's share of the CPUs, and the split costs ~10-20 % more CPU (the
+  hand-over, each process's copy of the pages it touches).
 
 The threads, earlier:
 

@@ -177,9 +177,10 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     ``child``: the blocks are read and the pipeline's stream stage runs in a forked child
     process, its tick stage here (:mod:`replay.stage_process`; the same bits; a reader's
     ``stats`` are brought back; until the end this pipeline's stream-stage objects, which
-    only its status, report and state read, are those it started with); ``threads``: the stream stage runs on a second thread
-    (:mod:`replay.stages`; the same bits), which does not shorten the wall time, the two
-    stages' Python holding the GIL most of the time (figures in bench/bench_threads.py)."""
+    only its status, report and state read, are those it started with); ``threads``: the
+    stream stage runs on a second thread (:mod:`replay.stages`; the same bits), which does
+    not shorten the wall time, the two stages' Python holding the GIL most of the time
+    (figures in bench/bench_threads.py)."""
     start = time.perf_counter()
     # a continued state keeps its buoy (it took the log's buoy id when it was first saved)
     state_buoy = state.get("buoy_id") if state is not None else None

@@ -50,8 +50,9 @@ from monitor.blocks import SampleBlock
 from monitor.components import Component
 from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
 
-# Logs inflating to less than this replay in one process: forking and the hand-over cost
-# more than they save on a few minutes of data (bench/bench_threads.py).
+# Logs inflating to less than this replay in one process: the fork and the hand-over cost
+# what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
+# against 0.90-0.97 s in a fresh process; 30 days 7.7 s against 11.0 s, bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 
@@ -257,11 +258,11 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
                  ) -> Generator[tuple[str, Any], None, None]:
     """Read ``blocks`` and run the stream stage in a forked child; yields, in order,
     ``("first", buoy id or None)``, then ``("slab", (the intake's fields (:func:`intake_of`),
-    (samples, last time) or None for the flush))`` per slab and ``("end", (stream state or None, ignored blocks, reader
-    statistics))``. ``make_pipeline(buoy_id)`` builds the child's pipeline (as the caller
-    builds its own); ``send_blocks``: the intakes carry their blocks. The child's exception
-    is raised here; :class:`ChildDied` if it ends without a word. Closing the generator
-    stops the child."""
+    (samples, last time) or None for the flush))`` per slab and ``("end", (stream state or
+    None, ignored blocks, reader statistics))``. ``make_pipeline(buoy_id)`` builds the
+    child's pipeline (as the caller builds its own); ``send_blocks``: the intakes carry
+    their blocks. The child's exception is raised here; :class:`ChildDied` if it ends
+    without a word. Closing the generator stops the child."""
     read_fd, write_fd = os.pipe()
     fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
     ctx = multiprocessing.get_context("fork")
