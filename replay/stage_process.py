@@ -22,8 +22,8 @@ after a complete replay), nothing left running. An exception here (a sink) close
 which stops the child at its next send.
 
 When it is used (:func:`child_pays`): on Linux, when this process may run on at least two
-CPUs and the logs inflate to at least :data:`CHILD_MIN_BYTES` (figures in
-bench/bench_threads.py).
+CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least :data:`IDLE_CPUS`
+of the machine's CPUs are idle as the replay starts (figures in bench/bench_threads.py).
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ import multiprocessing
 import os
 import pickle
 import sys
+import time
 import traceback
 import types
 from pathlib import Path
@@ -54,6 +55,7 @@ from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
 # what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
 # against 0.90-0.97 s in a fresh process; 30 days 7.7 s against 11.0 s, bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
+IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 
 # The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
@@ -68,15 +70,31 @@ class ChildDied(RuntimeError):
 
 def child_pays(files: Sequence[Path]) -> bool:
     """Whether to replay these logs with the reading and stream stage in a child process:
-    on Linux, with at least two CPUs for this process and at least :data:`CHILD_MIN_BYTES`
-    of data."""
+    on Linux, with at least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of
+    data, and at least :data:`IDLE_CPUS` of the machine's CPUs idle just before (with
+    another job on the second CPU the two processes keep waiting for each other: the
+    30-day log took 15.2 s against 11.6 s in one process)."""
     from replay.log_files import inflated_size
 
     # fork, CPU affinity and pipe sizes as Linux has them (elsewhere: one process)
     if not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2:
         return False
     size = inflated_size(files)
-    return size is not None and size >= CHILD_MIN_BYTES
+    return size is not None and size >= CHILD_MIN_BYTES and idle_cpus() >= IDLE_CPUS
+
+
+def idle_cpus(interval_s: float = 0.05) -> float:
+    """The machine's CPUs idle on average over ``interval_s`` from now (/proc/stat's idle
+    and iowait times; this process sleeps meanwhile, so its own CPU counts as idle)."""
+    def idle_total() -> tuple[int, int]:
+        with open("/proc/stat") as f:
+            ticks = [int(x) for x in f.readline().split()[1:]]
+        return ticks[3] + ticks[4], sum(ticks)
+
+    idle0, total0 = idle_total()
+    time.sleep(interval_s)
+    idle1, total1 = idle_total()
+    return (os.cpu_count() or 1) * (idle1 - idle0) / max(total1 - total0, 1)
 
 
 # ---------------------------------------------------------------------------------- pickling

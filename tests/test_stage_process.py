@@ -150,6 +150,24 @@ def test_an_error_here_stops_the_child(feed):
     assert multiprocessing.active_children() == []
 
 
+def test_idle_cpus_counts_a_busy_cpu_as_busy():
+    """A thread spinning through the whole sample: at most all CPUs but about one idle."""
+    import threading
+    import time
+
+    stop = time.monotonic() + 0.3
+
+    def spin() -> None:
+        while time.monotonic() < stop:
+            pass
+
+    spinner = threading.Thread(target=spin)
+    spinner.start()
+    idle = stage_process.idle_cpus(0.2)
+    spinner.join()
+    assert 0 <= idle <= (os.cpu_count() or 1) - 0.7
+
+
 def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkeypatch, capsys):
     csv = tmp_path / "in.csv"
     csv.write_text("time_s,tension_N\n" + "\n".join(f"{i / 20},{5000 + i % 7}"
@@ -160,7 +178,11 @@ def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkey
     assert not child_pays([log])  # a small log: one process
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.6)
     assert child_pays([log])
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.4)
+    assert not child_pays([log])  # another job on the second CPU: one process
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.6)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {1})
     assert not child_pays([log])  # one CPU: one process
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
