@@ -25,6 +25,11 @@ in every run and to the golden of main 7e8ba84 (golden.sh, golden30.sh):
     tension samples/s against 4.7; an earlier round at load 1.4-2.1: ``turn`` 11.83 s.
     ``child-ra`` 8.27 s against ``child`` 8.25 s in the same round: the read-ahead thread
     buys nothing in the child (it waits for the GIL), so the child reads on its own thread.
+    Two later pairs (22:10-22:13 UTC, final build but the idle-CPU rule): ``turn`` 11.62 s
+    against ``child`` 15.21 s while another job took most of a CPU (``top``), and ``turn``
+    11.63 s (14.16 CPU-s: contended) against ``child`` 9.35 s (7.58 + 9.11) at load 1.2-1.3.
+    Hence the rule of :func:`replay.stage_process.child_pays`: the child only when at least
+    1.5 of the machine's CPUs are idle as the replay starts.
   - 30-day log as ``buoymon replay`` runs it (``replay_logs`` in a fresh process): 8.37 s
     wall, 6.13 + 7.66 CPU-s, 6.2 M tension samples/s; the CLI (imports, report) 10.05 s.
     Peak RSS 188 MB here + 137 MB in the child, against 177 + 133-135 MB for the 1-day log
