@@ -1,11 +1,71 @@
-"""The replay's stream stage on a second thread (replay.stages) against both stages in turn.
+"""The second core in a replay of one log: the stream stage on a second thread
+(replay.stages), or the reading and the stream stage in a child process
+(replay.stage_process), against both stages in turn in one process.
 
-Replays one log in-process (``replay.runner.run_blocks`` with the default configuration,
-after a warm-up replay), alternating sequential and threaded runs, and prints the best and
-median wall and CPU seconds of each, the load average before and after, and whether every
-run gave the same report and state bytes.
+Replays one log (``replay.runner.run_blocks`` with the default configuration, after a
+warm-up replay of every mode), the modes interleaved round by round, and prints the best and
+median wall and CPU seconds of each (a child's CPU apart), the load average before and after,
+and whether every run gave the same report and state bytes.
 
-usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N]
+usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N] [--modes M,..] [--warm-log L]
+
+Modes: ``turn`` (one process, the reader's read-ahead thread), ``turn-no-ra`` (one thread),
+``threads``, ``child`` (the child reads on its one thread: what ``buoymon replay`` runs on 2
+CPUs), ``child-ra`` (the child with a read-ahead thread).
+
+The child process, measured 2026-11-25 on the 2-core development machine (Xeon, shared with
+other sessions), the 1-day bench log (/work/wt/_gold/day1.mcap, 1.73 M tension samples) and
+the 30-day benchmark log (/tmp/perf_bench/log_30d.mcap, 51.84 M), report and state identical
+in every run and to the golden of main 7e8ba84 (golden.sh, golden30.sh):
+
+* Final build, fairly quiet machine (22:05-22:09 UTC, load 1.2-2.1 with this benchmark's own
+  two processes; nothing else in ``top``):
+  - 30-day log, one round each, in-process after a warm-up: ``turn`` 10.99 s wall (12.33
+    CPU-s), ``child`` 7.73 s wall (5.67 CPU-s here + 7.64 in the child): -30 % wall, 6.7 M
+    tension samples/s against 4.7; an earlier round at load 1.4-2.1: ``turn`` 11.83 s.
+    ``child-ra`` 8.27 s against ``child`` 8.25 s in the same round: the read-ahead thread
+    buys nothing in the child (it waits for the GIL), so the child reads on its own thread.
+    Two later pairs (22:10-22:13 UTC, final build but the idle-CPU rule): ``turn`` 11.62 s
+    against ``child`` 15.21 s while another job took most of a CPU (``top``), and ``turn``
+    11.63 s (14.16 CPU-s: contended) against ``child`` 9.35 s (7.58 + 9.11) at load 1.2-1.3.
+    Hence the rule of :func:`replay.stage_process.child_pays`: the child only when at least
+    1.5 of the machine's CPUs are idle as the replay starts.
+  - 30-day log as ``buoymon replay`` runs it (``replay_logs`` in a fresh process): 8.37 s
+    wall, 6.13 + 7.66 CPU-s, 6.2 M tension samples/s; the CLI (imports, report) 10.05 s.
+    Peak RSS 188 MB here + 137 MB in the child, against 177 + 133-135 MB for the 1-day log
+    (+6.4 % / +2-3 %, +4.6 % together; the two share the libraries and kernels, so together
+    they hold less than the sum); one process: ~220 MB.
+  - 1-day log, 7 rounds, wall best / median: ``turn`` 0.291 / 0.329, ``turn-no-ra`` 0.344 /
+    0.386, ``threads`` 0.342 / 0.429, ``child`` 0.302 / 0.321 s (CPU 0.180 + 0.290 in the
+    child against 0.361): even at one day (the fork and a fresh child's first slabs); in a
+    fresh process (``replay_logs``, 3 pairs) 0.89-0.95 s with the child, 0.90-0.97 s
+    without: :data:`replay.stage_process.CHILD_MIN_BYTES` (20 MB, about a day of the
+    default streams) is where it starts to pay.
+* The critical path is the child (reading and stream stage, ~0.25 CPU-s a day) against the
+  tick stage's ~0.19: 10 M tension samples/s (5.2 s for the 30-day log) would need the
+  child's work itself to shrink by a third, or part of the stream stage (the sea-state
+  learner's spectra, ~1.5 s of the 30-day log) to move to the tick stage's process.
+* Where one process's time goes, 1-day log, one core, per stage (load 2.6): reading 0.085,
+  stream stage (``ingest``) 0.135, tick stage (``advance``) 0.135 CPU-s.
+* The hand-over, a day of the default streams: pickled as they are 162 MB (the block 55 MB,
+  the stream slabs' accepted values 35 MB that the tick stage never reads, the components'
+  stresses 28 MB); sent without those (a block only when a sink has a block hook, the
+  stresses computed again by the tick stage's process: 3 ms a day) 46 MB. A pipe moves 72 MB
+  in 0.008 CPU-s (writer) / 0.012 (reader); the costs are pickling (~0.01-0.02 CPU-s a day
+  in the child) and receiving into fresh buffers and unpickling (0.055 -> 0.040 CPU-s a day
+  without the stresses).
+* What did not work: a writer thread in the child (up to 4 slabs queued) and the child's
+  read-ahead thread: each write waited for the GIL and the parent for the write; the 30-day
+  log took 11.3 s (``child``) and 13.9 s (``child-ra``) wall at load 1.4-2.1 against
+  ``turn``'s 11.8; writing each hand-over in one ``writev`` from the child's one thread gave
+  the 7.7 s above. Loading the kernels in both processes after the fork cost the child
+  ~0.5 CPU-s in a fresh process: the pipeline is built (its kernels loaded) before the fork.
+* On a saturated machine (load 6-7, 21:45-21:51 UTC, the writer-thread build) the child buys
+  nothing: ``turn`` 33.86 s, ``child-ra`` 33.74 s wall (14.80 against 7.73 + 9.90 CPU-s): the
+  wall is then this job's share of the CPUs, and the split costs ~10-20 % more CPU (the
+  hand-over, each process's copy of the pages it touches).
+
+The threads, earlier:
 
 Measured 2026-11-25 on the 2-core development machine, never quiet (other sessions' test
 suites: load average 1.4 to 9 on 2 cores, so the wall times measure them too), the 1-day
@@ -46,6 +106,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import time
 
@@ -53,36 +114,56 @@ from monitor.config import default_config
 from replay.reader import LogReader
 from replay.runner import run_blocks
 
+# mode: (the reader's read-ahead thread, the stream stage on a thread, in a child process)
+MODES = {"turn": (True, False, False), "turn-no-ra": (False, False, False),
+         "threads": (True, True, False), "child": (False, False, True),
+         "child-ra": (True, False, True)}
 
-def replay(log: str, threads: bool) -> tuple[float, float, bytes]:
-    """(wall s, CPU s, report and state bytes) of one replay."""
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def replay(log: str, mode: str) -> tuple[float, float, float, bytes]:
+    """(wall s, this process's CPU s, the child's CPU s, report and state bytes) of one
+    replay."""
+    read_ahead, threads, child = MODES[mode]
     cfg = default_config()
-    wall, cpu = time.perf_counter(), time.process_time()
-    pipeline, _ = run_blocks(cfg, LogReader([log]), threads=threads)
+    wall, cpu, kids = time.perf_counter(), time.process_time(), _children_cpu()
+    pipeline, _ = run_blocks(cfg, LogReader([log], read_ahead=read_ahead), threads=threads,
+                             child=child)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     out = json.dumps([pipeline.report(), pipeline.state()], allow_nan=True).encode()
-    return wall, cpu, out
+    return wall, cpu, _children_cpu() - kids, out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("log")
     ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--modes", default="turn,turn-no-ra,threads,child,child-ra",
+                    help=f"comma-separated, of {', '.join(MODES)}")
+    ap.add_argument("--warm-log", help="warm up on this log (default: LOG itself)")
     args = ap.parse_args()
-    replay(args.log, True)  # warm: compile cache, model cache, page cache
-    print(f"load average before: {os.getloadavg()}")
-    runs: dict[bool, list[tuple[float, float]]] = {False: [], True: []}
+    modes = args.modes.split(",")
+    for mode in modes:  # warm: compile cache, model cache, page cache
+        replay(args.warm_log or args.log, mode)
+    print(f"load average before: {os.getloadavg()}, CPUs {len(os.sched_getaffinity(0))}")
+    runs: dict[str, list[tuple[float, float, float]]] = {m: [] for m in modes}
     outputs = set()
     for _ in range(args.rounds):
-        for threads in (False, True):
-            wall, cpu, out = replay(args.log, threads)
-            runs[threads].append((wall, cpu))
+        for mode in modes:
+            *figures, out = replay(args.log, mode)
+            runs[mode].append(tuple(figures))
             outputs.add(out)
     print(f"load average after:  {os.getloadavg()}")
-    for threads, label in ((False, "sequential"), (True, "threaded  ")):
-        walls, cpus = zip(*runs[threads])
-        print(f"{label} wall best {min(walls):.3f} median {statistics.median(walls):.3f} s, "
-              f"CPU best {min(cpus):.3f} median {statistics.median(cpus):.3f} s")
+    for mode in modes:
+        walls, cpus, kids = zip(*runs[mode])
+        print(f"{mode:11s} wall best {min(walls):.3f} median {statistics.median(walls):.3f} s, "
+              f"CPU best {min(cpus):.3f} median {statistics.median(cpus):.3f} s"
+              + (f", child CPU best {min(kids):.3f} median {statistics.median(kids):.3f} s"
+                 if MODES[mode][2] else ""))
     print("report and state identical in every run" if len(outputs) == 1
           else f"DIFFERENT outputs: {len(outputs)}")
 

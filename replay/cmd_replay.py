@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from replay.report import summary_text, write_report
     from replay.log_files import expand_paths
     from replay.runner import replay_logs
+    from replay.stage_process import ChildDied
 
     try:
         config = load_config(args.config) if args.config else default_config()
@@ -99,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     except (FileNotFoundError, ValueError) as exc:
         print(f"replay: {exc}", file=sys.stderr)
+        return 1
+    except ChildDied as exc:  # killed, out of memory: --state unchanged
+        print(f"replay: {exc}; no report or state written, run it again", file=sys.stderr)
         return 1
     if args.report:
         write_report(args.report, result.report)

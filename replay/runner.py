@@ -167,34 +167,33 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
                sinks: Sequence[Sink] = (), speed: float | None = None,
                progress: Progress | None = None,
                forecasts: Sequence[tuple[str, Any, int]] = (),
-               threads: bool = False) -> tuple[Pipeline, ReplayResult]:
+               threads: bool = False, child: bool = False) -> tuple[Pipeline, ReplayResult]:
     """Feed blocks into a pipeline and flush it at the end. The pipeline is built at the first
     block, whose buoy id replaces the config's (with a warning); a continued state keeps its
     own buoy id, and a ValueError says so if the first block is of another buoy. Later blocks
     of other buoys are counted and skipped. ``forecasts`` (buoy id, JSON, due time ns), as
     recorded by the daemon (:mod:`replay.forecast_log`), are given to the pipeline before
-    the blocks: each is applied at its due tick, as it was live. ``threads``: unless paced
-    (``speed``), the pipeline's stream stage runs on a second thread, ahead of its tick stage
-    (:mod:`replay.stages`; the same bits). Off by default: on the shared 2-core machine it
-    did not shorten the wall time, the two stages' Python holding the GIL most of the time
+    the blocks: each is applied at its due tick, as it was live. Unless paced (``speed``):
+    ``child``: the blocks are read and the pipeline's stream stage runs in a forked child
+    process, its tick stage here (:mod:`replay.stage_process`; the same bits; a reader's
+    ``stats`` are brought back; until the end this pipeline's stream-stage objects, which
+    only its status, report and state read, are those it started with); ``threads``: the
+    stream stage runs on a second thread (:mod:`replay.stages`; the same bits), which does
+    not shorten the wall time, the two stages' Python holding the GIL most of the time
     (figures in bench/bench_threads.py)."""
-    n_blocks = n_samples = 0
-    ignored: dict[str, int] = {}
     start = time.perf_counter()
     # a continued state keeps its buoy (it took the log's buoy id when it was first saved)
     state_buoy = state.get("buoy_id") if state is not None else None
     if isinstance(state_buoy, str) and state_buoy != config.buoy.id:
         config = config_with(config, buoy={**config.section("buoy"), "id": state_buoy})
+    if child and speed is None:
+        return _run_with_child(config, blocks, state, sinks, progress, forecasts, start)
+    n_blocks = n_samples = 0
+    ignored: dict[str, int] = {}
     source = iter(blocks)
     first = next(source, None)
     if first is not None:
-        if first.buoy_id != config.buoy.id and state is not None:
-            raise ValueError(f"the state is for buoy {config.buoy.id!r}, the log for "
-                             f"buoy {first.buoy_id!r}")
-        if first.buoy_id != config.buoy.id:
-            log.warning("log is for buoy %r, config for %r: replaying as %r",
-                        first.buoy_id, config.buoy.id, first.buoy_id)
-            config = config_with(config, buoy={**config.section("buoy"), "id": first.buoy_id})
+        config = _log_config(config, state, first.buoy_id)
     pipeline = replay_pipeline(config, sinks, state)
     if first is None:  # an empty log
         pipeline.flush()
@@ -227,9 +226,74 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
             if progress is not None:
                 progress.update(block.t_last_ns, n_samples)
         pipeline.flush()
+    _close_progress(progress, pipeline, n_samples)
+    result = ReplayResult({}, n_blocks, n_samples, time.perf_counter() - start, ignored)
+    return pipeline, result
+
+
+def _log_config(config: Config, state: dict | None, buoy_id: str, warn: bool = True) -> Config:
+    """The config for a log whose first block is of ``buoy_id`` (see :func:`run_blocks`)."""
+    if buoy_id != config.buoy.id and state is not None:
+        raise ValueError(f"the state is for buoy {config.buoy.id!r}, the log for "
+                         f"buoy {buoy_id!r}")
+    if buoy_id != config.buoy.id:
+        if warn:
+            log.warning("log is for buoy %r, config for %r: replaying as %r",
+                        buoy_id, config.buoy.id, buoy_id)
+        config = config_with(config, buoy={**config.section("buoy"), "id": buoy_id})
+    return config
+
+
+def _close_progress(progress: Progress | None, pipeline: Pipeline, n_samples: int) -> None:
     if progress is not None and n_samples:
         progress.update(pipeline.last["now_ns"], n_samples, force=True)
         progress.close()
+
+
+def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict | None,
+                    sinks: Sequence[Sink], progress: Progress | None,
+                    forecasts: Sequence[tuple[str, Any, int]], start: float
+                    ) -> tuple[Pipeline, ReplayResult]:
+    """:func:`run_blocks` with the reading and the stream stage in a child process."""
+    from replay.stage_process import WantsQc, intake_of, run_in_child, take_stream_state
+
+    wants_qc = any(getattr(s, "wants_qc", False) for s in sinks)
+
+    def child_pipeline(buoy_id: str) -> Pipeline:  # called in the child (no sink is called)
+        return replay_pipeline(_log_config(config, state, buoy_id, warn=False),
+                               [WantsQc(wants_qc)], state)
+
+    # before the fork: the compiled kernels both processes call are loaded once (the
+    # pipeline's warm-up; about 0.3 s of CPU each would load them again)
+    child_pipeline(config.buoy.id)
+    n_blocks = n_samples = 0
+    messages = run_in_child(blocks, child_pipeline,
+                            send_blocks=any(hasattr(s, "on_block") for s in sinks))
+    with contextlib.closing(messages):
+        _, buoy_id = next(messages)
+        if buoy_id is not None:
+            config = _log_config(config, state, buoy_id)
+        pipeline = replay_pipeline(config, sinks, state)
+        if buoy_id is not None:
+            _add_forecasts(pipeline, forecasts)
+        for kind, message in messages:
+            if kind == "end":
+                stream_state, ignored, stats = message
+                break
+            fields, done = message
+            pipeline.advance(intake_of(fields, pipeline.components))
+            if done is not None:
+                n_blocks += 1
+                n_samples += done[0]
+                if progress is not None:
+                    progress.update(done[1], n_samples)
+    if stream_state is None:  # an empty log
+        pipeline.flush()
+    else:
+        take_stream_state(pipeline, stream_state)
+    if stats is not None:
+        blocks.stats[:] = stats  # type: ignore[attr-defined]
+    _close_progress(progress, pipeline, n_samples)
     result = ReplayResult({}, n_blocks, n_samples, time.perf_counter() - start, ignored)
     return pipeline, result
 
@@ -281,6 +345,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     from replay.log_files import time_span
     from replay.reader import LogReader
     from replay.report import add_plot_fields
+    from replay.stage_process import child_pays
 
     files = collect_logs(paths)
     if plain is None:
@@ -294,11 +359,15 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         span = time_span(files) if show_progress else None
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-        source = LogReader(files, coalesce=speed is None)
+        child = speed is None and child_pays(files)
+        # the child reads on its one thread: a read-ahead thread there waits for the GIL
+        # (bench/bench_threads.py)
+        source = LogReader(files, coalesce=speed is None, read_ahead=not child)
         history = ReportHistory() if plot_fields else None
         all_sinks = [*sinks, history] if history is not None else list(sinks)
         pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,
-                                      progress=progress, forecasts=read_forecasts(files))
+                                      progress=progress, forecasts=read_forecasts(files),
+                                      child=child)
         result.report = build_report(pipeline.config, pipeline.report(), [str(f) for f in files],
                                      read_summary(source.stats))
         if history is not None:

@@ -9,7 +9,8 @@ stream stage may run ahead: the tick stage still gets every hand-over in order, 
 results are the same to the bit as ``process`` block by block. Only the ``nogil`` compiled
 kernels (validation, QC, the estimator) and some numpy operations release the GIL, so the
 two overlap little: ``run_blocks`` uses this only when asked (``threads=True``; figures in
-bench/bench_threads.py).
+bench/bench_threads.py). The same split across two processes (replay.stage_process) does
+overlap, and ``buoymon replay`` uses that.
 """
 
 from __future__ import annotations

@@ -1,0 +1,219 @@
+"""The replay with its reading and stream stage in a child process (replay.stage_process)
+gives what one process gives, to the last bit: report, state, every step, tick observation
+and block the sinks see, the reader's statistics; on the faulty feed of test_stages and on
+the Maine load cell's measured tension (../shared/realdata, imported to a log). A child that
+fails, dies or outlives an error here leaves a clear error and no process behind."""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from monitor.blocks import SampleBlock
+from monitor.cli import main
+from replay import stage_process
+from replay.reader import LogReader
+from replay.runner import run_blocks
+from replay.stage_process import ChildDied, child_pays
+from test_stages import CONFIG, Recorder, faulty_blocks
+
+SHARED = next((p / "shared" for p in Path(__file__).resolve().parents
+               if (p / "shared/realdata").is_dir()), None)
+MAINE = None if SHARED is None else (
+    SHARED / "realdata/maine_endline_loadcell/17348481-2018.11.30-09.58.27-15.csv")
+LBF = 4.4482216152605  # N
+
+needs_fork = pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
+                                reason="no fork on this platform")
+pytestmark = needs_fork
+
+
+def _replay(blocks, child: bool, sinks=(), config=CONFIG) -> tuple[bytes, object]:
+    pipeline, result = run_blocks(config, blocks, sinks=sinks, child=child)
+    out = json.dumps([pipeline.report(), pipeline.state()], allow_nan=True).encode()
+    return out, result
+
+
+@pytest.fixture(scope="module")
+def feed():
+    return faulty_blocks()[0]
+
+
+@pytest.mark.parametrize("sink", [Recorder, None], ids=["sink-with-block-hook", "no-sink"])
+def test_the_child_gives_the_same_bits_as_one_process_on_the_faulty_feed(feed, sink):
+    seen = {}
+    outs = {}
+    for child in (False, True):
+        sinks = [sink()] if sink is not None else []
+        outs[child], result = _replay(iter(feed), child, sinks)
+        assert (result.blocks, result.samples) == (len(feed), sum(len(b) for b in feed))
+        seen[child] = sinks[0].seen if sinks else None
+    assert outs[True] == outs[False]
+    assert seen[True] == seen[False]
+    if sink is not None:
+        assert len(seen[True]) > 1000
+    assert multiprocessing.active_children() == []
+
+
+def test_blocks_of_another_buoy_are_counted_in_the_child_as_in_one_process(feed):
+    other = [SampleBlock("other", b.sensor, b.t_ns, b.fields) for b in feed[10:40:3]]
+    blocks = feed[:10] + other + feed[10:]
+    results = [_replay(iter(blocks), child)[1] for child in (False, True)]
+    assert results[0].ignored_blocks == results[1].ignored_blocks == {"other": len(other)}
+    assert results[0].blocks == results[1].blocks == len(feed)
+
+
+def test_an_empty_source_gives_the_empty_pipeline():
+    assert _replay(iter([]), True)[0] == _replay(iter([]), False)[0]
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(MAINE is None or not MAINE.exists(), reason="../shared/realdata absent")
+def test_the_child_gives_the_same_bits_and_reader_statistics_on_measured_tension(tmp_path,
+                                                                                  capsys):
+    raw = np.genfromtxt(MAINE, delimiter=",", usecols=(1, 2))
+    csv = tmp_path / "in.csv"
+    csv.write_text("time_s,tension_N\n" + "\n".join(
+        f"{s!r},{v!r}" for s, v in zip(raw[:, 0].tolist(), (raw[:, 1] * LBF).tolist())) + "\n")
+    log = tmp_path / "in.mcap"
+    assert main(["import", str(csv), "-o", str(log), "--buoy-id", "vaps"]) == 0
+    capsys.readouterr()
+    outs, stats = [], []
+    for child in (False, True):
+        reader = LogReader([log])
+        out, result = _replay(reader, child)
+        outs.append(out)
+        stats.append([s.as_dict() for s in reader.stats])
+        assert result.samples == raw.shape[0]
+    assert outs[0] == outs[1]
+    assert stats[0] == stats[1] and stats[1][0]["messages"] > 0
+    report = json.loads(outs[1])[0]
+    assert report["samples"]["tension"]["accepted"] == raw.shape[0]
+    assert report["components"]["conductor"]["damage_committed"] > 0
+
+
+def test_an_error_in_the_child_is_raised_here_and_no_child_is_left(feed):
+    def failing():
+        yield from feed[:200]
+        raise OSError("disk went away")
+
+    with pytest.raises(OSError, match="disk went away"):
+        run_blocks(CONFIG, failing(), child=True)
+    assert multiprocessing.active_children() == []
+
+
+def test_an_exception_that_does_not_pickle_arrives_as_its_text(feed):
+    class Odd(Exception):
+        def __reduce__(self):
+            raise TypeError("no pickling")
+
+    def failing():
+        yield from feed[:20]
+        raise Odd("the odd one")
+
+    with pytest.raises(RuntimeError, match="the odd one"):
+        run_blocks(CONFIG, failing(), child=True)
+    assert multiprocessing.active_children() == []
+
+
+def test_a_child_that_dies_is_a_clear_error_not_a_hang(feed):
+    parent = os.getpid()
+
+    def killed():
+        yield from feed[:100]
+        if os.getpid() != parent:  # in the child: as if the kernel's OOM killer struck
+            os.kill(os.getpid(), signal.SIGKILL)
+        yield from feed[100:]
+
+    with pytest.raises(ChildDied, match="exit code -9"):
+        run_blocks(CONFIG, killed(), child=True)
+    assert multiprocessing.active_children() == []
+
+
+def test_an_error_here_stops_the_child(feed):
+    class Failing(Recorder):
+        steps = 0
+
+        def on_step(self, step) -> None:
+            self.steps += 1
+            if self.steps == 30:
+                raise OSError("sink full")
+
+    with pytest.raises(OSError, match="sink full"):
+        run_blocks(CONFIG, iter(feed * 3), sinks=[Failing()], child=True)
+    assert multiprocessing.active_children() == []
+
+
+def test_idle_cpus_counts_a_busy_cpu_as_busy():
+    """A thread spinning through the whole sample: at most all CPUs but about one idle."""
+    import threading
+    import time
+
+    stop = time.monotonic() + 0.3
+
+    def spin() -> None:
+        while time.monotonic() < stop:
+            pass
+
+    spinner = threading.Thread(target=spin)
+    spinner.start()
+    idle = stage_process.idle_cpus(0.2)
+    spinner.join()
+    assert 0 <= idle <= (os.cpu_count() or 1) - 0.7
+
+
+def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkeypatch, capsys):
+    csv = tmp_path / "in.csv"
+    csv.write_text("time_s,tension_N\n" + "\n".join(f"{i / 20},{5000 + i % 7}"
+                                                     for i in range(2000)) + "\n")
+    log = tmp_path / "in.mcap"
+    assert main(["import", str(csv), "-o", str(log), "--buoy-id", "vaps"]) == 0
+    capsys.readouterr()
+    assert not child_pays([log])  # a small log: one process
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.6)
+    assert child_pays([log])
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.4)
+    assert not child_pays([log])  # another job on the second CPU: one process
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.6)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {1})
+    assert not child_pays([log])  # one CPU: one process
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process.sys, "platform", "darwin")
+    assert not child_pays([log])  # not Linux: one process
+
+
+def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path, feed,
+                                                                         monkeypatch, capsys):
+    from monitor.pipeline import Pipeline
+    from replay.writer import LogWriter
+
+    log, state = tmp_path / "in.mcap", tmp_path / "state.json"
+    with LogWriter(log) as w:
+        for b in feed:
+            w.write_block(b)
+    assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 0
+    saved = state.read_bytes()
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    parent, ingest = os.getpid(), Pipeline.ingest
+
+    def dying(self, block):  # in the child only: as if the kernel's OOM killer struck
+        if os.getpid() != parent:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return ingest(self, block)
+
+    monkeypatch.setattr(Pipeline, "ingest", dying)
+    capsys.readouterr()
+    assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "reading process ended without finishing the log (exit code -9)" in err
+    assert "no report or state written" in err
+    assert state.read_bytes() == saved
+    assert multiprocessing.active_children() == []
