@@ -199,7 +199,6 @@ def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> Non
     from monitor.config import config_with, default_config
     from replay.reader import LogReader
     from replay.runner import run_blocks
-    from replay.stage_process import child_pays
 
     config = default_config()
     if not rules:
@@ -207,8 +206,8 @@ def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> Non
                                              if k != "rule"})
     start, cpu = time.perf_counter(), time.process_time()
     reader = LogReader([path])
-    # as `buoymon replay`: on 2 CPUs the reading and stream stage run in a child process
-    pipeline, result = run_blocks(config, reader, child=child_pays([path]))
+    # as `buoymon replay` (one process; the child process of --two-processes did not pay)
+    pipeline, result = run_blocks(config, reader)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     rep = pipeline.report()

@@ -33,6 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--html", metavar="FILE.html",
                    help="also write the HTML fatigue report (and its plots as PNG beside it); "
                         "the --report JSON then carries the plot fields too")
+    p.add_argument("--two-processes", action="store_true",
+                   help="read the logs and run the stream stage in a second process (Linux, "
+                        "2+ idle CPUs; same results; slower than one process with the default "
+                        "configuration on a 2-core machine: see bench/bench_threads.py)")
     cmd_fleet.add_arguments(p)
     p.set_defaults(func=run)
 
@@ -94,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks, speed=speed,
                              show_progress=False if args.no_progress else None,
-                             plot_fields=bool(args.html))
+                             plot_fields=bool(args.html), two_processes=args.two_processes)
     except ConfigError as exc:  # found when the pipeline is built (rules, cable, S-N curves)
         print(exc, file=sys.stderr)
         return 2

@@ -332,13 +332,17 @@ def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
                 sinks: Sequence[Sink] = (), speed: float | None = None,
                 show_progress: bool | None = None, plot_fields: bool = False,
-                plain: bool | None = None) -> ReplayResult:
+                plain: bool | None = None, two_processes: bool = False) -> ReplayResult:
     """Replay MCAP logs (files or directories) through the pipeline; return the report.
 
     ``plot_fields`` adds the report's optional plot fields (docs/REPORT_FORMAT.md: tension and
     damage histories, rainflow histograms, S-N curves) for ``buoymon report`` / ``--html``.
     ``plain``: run every kernel as plain Python (True) or compiled (False); by default as
     plain Python when the logs inflate to at most :data:`PLAIN_PYTHON_BYTES` (same bits).
+    ``two_processes``: read the logs and run the stream stage in a child process when
+    :func:`replay.stage_process.child_pays` allows it (same bits). Off by default: with the
+    default configuration one process was faster on the 2-core machine (the hand-over costs
+    about 40 % more CPU in all; figures in bench/bench_threads.py).
     """
     from monitor.viz.report_history import ReportHistory
     from replay.forecast_log import read_forecasts
@@ -359,7 +363,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         span = time_span(files) if show_progress else None
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-        child = speed is None and child_pays(files)
+        child = two_processes and speed is None and child_pays(files)
         # the child reads on its one thread: a read-ahead thread there waits for the GIL
         # (bench/bench_threads.py)
         source = LogReader(files, coalesce=speed is None, read_ahead=not child)

@@ -21,7 +21,9 @@ memory) closes the pipe: :class:`ChildDied` here, nothing saved (``--state`` is 
 after a complete replay), nothing left running. An exception here (a sink) closes the pipe,
 which stops the child at its next send.
 
-When it is used (:func:`child_pays`): on Linux, when this process may run on at least two
+When it is used: when asked (``buoymon replay --two-processes``; with the default
+configuration one process was faster on the 2-core machine: the hand-over costs about 40 %
+more CPU in all) and :func:`child_pays` allows it: on Linux, when this process may run on at least two
 CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least :data:`IDLE_CPUS`
 of the machine's CPUs are idle as the replay starts (figures in bench/bench_threads.py).
 """

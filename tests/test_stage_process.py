@@ -211,7 +211,10 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
 
     monkeypatch.setattr(Pipeline, "ingest", dying)
     capsys.readouterr()
-    assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 1
+    # one process unless asked (no child to die)
+    assert main(["replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress"]) == 0
+    assert main(["replay", str(log), "--state", str(state), "--no-progress",
+                 "--two-processes"]) == 1
     err = capsys.readouterr().err
     assert "reading process ended without finishing the log (exit code -9)" in err
     assert "no report or state written" in err
