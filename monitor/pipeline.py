@@ -48,6 +48,7 @@ from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
 from monitor.sea_state_learner import SeaStateLearner
 from monitor.stats_kernel import load_stats_pass
+from monitor.time_ahead import drop_ahead
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
@@ -424,6 +425,7 @@ class Pipeline:
                                      gate_all, st.get("reorder"))
         # sensor time processed so far by watermark (not by flush): older samples are late
         self.processed_ns = int(st.get("processed_ns", _NEVER))
+        self._max_ahead_ns = int(round(config.ordering.max_ahead_s * 1e9))
         self.alerts = build_alert_engine(
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
@@ -564,12 +566,17 @@ class Pipeline:
         if block.buoy_id != self.buoy_id:
             raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
                              f"{self.buoy_id!r}")
+        block, ahead = drop_ahead(block, self._max_ahead_ns)
+        if ahead:  # counted before the slab's checks, so its ticks' totals include them
+            self.validators[block.sensor].rejected["time_ahead"] += ahead
         if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
                 and self.config.load.source != "measured" and len(block)):
             self._choose_motion(block.sensor)
         self.reorder.push(block)
         upto = self.reorder.watermark()
-        return self._ingest_slab(block, block.sensor, upto, upto)
+        intake = self._ingest_slab(block, block.sensor, upto, upto)
+        intake.rejected["time_ahead"] += ahead
+        return intake
 
     def ingest_end(self) -> SlabIntake:
         """Stream stage of :meth:`flush`: every buffered sample."""

@@ -19,6 +19,10 @@ Rules, applied to each sample in time order, first match wins:
                     goes, heave too (the estimator needs all three displacements), and the
                     fail lasts a window (50 s), so the estimator sees a gap and restarts.
 
+Before all these, the pipeline drops a sample whose time is further ahead of its receive time
+than ``[ordering] max_ahead_s`` and counts it here as ``time_ahead`` (:mod:`monitor.time_ahead`):
+accepted, it would make every later sample ``time_backwards``.
+
 A displacement (``motion``) sample whose position the line cannot reach is ``out_of_range``
 and a QARTOD ``location`` fail: its horizontal distance from the anchor,
 ``hypot(span + surge, sway)``, beyond ``sqrt(L^2 - (depth + heave)^2)`` with the line
@@ -59,8 +63,9 @@ from monitor.config import SensorLimits
 from monitor.qartod import CHECK, FAIL, FLAT, StreamQC
 
 ACCEPTED = 0
+# time_ahead last: the pipeline counts it at intake (monitor.time_ahead), no code of _validate
 REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
-                            "flat_line", "check_factor")
+                            "flat_line", "check_factor", "time_ahead")
 _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 
 

@@ -15,6 +15,7 @@ import random
 import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -652,3 +653,65 @@ def test_the_first_catch_up_waits_until_discovery_settles(monkeypatch):
     assert time.monotonic() - start < daemon_mod._RECONNECT_WAIT_S
     start = time.monotonic() + 10  # later: tension alone, at once
     assert [k for k, _ in daemon_mod.Daemon._publishers_to_catch_up(fake)] == keys[3:]
+
+
+# ---- a sample time far ahead of the daemon's clock ------------------------------------------
+
+def test_a_far_future_sample_is_time_ahead_alerted_and_the_stream_goes_on(tmp_path):
+    """A plain Zenoh publisher sends tension on the daemon's clock; one sample of the third
+    block is dated a year ahead (a flipped year digit), the seventh block wholly (a wrong
+    clock, alerted as clock_skew until its next block). Those 21 samples are ``time_ahead``
+    within seconds (status, metric) and every other sample is accepted: no ``time_backwards``, no time restart. Was:
+    the first was accepted and every later sample was ``time_backwards`` for good. A replay
+    of the daemon's recording (log_time = the daemon's clock) counts the same."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, record=True, load_source="measured")
+    d = start_daemon(cfg, tmp_path)
+    alerts = queue.SimpleQueue()
+    year = 365 * 86400 * 10**9
+    t0 = time.time_ns() // 10**9 * 10**9 - 120 * 10**9
+    codec = zenoh_io.ProtobufCodec()
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/clock_skew/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+            for k in (*range(8), 40):  # the last block pushes the others through the ordering
+                t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+                if k == 2:
+                    t[5] += year
+                if k == 6:
+                    t += year
+                v = 3000.0 + 100.0 * np.sin(np.arange(20))
+                if k == 6:  # the third block's skew may have been alerted for a moment
+                    wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 6,
+                                     buoy=BUOY)
+                    time.sleep(1.0)  # two status intervals: a put and its delete, if any
+                    while not alerts.empty():
+                        alerts.get()
+                pub.put(codec.encode(SampleBlock(BUOY, "tension", t, {"tension_N": v})))
+                if k == 6:  # the clock stays wrong until its next block
+                    assert wait_for(lambda: alerts.qsize() >= 1, 30)
+                    rec = json.loads(alerts.get()[2])
+                    assert rec["labels"]["component"] == "tension"
+                    assert abs(rec["value"] - year / 1e9) < 200
+            assert wait_for(lambda: alerts.qsize() >= 1, 30)
+            assert not alerts.get()[2]  # cleared: a DELETE (the clock is right again)
+            st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 9
+                                  and s["status"]["streams"]["tension"]["accepted"] == 159,
+                                  buoy=BUOY)["status"]["streams"]["tension"]
+            assert {r: n for r, n in st["rejected"].items() if n} == {"time_ahead": 21}
+            assert (st["time_restarts"], st["clock_skewed_blocks"]) == (0, 2)
+            metrics = int(cfg.read_text().split("[metrics]\nport = ")[1].split()[0])
+            with urllib.request.urlopen(f"http://127.0.0.1:{metrics}/metrics", timeout=10) as r:
+                text = r.read().decode()
+            assert (f'buoymon_samples_rejected_total{{buoy="{BUOY}",reason="time_ahead",'
+                    f'stream="tension"}} 21.0') in text
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0
+    replayed = replayed_figures(load_config(cfg), sorted((tmp_path / "rec").glob("*.mcap")))
+    tension = replayed["samples"]["tension"]
+    assert {r: n for r, n in tension["rejected"].items() if n} == {"time_ahead": 21}
+    assert tension["accepted"] == 159
