@@ -211,6 +211,9 @@ class _TensionStats:
                 "max": _finite_or_none(self.max)}
 
 
+_DUP_CODE = REASONS.index("duplicate") + 1  # StreamValidator.check's verdict of a copy
+
+
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
@@ -225,9 +228,13 @@ class _StreamSlab:
         self.t, self.codes = t, codes
         if codes.any():
             ok = codes == 0
-            self.acc_t, self.acc_values, self.rej_t = t[ok], values[:, ok], t[~ok]
-        else:  # the usual case: no copies
-            self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
+            # a copy (a duplicate verdict) is no measurement: neither received nor rejected
+            # in a tick's counts (the rejected_rate rule), only in the duplicate total
+            copy = codes == _DUP_CODE
+            self.acc_t, self.acc_values = t[ok], values[:, ok]
+            self.rx_t, self.rej_t = t[~copy], t[~(ok | copy)]
+        else:  # the usual case: no rejections
+            self.acc_t, self.acc_values, self.rx_t, self.rej_t = t, values, t, t[:0]
         self._before = validator_before
 
     @staticmethod
@@ -235,8 +242,8 @@ class _StreamSlab:
         return v.accepted, dict(v.rejected), v.has_last, v.last_t_ns
 
     def counts_after(self, lo: int) -> tuple[int, int]:
-        """Samples received and rejected with time after ``lo``."""
-        return (self.t.shape[0] - int(np.searchsorted(self.t, lo, side="right")),
+        """Samples received (copies aside) and rejected with time after ``lo``."""
+        return (self.rx_t.shape[0] - int(np.searchsorted(self.rx_t, lo, side="right")),
                 self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
 
     def prepare(self, ends: np.ndarray) -> None:
@@ -246,7 +253,7 @@ class _StreamSlab:
         if self.rej_t.shape[0]:
             by_reason = np.stack([np.searchsorted(self.t[self.codes == i], ends, side="right")
                                   for i in range(1, len(REASONS) + 1)]).tolist()
-        cut = np.searchsorted(self.t, ends, side="right")
+        cut = np.searchsorted(self.rx_t, ends, side="right")
         rej_cut = np.searchsorted(self.rej_t, ends, side="right")
         k = np.searchsorted(self.acc_t, ends, side="right")
         has = (k > 0) | has_last

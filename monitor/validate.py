@@ -42,7 +42,10 @@ A genuine step in the signal is accepted once ``max_rate_per_s * elapsed`` cover
 Duplicates are removed and counted in the pipeline only, live and in replay alike (the log
 reader delivers every copy it reads): the ordering (:mod:`monitor.ordering`, stable) drops an
 exact copy it finds right behind its original, this rule rejects any other sample at a time
-already seen; both land in the one ``duplicate`` count.
+already seen; both land in the one ``duplicate`` count. A copy is no measurement: it is not
+among the samples a tick received or rejected (the ``rejected_rate`` alert rule), so
+re-deliveries never read as a glitching sensor. (A different value at a time already seen is
+a ``duplicate`` too, and likewise outside the rate.)
 
 Rejected samples are simply absent downstream: the fatigue series is the accepted samples in
 time order. A run of rejections therefore joins the accepted samples either side; if the run is
