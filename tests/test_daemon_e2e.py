@@ -715,3 +715,52 @@ def test_a_far_future_sample_is_time_ahead_alerted_and_the_stream_goes_on(tmp_pa
     tension = replayed["samples"]["tension"]
     assert {r: n for r, n in tension["rejected"].items() if n} == {"time_ahead": 21}
     assert tension["accepted"] == 159
+
+
+def test_a_late_publisher_s_data_behind_the_processed_time_is_counted_and_alerted(tmp_path):
+    """Tension has flowed 150 s through a running daemon when a separate `replay.publish`
+    process appears with 120 s of IMU data from that past. The IMU samples lie behind the
+    time the pipeline has processed (the 10 s live horizon): all 1,200 are rejected as
+    time_backwards (keeping such a backlog is open work), and the shipped rejected_rate rule,
+    now on every stream, alerts on the IMU (before, it watched tension only: silence)."""
+    port = free_port()
+    d = start_daemon(write_config(tmp_path, port, load_source="measured"), tmp_path)
+    codec = zenoh_io.ProtobufCodec()
+    alerts = queue.SimpleQueue()
+    t0 = time.time_ns() // 10**9 * 10**9 - 200 * 10**9
+    imu = [SampleBlock(BUOY, "imu", t0 + k * 10**9 + 100_000_000 * np.arange(10, dtype=np.int64),
+                       {"accel_x_mps2": np.zeros(10), "accel_y_mps2": np.zeros(10),
+                        "accel_z_mps2": np.sin(np.arange(10.0))}) for k in range(120)]
+    log = write_log(tmp_path / "imu.mcap", imu)
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/rejected_rate/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+
+            def tension(k: int) -> None:
+                t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+                pub.put(codec.encode(SampleBlock(BUOY, "tension", t, {
+                    "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0))})))
+
+            for k in range(150):
+                tension(k)
+            wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 150,
+                             buoy=BUOY)
+            late = publish(log, port)
+            out, err = late.communicate(timeout=60)
+            assert late.returncode == 0 and out.strip() == "120", err
+            for k in range(150, 170):  # tension goes on: the ticks that judge the IMU
+                tension(k)
+            st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 290,
+                                  buoy=BUOY)["status"]["streams"]
+            assert (st["imu"]["accepted"], {r: n for r, n in st["imu"]["rejected"].items() if n}
+                    ) == (0, {"time_backwards": 1200})
+            assert wait_for(lambda: not alerts.empty(), 30)
+            key, payload = alerts.get()[1:3]
+            assert key == f"buoy/{BUOY}/monitor/alert/rejected_rate/imu"
+            assert json.loads(payload)["value"] == 1.0
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0
