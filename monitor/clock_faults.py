@@ -9,7 +9,9 @@ pipeline still decides what is accepted, so rejected data stays rejected):
   time_restart_min_s``, than the newest sample time this stream already sent in this daemon
   life (a sensor or publisher restarted with an older clock). Only this life is compared: a
   re-delivery after a daemon restart (samples at or before the checkpoint) is not a restart.
-  The fault holds until the stream catches up with its previous newest time.
+  The fault holds until the stream catches up with its previous newest time. A block time
+  ``time_ahead`` of its arrival (:mod:`monitor.time_ahead`: the pipeline rejects it) is not
+  taken as the newest: the stream going on at the right time after it is no restart.
 
 Both are counted, give a log line (the caller rate-limits it) and show as status fields,
 from which :mod:`monitor.alerts.live` raises the ``clock_skew`` and ``time_restart`` alerts.
@@ -19,6 +21,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
+
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S, is_ahead
 
 NS = 1_000_000_000
 
@@ -43,9 +47,11 @@ class StreamClock:
 class ClockFaults:
     """Per-stream clock-skew and time-restart detection."""
 
-    def __init__(self, skew_max_s: float, restart_min_s: float) -> None:
+    def __init__(self, skew_max_s: float, restart_min_s: float,
+                 max_ahead_s: float = DEFAULT_MAX_AHEAD_S) -> None:
         self.skew_max_s = skew_max_s
         self.restart_min_ns = int(restart_min_s * NS)
+        self.max_ahead_ns = int(round(max_ahead_s * NS))
         self.streams: dict[str, StreamClock] = {}
 
     def observe(self, sensor: str, t_last_ns: int, recv_ns: int) -> list[str]:
@@ -68,7 +74,8 @@ class ClockFaults:
                        "(its samples are rejected as time_backwards until it catches up)")
         else:
             s.behind_s = 0.0
-        s.newest_ns = t_last_ns if s.newest_ns is None else max(s.newest_ns, t_last_ns)
+        if not is_ahead(t_last_ns, recv_ns, self.max_ahead_ns):
+            s.newest_ns = t_last_ns if s.newest_ns is None else max(s.newest_ns, t_last_ns)
         return out
 
     def fields(self, sensor: str) -> dict[str, Any]:

@@ -54,7 +54,8 @@ def build_daemon(path: str) -> Daemon:
         # opened here too, so a damaged outbox stops the start with its name (exit status 2),
         # not with a traceback once the daemon has begun to serve
         Outbox(cfg.alerts.outbox.path, {}).close()
-    return Daemon(cfg.buoy.id, cfg.daemon, make_pipeline, default_codec(), attach=attach)
+    return Daemon(cfg.buoy.id, cfg.daemon, make_pipeline, default_codec(), attach=attach,
+                  max_ahead_s=cfg.ordering.max_ahead_s)
 
 
 def rerun_sinks(cfg: Any) -> list[Any]:

@@ -34,6 +34,7 @@ from monitor.daemon_config import DaemonConfig, parse_daemon_sections
 from monitor.forecast_config import ForecastConfig
 from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, error, parse_struct,
                             read_toml, unknown)
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S
 from monitor.viz.rerun_options import RerunOptions
 
 
@@ -225,6 +226,8 @@ class OrderingConfig(msgspec.Struct, frozen=True):
     horizon_s: Seconds = 10.0  # live: how far a stream may lag the newest data before it is
     #                            passed by
     replay_horizon_s: Seconds = 3600.0  # replay: same, sized for coalesced log blocks
+    max_ahead_s: Seconds = DEFAULT_MAX_AHEAD_S  # a sample time further ahead of its receive time is
+    #                               time_ahead (monitor.time_ahead)
 
 
 @dataclass(frozen=True)

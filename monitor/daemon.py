@@ -39,6 +39,7 @@ from monitor.events import Sink, StepResult
 from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S
 from monitor.sequence import SequenceTracker
 from monitor import zenoh_io
 
@@ -203,7 +204,8 @@ class Daemon:
 
     def __init__(self, buoy_id: str, config: DaemonConfig, make_pipeline: PipelineFactory,
                  codec: zenoh_io.BlockCodec, notifier: SdNotifier | None = None,
-                 attach: Attach | None = None) -> None:
+                 attach: Attach | None = None,
+                 max_ahead_s: float = DEFAULT_MAX_AHEAD_S) -> None:
         self.buoy_id = buoy_id
         self.config = config
         self.codec = codec
@@ -239,7 +241,8 @@ class Daemon:
         self._first_catch_up = True
         self.restored_seq = restored.seq if restored is not None else 0
         hc = config.health
-        self.clocks = ClockFaults(hc.clock_skew_max_s, hc.time_restart_min_s)
+        # the pipeline's [ordering] max_ahead_s: a block it rejects as time_ahead is no restart
+        self.clocks = ClockFaults(hc.clock_skew_max_s, hc.time_restart_min_s, max_ahead_s)
         self.live = LiveAlerts(buoy_id, LiveConfig(
             hc.live_rules, hc.required_streams, hc.fatigue_blind_timeout_s,
             hc.clock_skew_max_s, hc.hold_s), saved.get("daemon", {}).get("live"))
@@ -543,7 +546,8 @@ class Daemon:
             # skew against the time it was published: a message from a publisher's cache
             # arrives late by design
             sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else recv_ns
-            for msg in self.clocks.observe(block.sensor, block.t_last_ns, sent_ns):
+            # the newest sample (a block need not be sorted): a corrupt time inside it shows
+            for msg in self.clocks.observe(block.sensor, int(block.t_ns.max()), sent_ns):
                 self._faults.warning(f"clock {block.sensor}", "sensor clock fault: " + msg,
                                      sensor=block.sensor, **self.clocks.fields(block.sensor))
         try:

@@ -49,6 +49,7 @@ from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
 from monitor.sea_state_learner import SeaStateLearner
 from monitor.stats_kernel import load_stats_pass
+from monitor.time_ahead import drop_ahead
 from monitor.validate import REASONS, StreamValidator
 
 MOTION_SENSORS = ("imu", "motion")  # the streams a motion estimator can use
@@ -219,6 +220,9 @@ class _TensionStats:
                 "max": _finite_or_none(self.max)}
 
 
+_DUP_CODE = REASONS.index("duplicate") + 1  # StreamValidator.check's verdict of a copy
+
+
 class _StreamSlab:
     """One stream's share of a slab with its verdicts, and its health at each tick end."""
 
@@ -233,9 +237,13 @@ class _StreamSlab:
         self.t, self.codes = t, codes
         if codes.any():
             ok = codes == 0
-            self.acc_t, self.acc_values, self.rej_t = t[ok], values[:, ok], t[~ok]
-        else:  # the usual case: no copies
-            self.acc_t, self.acc_values, self.rej_t = t, values, t[:0]
+            # a copy (a duplicate verdict) is no measurement: neither received nor rejected
+            # in a tick's counts (the rejected_rate rule), only in the duplicate total
+            copy = codes == _DUP_CODE
+            self.acc_t, self.acc_values = t[ok], values[:, ok]
+            self.rx_t, self.rej_t = t[~copy], t[~(ok | copy)]
+        else:  # the usual case: no rejections
+            self.acc_t, self.acc_values, self.rx_t, self.rej_t = t, values, t, t[:0]
         self._before = validator_before
 
     @staticmethod
@@ -243,8 +251,8 @@ class _StreamSlab:
         return v.accepted, dict(v.rejected), v.has_last, v.last_t_ns
 
     def counts_after(self, lo: int) -> tuple[int, int]:
-        """Samples received and rejected with time after ``lo``."""
-        return (self.t.shape[0] - int(np.searchsorted(self.t, lo, side="right")),
+        """Samples received (copies aside) and rejected with time after ``lo``."""
+        return (self.rx_t.shape[0] - int(np.searchsorted(self.rx_t, lo, side="right")),
                 self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
 
     def prepare(self, ends: np.ndarray) -> None:
@@ -257,11 +265,11 @@ class _StreamSlab:
         was ever accepted, the last accepted time (vectorised)."""
         if self._arrays is None:
             ends = self._ends
-            cut = np.searchsorted(self.t, ends, side="right")
+            cut = np.searchsorted(self.rx_t, ends, side="right")
             if self.rej_t.shape[0]:
                 rej_cut = np.searchsorted(self.rej_t, ends, side="right")
                 k = np.searchsorted(self.acc_t, ends, side="right")
-            else:  # the usual case: every sample accepted
+            else:  # the usual case: every sample accepted (and so rx_t is t)
                 rej_cut, k = np.zeros(ends.shape[0], np.int64), cut
             has = (k > 0) | self._before[2]
             last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0]
@@ -458,6 +466,7 @@ class Pipeline:
                                      gate_all, st.get("reorder"))
         # sensor time processed so far by watermark (not by flush): older samples are late
         self.processed_ns = int(st.get("processed_ns", _NEVER))
+        self._max_ahead_ns = int(round(config.ordering.max_ahead_s * 1e9))
         self.alerts = build_alert_engine(
             config, self.buoy_id,
             {n: endurance_stress_Pa(c.cfg, c.sn_curve) for n, c in self.components.items()},
@@ -598,12 +607,17 @@ class Pipeline:
         if block.buoy_id != self.buoy_id:
             raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
                              f"{self.buoy_id!r}")
+        block, ahead = drop_ahead(block, self._max_ahead_ns)
+        if ahead:  # counted before the slab's checks, so its ticks' totals include them
+            self.validators[block.sensor].rejected["time_ahead"] += ahead
         if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
                 and self.config.load.source != "measured" and len(block)):
             self._choose_motion(block.sensor)
         self.reorder.push(block)
         upto = self.reorder.watermark()
-        return self._ingest_slab(block, block.sensor, upto, upto)
+        intake = self._ingest_slab(block, block.sensor, upto, upto)
+        intake.rejected["time_ahead"] += ahead
+        return intake
 
     def ingest_end(self) -> SlabIntake:
         """Stream stage of :meth:`flush`: every buffered sample."""

@@ -19,6 +19,10 @@ Rules, applied to each sample in time order, first match wins:
                     goes, heave too (the estimator needs all three displacements), and the
                     fail lasts a window (50 s), so the estimator sees a gap and restarts.
 
+Before all these, the pipeline drops a sample whose time is further ahead of its receive time
+than ``[ordering] max_ahead_s`` and counts it here as ``time_ahead`` (:mod:`monitor.time_ahead`):
+accepted, it would make every later sample ``time_backwards``.
+
 A displacement (``motion``) sample whose position the line cannot reach is ``out_of_range``
 and a QARTOD ``location`` fail: its horizontal distance from the anchor,
 ``hypot(span + surge, sway)``, beyond ``sqrt(L^2 - (depth + heave)^2)`` with the line
@@ -38,7 +42,10 @@ A genuine step in the signal is accepted once ``max_rate_per_s * elapsed`` cover
 Duplicates are removed and counted in the pipeline only, live and in replay alike (the log
 reader delivers every copy it reads): the ordering (:mod:`monitor.ordering`, stable) drops an
 exact copy it finds right behind its original, this rule rejects any other sample at a time
-already seen; both land in the one ``duplicate`` count.
+already seen; both land in the one ``duplicate`` count. A copy is no measurement: it is not
+among the samples a tick received or rejected (the ``rejected_rate`` alert rule), so
+re-deliveries never read as a glitching sensor. (A different value at a time already seen is
+a ``duplicate`` too, and likewise outside the rate.)
 
 Rejected samples are simply absent downstream: the fatigue series is the accepted samples in
 time order. A run of rejections therefore joins the accepted samples either side; if the run is
@@ -59,8 +66,9 @@ from monitor.config import SensorLimits
 from monitor.qartod import CHECK, FAIL, FLAT, StreamQC, _qc_fast
 
 ACCEPTED = 0
+# time_ahead last: the pipeline counts it at intake (monitor.time_ahead), no code of _validate
 REASONS: tuple[str, ...] = ("nan", "out_of_range", "spike", "duplicate", "time_backwards",
-                            "flat_line", "check_factor")
+                            "flat_line", "check_factor", "time_ahead")
 _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 
 

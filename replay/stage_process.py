@@ -101,18 +101,20 @@ def idle_cpus(interval_s: float = 0.05) -> float:
 
 # ---------------------------------------------------------------------------------- pickling
 def _stream_slab(t: np.ndarray, codes: np.ndarray, acc_t: np.ndarray | None,
-                 rej_t: np.ndarray, before: tuple) -> _StreamSlab:
+                 rx_t: np.ndarray | None, rej_t: np.ndarray, before: tuple) -> _StreamSlab:
     """A stream's slab as the tick stage reads it (its accepted values are the stream
     stage's: left out)."""
     slab = _StreamSlab.__new__(_StreamSlab)
     slab.t, slab.codes, slab.rej_t, slab._before = t, codes, rej_t, before
     slab.acc_t = t if acc_t is None else acc_t
+    slab.rx_t = t if rx_t is None else rx_t
     slab.acc_values = None  # type: ignore[assignment]  # read here, it fails loudly
     return slab
 
 
 def _reduce_stream_slab(s: _StreamSlab) -> tuple:
-    return _stream_slab, (s.t, s.codes, None if s.acc_t is s.t else s.acc_t, s.rej_t, s._before)
+    return _stream_slab, (s.t, s.codes, None if s.acc_t is s.t else s.acc_t,
+                          None if s.rx_t is s.t else s.rx_t, s.rej_t, s._before)
 
 
 def _no_block() -> None:

@@ -15,6 +15,7 @@ import random
 import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -652,3 +653,114 @@ def test_the_first_catch_up_waits_until_discovery_settles(monkeypatch):
     assert time.monotonic() - start < daemon_mod._RECONNECT_WAIT_S
     start = time.monotonic() + 10  # later: tension alone, at once
     assert [k for k, _ in daemon_mod.Daemon._publishers_to_catch_up(fake)] == keys[3:]
+
+
+# ---- a sample time far ahead of the daemon's clock ------------------------------------------
+
+def test_a_far_future_sample_is_time_ahead_alerted_and_the_stream_goes_on(tmp_path):
+    """A plain Zenoh publisher sends tension on the daemon's clock; one sample of the third
+    block is dated a year ahead (a flipped year digit), the seventh block wholly (a wrong
+    clock, alerted as clock_skew until its next block). Those 21 samples are ``time_ahead``
+    within seconds (status, metric) and every other sample is accepted: no ``time_backwards``, no time restart. Was:
+    the first was accepted and every later sample was ``time_backwards`` for good. A replay
+    of the daemon's recording (log_time = the daemon's clock) counts the same."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, record=True, load_source="measured")
+    d = start_daemon(cfg, tmp_path)
+    alerts = queue.SimpleQueue()
+    year = 365 * 86400 * 10**9
+    t0 = time.time_ns() // 10**9 * 10**9 - 120 * 10**9
+    codec = zenoh_io.ProtobufCodec()
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/clock_skew/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+            for k in (*range(8), 40):  # the last block pushes the others through the ordering
+                t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+                if k == 2:
+                    t[5] += year
+                if k == 6:
+                    t += year
+                v = 3000.0 + 100.0 * np.sin(np.arange(20))
+                if k == 6:  # the third block's skew may have been alerted for a moment
+                    wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 6,
+                                     buoy=BUOY)
+                    time.sleep(1.0)  # two status intervals: a put and its delete, if any
+                    while not alerts.empty():
+                        alerts.get()
+                pub.put(codec.encode(SampleBlock(BUOY, "tension", t, {"tension_N": v})))
+                if k == 6:  # the clock stays wrong until its next block
+                    assert wait_for(lambda: alerts.qsize() >= 1, 30)
+                    rec = json.loads(alerts.get()[2])
+                    assert rec["labels"]["component"] == "tension"
+                    assert abs(rec["value"] - year / 1e9) < 200
+            assert wait_for(lambda: alerts.qsize() >= 1, 30)
+            assert not alerts.get()[2]  # cleared: a DELETE (the clock is right again)
+            st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 9
+                                  and s["status"]["streams"]["tension"]["accepted"] == 159,
+                                  buoy=BUOY)["status"]["streams"]["tension"]
+            assert {r: n for r, n in st["rejected"].items() if n} == {"time_ahead": 21}
+            assert (st["time_restarts"], st["clock_skewed_blocks"]) == (0, 2)
+            metrics = int(cfg.read_text().split("[metrics]\nport = ")[1].split()[0])
+            with urllib.request.urlopen(f"http://127.0.0.1:{metrics}/metrics", timeout=10) as r:
+                text = r.read().decode()
+            assert (f'buoymon_samples_rejected_total{{buoy="{BUOY}",reason="time_ahead",'
+                    f'stream="tension"}} 21.0') in text
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0
+    replayed = replayed_figures(load_config(cfg), sorted((tmp_path / "rec").glob("*.mcap")))
+    tension = replayed["samples"]["tension"]
+    assert {r: n for r, n in tension["rejected"].items() if n} == {"time_ahead": 21}
+    assert tension["accepted"] == 159
+
+
+def test_a_late_publisher_s_data_behind_the_processed_time_is_counted_and_alerted(tmp_path):
+    """Tension has flowed 150 s through a running daemon when a separate `replay.publish`
+    process appears with 120 s of IMU data from that past. The IMU samples lie behind the
+    time the pipeline has processed (the 10 s live horizon): all 1,200 are rejected as
+    time_backwards (keeping such a backlog is open work), and the shipped rejected_rate rule,
+    now on every stream, alerts on the IMU (before, it watched tension only: silence)."""
+    port = free_port()
+    d = start_daemon(write_config(tmp_path, port, load_source="measured"), tmp_path)
+    codec = zenoh_io.ProtobufCodec()
+    alerts = queue.SimpleQueue()
+    t0 = time.time_ns() // 10**9 * 10**9 - 200 * 10**9
+    imu = [SampleBlock(BUOY, "imu", t0 + k * 10**9 + 100_000_000 * np.arange(10, dtype=np.int64),
+                       {"accel_x_mps2": np.zeros(10), "accel_y_mps2": np.zeros(10),
+                        "accel_z_mps2": np.sin(np.arange(10.0))}) for k in range(120)]
+    log = write_log(tmp_path / "imu.mcap", imu)
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/rejected_rate/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+
+            def tension(k: int) -> None:
+                t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+                pub.put(codec.encode(SampleBlock(BUOY, "tension", t, {
+                    "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0))})))
+
+            for k in range(150):
+                tension(k)
+            wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 150,
+                             buoy=BUOY)
+            late = publish(log, port)
+            out, err = late.communicate(timeout=60)
+            assert late.returncode == 0 and out.strip() == "120", err
+            for k in range(150, 170):  # tension goes on: the ticks that judge the IMU
+                tension(k)
+            st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 290,
+                                  buoy=BUOY)["status"]["streams"]
+            assert (st["imu"]["accepted"], {r: n for r, n in st["imu"]["rejected"].items() if n}
+                    ) == (0, {"time_backwards": 1200})
+            assert wait_for(lambda: not alerts.empty(), 30)
+            key, payload = alerts.get()[1:3]
+            assert key == f"buoy/{BUOY}/monitor/alert/rejected_rate/imu"
+            assert json.loads(payload)["value"] == 1.0
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0

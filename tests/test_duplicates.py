@@ -5,8 +5,10 @@ the ordering is counted once, in ``samples.<stream>.rejected.duplicate``, copies
 samples included (not judged again); everything else, alerts included (a copy is no
 measurement, so no rejection in a tick's counts), is the clean data's to the last bit."""
 
+import numpy as np
 import pytest
 
+from monitor.blocks import SampleBlock
 from monitor.config import default_config
 from monitor.pipeline import Pipeline
 from replay.reader import LogReader
@@ -111,3 +113,31 @@ def test_live_copies_and_disorder_equal_their_replay(tmp_path, clean):
     assert replayed["samples"] == got["samples"]
     for name, comp in got["components"].items():
         assert replayed["components"][name]["damage_committed"] == comp["damage_committed"]
+
+
+def test_the_shipped_rejected_rate_rule_fires_on_glitches_of_any_stream(tmp_path, clean):
+    """The shipped rule (5 % over 600 s, every stream) on the IMU: every 5th sample NaN from
+    300 s on. The window holds all samples so far (t <= T at the 10-s tick T: 10 T + 1 of them,
+    (10 T - 3000) / 5 + 1 NaN), so the fraction first exceeds 5 % at T = 400 s (201 / 4001;
+    390 s: 181 / 3901 = 4.6 %), and it is the only rule firing that the clean log does not. The copies of the test above
+    fire nothing."""
+    from synthetic_buoy import S, T0
+
+    def glitched(b):
+        if b.sensor != "imu":
+            return b
+        bad = ((b.t_ns - T0) >= 300 * S) & (((b.t_ns - T0) // (S // 10)) % 5 == 0)
+        return SampleBlock(b.buoy_id, b.sensor, b.t_ns,
+                           {f: np.where(bad, np.nan, v) for f, v in b.fields.items()}, b.recv_ns)
+
+    got = replay_logs(default_config(), [_write(tmp_path / "g.mcap", map(glitched, clean[0]))]
+                      ).report
+    def key(a):
+        return a["rule"], a["labels"]["component"]
+
+    clean_fired = {key(a) for a in clean[1]["alerts"]}
+    fired = [a for a in got["alerts"] if a["state"] == "firing" and key(a) not in clean_fired]
+    assert [key(a) for a in fired] == [("rejected_rate", "imu")]
+    assert (fired[0]["at_ns"], fired[0]["value"]) == (T0 + 400 * S, 201 / 4001)
+    assert got["samples"]["imu"]["rejected"]["nan"] == 600
+    assert not any(a["rule"] == "rejected_rate" for a in clean[1]["alerts"])

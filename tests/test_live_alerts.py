@@ -166,6 +166,19 @@ def test_clock_skew_of_a_year_either_way_is_counted_with_its_size():
                                  "time_restart_jump_s": 0.0}
 
 
+def test_a_block_time_ahead_of_its_arrival_is_skewed_but_the_next_right_one_no_restart():
+    """A block 601 s ahead of its arrival (time_ahead: the pipeline rejects it) is a clock
+    skew; the stream's next block at the right time is no restart. 600 s ahead is taken."""
+    cf = ClockFaults(skew_max_s=300.0, restart_min_s=1.0, max_ahead_s=600.0)
+    cf.observe("tension", T0, T0)
+    assert len(cf.observe("tension", T0 + 601 * NS, T0)) == 1
+    assert cf.observe("tension", T0 + NS, T0 + NS) == []
+    assert cf.fields("tension")["time_restarts"] == 0
+    cf.observe("tension", T0 + 602 * NS, T0 + 2 * NS)
+    assert len(cf.observe("tension", T0 + 3 * NS, T0 + 3 * NS)) == 1  # 599 s back: a restart
+    assert cf.fields("tension")["time_restarts"] == 1
+
+
 def test_time_restart_is_counted_once_and_holds_until_the_stream_catches_up():
     cf = ClockFaults(skew_max_s=1e12, restart_min_s=1.0)
     for k in range(10):

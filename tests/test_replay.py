@@ -58,7 +58,7 @@ def test_report_contract_and_summary(tmp_path):
     assert set(report["samples"]) == {"tension", "imu", "gnss"}
     assert set(report["samples"]["tension"]["rejected"]) == {
         "nan", "out_of_range", "spike", "duplicate", "time_backwards", "flat_line",
-        "check_factor"}
+        "check_factor", "time_ahead"}
     assert set(report["samples"]["tension"]["qc"]) == {
         "gross_range", "spike", "rate_of_change", "flat_line"}
     assert set(report["samples"]["gnss"]["qc"]) >= {"location"}

@@ -32,7 +32,8 @@ def test_each_reason_is_detected_and_counted():
                    "ok", "ok"]
     assert val.accepted == 4
     assert val.rejected == {"nan": 1, "out_of_range": 1, "spike": 1, "duplicate": 1,
-                            "time_backwards": 1, "flat_line": 0, "check_factor": 0}
+                            "time_backwards": 1, "flat_line": 0, "check_factor": 0,
+                            "time_ahead": 0}
     assert val.last_t_ns == int(0.6 * S) and val.last_values[0] == 1120
 
 
@@ -184,7 +185,7 @@ def test_runs_of_accepted_samples_give_the_sequential_verdicts():
     codes, counts, last_t, has_last = _validate(t, values, lo, hi, rate, np.int64(0), last_v,
                                                 False, np.int64(floor), qc_code, repeat)
     assert codes.tolist() == ref
-    assert counts.tolist() == np.bincount(ref, minlength=8).tolist()
+    assert counts.tolist() == np.bincount(ref, minlength=len(REASONS) + 1).tolist()
     accepted = np.flatnonzero(np.array(ref) == 0)
     assert has_last and last_t == t[accepted[-1]]
     np.testing.assert_array_equal(last_v, values[:, accepted[-1]])

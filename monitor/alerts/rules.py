@@ -438,7 +438,8 @@ class Stale(Rule):
 
 class RejectedRate(Rule):
     """Fraction of a stream's received samples rejected by validation over the last
-    ``window_s`` of sensor time above ``threshold``."""
+    ``window_s`` of sensor time above ``threshold`` (copies, ``duplicate``, are neither:
+    monitor.validate)."""
 
     kind = "rejected_rate"
     unit = ""

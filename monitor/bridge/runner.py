@@ -54,6 +54,7 @@ from monitor.bridge.config import BridgeConfig, SourceConfig
 from monitor.bridge.formats import Rejected, Samples, bulk_parser, parser
 from monitor.bridge.transports import FLOOD, LINKS, LineSplitter, Link, Links, ReceiveClock
 from monitor.sensors import PublisherOptions, SensorPublisher
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S, is_ahead
 from monitor import zenoh_io
 
 log = logging.getLogger("buoymon.bridge")
@@ -80,8 +81,8 @@ _NEAR_S = 0.01
 # sentences without a fix of their own (counted, not logged)
 _QUIET = {"header_read"}
 # a time stamp this far ahead of the logger's clock, reached by a leap of as much: corrupt
-# (the daemon's clock_skew_max_s default)
-_MAX_AHEAD_NS = 600 * 10**9
+# (the pipeline's time_ahead default, the daemon's clock_skew_max_s default)
+_MAX_AHEAD_NS = int(DEFAULT_MAX_AHEAD_S * 10**9)
 _UNLOGGED = {"other_sentence", "repeat_fix"}
 
 
@@ -157,8 +158,8 @@ class SourceState:
 def _leaps_ahead(src: SourceState, t_ns: int, recv_ns: int) -> bool:
     """A corrupt time stamp (module docstring): ``t_ns`` is over ``_MAX_AHEAD_NS`` ahead of
     the logger's clock, and got there by a leap of as much beyond the clock's own advance."""
-    return (t_ns - recv_ns > _MAX_AHEAD_NS and src.last_t_ns is not None
-            and (t_ns - src.last_t_ns) - (recv_ns - src.last_recv_ns) > _MAX_AHEAD_NS)
+    return (is_ahead(t_ns, recv_ns, _MAX_AHEAD_NS) and src.last_t_ns is not None
+            and is_ahead(t_ns - src.last_t_ns, recv_ns - src.last_recv_ns, _MAX_AHEAD_NS))
 
 
 def _age(now_mono: float, then: float | None) -> float | None:
