@@ -13,7 +13,28 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Measured 2026-11-25 on the 2-core development machine, same 30-day log (51.84 M tension
+Latest, 2026-11-25 22:22-22:23 UTC on the 2-core development machine, quiet (load 0.9-1.1),
+the same 30-day log, report and state identical to the last bit to the previous main's (and,
+with the time_ahead and rejected_rate changes of the same round, to the new golden): this
+round's reading (a count per value instead of np.unique, ISA-L's CRC-32, no read-ahead thread
+on one CPU), learner (compiled loops with numpy's bits, one periodogram batch per window),
+alert batch (re-sends in the compiled scan) and stream stage (estimator in registers, ticks
+pass in groups, fused validation and QC) cuts:
+
+* one core: 9.79 s wall, 9.77 CPU-s, 5.29 M tension samples/s (13.78 CPU-s before: 1.41 x);
+  without alert rules 9.71 s;
+* 2 cores: 9.33 s wall (11.46 CPU-s), **5.55 M/s** (4.27 before); the reading and stream
+  stage in a child process (replay.stage_process, ``--two-processes``) was slower here than
+  one process (fresh in-process runs at load ~1: 11.4 s, 9.1 s with glibc's mmap threshold
+  raised, against 7.7-8.1 s in one process): its
+  hand-over costs ~40 % more CPU in all (bench/bench_threads.py);
+* peak RSS 1 day / 30 days 217 / 224 MB (+3.0 %);
+* naive baseline 0.549 M/s: **9.6 x** on one core (9.7 x without alert rules), 10.1 x on 2.
+
+Targets (issue 22): 10 M/s wall on 2 cores: NOT reached (5.55); 10 x on one core: NOT reached
+(9.6 x).
+
+Earlier, measured 2026-11-25 on the 2-core development machine, same 30-day log (51.84 M tension
 samples), default configuration, report and state identical to the last bit (a golden of this
 log written from main 7e8ba84). This build: the batched alert ticks, the per-tick commits in
 one compiled pass, the learner's reused periodogram buffers, the fused validation, QC,
