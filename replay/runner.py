@@ -212,7 +212,8 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
             pipeline.advance(intake)
             if intake.block is not None:
                 n_blocks += 1
-                n_samples += len(intake.block)
+                # the block as read: its time_ahead samples (dropped from intake.block) too
+                n_samples += len(intake.block) + intake.rejected["time_ahead"]
                 if progress is not None:
                     progress.update(intake.block.t_last_ns, n_samples)
     else:

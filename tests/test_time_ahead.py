@@ -94,3 +94,24 @@ def test_the_tolerance_must_be_positive():
     with pytest.raises(ConfigError, match="max_ahead_s"):
         base = default_config()
         config_with(base, ordering={**base.section("ordering"), "max_ahead_s": 0})
+
+
+def test_the_sample_count_includes_time_ahead_samples_with_the_stream_stage_on_a_thread(blocks):
+    """run_blocks counts the samples read, time_ahead ones included, in each mode (the thread
+    mode counted its hand-over's block, from which they are dropped)."""
+    from replay.runner import run_blocks
+
+    out, k = blocks
+    fed = []
+    for i, b in enumerate(out):
+        b = dataclasses.replace(b, recv_ns=int(b.t_ns.max()) + 20_000_000)
+        if i == k:
+            t = b.t_ns.copy()
+            t[5] += YEAR_NS
+            b = dataclasses.replace(b, t_ns=t)
+        fed.append(b)
+    total = sum(len(b) for b in fed)
+    for threads in (False, True):
+        pipeline, result = run_blocks(default_config(), iter(fed), threads=threads)
+        assert pipeline.validators["tension"].rejected["time_ahead"] == 1
+        assert (result.blocks, result.samples) == (len(fed), total)
