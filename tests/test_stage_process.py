@@ -224,3 +224,21 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     assert "no report or state written" in err
     assert state.read_bytes() == saved
     assert multiprocessing.active_children() == []
+
+
+def test_a_pipe_that_cannot_grow_still_gives_the_same_bits(feed, monkeypatch):
+    """F_SETPIPE_SZ refused (EPERM: pipe-max-size lowered, or the user's pipe pages spent):
+    the replay goes on through the default pipe; it crashed with the refusal."""
+    import fcntl
+
+    want = _replay(iter(feed), False)[0]
+    real = fcntl.fcntl
+
+    def refused(fd, cmd, *arg):
+        if cmd == fcntl.F_SETPIPE_SZ:
+            raise PermissionError(1, "Operation not permitted")
+        return real(fd, cmd, *arg)
+
+    monkeypatch.setattr(fcntl, "fcntl", refused)
+    assert _replay(iter(feed), True)[0] == want
+    assert multiprocessing.active_children() == []
