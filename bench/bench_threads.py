@@ -10,8 +10,8 @@ and whether every run gave the same report and state bytes.
 usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N] [--modes M,..] [--warm-log L]
 
 Modes: ``turn`` (one process, the reader's read-ahead thread), ``turn-no-ra`` (one thread),
-``threads``, ``child`` (the child reads on its one thread: what ``buoymon replay`` runs on 2
-CPUs), ``child-ra`` (the child with a read-ahead thread).
+``threads``, ``child`` (the child reads on its one thread: what ``buoymon replay
+--two-processes`` runs on 2 CPUs), ``child-ra`` (the child with a read-ahead thread).
 
 The child process, measured 2026-11-25 on the 2-core development machine (Xeon, shared with
 other sessions), the 1-day bench log (/work/wt/_gold/day1.mcap, 1.73 M tension samples) and

@@ -165,7 +165,8 @@ class _Spectra:
         if not self.segments:
             return {}
         if self.added < self.filled:
-            self.summed(Periodograms(SEGMENT, _BATCH_ROWS))
+            # room for at least one segment of every signal, as _WindowSpectra's work
+            self.summed(Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names))))
         return {n: self.acc[i] for i, n in enumerate(self.names)}
 
     def mean_psd(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:

@@ -212,7 +212,8 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
             pipeline.advance(intake)
             if intake.block is not None:
                 n_blocks += 1
-                n_samples += len(intake.block)
+                # the block as read: its time_ahead samples (dropped from intake.block) too
+                n_samples += len(intake.block) + intake.rejected["time_ahead"]
                 if progress is not None:
                     progress.update(intake.block.t_last_ns, n_samples)
     else:
@@ -365,8 +366,9 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
         child = two_processes and speed is None and child_pays(files)
         # the child reads on its one thread: a read-ahead thread there waits for the GIL
-        # (bench/bench_threads.py)
-        source = LogReader(files, coalesce=speed is None, read_ahead=not child)
+        # (bench/bench_threads.py); one process reads ahead by the reader's rule
+        # (replay.chunks.read_ahead_pays: only with a CPU to spare)
+        source = LogReader(files, coalesce=speed is None, read_ahead=False if child else None)
         history = ReportHistory() if plot_fields else None
         all_sinks = [*sinks, history] if history is not None else list(sinks)
         pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,

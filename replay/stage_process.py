@@ -286,7 +286,10 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     their blocks. The child's exception is raised here; :class:`ChildDied` if it ends
     without a word. Closing the generator stops the child."""
     read_fd, write_fd = os.pipe()
-    fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
+    try:
+        fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
+    except OSError:  # pipe-max-size lowered, or the user's pipe pages spent: the default
+        pass  # pipe (64 KB) only makes the child wait more often
     ctx = multiprocessing.get_context("fork")
     child = ctx.Process(target=_child, name="buoymon-stream",
                         args=(write_fd, read_fd, blocks, make_pipeline, send_blocks,

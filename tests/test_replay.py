@@ -215,3 +215,27 @@ def test_logs_are_replayed_in_time_order_from_folders_and_sub_folders(tmp_path, 
                  "--report", str(tmp_path / "e.json")]) == 0
     assert capsys.readouterr().err.count(f"{tmp_path / 'empty'}: no *.mcap file in this folder") == 1
     assert json.loads((tmp_path / "e.json").read_text())["samples"] == one["samples"]
+
+
+def test_replay_reads_ahead_only_with_a_cpu_to_spare(tmp_path, monkeypatch):
+    """replay_logs in one process follows the reader's rule (replay.chunks.read_ahead_pays):
+    allowed one CPU, no read-ahead thread (it costs CPU and saves no time); allowed two, one."""
+    import os
+
+    import replay.reader
+    from replay.runner import replay_logs
+
+    path = tmp_path / "a.mcap"
+    write_log(path, blocks_interleaved(sea(20.0), 1.0))
+    made = []
+
+    class Spy(replay.reader.LogReader):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(self.read_ahead)
+
+    monkeypatch.setattr(replay.reader, "LogReader", Spy)
+    for cpus in ({0}, {0, 1}):
+        monkeypatch.setattr(os, "sched_getaffinity", lambda pid, c=cpus: set(c))
+        assert replay_logs(default_config(), [path], show_progress=False).samples > 0
+    assert made == [False, True]

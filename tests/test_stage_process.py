@@ -202,6 +202,10 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 0
     saved = state.read_bytes()
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    # the child whatever the machine's load (child_pays measures the idle CPUs: on a busy
+    # machine one process replayed, nothing died and the test failed)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     parent, ingest = os.getpid(), Pipeline.ingest
 
     def dying(self, block):  # in the child only: as if the kernel's OOM killer struck
@@ -219,4 +223,22 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     assert "reading process ended without finishing the log (exit code -9)" in err
     assert "no report or state written" in err
     assert state.read_bytes() == saved
+    assert multiprocessing.active_children() == []
+
+
+def test_a_pipe_that_cannot_grow_still_gives_the_same_bits(feed, monkeypatch):
+    """F_SETPIPE_SZ refused (EPERM: pipe-max-size lowered, or the user's pipe pages spent):
+    the replay goes on through the default pipe; it crashed with the refusal."""
+    import fcntl
+
+    want = _replay(iter(feed), False)[0]
+    real = fcntl.fcntl
+
+    def refused(fd, cmd, *arg):
+        if cmd == fcntl.F_SETPIPE_SZ:
+            raise PermissionError(1, "Operation not permitted")
+        return real(fd, cmd, *arg)
+
+    monkeypatch.setattr(fcntl, "fcntl", refused)
+    assert _replay(iter(feed), True)[0] == want
     assert multiprocessing.active_children() == []

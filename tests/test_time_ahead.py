@@ -4,6 +4,7 @@ good sample was ``time_backwards`` for good. The live daemon is tested in
 tests/test_daemon_e2e.py."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -94,3 +95,28 @@ def test_the_tolerance_must_be_positive():
     with pytest.raises(ConfigError, match="max_ahead_s"):
         base = default_config()
         config_with(base, ordering={**base.section("ordering"), "max_ahead_s": 0})
+
+
+def test_the_sample_count_includes_time_ahead_samples_with_the_stream_stage_on_a_thread(blocks):
+    """run_blocks counts the samples read, time_ahead ones included, in each mode (the thread
+    mode counted its hand-over's block, from which they are dropped), and gives the same
+    report and state in one thread, on two and with the child process."""
+    from replay.runner import run_blocks
+
+    out, k = blocks
+    fed = []
+    for i, b in enumerate(out):
+        b = dataclasses.replace(b, recv_ns=int(b.t_ns.max()) + 20_000_000)
+        if i == k:
+            t = b.t_ns.copy()
+            t[5] += YEAR_NS
+            b = dataclasses.replace(b, t_ns=t)
+        fed.append(b)
+    total = sum(len(b) for b in fed)
+    outs = []
+    for mode in ({}, {"threads": True}, {"child": True}):
+        pipeline, result = run_blocks(default_config(), iter(fed), **mode)
+        assert pipeline.validators["tension"].rejected["time_ahead"] == 1
+        assert (result.blocks, result.samples) == (len(fed), total)
+        outs.append(json.dumps([pipeline.report(), pipeline.state()], allow_nan=True))
+    assert outs[1] == outs[0] and outs[2] == outs[0]  # the same bits in every mode
