@@ -349,7 +349,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     from replay.log_files import time_span
     from replay.reader import LogReader
     from replay.report import add_plot_fields
-    from replay.stage_process import child_pays
+    from replay.stage_process import one_process_reason
 
     files = collect_logs(paths)
     if plain is None:
@@ -363,7 +363,12 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         span = time_span(files) if show_progress else None
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-        child = two_processes and speed is None and child_pays(files)
+        child = False
+        if two_processes:  # asked for: say why not, or the operator cannot tell
+            reason = "a paced replay" if speed is not None else one_process_reason(files)
+            child = reason is None
+            if reason is not None:
+                log.warning("two processes not used, one process replays: %s", reason)
         # the child reads on its one thread: a read-ahead thread there waits for the GIL
         # (bench/bench_threads.py)
         source = LogReader(files, coalesce=speed is None, read_ahead=not child)

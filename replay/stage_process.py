@@ -71,18 +71,32 @@ class ChildDied(RuntimeError):
 
 
 def child_pays(files: Sequence[Path]) -> bool:
-    """Whether to replay these logs with the reading and stream stage in a child process:
-    on Linux, with at least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of
-    data, and at least :data:`IDLE_CPUS` of the machine's CPUs idle just before (with
-    another job on the second CPU the two processes keep waiting for each other: the
-    30-day log took 15.2 s against 11.6 s in one process)."""
+    """Whether to replay these logs with the reading and stream stage in a child process
+    (:func:`one_process_reason` finds none against it)."""
+    return one_process_reason(files) is None
+
+
+def one_process_reason(files: Sequence[Path]) -> str | None:
+    """Why these logs replay in one process, or None when the child pays: on Linux, with at
+    least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of data, and at least
+    :data:`IDLE_CPUS` of the machine's CPUs idle just before (with another job on the second
+    CPU the two processes keep waiting for each other: the 30-day log took 15.2 s against
+    11.6 s in one process). The reason is for the operator who asked for two processes."""
     from replay.log_files import inflated_size
 
     # fork, CPU affinity and pipe sizes as Linux has them (elsewhere: one process)
-    if not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2:
-        return False
+    if not sys.platform.startswith("linux"):
+        return f"Linux only (this is {sys.platform})"
+    if len(os.sched_getaffinity(0)) < 2:
+        return "this process may run on one CPU only"
     size = inflated_size(files)
-    return size is not None and size >= CHILD_MIN_BYTES and idle_cpus() >= IDLE_CPUS
+    if size is None or size < CHILD_MIN_BYTES:
+        return (f"the logs hold less than {CHILD_MIN_BYTES / 1e6:g} MB of data (about a day "
+                "of the default streams), where a child costs what it saves")
+    idle = idle_cpus()
+    if idle < IDLE_CPUS:
+        return f"{idle:.1f} of the machine's CPUs idle, {IDLE_CPUS:g} needed"
+    return None
 
 
 def idle_cpus(interval_s: float = 0.05) -> float:

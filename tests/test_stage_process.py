@@ -190,6 +190,33 @@ def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkey
     assert not child_pays([log])  # not Linux: one process
 
 
+def test_buoymon_replay_says_why_two_processes_were_not_used(tmp_path, feed, monkeypatch,
+                                                             capsys):
+    """Asked for two processes on a small log (or a busy machine), the replay ran in one and
+    said nothing: the operator could not tell the flag had no effect."""
+    from replay.writer import LogWriter
+
+    log = tmp_path / "in.mcap"
+    with LogWriter(log) as w:
+        for b in feed:
+            w.write_block(b)
+    capsys.readouterr()
+    args = ["replay", str(log), "--no-progress", "--two-processes"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "two processes not used, one process replays: the logs hold less than 20 MB" in err
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 0.7)
+    assert main(args) == 0
+    assert "one process replays: 0.7 of the machine's CPUs idle, 1.5 needed" in capsys.readouterr().err
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    assert main(args) == 0
+    assert "two processes not used" not in capsys.readouterr().err
+    assert main(["replay", str(log), "--no-progress"]) == 0  # not asked: nothing to say
+    assert "two processes not used" not in capsys.readouterr().err
+
+
 def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path, feed,
                                                                          monkeypatch, capsys):
     from monitor.pipeline import Pipeline
@@ -202,6 +229,8 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     assert main(["replay", str(log), "--state", str(state), "--no-progress"]) == 0
     saved = state.read_bytes()
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    # a busy machine (other jobs) would replay in one process: no child to die
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
     parent, ingest = os.getpid(), Pipeline.ingest
 
     def dying(self, block):  # in the child only: as if the kernel's OOM killer struck
