@@ -40,6 +40,7 @@ import itertools
 import multiprocessing
 import os
 import pickle
+import signal
 import sys
 import time
 import traceback
@@ -290,6 +291,19 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
 
 
 # --------------------------------------------------------------------------------- the parent
+def _how_ended(exitcode: int | None) -> str:
+    """A child's end in the operator's words: multiprocessing's -9 means killed by SIGKILL
+    (the OOM killer's signal, or an operator's kill -9)."""
+    if exitcode is None:
+        return "still running"
+    if exitcode < 0:
+        try:
+            return f"killed by {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"killed by signal {-exitcode}"
+    return f"exit code {exitcode}"
+
+
 def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool
                  ) -> Generator[tuple[str, Any], None, None]:
     """Read ``blocks`` and run the stream stage in a forked child; yields, in order,
@@ -321,7 +335,7 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
             except EOFError:
                 child.join(5)
                 raise ChildDied(f"the replay's reading process ended without finishing the "
-                                f"log (exit code {child.exitcode})") from None
+                                f"log ({_how_ended(child.exitcode)})") from None
             if kind == "error":
                 raise obj
             yield kind, obj
