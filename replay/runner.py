@@ -24,6 +24,7 @@ from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
 from monitor.events import Sink
 from monitor.pipeline import Pipeline
+from monitor.time_ahead import pace_ns
 from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
 from replay.stages import ingest_ahead
@@ -147,10 +148,11 @@ class ReplayResult:
 
 def _pace(block: SampleBlock, speed: float, origin: list[float]) -> None:
     """Sleep so sensor time advances ``speed`` times faster than wall-clock time."""
+    t_ns = pace_ns(block.t_first_ns, block.recv_ns)
     if not origin:
-        origin.extend((block.t_first_ns, time.monotonic()))
+        origin.extend((t_ns, time.monotonic()))
         return
-    due = origin[1] + (block.t_first_ns - origin[0]) / 1e9 / speed
+    due = origin[1] + (t_ns - origin[0]) / 1e9 / speed
     delay = due - time.monotonic()
     if delay > 0:
         time.sleep(delay)
