@@ -19,6 +19,7 @@ from typing import Any, Callable, Iterable, Sequence
 from monitor.blocks import SampleBlock
 from monitor.daemon_config import ZenohConfig
 from monitor.sensors import PublisherOptions, declare_sensor_publisher
+from monitor.time_ahead import pace_ns
 from monitor import zenoh_io
 
 log = logging.getLogger(__name__)
@@ -63,9 +64,10 @@ def publish_blocks(session: Any, blocks: Iterable[SampleBlock], codec: zenoh_io.
                 pub = pubs[block.topic] = declare_sensor_publisher(session, block.topic, options)
                 tokens.append(session.liveliness().declare_token(block.topic))
             if speed is not None:
+                t_ns = pace_ns(block.t_last_ns, block.recv_ns)
                 if t0_sensor is None:
-                    t0_sensor, t0_wall = block.t_last_ns, clock()
-                delay = t0_wall + (block.t_last_ns - t0_sensor) / 1e9 / speed - clock()
+                    t0_sensor, t0_wall = t_ns, clock()
+                delay = t0_wall + (t_ns - t0_sensor) / 1e9 / speed - clock()
                 if delay > 0:
                     sleep(delay)
             pub.put(codec.encode(block))

@@ -37,6 +37,13 @@ def is_ahead(t_ns: int, recv_ns: int, max_ahead_ns: int) -> bool:
     return t_ns - recv_ns > max_ahead_ns
 
 
+def pace_ns(t_ns: int, recv_ns: int) -> int:
+    """The time to pace a replayed or re-published block at: its sensor time ``t_ns``, or its
+    receive time when that is earlier (a sensor time ahead of it, e.g. a flipped year digit,
+    made a paced replay sleep until then: a year at real time). ``recv_ns`` 0: unknown."""
+    return min(t_ns, recv_ns) if recv_ns else t_ns
+
+
 def drop_ahead(block: SampleBlock, max_ahead_ns: int) -> tuple[SampleBlock, int]:
     """``block`` without its samples :func:`is_ahead` of its receive time, and how many went.
 

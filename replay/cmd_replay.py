@@ -35,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "the --report JSON then carries the plot fields too")
     p.add_argument("--two-processes", action="store_true",
                    help="read the logs and run the stream stage in a second process (Linux, "
+                        "logs of about a day or more, "
                         "2+ idle CPUs; same results; slower than one process with the default "
                         "configuration on a 2-core machine: see bench/bench_threads.py)")
     cmd_fleet.add_arguments(p)

@@ -24,6 +24,7 @@ from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
 from monitor.events import Sink
 from monitor.pipeline import Pipeline
+from monitor.time_ahead import pace_ns
 from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
 from replay.stages import ingest_ahead
@@ -147,10 +148,11 @@ class ReplayResult:
 
 def _pace(block: SampleBlock, speed: float, origin: list[float]) -> None:
     """Sleep so sensor time advances ``speed`` times faster than wall-clock time."""
+    t_ns = pace_ns(block.t_first_ns, block.recv_ns)
     if not origin:
-        origin.extend((block.t_first_ns, time.monotonic()))
+        origin.extend((t_ns, time.monotonic()))
         return
-    due = origin[1] + (block.t_first_ns - origin[0]) / 1e9 / speed
+    due = origin[1] + (t_ns - origin[0]) / 1e9 / speed
     delay = due - time.monotonic()
     if delay > 0:
         time.sleep(delay)
@@ -350,7 +352,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
     from replay.log_files import time_span
     from replay.reader import LogReader
     from replay.report import add_plot_fields
-    from replay.stage_process import child_pays
+    from replay.stage_process import one_process_reason
 
     files = collect_logs(paths)
     if plain is None:
@@ -364,7 +366,12 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         span = time_span(files) if show_progress else None
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-        child = two_processes and speed is None and child_pays(files)
+        child = False
+        if two_processes:  # asked for: say why not, or the operator cannot tell
+            reason = "a paced replay" if speed is not None else one_process_reason(files)
+            child = reason is None
+            if reason is not None:
+                log.warning("two processes not used, one process replays: %s", reason)
         # the child reads on its one thread: a read-ahead thread there waits for the GIL
         # (bench/bench_threads.py); one process reads ahead by the reader's rule
         # (replay.chunks.read_ahead_pays: only with a CPU to spare)

@@ -40,6 +40,7 @@ import itertools
 import multiprocessing
 import os
 import pickle
+import signal
 import sys
 import time
 import traceback
@@ -71,18 +72,32 @@ class ChildDied(RuntimeError):
 
 
 def child_pays(files: Sequence[Path]) -> bool:
-    """Whether to replay these logs with the reading and stream stage in a child process:
-    on Linux, with at least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of
-    data, and at least :data:`IDLE_CPUS` of the machine's CPUs idle just before (with
-    another job on the second CPU the two processes keep waiting for each other: the
-    30-day log took 15.2 s against 11.6 s in one process)."""
+    """Whether to replay these logs with the reading and stream stage in a child process
+    (:func:`one_process_reason` finds none against it)."""
+    return one_process_reason(files) is None
+
+
+def one_process_reason(files: Sequence[Path]) -> str | None:
+    """Why these logs replay in one process, or None when the child pays: on Linux, with at
+    least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of data, and at least
+    :data:`IDLE_CPUS` of the machine's CPUs idle just before (with another job on the second
+    CPU the two processes keep waiting for each other: the 30-day log took 15.2 s against
+    11.6 s in one process). The reason is for the operator who asked for two processes."""
     from replay.log_files import inflated_size
 
     # fork, CPU affinity and pipe sizes as Linux has them (elsewhere: one process)
-    if not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2:
-        return False
+    if not sys.platform.startswith("linux"):
+        return f"Linux only (this is {sys.platform})"
+    if len(os.sched_getaffinity(0)) < 2:
+        return "this process may run on one CPU only"
     size = inflated_size(files)
-    return size is not None and size >= CHILD_MIN_BYTES and idle_cpus() >= IDLE_CPUS
+    if size is None or size < CHILD_MIN_BYTES:
+        return (f"the logs hold less than {CHILD_MIN_BYTES / 1e6:g} MB of data (about a day "
+                "of the default streams), where a child costs what it saves")
+    idle = idle_cpus()
+    if idle < IDLE_CPUS:
+        return f"{idle:.1f} of the machine's CPUs idle, {IDLE_CPUS:g} needed"
+    return None
 
 
 def idle_cpus(interval_s: float = 0.05) -> float:
@@ -276,6 +291,19 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
 
 
 # --------------------------------------------------------------------------------- the parent
+def _how_ended(exitcode: int | None) -> str:
+    """A child's end in the operator's words: multiprocessing's -9 means killed by SIGKILL
+    (the OOM killer's signal, or an operator's kill -9)."""
+    if exitcode is None:
+        return "still running"
+    if exitcode < 0:
+        try:
+            return f"killed by {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"killed by signal {-exitcode}"
+    return f"exit code {exitcode}"
+
+
 def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool
                  ) -> Generator[tuple[str, Any], None, None]:
     """Read ``blocks`` and run the stream stage in a forked child; yields, in order,
@@ -310,7 +338,7 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
             except EOFError:
                 child.join(5)
                 raise ChildDied(f"the replay's reading process ended without finishing the "
-                                f"log (exit code {child.exitcode})") from None
+                                f"log ({_how_ended(child.exitcode)})") from None
             if kind == "error":
                 raise obj
             yield kind, obj

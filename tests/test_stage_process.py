@@ -131,7 +131,7 @@ def test_a_child_that_dies_is_a_clear_error_not_a_hang(feed):
             os.kill(os.getpid(), signal.SIGKILL)
         yield from feed[100:]
 
-    with pytest.raises(ChildDied, match="exit code -9"):
+    with pytest.raises(ChildDied, match="killed by SIGKILL"):
         run_blocks(CONFIG, killed(), child=True)
     assert multiprocessing.active_children() == []
 
@@ -190,6 +190,33 @@ def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkey
     assert not child_pays([log])  # not Linux: one process
 
 
+def test_buoymon_replay_says_why_two_processes_were_not_used(tmp_path, feed, monkeypatch,
+                                                             capsys):
+    """Asked for two processes on a small log (or a busy machine), the replay ran in one and
+    said nothing: the operator could not tell the flag had no effect."""
+    from replay.writer import LogWriter
+
+    log = tmp_path / "in.mcap"
+    with LogWriter(log) as w:
+        for b in feed:
+            w.write_block(b)
+    capsys.readouterr()
+    args = ["replay", str(log), "--no-progress", "--two-processes"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "two processes not used, one process replays: the logs hold less than 20 MB" in err
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 0.7)
+    assert main(args) == 0
+    assert "one process replays: 0.7 of the machine's CPUs idle, 1.5 needed" in capsys.readouterr().err
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    assert main(args) == 0
+    assert "two processes not used" not in capsys.readouterr().err
+    assert main(["replay", str(log), "--no-progress"]) == 0  # not asked: nothing to say
+    assert "two processes not used" not in capsys.readouterr().err
+
+
 def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path, feed,
                                                                          monkeypatch, capsys):
     from monitor.pipeline import Pipeline
@@ -220,7 +247,7 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     assert main(["replay", str(log), "--state", str(state), "--no-progress",
                  "--two-processes"]) == 1
     err = capsys.readouterr().err
-    assert "reading process ended without finishing the log (exit code -9)" in err
+    assert "reading process ended without finishing the log (killed by SIGKILL)" in err
     assert "no report or state written" in err
     assert state.read_bytes() == saved
     assert multiprocessing.active_children() == []

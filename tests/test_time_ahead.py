@@ -120,3 +120,45 @@ def test_the_sample_count_includes_time_ahead_samples_with_the_stream_stage_on_a
         assert (result.blocks, result.samples) == (len(fed), total)
         outs.append(json.dumps([pipeline.report(), pipeline.state()], allow_nan=True))
     assert outs[1] == outs[0] and outs[2] == outs[0]  # the same bits in every mode
+
+
+def _log_with_a_block_a_year_ahead(path) -> None:
+    """Three 1-s tension blocks on the logger's clock; the second's sensor time a year ahead."""
+    t0 = 946_684_800 * 10**9
+    with LogWriter(path) as w:
+        for k in range(3):
+            t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+            recv = int(t[-1])
+            w.write_block(_block(t + YEAR_NS if k == 1 else t, recv), recv_ns=recv)
+
+
+def test_a_paced_replay_does_not_sleep_until_a_block_a_year_ahead(tmp_path, monkeypatch):
+    """`buoymon replay --speed 100` of a 3-s log with one block a year ahead waited ~3.6 days
+    (the pacing followed that block's sensor time); now it follows the receive time there."""
+    import replay.runner
+
+    _log_with_a_block_a_year_ahead(tmp_path / "a.mcap")
+    slept: list[float] = []
+    monkeypatch.setattr(replay.runner.time, "sleep", slept.append)
+    report = replay_logs(default_config(), [tmp_path / "a.mcap"], speed=100.0,
+                         show_progress=False).report
+    assert report["samples"]["tension"]["rejected"]["time_ahead"] == 20
+    assert report["samples"]["tension"]["accepted"] == 40
+    assert slept and max(slept) < 0.03  # 2 s of data at 100 x: 0.02 s at most
+
+
+def test_a_paced_publisher_does_not_sleep_until_a_block_a_year_ahead(tmp_path):
+    """`python -m replay.publish --speed 100` of the same log: the same wait, the same fix."""
+    from monitor import zenoh_io
+    from monitor.daemon_config import ZenohConfig
+    from monitor.publisher import publish_blocks
+    from replay.reader import iter_blocks
+
+    _log_with_a_block_a_year_ahead(tmp_path / "a.mcap")
+    slept: list[float] = []
+    with zenoh_io.open_session(ZenohConfig(listen=())) as session:
+        n = publish_blocks(session, iter_blocks([str(tmp_path / "a.mcap")], coalesce=False),
+                           zenoh_io.ProtobufCodec(), speed=100.0, clock=lambda: 0.0,
+                           sleep=slept.append)
+    assert n == 3
+    assert slept and max(slept) <= 0.02  # the last block 2 s after the first, at 100 x
