@@ -7,6 +7,7 @@ data; and a pipeline replaying a log both ways."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 
@@ -148,10 +149,7 @@ def test_batch_equals_per_tick_evaluation(seed: int, plain: bool) -> None:
         def tick(j: int) -> None:
             called.append(a + j)
             out.extend(eng.evaluate(ticks.obs(a + j)))
-        if plain:
-            with uncompiled():
-                batch.run(tick, out.extend)
-        else:
+        with uncompiled() if plain else contextlib.nullcontext():
             batch.run(tick, out.extend)
         assert dump(out) == dump(ref_out)
         assert json.dumps(eng.state()) == json.dumps(ref.state())
@@ -323,10 +321,7 @@ def test_batch_equals_per_tick_at_the_levels_and_when_a_latched_condition_lapses
         ref_out += [r for k in range(a, b) for r in ref.evaluate(ticks.obs(k))]
         batch = eng.tick_batch(ticks.inputs(a, b))
         assert batch is not None
-        if plain:
-            with uncompiled():
-                batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))), out.extend)
-        else:
+        with uncompiled() if plain else contextlib.nullcontext():
             batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))), out.extend)
         assert json.dumps(eng.state()) == json.dumps(ref.state()), (a, b)
     assert dump(out) == dump(ref_out)
@@ -369,10 +364,7 @@ def test_rejected_rate_through_silences_longer_than_its_window(plain) -> None:
     for a, b in ((0, 19), (19, 29), (29, n)):
         ref_out += [r for k in range(a, b) for r in ref.evaluate(ticks.obs(k))]
         batch = eng.tick_batch(ticks.inputs(a, b))
-        if plain:
-            with uncompiled():
-                batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))), out.extend)
-        else:
+        with uncompiled() if plain else contextlib.nullcontext():
             batch.run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))), out.extend)
         assert json.dumps(eng.state()) == json.dumps(ref.state()), (a, b)
     assert dump(out) == dump(ref_out)

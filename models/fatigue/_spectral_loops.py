@@ -119,34 +119,20 @@ def detrend_window(src, first, last, window, out):
 
 
 @compile_loop
-def add_power(acc, mags, scale, rows_per_signal):
-    """Add each row's one-sided PSD ``|X|^2 / scale`` (doubled but at DC and, for an even
-    segment, Nyquist) into ``acc`` of its signal, row after row in order: signal ``c`` has
-    rows ``[c m, (c + 1) m)`` of ``mags`` (``m = rows_per_signal``), numpy's
-    ``np.square(psd); psd /= scale; psd[:, 1:top] *= 2.0`` then ``acc += row`` per row. The
-    doubled bins are ``1 .. acc.shape[1] - 2`` for an even segment (``odd`` False)."""
+def add_power(acc, mags, scale, rows_per_signal, top):
+    """Add each row's one-sided PSD ``|X|^2 / scale``, doubled at bins ``1 .. top - 1`` (all
+    but DC and, for an even segment, Nyquist: ``top`` is ``mags.shape[1] - 1`` for an even
+    segment length, ``mags.shape[1]`` for an odd one), into ``acc`` of its signal, row after
+    row in order: signal ``c`` has rows ``[c m, (c + 1) m)`` of ``mags`` (``m =
+    rows_per_signal``), numpy's ``np.square(psd); psd /= scale; psd[:, 1:top] *= 2.0`` then
+    ``acc += row`` per row."""
     nb = mags.shape[1]
     for c in range(acc.shape[0]):
         for j in range(c * rows_per_signal, (c + 1) * rows_per_signal):
             for i in range(nb):
                 p = mags[j, i] * mags[j, i]
                 p = p / scale
-                if 0 < i < nb - 1:
-                    p = p * 2.0
-                acc[c, i] += p
-
-
-@compile_loop
-def add_power_odd(acc, mags, scale, rows_per_signal):
-    """:func:`add_power` for an odd segment length (no Nyquist bin: every bin but DC is
-    doubled)."""
-    nb = mags.shape[1]
-    for c in range(acc.shape[0]):
-        for j in range(c * rows_per_signal, (c + 1) * rows_per_signal):
-            for i in range(nb):
-                p = mags[j, i] * mags[j, i]
-                p = p / scale
-                if i > 0:
+                if 0 < i < top:
                     p = p * 2.0
                 acc[c, i] += p
 

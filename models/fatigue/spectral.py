@@ -325,8 +325,9 @@ class Periodograms:
             raise ValueError(f"Periodograms.add: {m} segments: need 1 <= m <= max_rows = "
                              f"{self.max_rows}")
         mags = self._magnitudes(segments, first, last, fs_hz)
-        add = loops.add_power_odd if self.n % 2 else loops.add_power
-        add(sums, mags, fs_hz * self.window_power, last - first)
+        # doubled bins 1 .. top - 1: an even segment's last (Nyquist) bin is not doubled
+        top = mags.shape[1] - 1 if self.n % 2 == 0 else mags.shape[1]
+        loops.add_power(sums, mags, fs_hz * self.window_power, last - first, top)
 
     def _magnitudes(self, segments: NDArray[np.float64], first: int, last: int,
                     fs_hz: float) -> NDArray[np.float64]:
