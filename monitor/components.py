@@ -21,6 +21,7 @@ part of the saved state; figures read between ticks include them.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any, Mapping, Sequence
 
@@ -110,10 +111,16 @@ _EMPTY = np.zeros(0)
 class TickRun:
     """What :meth:`Component.run_ticks` did: the closed cycles (ranges, means, counts) in
     closure order, and per tick (damage, damage_committed, damage rate per day, remaining
-    life in days) at its end, if asked for."""
+    life in days) at its end, if asked for: ``columns``, a float64 array of each over the
+    ticks, and ``figures``, the same as a tuple of floats per tick (made when first read:
+    the pipeline's alert batch reads the columns)."""
 
     cycles: tuple[np.ndarray, np.ndarray, np.ndarray]
-    figures: list[tuple[float, float, float, float]]
+    columns: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+    @functools.cached_property
+    def figures(self) -> list[tuple[float, float, float, float]]:
+        return list(zip(*(c.tolist() for c in self.columns)))
 
 
 class Component:
@@ -201,16 +208,16 @@ class Component:
         One compiled pass (``models.fatigue.commit_ticks``) when available, else the same
         feed/commit loop (the same bits)."""
         if not stops:
-            return TickRun((_EMPTY,) * 3, [])
+            return TickRun((_EMPTY,) * 3, (_EMPTY,) * 4)
         ranges, means, counts = self._pending
         run = fatigue.commit_ticks(self.rainflow, self.miner, stress_Pa, stops,
                                    np.asarray(ends_ns, np.int64) / 1e9, (ranges, means, counts),
                                    residue=figures)
         if run is not None:  # the compiled pass
             self._pending = [_EMPTY, _EMPTY, _EMPTY]
-            out = list(zip(run.damage.tolist(), run.committed.tolist(),
-                           run.rate_per_day.tolist(), run.life_days.tolist())) if figures else []
-            return TickRun((run.ranges, run.means, np.ones(run.ranges.shape[0])), out)
+            columns = ((run.damage, run.committed, run.rate_per_day, run.life_days) if figures
+                       else (_EMPTY,) * 4)
+            return TickRun((run.ranges, run.means, np.ones(run.ranges.shape[0])), columns)
         parts, out, start = [], [], 0
         for stop, end in zip(stops, ends_ns):
             if stop > start:
@@ -222,7 +229,8 @@ class Component:
                             f["remaining_life_days"]))
             start = stop
         cycles = tuple(np.concatenate(p) for p in zip(*parts)) if parts else (_EMPTY,) * 3
-        return TickRun(cycles, out)
+        columns = np.array(out, np.float64).reshape(-1, 4).T
+        return TickRun(cycles, (columns[0], columns[1], columns[2], columns[3]))
 
     def _damage(self, ranges: np.ndarray, means: np.ndarray, counts: np.ndarray) -> float:
         """Damage of the pending cycles, each as the committed ones' (``damage_per_cycle``)."""

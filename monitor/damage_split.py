@@ -47,7 +47,7 @@ class DamageSplit:
         self.cal_sum_sq = float(st.get("cal_sum_sq", 0.0))
 
     def ticks(self, committed: Mapping[str, Sequence[float]],
-              rows: Sequence[tuple[int, int, float, float]]) -> None:
+              rows: Sequence[tuple[int, int, float, float]] | np.ndarray) -> None:
         """Evaluated ticks in time order: each component's committed damage at each tick's
         end, and per tick ``(measured samples, samples, mean measured tension, mean
         estimate)`` (the means NaN when absent)."""
@@ -55,7 +55,7 @@ class DamageSplit:
         parts = np.array([[self.parts[n]["committed"], self.parts[n]["measured"],
                            self.parts[n]["estimated"]] for n in names], dtype=np.float64)
         cal = np.array([self.cal_n, self.cal_sum_sq], dtype=np.float64)
-        _split_ticks(np.array(rows, dtype=np.float64).reshape(-1, 4),
+        _split_ticks(np.asarray(rows, dtype=np.float64).reshape(-1, 4),
                      np.array([committed[n] for n in names], dtype=np.float64), parts, cal)
         for name, (c, m, e) in zip(names, parts.tolist()):
             self.parts[name].update(committed=c, measured=m, estimated=e)

@@ -27,18 +27,18 @@ data that would complete it, so a log replayed in parts gives the same history a
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
-from operator import itemgetter
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Protocol, Sequence
+from typing import Any, Iterable, Mapping, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
 from models.sea_state_table import DamageRateTable
 from monitor.alerts.batch import StreamTicks, TickInputs, warm_up as alert_batch_warm_up
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
-from monitor.components import Component, build_cable, endurance_stress_Pa
+from monitor.components import Component, TickRun, build_cable, endurance_stress_Pa
 from monitor.config import Config, ConfigError
 from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
@@ -102,13 +102,25 @@ def alert_to_dict(record: Any) -> dict[str, Any]:
 _NO_LOAD = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int8))
 
 
+class _TickLists(NamedTuple):
+    """:class:`_TickLoad`'s figures as Python numbers, for the tick-by-tick path."""
+
+    vmax: list[float]
+    vmin: list[float]
+    smax: dict[str, list[float]]
+    n: list[int]
+    n_meas: list[int]
+    meas: list[float]
+    est: list[float]
+
+
 class _TickLoad:
-    """Per-tick load figures of consecutive ticks in one pass (the tick loop then only
-    indexes lists): max and min tension, the mean of each source, each component's peak
-    stress. Tick ``k`` covers samples ``[starts[k], stops[k])``; every tick is reduced the
-    same way (a sum is one ``np.add.reduceat`` segment: the first sample plus numpy's
-    pairwise sum of the rest, the same bits wherever the segment starts), whichever slab
-    it came in."""
+    """Per-tick load figures of consecutive ticks in one pass, as arrays over the ticks (and
+    as lists, :attr:`lists`, when a tick is evaluated on its own): max and min tension, the
+    mean of each source, each component's peak stress. Tick ``k`` covers samples
+    ``[starts[k], stops[k])``; every tick is reduced the same way (a sum is one
+    ``np.add.reduceat`` segment: the first sample plus numpy's pairwise sum of the rest, the
+    same bits wherever the segment starts), whichever slab it came in."""
 
     def __init__(self, v: np.ndarray, src: np.ndarray, stresses: Mapping[str, np.ndarray],
                  starts: np.ndarray, stops: np.ndarray) -> None:
@@ -116,13 +128,13 @@ class _TickLoad:
         full = np.flatnonzero(n > 0)
         every = full.shape[0] == n.shape[0]  # (the usual slab: no tick without samples)
 
-        def per_tick(values: np.ndarray, empty: float = math.nan) -> list[Any]:
-            """The non-empty ticks' values as a list over all ticks."""
+        def per_tick(values: np.ndarray, empty: float = math.nan) -> np.ndarray:
+            """The non-empty ticks' values over all ticks."""
             if every:
-                return values.tolist()
+                return values
             out = np.full(n.shape[0], empty, dtype=values.dtype)
             out[full] = values
-            return out.tolist()
+            return out
 
         # the non-empty ticks are back to back: reduce over their span in one call each
         at, span = starts[full], slice(0, int(stops[full[-1]]) if full.shape[0] else 0)
@@ -133,10 +145,10 @@ class _TickLoad:
         measured = src[span] == MEASURED
         count = n[full]
         mean = np.add.reduceat(v[span], at) / count
-        self.n = n.tolist()  # samples, and of them measured (n_meas)
+        self.n = n  # samples, and of them measured (n_meas)
         if measured.all():  # one source, the load cell (the usual case)
             self.n_meas, self.meas = per_tick(count, 0), per_tick(mean)
-            self.est = per_tick(np.full(count.shape[0], math.nan))
+            self.est = np.full(n.shape[0], math.nan)
             return
         n_meas = np.add.reduceat(measured, at, dtype=np.int64)
         self.n_meas = per_tick(n_meas, 0)
@@ -147,6 +159,13 @@ class _TickLoad:
             a, b = int(starts[i]), int(stops[i])
             self.meas[i] = _seq_mean(v[a:b][measured[a:b]])
             self.est[i] = _seq_mean(v[a:b][~measured[a:b]])
+
+    @functools.cached_property
+    def lists(self) -> _TickLists:
+        return _TickLists(self.vmax.tolist(), self.vmin.tolist(),
+                          {name: s.tolist() for name, s in self.smax.items()},
+                          self.n.tolist(), self.n_meas.tolist(), self.meas.tolist(),
+                          self.est.tolist())
 
 
 def _seq_mean(x: np.ndarray) -> float:
@@ -793,34 +812,34 @@ class Pipeline:
                           est_means)
 
     def _commit_ticks(self, stresses: Mapping[str, np.ndarray], ticks: _SlabTicks,
-                      closed: Mapping[str, list[tuple[np.ndarray, ...]]]
-                      ) -> dict[str, list[tuple[float, float, float, float]]]:
+                      closed: Mapping[str, list[tuple[np.ndarray, ...]]]) -> dict[str, TickRun]:
         """Rainflow and Miner over the slab's whole ticks, each committed at its end; returns
-        every component's figures at every tick end (when the ticks are evaluated)."""
-        figures = {}
+        every component's run, with its figures at every tick end when the ticks are
+        evaluated."""
+        runs = {}
         for name, comp in self.components.items():
             run = comp.run_ticks(stresses[name], ticks.cuts[:ticks.n], ticks.ends,
                                  ticks.evaluate)
-            figures[name] = run.figures
+            runs[name] = run
             closed[name].append(run.cycles)
-        return figures
+        return runs
 
     def _evaluate_ticks(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                         streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
-                        figures: Mapping[str, list[tuple[float, float, float, float]]]) -> None:
+                        figures: Mapping[str, TickRun]) -> None:
         """Each tick end in turn: the newest load sample so far, then (when evaluated) the
         alert rules, all ticks at once when nothing needs an observation per tick; the
         damage split of the evaluated ticks."""
         split = None
-        # each component's committed damage at each tick end (a list or an array)
-        committed: Mapping[str, Any]
         if ticks.evaluate and not self._tick_hooks and ticks.n >= BATCH_MIN_TICKS:
             split = self._evaluate_batch(t, v, src, streams, ticks, figures)
+        # each component's committed damage at each tick end
+        committed = {n: f.columns[1] for n, f in figures.items()}
+        split_rows: Any  # an array, or a list of tuples, of a row per evaluated tick
         if split is not None:
-            split_rows, committed = split
+            split_rows = split
         else:
-            split_rows = []  # per evaluated tick
-            committed = {n: [f[k][1] for k in range(ticks.n)] for n, f in figures.items()}
+            split_rows = []
             start = 0
             for k in range(ticks.n):
                 stop = ticks.cuts[k]
@@ -830,18 +849,17 @@ class Pipeline:
                     split_rows.append(self._evaluate_tick(k, t, v, src, streams, ticks, figures))
                 self.open_tick = _NO_LOAD
                 start = stop
-        if split_rows:
+        if len(split_rows):
             self.damage_split.ticks(committed, split_rows)
 
     def _evaluate_batch(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                         streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
-                        figures: Mapping[str, list[tuple[float, float, float, float]]]
-                        ) -> tuple[list[tuple[int, int, float, float]], Mapping[str, Any]] | None:
+                        figures: Mapping[str, TickRun]) -> np.ndarray | None:
         """The slab's ticks through the alert engine's batch (:mod:`monitor.alerts.batch`):
         only the ticks where something happens get an Observation; the sea-state learner
-        still sees every tick. Returns the damage-split rows and each component's committed
-        damage per tick, None when the engine has no batch for these rules (the caller then
-        evaluates tick by tick)."""
+        still sees every tick. Returns the damage-split rows (an array: measured samples,
+        samples, measured mean, estimated mean), None when the engine has no batch for these
+        rules (the caller then evaluates tick by tick)."""
         tick_batch = getattr(self.alerts, "tick_batch", None)
         if tick_batch is None:
             return None
@@ -849,25 +867,25 @@ class Pipeline:
         load, n = ticks.load, ticks.n
         first = self._tick_view(0, t, v, src, ticks)  # with the samples left by earlier slabs
         load0, j0 = first[3], first[4]
-        est = list(ticks.est_means if ticks.est_means is not None else load.est)
-        est[0] = ticks.est_means[0] if ticks.est_means is not None else load0.est[j0]
-        meas, n_meas, n_load = list(load.meas), list(load.n_meas), list(load.n)
+        # the slab's per-tick figures with the first tick's as it began in an earlier slab
+        if ticks.est_means is not None:
+            est = np.array(ticks.est_means)
+        else:
+            est = load.est.copy()
+            est[0] = load0.est[j0]
+        meas, n_meas, n_load, tension_max = (
+            a.copy() for a in (load.meas, load.n_meas, load.n, load.vmax))
         meas[0], n_meas[0], n_load[0] = load0.meas[j0], load0.n_meas[j0], load0.n[j0]
-        tension_max = np.array(load.vmax)
         tension_max[0] = load0.vmax[j0]
-        # each component figure the rules ask for, once (as a column: a whole (n, 4) array
-        # from the tuples costs more than the rules' alert ticks used to)
-        columns: dict[tuple[str, int], np.ndarray] = {}
+        peaks: dict[str, np.ndarray] = {}  # each component's peak stress, once asked for
 
         def component(name: str, i: int) -> np.ndarray:
-            if (name, i) not in columns:
-                if i < 4:
-                    col = np.fromiter(map(itemgetter(i), figures[name]), np.float64, n)
-                else:
-                    col = np.array(load.smax[name])
-                    col[0] = load0.smax[name][j0]
-                columns[name, i] = col
-            return columns[name, i]
+            if i < 4:
+                return figures[name].columns[i]
+            if name not in peaks:
+                peaks[name] = load.smax[name].copy()
+                peaks[name][0] = load0.smax[name][j0]
+            return peaks[name]
         health: dict[str, StreamTicks] = {}  # stale and rejected-rate rules ask for the same
 
         def stream(s: str) -> StreamTicks:
@@ -876,30 +894,29 @@ class Pipeline:
             return health[s]
         batch = tick_batch(TickInputs(
             buoy_id=self.buoy_id, ends=ticks.ends, tension_max=tension_max,
-            measured=np.array(meas), estimated=np.array(est), component=component, stream=stream,
+            measured=meas, estimated=est, component=component, stream=stream,
             load=lambda: self._load_by_tick(t, v, ticks)))
         if batch is None:
             return None
         learner, forecasts = self.sea_states, self.forecasts
         quiet, next_due = None, None
         if learner is not None and forecasts is not None:
-            load_n = np.array(n_load)
-
             def committed(q: int) -> dict[str, float]:
-                return {name: f[q][1] for name, f in figures.items()}
+                return {name: float(f.columns[1][q]) for name, f in figures.items()}
 
             def quiet(a: int, b: int) -> None:  # the learner sees every tick
-                learner.ticks(ticks.ends, committed, load_n, a, b)
+                learner.ticks(ticks.ends, committed, n_load, a, b)
             next_due = forecasts.next_due_ns
 
         def tick(k: int) -> None:  # something happens: the ordinary evaluation
             self._note_load(t, src, ticks.cuts[k])
             tt, tv, _, tick_load, j = first if k == 0 else self._tick_view(k, t, v, src, ticks)
-            self._evaluate(k, ticks.ends_l[k], tt, tv, tick_load, j, streams, figures, est[k])
+            self._evaluate(k, ticks.ends_l[k], tt, tv, tick_load, j, streams, figures,
+                           float(est[k]))
         batch.run(tick, self._emit, quiet, next_due)
         self._note_load(t, src, ticks.cuts[n - 1])
         self.open_tick = _NO_LOAD
-        return list(zip(n_meas, n_load, meas, est)), {name: component(name, 1) for name in figures}
+        return np.column_stack((n_meas, n_load, meas, est)).astype(np.float64, copy=False)
 
     def _note_load(self, t: np.ndarray, src: np.ndarray, stop: int) -> None:
         """The newest load sample is the one before index ``stop`` of the slab (if any)."""
@@ -954,14 +971,14 @@ class Pipeline:
 
     def _evaluate_tick(self, k: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                        streams: Mapping[str, "_StreamSlab"], ticks: _SlabTicks,
-                       figures: Mapping[str, list[tuple[float, float, float, float]]]
-                       ) -> tuple[int, int, float, float]:
+                       figures: Mapping[str, TickRun]) -> tuple[int, int, float, float]:
         """The alert rules at the end of the slab's ``k``-th tick; returns the tick's
         damage-split row (measured samples, samples, measured mean, estimated mean)."""
         tt, tv, _, tick, j = self._tick_view(k, t, v, src, ticks)
-        est_mean = ticks.est_means[k] if ticks.est_means is not None else tick.est[j]
+        load = tick.lists
+        est_mean = ticks.est_means[k] if ticks.est_means is not None else load.est[j]
         self._evaluate(k, ticks.ends_l[k], tt, tv, tick, j, streams, figures, est_mean)
-        return tick.n_meas[j], tick.n[j], tick.meas[j], est_mean
+        return load.n_meas[j], load.n[j], load.meas[j], est_mean
 
     def _carry_estimate(self, estimate: tuple[np.ndarray, np.ndarray] | None,
                         ends: np.ndarray) -> None:
@@ -1014,18 +1031,20 @@ class Pipeline:
             out[0] = _seq_mean(np.concatenate([self.open_estimate[1], e_v[:int(cuts[0])]]))
         return out
 
-    def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, load: _TickLoad,
+    def _evaluate(self, k: int, end: int, t: np.ndarray, v: np.ndarray, tick_load: _TickLoad,
                   j: int, streams: Mapping[str, _StreamSlab],
-                  figures: Mapping[str, list[tuple[float, float, float, float]]],
-                  estimated: float) -> None:
-        """Evaluate the alert rules at the end of the slab's ``k``-th tick (``load``'s
-        ``j``-th); ``figures[name][k]`` are each component's (damage, damage_committed, rate,
-        life) at that tick's end, ``estimated`` the tick's mean motion estimate."""
+                  figures: Mapping[str, TickRun], estimated: float) -> None:
+        """Evaluate the alert rules at the end of the slab's ``k``-th tick (``tick_load``'s
+        ``j``-th); ``figures[name].figures[k]`` are each component's (damage,
+        damage_committed, rate, life) at that tick's end, ``estimated`` the tick's mean
+        motion estimate."""
+        load = tick_load.lists
         obs = Observation(
             buoy_id=self.buoy_id, t_ns=end, tick_s=self.tick_ns / 1e9,
             load_source=self._source_at(end), load_t_ns=t, tension_N=v,
             measured_tension_N=load.meas[j], estimated_tension_N=estimated,
-            components={n: ComponentObs(*f[k], load.smax[n][j]) for n, f in figures.items()},
+            components={n: ComponentObs(*f.figures[k], load.smax[n][j])
+                        for n, f in figures.items()},
             streams=_LazyStreams(self, end, streams, k),
             tension_range_N=(load.vmin[j], load.vmax[j]),
         )
