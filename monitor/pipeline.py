@@ -941,18 +941,22 @@ class Pipeline:
         val, n = self._totals[s], ends.shape[0]
         info = streams.get(s)
         if info is None:  # nothing new on this stream
-            has = np.full(n, val.has_last)
-            last = np.full(n, val.last_t_ns, np.int64)
             received, rejected = np.zeros(n, np.int64), np.zeros(n, np.int64)
+            if val.has_last:
+                last = np.full(n, val.last_t_ns, np.int64)
+                stale = ends - last > self._stale_ns[s]
+            else:  # never seen (the usual idle stream): stale, and no time
+                last, stale = np.zeros(n, np.int64), np.ones(n, bool)
         else:
             received, rejected, has, last = info.tick_arrays
             received, rejected = received.copy(), rejected.copy()  # the first tick adds below
+            # (a stream never seen is stale whatever its age, even where ends - last wraps)
+            stale = ~has | (ends - last > self._stale_ns[s])
+            last = np.where(has, last, 0)
         if s in self.tick_counts:
             received[0] += self.tick_counts[s][0]
             rejected[0] += self.tick_counts[s][1]
-        # (a stream never seen is stale whatever its age, even where ends - last wraps)
-        stale = ~has | (ends - last > self._stale_ns[s])
-        return StreamTicks(np.where(has, last, 0), stale, received, rejected)
+        return StreamTicks(last, stale, received, rejected)
 
     def _tick_view(self, k: int, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                    ticks: _SlabTicks) -> tuple[np.ndarray, np.ndarray, np.ndarray, _TickLoad, int]:

@@ -224,7 +224,8 @@ class _TickHook:
         pass
 
 
-def _pipeline_run(block_s: int, hooked: bool, monkeypatch) -> tuple[str, str, list]:
+def _pipeline_run(block_s: int, hooked: bool, monkeypatch) -> tuple[str, str, list, int]:
+    """Report, state, alert history and the number of ticks evaluated the ordinary way."""
     from monitor import pipeline as pipeline_mod
     from monitor.config import config_with, default_config
     from monitor.pipeline import Pipeline
@@ -242,12 +243,16 @@ def _pipeline_run(block_s: int, hooked: bool, monkeypatch) -> tuple[str, str, li
         {"kind": "conductor_stress", "threshold": 0.1, "off_delay_s": 30},
         {"kind": "slack_snap", "floor_N": 2700, "threshold": 4000, "window_s": 3},
         {"kind": "stale", "component": "tension"},
+        {"kind": "stale", "component": "waves", "name": "waves_stale"},  # never seen
         {"kind": "rejected_rate", "component": "tension", "threshold": 0.002, "window_s": 60},
         {"kind": "model_residual", "threshold": 300, "on_delay_s": 20},
     ]})
     blocks = blocks_interleaved(sea(900, gap=(300, 360)), block_s)
     # live ordering: slabs of a tick or two with 1-s blocks, many ticks with 97-s blocks
     p = Pipeline(config, [_TickHook()] if hooked else [], horizon_s=2.0)
+    ordinary = []
+    evaluate = p._evaluate
+    monkeypatch.setattr(p, "_evaluate", lambda *a: ordinary.append(1) or evaluate(*a))
     mid = len(blocks) // 2 if block_s == 1 else 4
     for i, b in enumerate(blocks):
         if i == mid:  # operator actions mid-stream
@@ -257,19 +262,22 @@ def _pipeline_run(block_s: int, hooked: bool, monkeypatch) -> tuple[str, str, li
         p.process(b)
     p.flush()
     return (json.dumps(p.report(), sort_keys=True), json.dumps(p.state(), sort_keys=True),
-            p.alert_history)
+            p.alert_history, len(ordinary))
 
 
 @pytest.mark.parametrize("block_s", [1, 97])
 def test_pipeline_replays_the_same_with_and_without_a_tick_hook(block_s, monkeypatch) -> None:
-    report, state, history = _pipeline_run(block_s, False, monkeypatch)
+    report, state, history, ordinary = _pipeline_run(block_s, False, monkeypatch)
     assert (report, state) == _pipeline_run(block_s, True, monkeypatch)[:2]
+    # the batch evaluated the ordinary way only ticks with a transition (or a re-arm)
+    assert ordinary <= sum(a["event"] != "resend" for a in history)
     events = {(a["kind"], a["event"]) for a in history}
     assert {("damage_fraction", "fire"), ("damage_fraction", "reset"), ("tension_high", "fire"),
             ("slack_snap", "fire"), ("stale", "fire"),
             ("stale", "clear"), ("rejected_rate", "fire"), ("conductor_stress", "resend"),
             } <= events, events
     assert any(a["acked_by"] == "ops" for a in history)
+    assert any(a["rule"] == "waves_stale" and a["event"] == "fire" for a in history)
 
 
 @pytest.mark.parametrize("plain", [False, True])
@@ -343,7 +351,8 @@ def test_rejected_rate_through_silences_longer_than_its_window(plain) -> None:
     on-delay is 120 s), silent for 80 s (still pending once the window is empty), 20 % again
     (fires 120 s after the period began), silent (still firing, re-sent every 30 s), clean
     (clears at once: the window holds no rejections). Slabs end inside the silences, so the window, value and pending time
-    the batch leaves in the rule are in the compared state."""
+    the batch leaves in the rule are in the compared state; one lies in a silence with the
+    window already empty."""
     n = 60
     ticks = Ticks(n, 8)
     s = ticks.streams["tension"]
@@ -361,7 +370,7 @@ def test_rejected_rate_through_silences_longer_than_its_window(plain) -> None:
     eng = AlertEngine.from_config(rules, "b1", COMPONENTS)
     ref_out: list = []
     out: list = []
-    for a, b in ((0, 19), (19, 29), (29, n)):
+    for a, b in ((0, 17), (17, 19), (19, 29), (29, n)):  # 17..18: idle, the window empty
         ref_out += [r for k in range(a, b) for r in ref.evaluate(ticks.obs(k))]
         batch = eng.tick_batch(ticks.inputs(a, b))
         with uncompiled() if plain else contextlib.nullcontext():

@@ -276,8 +276,12 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
 
 def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
     s = x.stream(rule.target)
+    held = rule.window()
+    if not held.shape[0] and not s.received.any():
+        # an empty window staying empty (an idle stream): no rate at any tick
+        return _Row(np.full(x.ends.shape[0], math.nan))
     values, entries, lo, hi, n_rej, n_rec = rejected_rate_ticks(
-        rule.window(), x.ends, s.received, s.rejected, rule.window_ns)
+        held, x.ends, s.received, s.rejected, rule.window_ns)
 
     def side(j: int) -> None:
         rule.set_window(entries[lo[j]:hi[j]], int(n_rej[j]), int(n_rec[j]))
