@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import json
 import math
 from typing import Any, Mapping, Sequence
 
@@ -187,18 +188,35 @@ class Component:
             return _EMPTY, _EMPTY, _EMPTY
         ranges, means, counts = self.rainflow.feed(stress_Pa)
         if ranges.shape[0]:
+            # (in place: a component counting with this one shares the list)
             if self._pending[0].shape[0]:
-                self._pending = [np.concatenate([p, c])
-                                 for p, c in zip(self._pending, (ranges, means, counts))]
+                self._pending[:] = [np.concatenate([p, c])
+                                    for p, c in zip(self._pending, (ranges, means, counts))]
             else:
-                self._pending = [ranges, means, counts]
+                self._pending[:] = [ranges, means, counts]
         return ranges, means, counts
 
     def commit(self, tick_end_ns: int) -> None:
         """End of an alert tick: add the pending cycles to the Miner sum in one step."""
         ranges, means, counts = self._pending
         self.miner.add_cycles(ranges, means, counts, time_s=tick_end_ns / 1e9)
-        self._pending = [_EMPTY, _EMPTY, _EMPTY]
+        self._pending[:] = [_EMPTY, _EMPTY, _EMPTY]
+
+    def count_with(self, other: "Component") -> bool:
+        """Share ``other``'s rainflow counter, Miner sum and pending cycles from now on if
+        they count the same: the same configuration but for the name and the location, and
+        the same bend or none (so the same stress of the same load), and the same counting
+        state (the default conductor and its termination). Then feeding either one (``feed``,
+        ``commit``, ``run_ticks``) counts for both and the other must not be fed; each
+        keeps its own peak stress and samples beyond yield. Returns whether they share."""
+        def counting(c: Component) -> tuple[Any, ...]:
+            return (dataclasses.replace(c.cfg, name="", location=""), c._bend, c._cable,
+                    c._fcfg, json.dumps([c.rainflow.state(), c.miner.state(),
+                                         [p.tolist() for p in c._pending]]))
+        if counting(self) != counting(other):
+            return False
+        self.rainflow, self.miner, self._pending = other.rainflow, other.miner, other._pending
+        return True
 
     def run_ticks(self, stress_Pa: np.ndarray, stops: list[int],
                   ends_ns: Sequence[int] | np.ndarray, figures: bool = True) -> TickRun:
@@ -214,7 +232,7 @@ class Component:
                                    np.asarray(ends_ns, np.int64) / 1e9, (ranges, means, counts),
                                    residue=figures)
         if run is not None:  # the compiled pass
-            self._pending = [_EMPTY, _EMPTY, _EMPTY]
+            self._pending[:] = [_EMPTY, _EMPTY, _EMPTY]
             columns = ((run.damage, run.committed, run.rate_per_day, run.life_days) if figures
                        else (_EMPTY,) * 4)
             return TickRun((run.ranges, run.means, np.ones(run.ranges.shape[0])), columns)

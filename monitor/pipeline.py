@@ -456,6 +456,15 @@ class Pipeline:
             c.name: Component(c, cable, config.fatigue, st.get("components", {}).get(c.name))
             for c in config.components
         }
+        # components counting as an earlier one (Component.count_with) take its runs: the
+        # default conductor and termination rainflow and commit the same stress once
+        self._counts_as: dict[str, str] = {}
+        names = list(self.components)
+        for i, name in enumerate(names):
+            lead = next((n for n in names[:i] if n not in self._counts_as
+                         and self.components[name].count_with(self.components[n])), None)
+            if lead is not None:
+                self._counts_as[name] = lead
         self.validators = {
             s: StreamValidator(s, config.validate[s], st.get("validators", {}).get(s))
             for s in SENSOR_ORDER
@@ -816,10 +825,11 @@ class Pipeline:
         """Rainflow and Miner over the slab's whole ticks, each committed at its end; returns
         every component's run, with its figures at every tick end when the ticks are
         evaluated."""
-        runs = {}
+        runs: dict[str, TickRun] = {}
         for name, comp in self.components.items():
-            run = comp.run_ticks(stresses[name], ticks.cuts[:ticks.n], ticks.ends,
-                                 ticks.evaluate)
+            lead = self._counts_as.get(name)
+            run = runs[lead] if lead is not None else comp.run_ticks(
+                stresses[name], ticks.cuts[:ticks.n], ticks.ends, ticks.evaluate)
             runs[name] = run
             closed[name].append(run.cycles)
         return runs
@@ -1005,8 +1015,11 @@ class Pipeline:
         start = ticks.cuts[ticks.n - 1] if ticks.n else 0
         stop = ticks.cuts[ticks.n]
         if stop > start:
+            fed: dict[str, tuple[np.ndarray, ...]] = {}
             for name, comp in self.components.items():
-                closed[name].append(comp.feed(stresses[name][start:stop]))
+                lead = self._counts_as.get(name)
+                fed[name] = fed[lead] if lead is not None else comp.feed(stresses[name][start:stop])
+                closed[name].append(fed[name])
             o_t, o_v, o_src = self.open_tick
             self.open_tick = (np.concatenate([o_t, t[start:]]), np.concatenate([o_v, v[start:]]),
                               np.concatenate([o_src, src[start:]]))

@@ -137,3 +137,55 @@ def test_tick_ends_as_an_array_give_the_per_tick_feed_and_commit(mean_stress):
         start = stop
     assert run.figures == rows and rows[-1][2] > 0.0
     assert json.dumps(fast.state()) == json.dumps(slow.state())
+
+
+def test_components_of_the_same_stress_and_state_count_together():
+    """The default conductor and its termination (no bend) count the same stress: the
+    termination shares the conductor's counting, and feeding the conductor alone gives it
+    the figures and state of a component fed on its own; a bend, another S-N factor or
+    another counting state keeps them apart."""
+    config = default_config()
+    cable = build_cable(config)
+    free, term = (Component(c, cable, config.fatigue) for c in config.components)
+    alone = Component(config.components[1], cable, config.fatigue)
+    assert term.count_with(free)
+    rng = np.random.default_rng(4)
+    stress = 20e6 + 8e6 * np.sin(np.arange(6000) / 7.0) + rng.normal(0, 1e6, 6000)
+    for comp in (free, alone):
+        comp.run_ticks(stress[:5000], [2000, 4000, 5000], [1, 2, 3])
+        comp.feed(stress[5000:])
+    assert term.figures() == alone.figures() and term.figures()["damage"] > 0
+    assert json.dumps(term.state()) == json.dumps(alone.state())
+    # a bend configured on both, which bends the termination only; another SCF
+    bend = {"bend_radius_m": 0.5, "bend_angle_deg": 20.0}
+    for a, b in ((dataclasses.replace(config.components[1], **bend),
+                  dataclasses.replace(config.components[0], **bend)),
+                 (dataclasses.replace(config.components[1], scf=1.2), config.components[0])):
+        assert not Component(a, cable, config.fatigue).count_with(
+            Component(b, cable, config.fatigue))
+    assert not Component(config.components[1], cable, config.fatigue).count_with(free)
+
+
+def test_a_pipeline_counting_twins_once_replays_as_counting_each(monkeypatch):
+    """A pipeline of the default components (the termination counts with the conductor)
+    gives the report and state of one counting each on its own, through a state saved and
+    restored mid-log."""
+    from monitor.pipeline import Pipeline
+    from synthetic_buoy import blocks_interleaved, sea
+
+    config = default_config()
+    blocks = blocks_interleaved(sea(900, gap=(300, 360)), 20)
+
+    def replay() -> tuple[dict, str]:
+        p = Pipeline(config)
+        for b in blocks[:len(blocks) // 2]:
+            p.process(b)
+        p = Pipeline(config, state=json.loads(json.dumps(p.state())))
+        for b in blocks[len(blocks) // 2:]:
+            p.process(b)
+        p.flush()
+        return p._counts_as, json.dumps([p.report(), p.state()])
+    shared, out = replay()
+    monkeypatch.setattr(Component, "count_with", lambda self, other: False)
+    assert shared == {"conductor_termination": "conductor"}
+    assert replay() == ({}, out)
