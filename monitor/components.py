@@ -256,8 +256,19 @@ class Component:
             return 0.0
         return float(np.sum(self.sn_curve.damage_per_cycle(ranges, means, counts)))
 
-    def figures(self) -> dict[str, float]:
-        """damage (with pending cycles and the open residue as half cycles), committed, rate, life.
+    def figures(self, counting: Mapping[str, float] | None = None) -> dict[str, float]:
+        """damage (with pending cycles and the open residue as half cycles), committed, rate,
+        life, cycles (:meth:`counting_figures`, or ``counting``: those of a component this
+        one counts with), and its own peak stress and samples beyond yield."""
+        return {
+            **(self.counting_figures() if counting is None else counting),
+            "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
+            "samples_beyond_yield": float(self.samples_beyond_yield),
+        }
+
+    def counting_figures(self) -> dict[str, float]:
+        """damage (with pending cycles and the open residue as half cycles), committed, rate,
+        life, cycles: the figures of the counting (shared by components counting together).
 
         ``damage_committed`` includes cycles closed since the last tick, computed fresh here
         and not accumulated, so reading figures never changes the state.
@@ -272,8 +283,6 @@ class Component:
             "remaining_life_days": fatigue.remaining_life_days(damage, rate),
             "cycles": float(self.miner.total_cycles) + (
                 float(self._pending[2].sum()) if self._pending[2].shape[0] else 0.0),
-            "max_stress_Pa": self.max_stress_Pa if math.isfinite(self.max_stress_Pa) else math.nan,
-            "samples_beyond_yield": float(self.samples_beyond_yield),
         }
 
     def warm_up(self) -> None:

@@ -140,8 +140,12 @@ class _TickLoad:
         at, span = starts[full], slice(0, int(stops[full[-1]]) if full.shape[0] else 0)
         self.vmax = per_tick(np.maximum.reduceat(v[span], at))
         self.vmin = per_tick(np.minimum.reduceat(v[span], at))
-        self.smax = {name: per_tick(np.maximum.reduceat(s[span], at))
-                     for name, s in stresses.items()}
+        peaks: dict[int, np.ndarray] = {}  # per stress array (components may share one)
+        self.smax = {}
+        for name, s in stresses.items():
+            if id(s) not in peaks:
+                peaks[id(s)] = per_tick(np.maximum.reduceat(s[span], at))
+            self.smax[name] = peaks[id(s)]
         measured = src[span] == MEASURED
         count = n[full]
         mean = np.add.reduceat(v[span], at) / count
@@ -719,7 +723,9 @@ class Pipeline:
         if intake.block is not None:
             for hook in self._block_hooks:
                 hook(intake.block)
-        t, v, src, stresses = intake.t, intake.v, intake.src, intake.stresses
+        t, v, src = intake.t, intake.v, intake.src
+        # a component counting with another has its stress (the same bits): one array
+        stresses = {n: intake.stresses[self._counts_as.get(n, n)] for n in intake.stresses}
         if intake.span is not None:
             first, last = intake.span
             start, end = self.last["time_start_ns"], self.last["time_end_ns"]
@@ -978,8 +984,11 @@ class Pipeline:
         tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
         if k == 0 and self.open_tick[0].shape[0]:  # the tick began in an earlier slab
             tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
-            tick = _TickLoad(tv, ts, {n: c.stress(tv, record=False) for n, c in self.components.items()},
-                             np.zeros(1, np.int64), np.full(1, tv.shape[0]))
+            stresses: dict[str, np.ndarray] = {}
+            for n, c in self.components.items():
+                lead = self._counts_as.get(n)
+                stresses[n] = stresses[lead] if lead is not None else c.stress(tv, record=False)
+            tick = _TickLoad(tv, ts, stresses, np.zeros(1, np.int64), np.full(1, tv.shape[0]))
             return tt, tv, ts, tick, 0
         return tt, tv, ts, ticks.load, k
 
@@ -1123,8 +1132,12 @@ class Pipeline:
               n_acc: int, rejected: Mapping[str, int],
               qc: Mapping[str, Mapping[str, Mapping[str, int]]]) -> StepResult:
         comps = {}
+        counting: dict[str, Mapping[str, float]] = {}  # of each component counting
         for name, comp in self.components.items():
-            f = comp.figures()
+            lead = self._counts_as.get(name, name)
+            if lead not in counting:
+                counting[lead] = comp.counting_figures()
+            f = comp.figures(counting[lead])
             r, m, c = closed[name]
             comps[name] = ComponentStep(
                 name=name, stress_Pa=stresses[name], ranges_Pa=r, means_Pa=m, counts=c,

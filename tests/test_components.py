@@ -168,8 +168,8 @@ def test_components_of_the_same_stress_and_state_count_together():
 
 def test_a_pipeline_counting_twins_once_replays_as_counting_each(monkeypatch):
     """A pipeline of the default components (the termination counts with the conductor)
-    gives the report and state of one counting each on its own, through a state saved and
-    restored mid-log."""
+    gives the steps, report and state of one counting each on its own, through a state
+    saved and restored mid-log."""
     from monitor.pipeline import Pipeline
     from synthetic_buoy import blocks_interleaved, sea
 
@@ -177,14 +177,18 @@ def test_a_pipeline_counting_twins_once_replays_as_counting_each(monkeypatch):
     blocks = blocks_interleaved(sea(900, gap=(300, 360)), 20)
 
     def replay() -> tuple[dict, str]:
+        steps = []
         p = Pipeline(config)
         for b in blocks[:len(blocks) // 2]:
-            p.process(b)
+            steps.append(p.process(b))
         p = Pipeline(config, state=json.loads(json.dumps(p.state())))
         for b in blocks[len(blocks) // 2:]:
-            p.process(b)
-        p.flush()
-        return p._counts_as, json.dumps([p.report(), p.state()])
+            steps.append(p.process(b))
+        steps.append(p.flush())
+        figures = [[(c.damage, c.damage_committed, c.damage_rate_per_day, c.remaining_life_days,
+                     c.max_stress_Pa, c.stress_Pa.tolist(), c.ranges_Pa.tolist())
+                    for c in step.components.values()] for step in steps]
+        return p._counts_as, json.dumps([figures, p.report(), p.state()])
     shared, out = replay()
     monkeypatch.setattr(Component, "count_with", lambda self, other: False)
     assert shared == {"conductor_termination": "conductor"}
