@@ -172,6 +172,13 @@ class _TickLoad:
                           self.est.tolist())
 
 
+def _joined(parts: Sequence[np.ndarray]) -> np.ndarray:
+    """The arrays end to end: the only non-empty one itself (the cycles a slab closed come
+    in fresh arrays that nothing writes to), else a new one."""
+    full = [p for p in parts if p.shape[0]]
+    return full[0] if len(full) == 1 else np.concatenate(parts)
+
+
 def _seq_mean(x: np.ndarray) -> float:
     """Mean by one ``np.add.reduceat`` segment, as ``_TickLoad`` reduces whole ticks (NaN if
     empty)."""
@@ -794,7 +801,11 @@ class Pipeline:
             self.next_tick_ns = ticks.next_tick
             self.tick_counts = {}
         self._keep_open_tick(t, v, src, stresses, streams, ticks, closed)
-        return {n: [np.concatenate(parts) for parts in zip(*cycles)] for n, cycles in closed.items()}
+        out: dict[str, list[np.ndarray]] = {}
+        for name, cycles in closed.items():
+            lead = self._counts_as.get(name)  # (the same cycles)
+            out[name] = out[lead] if lead is not None else [_joined(p) for p in zip(*cycles)]
+        return out
 
     def _due_ticks(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                    stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],

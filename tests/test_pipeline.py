@@ -515,3 +515,14 @@ def test_tick_load_figures_equal_the_tick_by_tick_reductions(sources):
         assert load.smax["a"][k] == (x * 1e3).max() and load.smax["b"][k] == (-x).max()
         for got, want in ((load.meas[k], _seq_mean(x[m])), (load.est[k], _seq_mean(x[~m]))):
             assert got == want or (math.isnan(got) and math.isnan(want))
+
+
+def test_joined_cycles_share_a_lone_array_and_concatenate_several():
+    """A step's cycles end to end: the one non-empty part itself, else a concatenation."""
+    from monitor.pipeline import _joined
+
+    a, b, empty = np.array([1.0, 2.0]), np.array([3.0]), np.zeros(0)
+    assert _joined([empty, a]) is a and _joined([a, empty]) is a
+    assert _joined([a, b]).tolist() == [1.0, 2.0, 3.0]
+    assert _joined([b, empty, a]).tolist() == [3.0, 1.0, 2.0]
+    assert _joined([empty, empty]).shape == (0,)
