@@ -46,7 +46,7 @@ class DamageSplit:
         self.cal_n = int(st.get("cal_n", 0))
         self.cal_sum_sq = float(st.get("cal_sum_sq", 0.0))
 
-    def ticks(self, committed: Mapping[str, Sequence[float]],
+    def ticks(self, committed: Mapping[str, Sequence[float] | np.ndarray],
               rows: Sequence[tuple[int, int, float, float]] | np.ndarray) -> None:
         """Evaluated ticks in time order: each component's committed damage at each tick's
         end, and per tick ``(measured samples, samples, mean measured tension, mean
