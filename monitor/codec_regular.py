@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from models._jit import kernel
+from models._jit import bits_float, kernel
 from monitor.varint import read_varint, unzigzag
 
 
@@ -37,8 +37,6 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
     cap = cap // nf + 1  # every sample takes at least one byte in each field
     t = np.empty(cap, np.int64)
     vals = np.empty((nf, cap), np.float64)
-    qv = np.empty(1, np.float64)
-    qb = qv.view(np.uint8)
     nsamp = np.zeros(m, np.int64)
     one = np.uint64(1)
     pos = 0
@@ -66,8 +64,10 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta)
             body_end = p + ln
             if p < 0 or body_end > end or p + 10 > body_end or buf[p] != tag_q:
                 return False, nsamp, t, vals, pos
-            qb[:] = buf[p + 1:p + 9]
-            q = qv[0]
+            qi = 0  # the quantum's bits, as t0's: a slice copy cost 13 % of the decode
+            for r in range(8):
+                qi |= np.int64(buf[p + 1 + r]) << (8 * r)
+            q = bits_float(qi)
             if not (q > 0 and q < np.inf) or buf[p + 9] != tag_delta:
                 return False, nsamp, t, vals, pos
             dl, a = read_varint(buf, p + 10, body_end)
