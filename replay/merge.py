@@ -119,7 +119,6 @@ class StreamMerge:
         ctx.last_log = int(log[-1])
         seq = self._seq + np.arange(ch.shape[0], dtype=np.int64)
         self._seq += ch.shape[0]
-        parts = []
         for c, sel in d.groups.items():
             target = ctx.channels.get(c)
             if target is None or isinstance(target, str):
@@ -146,15 +145,12 @@ class StreamMerge:
                 lo, hi = int(p_sel.min()), int(p_sel.max())
                 st.first_ns = lo if st.first_ns is None else min(st.first_ns, lo)
                 st.last_ns = hi if st.last_ns is None else max(st.last_ns, hi)
-            parts.append({"stream": np.full(sel.shape[0], sidx, np.int64), "pub": p_sel,
-                          "log": log[sel], "start": start, "n": n, "seq": seq[sel]})
-        for p in parts:
-            late = p["pub"] <= self._released_to
-            if late.any():
-                st.late += int(late.sum())
-            if p["pub"].shape[0]:
-                self._max_pub = max(self._max_pub, int(p["pub"].max()))
-            self._pending.append(p)
+                if lo <= self._released_to:
+                    st.late += int(np.count_nonzero(p_sel <= self._released_to))
+                self._max_pub = max(self._max_pub, hi)
+            self._pending.append({"stream": np.full(sel.shape[0], sidx, np.int64),
+                                  "pub": p_sel, "log": log[sel], "start": start, "n": n,
+                                  "seq": seq[sel]})
         return int(ch.shape[0])
 
     def stream_index(self, topic: str) -> int | None:
