@@ -50,13 +50,17 @@ class Slab(dict):
 
 
 # One buffered run of samples: times and one array per field. The arrays are the blocks' own
-# (no copy when a block is pushed); take() copies the values it releases once, into the slab.
+# (no copy when a block is pushed); take() copies the values it releases once, into the slab
+# (not those of one part of a one-field stream: its slab views them).
 _Part = tuple[np.ndarray, tuple[np.ndarray, ...]]
 
 
 def _joined(parts: Sequence[_Part]) -> tuple[np.ndarray, np.ndarray]:
-    """The parts' samples in one time array (the part's own if only one) and one new
-    ``(n_fields, n)`` value array."""
+    """The parts' samples in one time array and one ``(n_fields, n)`` value array: one
+    part's own arrays (a view) if only one with one field, else new ones. (Nothing writes
+    into a slab's samples, so the view needs no copy.)"""
+    if len(parts) == 1 and len(parts[0][1]) == 1:
+        return parts[0][0], np.asarray(parts[0][1][0])[None]
     t = parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])
     values = np.empty((len(parts[0][1]), t.shape[0]))
     at = 0
@@ -94,11 +98,13 @@ class ReorderBuffer:
         t = block.t_ns
         parts = self._pending[block.sensor]
         # the usual case: sorted blocks arriving in order; then take() never re-sorts
-        if self._in_order[block.sensor] and (
-                (parts and t[0] < parts[-1][0][-1]) or bool(np.any(t[1:] < t[:-1]))):
-            self._in_order[block.sensor] = False
+        sorted_block = False
+        if self._in_order[block.sensor]:
+            sorted_block = not bool(np.any(t[1:] < t[:-1]))
+            if not sorted_block or (parts and t[0] < parts[-1][0][-1]):
+                self._in_order[block.sensor] = False
         parts.append((t, tuple(block.fields[f] for f in SENSOR_FIELDS[block.sensor])))
-        newest = int(t.max())
+        newest = int(t[-1] if sorted_block else t.max())
         self.received_max[block.sensor] = max(self.received_max.get(block.sensor, _NEVER), newest)
 
     @property

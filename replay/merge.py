@@ -11,6 +11,7 @@ from typing import Iterator
 
 import numpy as np
 
+from models._jit import kernel
 from monitor import codec
 from monitor.blocks import SENSOR_FIELDS, SampleBlock, parse_sensor_topic
 from replay.mcap_scan import Digest, distinct
@@ -118,7 +119,6 @@ class StreamMerge:
         ctx.last_log = int(log[-1])
         seq = self._seq + np.arange(ch.shape[0], dtype=np.int64)
         self._seq += ch.shape[0]
-        parts = []
         for c, sel in d.groups.items():
             target = ctx.channels.get(c)
             if target is None or isinstance(target, str):
@@ -145,15 +145,12 @@ class StreamMerge:
                 lo, hi = int(p_sel.min()), int(p_sel.max())
                 st.first_ns = lo if st.first_ns is None else min(st.first_ns, lo)
                 st.last_ns = hi if st.last_ns is None else max(st.last_ns, hi)
-            parts.append({"stream": np.full(sel.shape[0], sidx, np.int64), "pub": p_sel,
-                          "log": log[sel], "start": start, "n": n, "seq": seq[sel]})
-        for p in parts:
-            late = p["pub"] <= self._released_to
-            if late.any():
-                st.late += int(late.sum())
-            if p["pub"].shape[0]:
-                self._max_pub = max(self._max_pub, int(p["pub"].max()))
-            self._pending.append(p)
+                if lo <= self._released_to:
+                    st.late += int(np.count_nonzero(p_sel <= self._released_to))
+                self._max_pub = max(self._max_pub, hi)
+            self._pending.append({"stream": np.full(sel.shape[0], sidx, np.int64),
+                                  "pub": p_sel, "log": log[sel], "start": start, "n": n,
+                                  "seq": seq[sel]})
         return int(ch.shape[0])
 
     def stream_index(self, topic: str) -> int | None:
@@ -177,49 +174,92 @@ class StreamMerge:
             return
         tab = {k: np.concatenate([p[k] for p in self._pending]) for k in _COLS}
         cut = np.iinfo(np.int64).max if final else self._max_pub - self.window_ns
-        out = tab["pub"] <= cut
-        if not out.any():
+        n_out = int(np.count_nonzero(tab["pub"] <= cut))
+        if not n_out:
             return
-        rel = {k: v[out] for k, v in tab.items()}
-        keep = {k: v[~out] for k, v in tab.items()}
-        self._released_to = max(self._released_to, int(rel["pub"].max()))
-        # canonical order: publish time, topic, read order
+        # canonical order: publish time, topic, read order (topic rank and read order in one
+        # key, exact while streams x messages read < 2**63). The messages released (publish
+        # time <= cut) come first, those held back after them.
         rank = np.argsort(np.argsort([s.topic for s in self._streams]))
-        order = np.lexsort((rel["seq"], rank[rel["stream"]], rel["pub"]))
-        rel = {k: v[order] for k, v in rel.items() if k != "seq"}  # seq: done with
-        # a release is as long as a chunk: cut it into spans of at most COALESCE_S of sensor
-        # time, so no coalesced block runs ahead of the other streams by more than that
-        span = (rel["pub"] - rel["pub"][0]) // COALESCE_NS if rel["pub"].shape[0] else rel["pub"]
-        cuts = np.flatnonzero(np.r_[True, span[1:] != span[:-1], True])
-        blocks = [b for a, z in zip(cuts[:-1], cuts[1:])
-                  for b in self._blocks({k: v[a:z] for k, v in rel.items()}, rank)]
+        order = np.lexsort((rank[tab["stream"]] * self._seq + tab["seq"], tab["pub"]))
+        rel, held = order[:n_out], order[n_out:]
+        self._released_to = max(self._released_to, int(tab["pub"][rel[-1]]))
+        blocks = self._blocks(tab, rel)
+        keep = {k: v[held] for k, v in tab.items()}
         # compact: keep only the held-back samples
         for s in distinct(tab["stream"]):
             mine = keep["stream"] == s
             keep["start"][mine] = self._streams[s].keep_only(keep["start"][mine],
                                                              keep["n"][mine])
-        self._pending = [keep] if keep["pub"].shape[0] else []
+        self._pending = [keep] if held.shape[0] else []
         yield from blocks
 
-    def _blocks(self, rel: dict, rank: np.ndarray) -> list[SampleBlock]:
-        out: list[tuple[int, int, int, SampleBlock]] = []
-        for s in distinct(rel["stream"]):
-            mine = np.flatnonzero(rel["stream"] == s)
-            stream = self._streams[s]
-            names = list(SENSOR_FIELDS[stream.sensor])
-            if self.coalesce:
-                tt, vv = stream.take(rel["start"][mine], rel["n"][mine])
-                blk = SampleBlock(stream.buoy_id, stream.sensor, tt,
-                                  {f: vv[q] for q, f in enumerate(names)},
-                                  int(rel["log"][mine].max()))
-                out.append((int(rel["pub"][mine[0]]), int(rank[s]), int(mine[0]), blk))
-                continue
-            for k in mine.tolist():
-                a, n = int(rel["start"][k]), int(rel["n"][k])
-                t, v = stream._span(a, a + n)
-                blk = SampleBlock(stream.buoy_id, stream.sensor, t.copy(),
-                                  {f: v[q].copy() for q, f in enumerate(names)},
-                                  int(rel["log"][k]))
-                out.append((0, 0, k, blk))
-        out.sort(key=lambda x: x[:3])
-        return [b for *_, b in out]
+    def _blocks(self, tab: dict, rel: np.ndarray) -> list[SampleBlock]:
+        """The messages ``tab[rel]`` (in canonical order) as blocks."""
+        if not self.coalesce:
+            return [self._message_block(*m) for m in zip(
+                *(tab[k][rel].tolist() for k in ("stream", "start", "n", "log")))]
+        count, *per_block, member = _groups(rel, tab["stream"], tab["pub"], tab["log"],
+                                            tab["start"], tab["n"], COALESCE_NS,
+                                            len(self._streams))
+        sid, lo, hi, log, apart = (x.tolist() for x in per_block)
+        out = []
+        for g in range(count):
+            stream = self._streams[sid[g]]
+            if apart[g]:  # (rare) messages not back to back in their stream
+                mine = rel[member == g]
+                tt, vv = stream.take(tab["start"][mine], tab["n"][mine])
+            else:
+                tt, vv = stream._span(lo[g], hi[g])
+            out.append(SampleBlock(stream.buoy_id, stream.sensor, tt, {
+                f: vv[q] for q, f in enumerate(SENSOR_FIELDS[stream.sensor])}, log[g]))
+        return out
+
+    def _message_block(self, s: int, a: int, n: int, log: int) -> SampleBlock:
+        """One message's samples as a block of their own (copies)."""
+        stream = self._streams[s]
+        t, v = stream._span(a, a + n)
+        return SampleBlock(stream.buoy_id, stream.sensor, t.copy(),
+                           {f: v[q].copy() for q, f in enumerate(SENSOR_FIELDS[stream.sensor])},
+                           log)
+
+
+@kernel()
+def _groups(order, stream, pub, log, start, n, span_ns, n_streams):
+    """The coalesced blocks of the messages ``order`` (indices, in canonical order; at least
+    one): a release is as long as a chunk, so it is cut into spans of ``span_ns`` of publish
+    time from its first message (no coalesced block then runs ahead of the other streams by
+    more than that), and each span gives one block per stream, the blocks in the order of
+    their first messages. Returns their count and, per block: stream, first and end sample
+    (the stream's pending indices), the latest receive time, whether its messages are
+    apart (not back to back in the stream: then ``lo``/``hi`` do not describe it), and the
+    block of every message."""
+    m = order.shape[0]
+    sid = np.empty(m, np.int64)
+    lo = np.empty(m, np.int64)
+    hi = np.empty(m, np.int64)
+    latest = np.empty(m, np.int64)
+    apart = np.zeros(m, np.bool_)
+    member = np.empty(m, np.int64)
+    open_block = np.full(n_streams, -1, np.int64)  # each stream's block in the current span
+    count = 0
+    first_pub = pub[order[0]]
+    span = 0
+    for i in range(m):
+        k = order[i]
+        sp = (pub[k] - first_pub) // span_ns
+        if sp != span:
+            open_block[:] = -1
+            span = sp
+        s = stream[k]
+        b = open_block[s]
+        if b < 0:
+            b = open_block[s] = count
+            count += 1
+            sid[b], lo[b], latest[b] = s, start[k], log[k]
+        else:
+            apart[b] |= start[k] != hi[b]
+            latest[b] = max(latest[b], log[k])
+        hi[b] = start[k] + n[k]
+        member[i] = b
+    return count, sid[:count], lo[:count], hi[:count], latest[:count], apart[:count], member

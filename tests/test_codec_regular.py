@@ -154,3 +154,23 @@ def test_random_payloads_of_the_reference_encoder_decode_as_protobuf_reads_them(
                 plain = decode_regular(buf, offs, lens, numbers)
             assert (plain is None) == extreme and (extreme or _same(plain, fast))
     assert fast_batches == 48
+
+
+def test_lengths_whose_varint_starts_with_0x80_take_the_one_pass_path():
+    """A field body or delta list of exactly 128 or 256 bytes (its length's first varint
+    byte 0x80, the one-byte length read in place must not take it): the one-pass decoder
+    takes the payloads and gives the reference decode's values."""
+    cls = _generic_class("tension")
+    payloads, want = [], []
+    for n in (128, 244):  # one-byte deltas: delta lists of 128 and 244 bytes, bodies 140, 256
+        m = cls(t0_ns=T0, period_ns=50_000_000)
+        d = np.random.default_rng(n).integers(-64, 63, n, endpoint=True)
+        m.tension_N.quantum = 0.1
+        m.tension_N.delta.extend(d.tolist())
+        payloads.append(m.SerializeToString())
+        want.append(np.cumsum(d).astype(np.float64) * 0.1)
+    assert bytes([0x80, 0x01]) in payloads[0] and bytes([0x80, 0x02]) in payloads[1]
+    buf, offs, lens = _batch(payloads)
+    fast = decode_regular(buf, offs, lens, codec.DEFAULT_FIELD_NUMBERS["tension"])
+    assert fast is not None and fast[1].tolist() == [128, 244]
+    assert fast[3].tobytes() == np.concatenate(want)[None].tobytes()

@@ -166,6 +166,28 @@ def test_out_of_order_within_the_window_and_every_copy_delivered(tmp_path):
     assert np.array_equal(blocks[-1].fields["tension_N"], expected)
 
 
+def test_coalesced_blocks_of_messages_read_out_of_order_are_theirs_in_time_order(tmp_path):
+    """Messages released together but not back to back in read order (late ones, copies,
+    one held back between them) are gathered into the coalesced block in the order of one
+    block per message; its receive time is their latest."""
+    path = tmp_path / "ooo.mcap"
+    with LogWriter(path) as w:
+        # 0 and 1 are released after the first chunk, 20 read between them is held back
+        for k, recv in ((0, 40), (20, 21), (1, 22)):
+            w.write_block(_blk("tension", _seconds("tension", k, 20), seed=k), T0 + recv * S)
+        w.flush(fsync=False)
+        for k in [21, 23, 22, 23]:  # 22 late, 23 twice
+            w.write_block(_blk("tension", _seconds("tension", k, 20), seed=k), T0 + 30 * S)
+    per_message = list(LogReader(path, coalesce=False, reorder_window_s=5))
+    blocks = list(LogReader(path, coalesce=True, reorder_window_s=5))
+    assert [((b.t_ns[::20] - T0) // S).tolist() for b in blocks] == [[0, 1], [20, 21, 22, 23, 23]]
+    assert [b.recv_ns for b in blocks] == [T0 + 40 * S, T0 + 30 * S]
+    for f in ("t_ns", "tension_N"):
+        get = (lambda b: b.t_ns) if f == "t_ns" else (lambda b: b.fields[f])
+        assert np.array_equal(np.concatenate([get(b) for b in blocks]),
+                              np.concatenate([get(b) for b in per_message]))
+
+
 def test_messages_later_than_the_window_are_counted_late_and_delivered(tmp_path):
     path = tmp_path / "late.mcap"
     with LogWriter(path) as w:
