@@ -285,6 +285,8 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
                 break
             fields, done = message
             pipeline.advance(intake_of(fields, pipeline.components))
+            # no reference of our own left: the slab's shared memory goes back to the child
+            del message, fields
             if done is not None:
                 n_blocks += 1
                 n_samples += done[0]

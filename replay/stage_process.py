@@ -31,15 +31,18 @@ of the machine's CPUs are idle as the replay starts (figures in bench/bench_thre
 from __future__ import annotations
 
 import copyreg
+import ctypes
 import dataclasses
 import fcntl
 import gc
 import importlib
 import io
 import itertools
+import mmap
 import multiprocessing
 import os
 import pickle
+import select
 import signal
 import sys
 import time
@@ -53,6 +56,7 @@ import numpy as np
 from monitor.blocks import SampleBlock
 from monitor.components import Component
 from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
+from monitor.sea_state_learner import _Spectra
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
 # what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
@@ -60,6 +64,14 @@ from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
 CHILD_MIN_BYTES = 20_000_000
 IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
+# The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
+# before the fork, reused: no page faults, no copies through the pipe). A slab of the default
+# streams needs up to ~2.4 MB; a larger one (or one with every slot still in use here) goes
+# through the pipe. Four slots let the child work up to three slabs ahead.
+SLOTS = 4
+SLOT_BYTES = 4 << 20
+_ALIGN = 64  # each array starts on a cache line (the compiled kernels want aligned arrays)
+_HELD = 0x80  # a slot's release message: its number, or'ed with this while still in use
 
 # The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
 _STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
@@ -164,34 +176,82 @@ class _Pickler(pickle.Pickler):
     dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
 
 
-class _BlocklessPickler(_Pickler):
+def _spectra_of(attrs: dict[str, Any], rows: np.ndarray) -> _Spectra:
+    """A learner window's spectra as the child sent them, every array a copy: the tick
+    stage keeps them across slabs (the open window, finished ones until their tick), so
+    they must not stay in the hand-over's slot."""
+    spectra = _Spectra.__new__(_Spectra)
+    for name, value in attrs.items():
+        if isinstance(value, np.ndarray):
+            value = value.copy()
+        elif isinstance(value, dict):
+            value = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in value.items()}
+        setattr(spectra, name, value)
+    spectra.rows = rows.copy()
+    return spectra
+
+
+def _reduce_spectra(s: _Spectra) -> tuple:
+    """Only the kept segments not yet added (``rows[:, added:filled]``, all the tick stage
+    reads: the rest is the child's room for feeding); the same segments in the same
+    batches, so the same sums to the bit."""
+    attrs = {k: v for k, v in vars(s).items() if k != "rows"}
+    attrs["added"], attrs["filled"] = 0, s.filled - s.added
+    return _spectra_of, (attrs, np.ascontiguousarray(s.rows[:, s.added:s.filled]))
+
+
+class _SlabPickler(_Pickler):
+    """A hand-over: the learner's spectra as :func:`_reduce_spectra` sends them."""
+
+    dispatch_table = {**_Pickler.dispatch_table, _Spectra: _reduce_spectra}
+
+
+class _BlocklessPickler(_SlabPickler):
     """Sends a hand-over's block as None: no sink here reads it (no samples sent twice)."""
 
-    dispatch_table = {**_Pickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
+    dispatch_table = {**_SlabPickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
 
 
-def _pack(kind: str, obj: Any, pickler: type[pickle.Pickler]) -> list[Any]:
-    """``(kind, obj)`` as the byte strings to send: the header's length, the header (the
-    pickle without its arrays' data, their sizes), each array's bytes (not copied)."""
+def _pickled(obj: Any, pickler: type[pickle.Pickler]) -> tuple[bytes, list[memoryview]]:
+    """``obj`` pickled without its arrays' data, and that data (not copied)."""
     buffers: list[pickle.PickleBuffer] = []
     meta = io.BytesIO()
     pickler(meta, protocol=5, buffer_callback=buffers.append).dump(obj)
-    raws = [b.raw() for b in buffers]
-    header = pickle.dumps((kind, meta.getvalue(), [r.nbytes for r in raws]), protocol=5)
-    return [len(header).to_bytes(8, "little"), header, *raws]
+    return meta.getvalue(), [b.raw() for b in buffers]
 
 
-def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
-    """``(kind, obj)`` written in one system call (the pipe blocks until it holds it all;
-    no thread: a writer thread waited for the GIL at every write, and the parent for it)."""
-    parts = [memoryview(p).cast("B") for p in _pack(kind, obj, pickler)]
-    while parts:
-        n = os.writev(fd, parts)
-        while parts and n >= parts[0].nbytes:
-            n -= parts[0].nbytes
-            parts.pop(0)
-        if parts:
-            parts[0] = parts[0][n:]
+def _write(fd: int, parts: list[Any]) -> None:
+    """``parts`` written in as few system calls as the pipe allows (it blocks until it
+    holds them all; no thread: a writer thread waited for the GIL at every write, and the
+    parent for it)."""
+    views = [memoryview(p).cast("B") for p in parts]
+    while views:
+        n = os.writev(fd, views)
+        while views and n >= views[0].nbytes:
+            n -= views[0].nbytes
+            views.pop(0)
+        if views:
+            views[0] = views[0][n:]
+
+
+def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler,
+          slots: "_SlotWriter | None" = None) -> None:
+    """``(kind, obj)`` through the pipe: the header (its length, then the pickle without
+    its arrays' data, and where that data is), then the data itself, unless ``slots`` has
+    a slot for it: then it is copied there and only the header goes through the pipe."""
+    meta, raws = _pickled(obj, pickler)
+    offsets, end = [], 0
+    for raw in raws:
+        offsets.append(end)
+        end += -(-raw.nbytes // _ALIGN) * _ALIGN
+    slot = None if slots is None else slots.take(end)
+    if slot is None:
+        where: Any = [r.nbytes for r in raws]
+    else:
+        slots.fill(slot, offsets, raws)
+        where, raws = (slot, offsets, [r.nbytes for r in raws]), []
+    header = pickle.dumps((kind, meta, where), protocol=5)
+    _write(fd, [len(header).to_bytes(8, "little"), header, *raws])
 
 
 def _read_into(fd: int, buf: Any) -> None:
@@ -203,16 +263,126 @@ def _read_into(fd: int, buf: Any) -> None:
         view = view[n:]
 
 
-def _receive(fd: int) -> tuple[str, Any]:
+def _receive(fd: int, slots: "_SlotReader") -> tuple[str, Any]:
     size = bytearray(8)
     _read_into(fd, size)
     header = bytearray(int.from_bytes(size, "little"))
     _read_into(fd, header)
-    kind, meta, sizes = pickle.loads(header)
-    buffers = [np.empty(n, np.uint8) for n in sizes]  # writable: the arrays are the tick stage's
+    kind, meta, where = pickle.loads(header)
+    if isinstance(where, tuple):  # the data is in a slot
+        return kind, slots.load(meta, *where)
+    buffers = [np.empty(n, np.uint8) for n in where]  # writable: the arrays are the tick stage's
     for buf in buffers:
         _read_into(fd, buf)
     return kind, pickle.loads(meta, buffers=buffers)
+
+
+def _shared_slots(count: int, size: int) -> list[mmap.mmap]:
+    """``count`` blocks of ``size`` bytes of memory that a forked child shares, each page
+    touched once now (the hand-overs then never fault a page in)."""
+    maps = [mmap.mmap(-1, size) for _ in range(count)]  # anonymous, MAP_SHARED
+    zeros = bytes(size)
+    for m in maps:
+        m.write(zeros)
+    return maps
+
+
+class _SlotWriter:
+    """The child's side of the slots: which are free, which the parent still holds.
+
+    The parent answers every slot it was sent, once the tick stage is done with the slab:
+    free, or held (something there still refers to the slab's arrays; free later). The
+    child waits for an answer only while a slot is on its way: with every slot held, the
+    data goes through the pipe, so the child never waits for what may not come."""
+
+    def __init__(self, maps: Sequence[mmap.mmap], release_fd: int) -> None:
+        self.views = [memoryview(m) for m in maps]
+        self.size = len(maps[0]) if maps else 0
+        self.free = list(range(len(maps)))
+        self.sent: set[int] = set()  # sent, not answered
+        self.fd = release_fd
+        os.set_blocking(release_fd, False)
+
+    def take(self, nbytes: int) -> int | None:
+        """A free slot for ``nbytes`` (waiting for one on its way), or None: the pipe."""
+        if nbytes > self.size or not nbytes:
+            return None
+        self._answers(wait=False)
+        while not self.free and self.sent:
+            self._answers(wait=True)
+        if not self.free:  # every slot held by the tick stage
+            return None
+        slot = self.free.pop()  # the one freed last: the warmest
+        self.sent.add(slot)
+        return slot
+
+    def fill(self, slot: int, offsets: Sequence[int], raws: Sequence[memoryview]) -> None:
+        view = self.views[slot]
+        for offset, raw in zip(offsets, raws):
+            view[offset:offset + raw.nbytes] = raw
+
+    def _answers(self, wait: bool) -> None:
+        if wait:
+            select.select([self.fd], [], [])
+        try:
+            answers = os.read(self.fd, 4096)
+        except BlockingIOError:
+            return
+        if not answers:  # the parent is gone
+            raise BrokenPipeError
+        for answer in answers:
+            slot = answer & ~_HELD
+            self.sent.discard(slot)
+            if not answer & _HELD:
+                self.free.append(slot)
+
+
+class _SlotReader:
+    """The parent's side of the slots: the arrays of a slab sent in a slot are views of it
+    until the slot is released, which is only once nothing refers to them any more.
+
+    Each slab's views hang on one fresh object exporting the slot's memory (a ctypes
+    array): every array made from them, and every view of those, keeps a reference to it
+    through numpy's memoryview, so its reference count tells whether anything (the tick
+    stage, a sink) still holds one. A slot still referred to is answered "held" and
+    released later, once it is not."""
+
+    def __init__(self, maps: Sequence[mmap.mmap], release_fd: int) -> None:
+        self.maps, self.fd = maps, release_fd
+        self.owners: dict[int, Any] = {}  # slot -> its current slab's exporting object
+        self.held: set[int] = set()
+        self.lost = 0  # slabs whose slot had to wait for a later slab to be released
+
+    def load(self, meta: bytes, slot: int, offsets: Sequence[int], sizes: Sequence[int]) -> Any:
+        owner = (ctypes.c_char * len(self.maps[slot])).from_buffer(self.maps[slot])
+        base = memoryview(owner).cast("B")
+        buffers = [base[o:o + n] for o, n in zip(offsets, sizes)]
+        obj = pickle.loads(meta, buffers=buffers)
+        del buffers
+        base.release()
+        self.owners[slot] = owner
+        return obj
+
+    def release(self) -> None:
+        """Answer every slot the tick stage is done with (call with no reference of one's
+        own left to a slab's arrays)."""
+        answers = bytearray()
+        for slot in list(self.owners):
+            # the dictionary's reference and getrefcount's argument: 2 when nothing else
+            # (no array, no view of one) refers to it
+            if sys.getrefcount(self.owners[slot]) == 2:
+                del self.owners[slot]
+                self.held.discard(slot)
+                answers.append(slot)
+            elif slot not in self.held:
+                self.held.add(slot)
+                self.lost += 1
+                answers.append(slot | _HELD)
+        if answers:
+            try:
+                os.write(self.fd, answers)
+            except BrokenPipeError:  # the child ended: the pipe says how
+                pass
 
 
 # ---------------------------------------------------------------------------------- the child
@@ -251,19 +421,22 @@ def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
             feed.current, feed._finished = state["learner"][f]
 
 
-def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline: Any,
-           send_blocks: bool, reader: Any) -> None:
+def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mmap.mmap],
+           blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool,
+           reader: Any) -> None:
     """The child: read, send the first block's buoy id, run the stream stage, send the
     hand-overs, then the stream stage's state, the blocks of other buoys and the reader's
     statistics."""
-    os.close(other_fd)  # the parent's end: a parent gone then fails the next send
+    for other in other_fds:  # the parent's ends: a parent gone then fails the next send
+        os.close(other)
     try:
+        slots = _SlotWriter(maps, release_fd)
         source = iter(blocks)
         first = next(source, None)
         _send(fd, "first", None if first is None else first.buoy_id)
         ignored: dict[str, int] = {}
         streams = None
-        pickler = _Pickler if send_blocks else _BlocklessPickler
+        pickler = _SlabPickler if send_blocks else _BlocklessPickler
         if first is not None:
             pipeline = make_pipeline(first.buoy_id)
             for block in itertools.chain([first], source):
@@ -271,8 +444,8 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
                     continue
                 _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
-                      pickler)
-            _send(fd, "slab", (pipeline.ingest_end(), None))
+                      pickler, slots)
+            _send(fd, "slab", (pipeline.ingest_end(), None), pickler, slots)
             streams = _stream_state(pipeline)
         _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
     except BrokenPipeError:  # the parent stopped reading: it has its own exception
@@ -288,6 +461,7 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
             pass
     finally:
         os.close(fd)
+        os.close(release_fd)
 
 
 # --------------------------------------------------------------------------------- the parent
@@ -318,9 +492,12 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
         fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
     except OSError:  # pipe-max-size lowered, or the user's pipe pages spent: the default
         pass  # pipe (64 KB) only makes the child wait more often
+    answers_read, answers_write = os.pipe()  # the slots' answers, to the child
+    maps = _shared_slots(SLOTS, SLOT_BYTES)
     ctx = multiprocessing.get_context("fork")
     child = ctx.Process(target=_child, name="buoymon-stream",
-                        args=(write_fd, read_fd, blocks, make_pipeline, send_blocks,
+                        args=(write_fd, (read_fd, answers_write), answers_read, maps, blocks,
+                              make_pipeline, send_blocks,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)
     # (multiprocessing flushes the standard streams before it forks: nothing this process
     # buffered is written twice.) The child's garbage collections then skip the objects it
@@ -331,10 +508,12 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     finally:
         gc.unfreeze()
     os.close(write_fd)
+    os.close(answers_read)
+    slots = _SlotReader(maps, answers_write)
     try:
         while True:
             try:
-                kind, obj = _receive(read_fd)
+                kind, obj = _receive(read_fd, slots)
             except EOFError:
                 child.join(5)
                 raise ChildDied(f"the replay's reading process ended without finishing the "
@@ -344,8 +523,11 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
             yield kind, obj
             if kind == "end":
                 return
+            del obj  # the caller is done with the slab (it asks for the next): its slot
+            slots.release()  # goes back to the child unless something still refers to it
     finally:
         os.close(read_fd)  # the child's next send fails: it stops
+        os.close(answers_write)
         child.join(5)
         if child.is_alive():
             child.kill()
