@@ -284,7 +284,7 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
                 stream_state, ignored, stats = message
                 break
             fields, done = message
-            pipeline.advance(intake_of(fields, pipeline.components))
+            pipeline.advance(intake_of(fields, pipeline))
             # no reference of our own left: the slab's shared memory goes back to the child
             del message, fields
             if done is not None:

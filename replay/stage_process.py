@@ -53,10 +53,8 @@ from typing import Any, Generator, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from monitor.blocks import SampleBlock
-from monitor.components import Component
-from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
-from monitor.sea_state_learner import _Spectra
+from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
 # what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
@@ -76,7 +74,6 @@ _HELD = 0x80  # a slot's release message: its number, or'ed with this while stil
 # The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
 _STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
                  "estimator", "selector", "stats", "_full_estimate")
-_LEARNER_FEEDS = ("stress", "heave", "accel")  # the sea-state learner's feeding side
 
 
 class ChildDied(RuntimeError):
@@ -128,14 +125,15 @@ def idle_cpus(interval_s: float = 0.05) -> float:
 
 # ---------------------------------------------------------------------------------- pickling
 def _stream_slab(t: np.ndarray, codes: np.ndarray, acc_t: np.ndarray | None,
-                 rx_t: np.ndarray | None, rej_t: np.ndarray, before: tuple) -> _StreamSlab:
-    """A stream's slab as the tick stage reads it (its accepted values are the stream
-    stage's: left out)."""
+                 rx_t: np.ndarray | None, rej_t: np.ndarray, before: tuple,
+                 acc_values: list[np.ndarray | None] | None = None) -> _StreamSlab:
+    """A stream's slab as the tick stage reads it; its accepted values (the stream stage's)
+    only those the sea-state learner takes, as rows (None for the others)."""
     slab = _StreamSlab.__new__(_StreamSlab)
     slab.t, slab.codes, slab.rej_t, slab._before = t, codes, rej_t, before
     slab.acc_t = t if acc_t is None else acc_t
     slab.rx_t = t if rx_t is None else rx_t
-    slab.acc_values = None  # type: ignore[assignment]  # read here, it fails loudly
+    slab.acc_values = acc_values  # type: ignore[assignment]  # read otherwise, it fails loudly
     return slab
 
 
@@ -144,28 +142,51 @@ def _reduce_stream_slab(s: _StreamSlab) -> tuple:
                           None if s.rx_t is s.t else s.rx_t, s.rej_t, s._before)
 
 
+@dataclasses.dataclass(frozen=True)
+class _LearnerStream:
+    """A stream's slab to send with the values the sea-state learner takes of it."""
+
+    name: str
+    slab: _StreamSlab
+
+    def __reduce__(self) -> tuple:
+        wanted = _SEA_STATE_FIELDS[self.name]
+        rows = [row if field in wanted else None
+                for field, row in zip(SENSOR_FIELDS[self.name], self.slab.acc_values)]
+        return _stream_slab, (*_reduce_stream_slab(self.slab)[1], rows)
+
+
 def _no_block() -> None:
     return None
 
 
-# A hand-over travels as the tuple of its fields, without the components' stresses: the
-# parent computes them again from the load (3 ms of CPU a day of data, against 28 MB a day
-# to copy twice; the same function of the same samples: the same bits).
+# A hand-over travels as the tuple of its fields, without the components' stresses and the
+# sea-state learner's inputs: the parent computes them (the stresses again: 3 ms of CPU a
+# day of data, against 28 MB a day to copy; the same function of the same samples: the
+# same bits; the learner's inputs in its place: Pipeline.feed_learner, moved out of the
+# child, which has more to do, with the values it takes).
 _INTAKE_FIELDS = tuple(f.name for f in dataclasses.fields(SlabIntake))
-_STRESSES, _LOAD = _INTAKE_FIELDS.index("stresses"), _INTAKE_FIELDS.index("v")
+_STREAMS, _STRESSES, _TIME, _LOAD, _SPECTRA = (
+    _INTAKE_FIELDS.index(f) for f in ("streams", "stresses", "t", "v", "spectra"))
 
 
 def _reduce_intake(intake: SlabIntake) -> tuple:
     fields = [getattr(intake, name) for name in _INTAKE_FIELDS]
     fields[_STRESSES] = None
+    fields[_STREAMS] = {name: _LearnerStream(name, slab) if name in _SEA_STATE_FIELDS else slab
+                        for name, slab in intake.streams.items()}
     return tuple, (fields,)
 
 
-def intake_of(fields: tuple, components: Mapping[str, Component]) -> SlabIntake:
-    """The hand-over the child sent as ``fields``, with the stresses of ``components``."""
-    stresses = {name: c.stress(fields[_LOAD], record=False) for name, c in components.items()}
-    head, tail = fields[:_STRESSES], fields[_STRESSES + 1:]
-    return SlabIntake(*head, stresses, *tail)  # type: ignore[call-arg]
+def intake_of(fields: tuple, pipeline: Pipeline) -> SlabIntake:
+    """The hand-over the child sent as ``fields``, with the stresses of ``pipeline``'s
+    components and its sea-state learner fed (its inputs: the child's learner is off)."""
+    fields = list(fields)
+    t, v = fields[_TIME], fields[_LOAD]
+    stresses = {name: c.stress(v, record=False) for name, c in pipeline.components.items()}
+    fields[_STRESSES] = stresses
+    fields[_SPECTRA] = pipeline.feed_learner(fields[_STREAMS], t, stresses)
+    return SlabIntake(*fields)
 
 
 class _Pickler(pickle.Pickler):
@@ -176,40 +197,10 @@ class _Pickler(pickle.Pickler):
     dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
 
 
-def _spectra_of(attrs: dict[str, Any], rows: np.ndarray) -> _Spectra:
-    """A learner window's spectra as the child sent them, every array a copy: the tick
-    stage keeps them across slabs (the open window, finished ones until their tick), so
-    they must not stay in the hand-over's slot."""
-    spectra = _Spectra.__new__(_Spectra)
-    for name, value in attrs.items():
-        if isinstance(value, np.ndarray):
-            value = value.copy()
-        elif isinstance(value, dict):
-            value = {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in value.items()}
-        setattr(spectra, name, value)
-    spectra.rows = rows.copy()
-    return spectra
-
-
-def _reduce_spectra(s: _Spectra) -> tuple:
-    """Only the kept segments not yet added (``rows[:, added:filled]``, all the tick stage
-    reads: the rest is the child's room for feeding); the same segments in the same
-    batches, so the same sums to the bit."""
-    attrs = {k: v for k, v in vars(s).items() if k != "rows"}
-    attrs["added"], attrs["filled"] = 0, s.filled - s.added
-    return _spectra_of, (attrs, np.ascontiguousarray(s.rows[:, s.added:s.filled]))
-
-
-class _SlabPickler(_Pickler):
-    """A hand-over: the learner's spectra as :func:`_reduce_spectra` sends them."""
-
-    dispatch_table = {**_Pickler.dispatch_table, _Spectra: _reduce_spectra}
-
-
-class _BlocklessPickler(_SlabPickler):
+class _BlocklessPickler(_Pickler):
     """Sends a hand-over's block as None: no sink here reads it (no samples sent twice)."""
 
-    dispatch_table = {**_SlabPickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
+    dispatch_table = {**_Pickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
 
 
 def _pickled(obj: Any, pickler: type[pickle.Pickler]) -> tuple[bytes, list[memoryview]]:
@@ -400,25 +391,11 @@ class WantsQc:
         pass
 
 
-def _stream_state(pipeline: Pipeline) -> dict[str, Any]:
-    learner = pipeline.sea_states
-    return {"pipeline": {a: getattr(pipeline, a) for a in _STREAM_ATTRS},
-            "learner": None if learner is None else {
-                "_new_waves": learner._new_waves,
-                **{f: (getattr(learner, f).current, getattr(learner, f)._finished)
-                   for f in _LEARNER_FEEDS}}}
-
-
 def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
-    """Give ``pipeline`` the stream stage's objects of the child's pipeline."""
-    for attr, value in state["pipeline"].items():
+    """Give ``pipeline`` the stream stage's objects of the child's pipeline (the learner's
+    feeding side is this pipeline's own: :func:`intake_of` fed it)."""
+    for attr, value in state.items():
         setattr(pipeline, attr, value)
-    learner = pipeline.sea_states
-    if state["learner"] is not None and learner is not None:
-        learner._new_waves = state["learner"]["_new_waves"]
-        for f in _LEARNER_FEEDS:
-            feed = getattr(learner, f)
-            feed.current, feed._finished = state["learner"][f]
 
 
 def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mmap.mmap],
@@ -436,9 +413,10 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
         _send(fd, "first", None if first is None else first.buoy_id)
         ignored: dict[str, int] = {}
         streams = None
-        pickler = _SlabPickler if send_blocks else _BlocklessPickler
+        pickler = _Pickler if send_blocks else _BlocklessPickler
         if first is not None:
             pipeline = make_pipeline(first.buoy_id)
+            pipeline.sea_states = None  # its inputs are fed in the parent (intake_of)
             for block in itertools.chain([first], source):
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
@@ -446,7 +424,7 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
                 _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
                       pickler, slots)
             _send(fd, "slab", (pipeline.ingest_end(), None), pickler, slots)
-            streams = _stream_state(pipeline)
+            streams = {a: getattr(pipeline, a) for a in _STREAM_ATTRS}
         _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
     except BrokenPipeError:  # the parent stopped reading: it has its own exception
         pass
