@@ -54,7 +54,7 @@ from typing import Any, Generator, Iterable, Mapping, Sequence
 import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
-from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab
+from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab, _Totals
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
 # what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
@@ -71,9 +71,12 @@ SLOT_BYTES = 4 << 20
 _ALIGN = 64  # each array starts on a cache line (the compiled kernels want aligned arrays)
 _HELD = 0x80  # a slot's release message: its number, or'ed with this while still in use
 
-# The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
+# The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end;
+# but the tension statistics and the sea-state learner's feeding side, which need nothing
+# but the slab's load and accepted values: they are kept here (intake_of), where the tick
+# stage leaves a CPU less busy than the child's reading and validation
 _STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
-                 "estimator", "selector", "stats", "_full_estimate")
+                 "estimator", "selector", "_full_estimate")
 
 
 class ChildDied(RuntimeError):
@@ -160,14 +163,22 @@ def _no_block() -> None:
     return None
 
 
-# A hand-over travels as the tuple of its fields, without the components' stresses and the
-# sea-state learner's inputs: the parent computes them (the stresses again: 3 ms of CPU a
-# day of data, against 28 MB a day to copy; the same function of the same samples: the
-# same bits; the learner's inputs in its place: Pipeline.feed_learner, moved out of the
-# child, which has more to do, with the values it takes).
+# A hand-over travels as the tuple of its fields, without the components' stresses and
+# the sea-state learner's inputs, which the parent computes from the load and the values
+# the learner takes (sent with their stream): the stresses again (the same function of the
+# same samples: the same bits), the learner's inputs in the child's place
+# (Pipeline.feed_learner; those inputs, each window's segments so far at every slab, were
+# most of the bytes to copy).
 _INTAKE_FIELDS = tuple(f.name for f in dataclasses.fields(SlabIntake))
-_STREAMS, _STRESSES, _TIME, _LOAD, _SPECTRA = (
-    _INTAKE_FIELDS.index(f) for f in ("streams", "stresses", "t", "v", "spectra"))
+_STREAMS, _STRESSES, _TIME, _LOAD, _SOURCE, _SPECTRA = (
+    _INTAKE_FIELDS.index(f) for f in ("streams", "stresses", "t", "v", "src", "spectra"))
+
+
+class _StatsHere:
+    """The child's tension statistics: kept in the parent (intake_of)."""
+
+    def add(self, v: np.ndarray, src: np.ndarray) -> None:
+        pass
 
 
 def _reduce_intake(intake: SlabIntake) -> tuple:
@@ -179,19 +190,31 @@ def _reduce_intake(intake: SlabIntake) -> tuple:
 
 
 def intake_of(fields: tuple, pipeline: Pipeline) -> SlabIntake:
-    """The hand-over the child sent as ``fields``, with the stresses of ``pipeline``'s
-    components and its sea-state learner fed (its inputs: the child's learner is off)."""
+    """The hand-over the child sent as ``fields``, its stream stage completed with
+    ``pipeline``'s: the components' stresses, the tension statistics and the sea-state
+    learner's feeding (the child's are off)."""
     fields = list(fields)
-    t, v = fields[_TIME], fields[_LOAD]
+    t, v, src = fields[_TIME], fields[_LOAD], fields[_SOURCE]
+    pipeline.stats.add(v, src)
     stresses = {name: c.stress(v, record=False) for name, c in pipeline.components.items()}
     fields[_STRESSES] = stresses
     fields[_SPECTRA] = pipeline.feed_learner(fields[_STREAMS], t, stresses)
     return SlabIntake(*fields)
 
 
+# a stream's totals by their fields' values: a slotted dataclass pickles by its generated
+# __getstate__ and __setstate__, which call dataclasses.fields() at every one, every slab
+_TOTALS_FIELDS = tuple(f.name for f in dataclasses.fields(_Totals))
+
+
+def _reduce_totals(totals: _Totals) -> tuple:
+    return _Totals, tuple(getattr(totals, name) for name in _TOTALS_FIELDS)
+
+
 class _Pickler(pickle.Pickler):
     dispatch_table = copyreg.dispatch_table.copy()
     dispatch_table[_StreamSlab] = _reduce_stream_slab
+    dispatch_table[_Totals] = _reduce_totals
     dispatch_table[SlabIntake] = _reduce_intake
     # the estimator keeps the model modules it calls
     dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
@@ -392,8 +415,8 @@ class WantsQc:
 
 
 def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
-    """Give ``pipeline`` the stream stage's objects of the child's pipeline (the learner's
-    feeding side is this pipeline's own: :func:`intake_of` fed it)."""
+    """Give ``pipeline`` the stream stage's objects of the child's pipeline (the tension
+    statistics and the learner's feeding side are its own: :func:`intake_of` kept them)."""
     for attr, value in state.items():
         setattr(pipeline, attr, value)
 
@@ -416,7 +439,8 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
         pickler = _Pickler if send_blocks else _BlocklessPickler
         if first is not None:
             pipeline = make_pipeline(first.buoy_id)
-            pipeline.sea_states = None  # its inputs are fed in the parent (intake_of)
+            pipeline.sea_states = None  # fed in the parent, as the statistics (intake_of)
+            pipeline.stats = _StatsHere()  # type: ignore[assignment]
             for block in itertools.chain([first], source):
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
