@@ -211,24 +211,26 @@ def _stub_qc() -> None:
 
 
 def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> None:
-    """Run in a child process: replay, print figures as JSON (with this process's peak RSS).
-    ``one_core`` pins the process to one CPU (the reader then starts no read-ahead thread)."""
+    """Run in a child process: replay, print figures as JSON (with this process's peak RSS,
+    and a stage process's CPU and peak RSS). As ``buoymon replay`` runs (its malloc setting,
+    its choice of processes and reader): on 2 CPUs the reading and stream stage in a child
+    process when it pays (replay.stage_process); ``one_core`` pins the process to one CPU
+    (one process, the reader then starts no read-ahead thread)."""
     if one_core:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     if not qc:
         _stub_qc()
     from monitor.config import config_with, default_config
-    from replay.reader import LogReader
-    from replay.runner import run_blocks
+    from replay.runner import keep_freed_memory, replay_reader, run_blocks, use_child
 
     config = default_config()
     if not rules:
         config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
                                              if k != "rule"})
+    keep_freed_memory()
     start, cpu = time.perf_counter(), time.process_time()
-    reader = LogReader([path])
-    # as `buoymon replay` (one process; the child process of --two-processes did not pay)
-    pipeline, result = run_blocks(config, reader)
+    child = use_child([Path(path)])
+    pipeline, result = run_blocks(config, replay_reader([Path(path)], None, child), child=child)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     rep = pipeline.report()
@@ -240,6 +242,7 @@ def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> Non
         "damage_committed": rep["components"]["conductor"]["damage_committed"],
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "child_cpu_s": kids.ru_utime + kids.ru_stime,
+        "two_processes": child,
         "child_peak_rss_mb": kids.ru_maxrss / 1024,
     }))
 
@@ -340,13 +343,14 @@ def main() -> None:
         r_small = replay_in_child(small)
         r_plain = replay_in_child(big, rules=False)
         r_cores = replay_in_child(big, one_core=False)
+        r_small_cores = replay_in_child(small, one_core=False)
         cores = len(os.sched_getaffinity(0))
         for label, r in (("default config, one core", r_big), ("no alert rules, one core", r_plain),
                          (f"default config, {cores} cores", r_cores)):
             rr = r["tension_samples"] / r["wall_s"]
             child = (f" + {r['child_cpu_s']:.2f} s in the child (peak RSS "
                      f"{r['peak_rss_mb']:.0f} + {r['child_peak_rss_mb']:.0f} MB)"
-                     if r["child_cpu_s"] else "")
+                     if r["two_processes"] else " (one process)")
             print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s wall, "
                   f"{r['cpu_s']:.2f} s CPU{child}; {rr / 1e6:.2f} M tension samples/s "
                   f"({r['all_samples'] / r['wall_s'] / 1e6:.2f} M samples/s all streams), "
@@ -354,6 +358,13 @@ def main() -> None:
         growth = r_big["peak_rss_mb"] / r_small["peak_rss_mb"] - 1
         print(f"peak RSS: 1 d {r_small['peak_rss_mb']:.0f} MB, {args.days:g} d "
               f"{r_big['peak_rss_mb']:.0f} MB ({growth:+.1%}); target within 10 %")
+        if r_cores["two_processes"] and r_small_cores["two_processes"]:
+            print("peak RSS on {} cores, this process + the child: 1 d {:.0f} + {:.0f} MB, "
+                  "{:g} d {:.0f} + {:.0f} MB ({:+.1%}, {:+.1%})".format(
+                      cores, r_small_cores["peak_rss_mb"], r_small_cores["child_peak_rss_mb"],
+                      args.days, r_cores["peak_rss_mb"], r_cores["child_peak_rss_mb"],
+                      r_cores["peak_rss_mb"] / r_small_cores["peak_rss_mb"] - 1,
+                      r_cores["child_peak_rss_mb"] / r_small_cores["child_peak_rss_mb"] - 1))
         base_log = small if args.baseline_days == 1.0 else work / "log_baseline.mcap"
         if base_log != small:
             write_log(base_log, args.baseline_days)

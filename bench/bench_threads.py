@@ -112,7 +112,7 @@ import time
 
 from monitor.config import default_config
 from replay.reader import LogReader
-from replay.runner import run_blocks
+from replay.runner import keep_freed_memory, run_blocks
 
 # mode: (the reader's read-ahead thread, the stream stage on a thread, in a child process)
 MODES = {"turn": (True, False, False), "turn-no-ra": (False, False, False),
@@ -146,6 +146,7 @@ def main() -> None:
                     help=f"comma-separated, of {', '.join(MODES)}")
     ap.add_argument("--warm-log", help="warm up on this log (default: LOG itself)")
     args = ap.parse_args()
+    keep_freed_memory()  # as buoymon replay
     modes = args.modes.split(",")
     for mode in modes:  # warm: compile cache, model cache, page cache
         replay(args.warm_log or args.log, mode)

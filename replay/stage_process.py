@@ -49,7 +49,7 @@ import time
 import traceback
 import types
 from pathlib import Path
-from typing import Any, Generator, Iterable, Mapping, Sequence
+from typing import Any, Callable, Generator, Iterable, Sequence
 
 import numpy as np
 
@@ -65,9 +65,10 @@ _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 # The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
 # before the fork, reused: no page faults, no copies through the pipe). A slab of the default
 # streams needs up to ~2.4 MB; a larger one (or one with every slot still in use here) goes
-# through the pipe. Four slots let the child work up to three slabs ahead.
-SLOTS = 4
+# through the pipe. Six slots let the child work up to five slabs ahead.
+SLOTS = 6
 SLOT_BYTES = 4 << 20
+BATCH = 2  # hand-overs and answers written together: each write may wake the other process
 _ALIGN = 64  # each array starts on a cache line (the compiled kernels want aligned arrays)
 _HELD = 0x80  # a slot's release message: its number, or'ed with this while still in use
 
@@ -248,46 +249,49 @@ def _write(fd: int, parts: list[Any]) -> None:
             views[0] = views[0][n:]
 
 
-def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler,
-          slots: "_SlotWriter | None" = None) -> None:
-    """``(kind, obj)`` through the pipe: the header (its length, then the pickle without
-    its arrays' data, and where that data is), then the data itself, unless ``slots`` has
-    a slot for it: then it is copied there and only the header goes through the pipe."""
-    meta, raws = _pickled(obj, pickler)
-    offsets, end = [], 0
-    for raw in raws:
-        offsets.append(end)
-        end += -(-raw.nbytes // _ALIGN) * _ALIGN
-    slot = None if slots is None else slots.take(end)
-    if slot is None:
-        where: Any = [r.nbytes for r in raws]
-    else:
-        slots.fill(slot, offsets, raws)
-        where, raws = (slot, offsets, [r.nbytes for r in raws]), []
+def _header(kind: str, meta: bytes, where: Any) -> list[bytes]:
     header = pickle.dumps((kind, meta, where), protocol=5)
-    _write(fd, [len(header).to_bytes(8, "little"), header, *raws])
+    return [len(header).to_bytes(8, "little"), header]
 
 
-def _read_into(fd: int, buf: Any) -> None:
+def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
+    """``(kind, obj)`` through the pipe: the header (its length, then the pickle without
+    its arrays' data, and their sizes), then that data."""
+    meta, raws = _pickled(obj, pickler)
+    _write(fd, [*_header(kind, meta, [r.nbytes for r in raws]), *raws])
+
+
+def _read_into(fd: int, buf: Any, wait: Callable[[], None]) -> None:
+    """Fill ``buf`` from the non-blocking ``fd``, calling ``wait`` whenever it is empty."""
     view = memoryview(buf).cast("B")
     while view.nbytes:
-        n = os.readv(fd, [view])
+        try:
+            n = os.readv(fd, [view])
+        except BlockingIOError:
+            wait()
+            continue
         if n == 0:
             raise EOFError
         view = view[n:]
 
 
 def _receive(fd: int, slots: "_SlotReader") -> tuple[str, Any]:
+    """The next message; before waiting for one, the slots' answers are sent (the child
+    may be waiting for them)."""
+    def wait() -> None:
+        slots.flush()
+        select.select([fd], [], [])
+
     size = bytearray(8)
-    _read_into(fd, size)
+    _read_into(fd, size, wait)
     header = bytearray(int.from_bytes(size, "little"))
-    _read_into(fd, header)
+    _read_into(fd, header, wait)
     kind, meta, where = pickle.loads(header)
     if isinstance(where, tuple):  # the data is in a slot
         return kind, slots.load(meta, *where)
     buffers = [np.empty(n, np.uint8) for n in where]  # writable: the arrays are the tick stage's
     for buf in buffers:
-        _read_into(fd, buf)
+        _read_into(fd, buf, wait)
     return kind, pickle.loads(meta, buffers=buffers)
 
 
@@ -302,44 +306,70 @@ def _shared_slots(count: int, size: int) -> list[mmap.mmap]:
 
 
 class _SlotWriter:
-    """The child's side of the slots: which are free, which the parent still holds.
+    """The child's side of the slots: which are free, which the parent still holds; the
+    hand-overs' headers, written :data:`BATCH` at a time (each write may wake the parent).
 
     The parent answers every slot it was sent, once the tick stage is done with the slab:
     free, or held (something there still refers to the slab's arrays; free later). The
-    child waits for an answer only while a slot is on its way: with every slot held, the
-    data goes through the pipe, so the child never waits for what may not come."""
+    child waits for an answer only while a slot is on its way (its headers written first):
+    with every slot held, the data goes through the pipe, so the child never waits for
+    what may not come."""
 
-    def __init__(self, maps: Sequence[mmap.mmap], release_fd: int) -> None:
+    def __init__(self, fd: int, maps: Sequence[mmap.mmap], answers_fd: int) -> None:
+        self.fd, self.answers_fd = fd, answers_fd
         self.views = [memoryview(m) for m in maps]
         self.size = len(maps[0]) if maps else 0
         self.free = list(range(len(maps)))
         self.sent: set[int] = set()  # sent, not answered
-        self.fd = release_fd
-        os.set_blocking(release_fd, False)
+        self.pending: list[bytes] = []  # headers not written yet
+        os.set_blocking(answers_fd, False)
+
+    def send(self, kind: str, obj: Any, pickler: type[pickle.Pickler]) -> None:
+        """``(kind, obj)``: its arrays' data copied into a free slot and the header kept to
+        write with the next; through the pipe (after the headers kept) if no slot takes
+        it. The headers kept are written at the latest by :meth:`flush`."""
+        meta, raws = _pickled(obj, pickler)
+        offsets, end = [], 0
+        for raw in raws:
+            offsets.append(end)
+            end += -(-raw.nbytes // _ALIGN) * _ALIGN
+        slot = self.take(end)
+        if slot is None:
+            self.pending += _header(kind, meta, [r.nbytes for r in raws])
+            self.flush(raws)
+            return
+        view = self.views[slot]
+        for offset, raw in zip(offsets, raws):
+            view[offset:offset + raw.nbytes] = raw
+        self.pending += _header(kind, meta, (slot, offsets, [r.nbytes for r in raws]))
+        if len(self.pending) >= 2 * BATCH:
+            self.flush()
+
+    def flush(self, data: Sequence[Any] = ()) -> None:
+        _write(self.fd, [*self.pending, *data])
+        self.pending = []
 
     def take(self, nbytes: int) -> int | None:
         """A free slot for ``nbytes`` (waiting for one on its way), or None: the pipe."""
         if nbytes > self.size or not nbytes:
             return None
-        self._answers(wait=False)
-        while not self.free and self.sent:
-            self._answers(wait=True)
+        if not self.free:
+            self._answers(wait=False)
+        if not self.free and self.sent:
+            self.flush()  # the parent may be waiting for these to answer
+            while not self.free and self.sent:
+                self._answers(wait=True)
         if not self.free:  # every slot held by the tick stage
             return None
         slot = self.free.pop()  # the one freed last: the warmest
         self.sent.add(slot)
         return slot
 
-    def fill(self, slot: int, offsets: Sequence[int], raws: Sequence[memoryview]) -> None:
-        view = self.views[slot]
-        for offset, raw in zip(offsets, raws):
-            view[offset:offset + raw.nbytes] = raw
-
     def _answers(self, wait: bool) -> None:
         if wait:
-            select.select([self.fd], [], [])
+            select.select([self.answers_fd], [], [])
         try:
-            answers = os.read(self.fd, 4096)
+            answers = os.read(self.answers_fd, 4096)
         except BlockingIOError:
             return
         if not answers:  # the parent is gone
@@ -353,7 +383,9 @@ class _SlotWriter:
 
 class _SlotReader:
     """The parent's side of the slots: the arrays of a slab sent in a slot are views of it
-    until the slot is released, which is only once nothing refers to them any more.
+    until the slot is released, which is only once nothing refers to them any more; the
+    answers are written :data:`BATCH` at a time (each write may wake the child), and
+    before this process waits (:func:`_receive`).
 
     Each slab's views hang on one fresh object exporting the slot's memory (a ctypes
     array): every array made from them, and every view of those, keeps a reference to it
@@ -361,11 +393,12 @@ class _SlotReader:
     stage, a sink) still holds one. A slot still referred to is answered "held" and
     released later, once it is not."""
 
-    def __init__(self, maps: Sequence[mmap.mmap], release_fd: int) -> None:
-        self.maps, self.fd = maps, release_fd
+    def __init__(self, maps: Sequence[mmap.mmap], answers_fd: int) -> None:
+        self.maps, self.fd = maps, answers_fd
         self.owners: dict[int, Any] = {}  # slot -> its current slab's exporting object
         self.held: set[int] = set()
         self.lost = 0  # slabs whose slot had to wait for a later slab to be released
+        self.answers = bytearray()  # not written yet
 
     def load(self, meta: bytes, slot: int, offsets: Sequence[int], sizes: Sequence[int]) -> Any:
         owner = (ctypes.c_char * len(self.maps[slot])).from_buffer(self.maps[slot])
@@ -380,23 +413,27 @@ class _SlotReader:
     def release(self) -> None:
         """Answer every slot the tick stage is done with (call with no reference of one's
         own left to a slab's arrays)."""
-        answers = bytearray()
         for slot in list(self.owners):
             # the dictionary's reference and getrefcount's argument: 2 when nothing else
             # (no array, no view of one) refers to it
             if sys.getrefcount(self.owners[slot]) == 2:
                 del self.owners[slot]
                 self.held.discard(slot)
-                answers.append(slot)
+                self.answers.append(slot)
             elif slot not in self.held:
                 self.held.add(slot)
                 self.lost += 1
-                answers.append(slot | _HELD)
-        if answers:
+                self.answers.append(slot | _HELD)
+        if len(self.answers) >= BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.answers:
             try:
-                os.write(self.fd, answers)
+                os.write(self.fd, self.answers)
             except BrokenPipeError:  # the child ended: the pipe says how
                 pass
+            self.answers = bytearray()
 
 
 # ---------------------------------------------------------------------------------- the child
@@ -430,7 +467,7 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
     for other in other_fds:  # the parent's ends: a parent gone then fails the next send
         os.close(other)
     try:
-        slots = _SlotWriter(maps, release_fd)
+        slots = _SlotWriter(fd, maps, release_fd)
         source = iter(blocks)
         first = next(source, None)
         _send(fd, "first", None if first is None else first.buoy_id)
@@ -445,9 +482,10 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
                     continue
-                _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
-                      pickler, slots)
-            _send(fd, "slab", (pipeline.ingest_end(), None), pickler, slots)
+                slots.send("slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
+                           pickler)
+            slots.send("slab", (pipeline.ingest_end(), None), pickler)
+            slots.flush()
             streams = {a: getattr(pipeline, a) for a in _STREAM_ATTRS}
         _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
     except BrokenPipeError:  # the parent stopped reading: it has its own exception
@@ -511,6 +549,7 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
         gc.unfreeze()
     os.close(write_fd)
     os.close(answers_read)
+    os.set_blocking(read_fd, False)  # _receive sends the answers before it waits
     slots = _SlotReader(maps, answers_write)
     try:
         while True:

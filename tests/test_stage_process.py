@@ -342,12 +342,16 @@ def test_a_slot_is_released_only_once_nothing_refers_to_its_arrays():
     maps = stage_process._shared_slots(2, 1 << 16)
     answers_read, answers_write = os.pipe()
     data_read, data_write = os.pipe()
-    writer = stage_process._SlotWriter(maps, answers_read)
+    writer = stage_process._SlotWriter(data_write, maps, answers_read)
     reader = stage_process._SlotReader(maps, answers_write)
+    os.set_blocking(data_read, False)
     try:
         def send(values):
-            stage_process._send(data_write, "slab", values, slots=writer)
-            return stage_process._receive(data_read, reader)[1]
+            writer.send("slab", values, stage_process._Pickler)
+            writer.flush()
+            got = stage_process._receive(data_read, reader)[1]
+            reader.flush()  # (answers are written two at a time, or before a wait)
+            return got
 
         got = send([np.arange(1000.0), np.arange(7, dtype=np.int8)])
         assert got[0].tolist() == list(range(1000)) and got[1].tolist() == list(range(7))
@@ -356,9 +360,11 @@ def test_a_slot_is_released_only_once_nothing_refers_to_its_arrays():
         view = got[0][10:20]
         del got
         reader.release()
+        reader.flush()
         assert reader.held == {first} and reader.lost == 1
         other = send([np.full(100, 3.0)])  # the other slot
         reader.release()
+        reader.flush()
         assert reader.held == {0, 1} and reader.lost == 2
         # both held, none on its way: the writer sends through the pipe rather than wait
         assert writer.take(800) is None
@@ -367,6 +373,7 @@ def test_a_slot_is_released_only_once_nothing_refers_to_its_arrays():
         assert other[0].tolist() == [3.0] * 100  # the slots untouched meanwhile
         del other
         reader.release()
+        reader.flush()
         assert reader.held == {first}
         assert writer.take(800) == 1 - first  # freed: taken again
         assert view.tolist() == list(range(10, 20))  # still its own samples
