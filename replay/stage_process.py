@@ -7,25 +7,36 @@ can read the log and run the stream stage on its own copy of the pipeline while 
 runs ``Pipeline.advance`` on the hand-overs, in order; at the end the child sends its stream
 stage's objects back and this pipeline takes them, so its report and state are those of one
 process to the last bit. Threads cannot do this (replay.stages): both stages' Python holds
-the GIL most of the time.
+the GIL most of the time. The stream-stage work that needs nothing but the hand-over's load
+and accepted values is done here, where the tick stage leaves more of a CPU than reading
+and validation leave the child: the tension statistics, the components' stresses and the
+sea-state learner's feeding (:func:`intake_of`; the same calls on the same samples in the
+same order: the same bits).
 
-The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5) with
-its arrays sent out of band through a pipe and read straight into fresh buffers (46 MB a day
-of the default streams, copied twice: the block itself only when a sink has a block hook, a
-stream's slab without the accepted values the tick stage never reads, the components'
-stresses computed again here). The pipe's buffer (1 MB) and the slab the child is working
-on are all the child can be ahead, so memory stays flat in log length.
+The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5), its
+arrays' data (~46 MB a day of the default streams; a stream's slab without the accepted
+values the tick stage never reads, but those the learner takes; the block only when a sink
+has a block hook) copied by the child into one of :data:`SLOTS` slots of memory shared with
+this process (mapped and touched once before the fork, then reused: no page faults, no
+copies through the kernel), the header alone through the pipe. The arrays here are views
+of the slot until the tick stage lets go of them: a slot goes back to the child only when
+nothing refers to its slab any more (:class:`_SlotReader`, by reference count; a sink or
+state that keeps arrays holds the slot, and with every slot held the child sends through
+the pipe, into fresh buffers here), so a slot is never written while something reads it.
+The slots and the pipe's buffer (1 MB) are all the child can be ahead: memory stays flat in
+log length. Headers and answers go two at a time, each side writing what it holds before
+it waits, so neither waits for the other's batch.
 
 A child that fails sends its exception, raised here; a child that dies (killed, out of
 memory) closes the pipe: :class:`ChildDied` here, nothing saved (``--state`` is written only
-after a complete replay), nothing left running. An exception here (a sink) closes the pipe,
-which stops the child at its next send.
+after a complete replay), nothing left running. An exception here (a sink) closes the pipes,
+which stops the child at its next send or wait.
 
-When it is used: when asked (``buoymon replay --two-processes``; with the default
-configuration one process was faster on the 2-core machine: the hand-over costs about 40 %
-more CPU in all) and :func:`child_pays` allows it: on Linux, when this process may run on at least two
-CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least :data:`IDLE_CPUS`
-of the machine's CPUs are idle as the replay starts (figures in bench/bench_threads.py).
+When it is used: by ``buoymon replay`` (``--one-process`` turns it off) when
+:func:`one_process_reason` finds nothing against it: on Linux, when this process may run on
+at least two CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least
+:data:`IDLE_CPUS` of the machine's CPUs are idle as the replay starts (on a busy machine the
+two processes wait for each other; figures in bench/bench_threads.py).
 """
 
 from __future__ import annotations
@@ -57,8 +68,9 @@ from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab, _Totals
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
-# what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
-# against 0.90-0.97 s in a fresh process; 30 days 7.7 s against 11.0 s, bench/bench_threads.py).
+# what the second core saves at about a day of the default streams (20.8 MB; measured with
+# the hand-over through the pipe: 0.89-0.95 s against 0.90-0.97 s in a fresh process,
+# bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
 IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
@@ -190,11 +202,11 @@ def _reduce_intake(intake: SlabIntake) -> tuple:
     return tuple, (fields,)
 
 
-def intake_of(fields: tuple, pipeline: Pipeline) -> SlabIntake:
-    """The hand-over the child sent as ``fields``, its stream stage completed with
-    ``pipeline``'s: the components' stresses, the tension statistics and the sea-state
+def intake_of(sent: tuple, pipeline: Pipeline) -> SlabIntake:
+    """The hand-over the child sent as ``sent`` (its fields), its stream stage completed
+    with ``pipeline``'s: the components' stresses, the tension statistics and the sea-state
     learner's feeding (the child's are off)."""
-    fields = list(fields)
+    fields = list(sent)
     t, v, src = fields[_TIME], fields[_LOAD], fields[_SOURCE]
     pipeline.stats.add(v, src)
     stresses = {name: c.stress(v, record=False) for name, c in pipeline.components.items()}
