@@ -51,6 +51,7 @@ import io
 import itertools
 import mmap
 import multiprocessing
+import operator
 import os
 import pickle
 import select
@@ -194,8 +195,11 @@ class _StatsHere:
         pass
 
 
+_intake_fields = operator.attrgetter(*_INTAKE_FIELDS)
+
+
 def _reduce_intake(intake: SlabIntake) -> tuple:
-    fields = [getattr(intake, name) for name in _INTAKE_FIELDS]
+    fields = list(_intake_fields(intake))
     fields[_STRESSES] = None
     fields[_STREAMS] = {name: _LearnerStream(name, slab) if name in _SEA_STATE_FIELDS else slab
                         for name, slab in intake.streams.items()}
@@ -217,11 +221,11 @@ def intake_of(sent: tuple, pipeline: Pipeline) -> SlabIntake:
 
 # a stream's totals by their fields' values: a slotted dataclass pickles by its generated
 # __getstate__ and __setstate__, which call dataclasses.fields() at every one, every slab
-_TOTALS_FIELDS = tuple(f.name for f in dataclasses.fields(_Totals))
+_totals_fields = operator.attrgetter(*(f.name for f in dataclasses.fields(_Totals)))
 
 
 def _reduce_totals(totals: _Totals) -> tuple:
-    return _Totals, tuple(getattr(totals, name) for name in _TOTALS_FIELDS)
+    return _Totals, _totals_fields(totals)
 
 
 class _Pickler(pickle.Pickler):
