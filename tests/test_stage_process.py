@@ -383,3 +383,22 @@ def test_a_slot_is_released_only_once_nothing_refers_to_its_arrays():
     finally:
         for fd in (answers_read, answers_write, data_read, data_write):
             os.close(fd)
+
+
+def test_a_replay_keeps_freed_memory_with_glibc_and_goes_on_without(monkeypatch):
+    """glibc's malloc takes the replay's thresholds; another C library (no mallopt, or no
+    libc.so.6) leaves the replay as it is."""
+    import ctypes
+    import platform
+
+    from replay import runner
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("not a glibc system")
+    assert runner.keep_freed_memory() is True
+
+    def no_libc(name):
+        raise OSError(f"{name}: cannot open shared object file")
+
+    monkeypatch.setattr(ctypes, "CDLL", no_libc)
+    assert runner.keep_freed_memory() is False
