@@ -4,16 +4,32 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
 5.25 s sea with noise) with replay.writer, then measures:
 
 * replay: ``replay.reader.LogReader`` -> ``Pipeline`` with the default configuration, in a
-  child process so its peak RSS is its own; pinned to one CPU (the issue's "on one core":
-  the reader then reads in line, without its read-ahead thread, by the rule of
-  replay.chunks.read_ahead_pays) and, for the wall-clock figure a user sees, on every core;
-  tension samples per second and times real time;
-* peak memory of a 1-day replay against the N-day one (must stay within 10 %);
+  child process so its peak RSS is its own, the way ``buoymon replay`` runs it (glibc's
+  malloc keeping freed memory; ``replay.runner.use_child`` choosing the processes):
+  pinned to one CPU (the issue's "on one core": one process, the reader reading in line,
+  without its read-ahead thread, by the rule of replay.chunks.read_ahead_pays) and, for
+  the wall-clock figure a user sees, on every core (on 2 idle CPUs the reading and stream
+  stage in a second process, replay.stage_process; one process on a busy machine: the line
+  says which); tension samples per second and times real time;
+* peak memory of a 1-day replay against the N-day one (must stay within 10 %), on one core
+  and, with two processes, of each;
 * the naive baseline: decode message by message with mcap's reader, then
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, 2026-11-25 22:22-22:23 UTC on the 2-core development machine, quiet (load 0.9-1.1),
+2026-11-26 00:38-00:40 UTC, the same machine and 30-day log, loaded (other sessions' test
+suites, load 2.2-3.1: walls measure them too), this round's hand-over (shared-memory slots,
+bench/bench_threads.py): one core 12.94 s wall, 9.18 CPU-s, 4.01 M/s (no alert rules 9.05
+CPU-s); the "2 cores" line ran in one process (fewer than 1.5 CPUs idle as it started:
+14.68 s wall, 10.44 CPU-s); peak RSS 1 / 30 days 216 / 229 MB (+5.9 %); naive baseline
+0.592 M/s. Two processes forced past the idle check, `buoymon replay` of the 30-day log at
+load ~3: 14.08 s wall, 11.78 CPU-s against one process's 13.65 s, 11.12 CPU-s (golden30
+identical both ways); peak RSS of the two 215 + 150 MB against 209 + 147 for 1 day. The
+two halves' CPU are even (bench_threads), so on two idle CPUs the wall should be about half
+of one process's streaming plus ~0.8 s of start-up: the quiet-machine figure against the
+10 M/s target (5.18 s) is the lead's final run.
+
+Earlier, 2026-11-25 22:22-22:23 UTC on the 2-core development machine, quiet (load 0.9-1.1),
 the same 30-day log, report and state identical to the last bit to the previous main's (and,
 with the time_ahead and rejected_rate changes of the same round, to the new golden): this
 round's reading (a count per value instead of np.unique, ISA-L's CRC-32, no read-ahead thread
