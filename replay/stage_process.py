@@ -417,6 +417,8 @@ class _SlotReader:
         self.answers = bytearray()  # not written yet
 
     def load(self, meta: bytes, slot: int, offsets: Sequence[int], sizes: Sequence[int]) -> Any:
+        if slot in self.owners:  # the child wrote a slot not given back: nothing here is safe
+            raise RuntimeError(f"hand-over slot {slot} written while still in use")
         owner = (ctypes.c_char * len(self.maps[slot])).from_buffer(self.maps[slot])
         base = memoryview(owner).cast("B")
         buffers = [base[o:o + n] for o, n in zip(offsets, sizes)]
