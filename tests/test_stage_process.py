@@ -377,6 +377,10 @@ def test_a_slot_is_released_only_once_nothing_refers_to_its_arrays():
         assert reader.held == {first}
         assert writer.take(800) == 1 - first  # freed: taken again
         assert view.tolist() == list(range(10, 20))  # still its own samples
+        # a writer that broke the protocol (wrote the held slot) is caught, not trusted
+        writer.free.append(first)
+        with pytest.raises(RuntimeError, match=f"slot {first} written while still in use"):
+            send([np.zeros(10)])
         del view
         reader.release()
         assert not reader.held and reader.owners == {}
