@@ -24,10 +24,12 @@ CPU-s); the "2 cores" line ran in one process (fewer than 1.5 CPUs idle as it st
 14.68 s wall, 10.44 CPU-s); peak RSS 1 / 30 days 216 / 229 MB (+5.9 %); naive baseline
 0.592 M/s. Two processes forced past the idle check, `buoymon replay` of the 30-day log at
 load ~3: 14.08 s wall, 11.78 CPU-s against one process's 13.65 s, 11.12 CPU-s (golden30
-identical both ways); peak RSS of the two 215 + 150 MB against 209 + 147 for 1 day. The
-two halves' CPU are even (bench_threads), so on two idle CPUs the wall should be about half
-of one process's streaming plus ~0.8 s of start-up: the quiet-machine figure against the
-10 M/s target (5.18 s) is the lead's final run.
+identical both ways); peak RSS of the two 215 + 150 MB against 209 + 147 for 1 day. At load
+1.7-2.1 (00:57 UTC, this script's 2-core measurement with the child forced, 3 interleaved
+pairs): one process 9.88-11.07 s wall, two 7.79-10.08 s, best 6.65 M tension samples/s
+against 5.25 (bench/bench_threads.py). The two halves' CPU are even, so on two idle CPUs the
+wall should be about half of one process's streaming plus ~0.8 s of start-up: the
+quiet-machine figure against the 10 M/s target (5.18 s) is the lead's final run.
 
 Earlier, 2026-11-25 22:22-22:23 UTC on the 2-core development machine, quiet (load 0.9-1.1),
 the same 30-day log, report and state identical to the last bit to the previous main's (and,

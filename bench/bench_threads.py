@@ -45,8 +45,18 @@ both modes (golden30.sh, and with the child forced):
   faster, which is why ``child_pays`` requires 1.5 idle CPUs. Peak RSS 30 days against 1
   day, two processes: 215 + 150 against 209 + 147 MB (+2.9 %, +2.0 %); one process 242
   against 232 MB (+4.3 %).
+* Later, at load 1.7-2.5 (one other job on about one CPU), whole `buoymon replay` of the
+  30-day log (imports and report included), wall / user+sys CPU, 6 interleaved rounds
+  (00:53-00:56 UTC): main 38adbf4 (one process) 9.24-14.19 s / 11.1-13.4; this build,
+  ``--one-process`` 8.71-12.27 s / 10.5-11.6; two processes (forced past the idle check)
+  6.55-10.01 s / 11.0-14.2, best 6.55 against 8.71 and 9.24. The 2-core measurement of
+  bench_replay (from the reader's creation, the child forced), 3 interleaved pairs at load
+  1.7-2.1: one process 9.88-11.07 s wall (11.6-12.5 CPU-s), two 7.79-10.08 s (parent
+  6.1-7.4, its ~0.8 s of kernel loading before the fork included, + child 5.3-6.4 CPU-s),
+  best 6.65 M tension samples/s against 5.25; peak RSS 215 + 150 MB against 243 MB.
 * The quiet-machine figure (the target: 5.18 s wall) is for the lead's final run:
-  ``bench/bench_replay.py`` measures the default path.
+  ``bench/bench_replay.py`` measures the default path (two processes when 1.5 CPUs are
+  idle as it starts).
 
 Earlier, the child process with the pickled hand-over through the pipe, measured 2026-11-25
 on the 2-core development machine (Xeon, shared with
