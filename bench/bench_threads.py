@@ -54,6 +54,11 @@ both modes (golden30.sh, and with the child forced):
   1.7-2.1: one process 9.88-11.07 s wall (11.6-12.5 CPU-s), two 7.79-10.08 s (parent
   6.1-7.4, its ~0.8 s of kernel loading before the fork included, + child 5.3-6.4 CPU-s),
   best 6.65 M tension samples/s against 5.25; peak RSS 215 + 150 MB against 243 MB.
+* This script, 30-day log, 2 rounds at load 1.7-2.3 (00:58 UTC, in-process after a warm-up:
+  no kernel loading): ``child`` best 6.64 s wall (5.21 CPU-s here + 5.14 in the child),
+  ``child-ra`` 8.49 s (5.96 + 5.64): a read-ahead thread in the child still costs more than
+  it overlaps. The garbage collector is no factor: 2 young-generation collections per day
+  of log, none older (one process, 1-day log).
 * The quiet-machine figure (the target: 5.18 s wall) is for the lead's final run:
   ``bench/bench_replay.py`` measures the default path (two processes when 1.5 CPUs are
   idle as it starts).
