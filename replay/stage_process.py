@@ -77,8 +77,10 @@ IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 # The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
 # before the fork, reused: no page faults, no copies through the pipe). A slab of the default
-# streams needs up to ~2.4 MB; a larger one (or one with every slot still in use here) goes
-# through the pipe. Six slots let the child work up to five slabs ahead.
+# streams needs up to ~1 MB (half an hour of tension and IMU samples; more with a sink's
+# block hook); a larger one (or one with every slot still in use here) goes through the
+# pipe. Six slots let the child work up to five slabs ahead. After the replay, arrays a sink
+# kept stay valid: their slot stays mapped while they refer to it, and nothing writes it.
 SLOTS = 6
 SLOT_BYTES = 4 << 20
 BATCH = 2  # hand-overs and answers written together: each write may wake the other process
