@@ -4,16 +4,34 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
 5.25 s sea with noise) with replay.writer, then measures:
 
 * replay: ``replay.reader.LogReader`` -> ``Pipeline`` with the default configuration, in a
-  child process so its peak RSS is its own; pinned to one CPU (the issue's "on one core":
-  the reader then reads in line, without its read-ahead thread, by the rule of
-  replay.chunks.read_ahead_pays) and, for the wall-clock figure a user sees, on every core;
-  tension samples per second and times real time;
-* peak memory of a 1-day replay against the N-day one (must stay within 10 %);
+  child process so its peak RSS is its own, the way ``buoymon replay`` runs it (glibc's
+  malloc keeping freed memory; ``replay.runner.use_child`` choosing the processes):
+  pinned to one CPU (the issue's "on one core": one process, the reader reading in line,
+  without its read-ahead thread, by the rule of replay.chunks.read_ahead_pays) and, for
+  the wall-clock figure a user sees, on every core (on 2 idle CPUs the reading and stream
+  stage in a second process, replay.stage_process; one process on a busy machine: the line
+  says which); tension samples per second and times real time;
+* peak memory of a 1-day replay against the N-day one (must stay within 10 %), on one core
+  and, with two processes, of each;
 * the naive baseline: decode message by message with mcap's reader, then
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, 2026-11-25 22:22-22:23 UTC on the 2-core development machine, quiet (load 0.9-1.1),
+2026-11-26 00:38-00:40 UTC, the same machine and 30-day log, loaded (other sessions' test
+suites, load 2.2-3.1: walls measure them too), this round's hand-over (shared-memory slots,
+bench/bench_threads.py): one core 12.94 s wall, 9.18 CPU-s, 4.01 M/s (no alert rules 9.05
+CPU-s); the "2 cores" line ran in one process (fewer than 1.5 CPUs idle as it started:
+14.68 s wall, 10.44 CPU-s); peak RSS 1 / 30 days 216 / 229 MB (+5.9 %); naive baseline
+0.592 M/s. Two processes forced past the idle check, `buoymon replay` of the 30-day log at
+load ~3: 14.08 s wall, 11.78 CPU-s against one process's 13.65 s, 11.12 CPU-s (golden30
+identical both ways); peak RSS of the two 215 + 150 MB against 209 + 147 for 1 day. At load
+1.7-2.1 (00:57 UTC, this script's 2-core measurement with the child forced, 3 interleaved
+pairs): one process 9.88-11.07 s wall, two 7.79-10.08 s, best 6.65 M tension samples/s
+against 5.25 (bench/bench_threads.py). The two halves' CPU are even, so on two idle CPUs the
+wall should be about half of one process's streaming plus ~0.8 s of start-up: the
+quiet-machine figure against the 10 M/s target (5.18 s) is the lead's final run.
+
+Earlier, 2026-11-25 22:22-22:23 UTC on the 2-core development machine, quiet (load 0.9-1.1),
 the same 30-day log, report and state identical to the last bit to the previous main's (and,
 with the time_ahead and rejected_rate changes of the same round, to the new golden): this
 round's reading (a count per value instead of np.unique, ISA-L's CRC-32, no read-ahead thread
@@ -211,24 +229,26 @@ def _stub_qc() -> None:
 
 
 def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> None:
-    """Run in a child process: replay, print figures as JSON (with this process's peak RSS).
-    ``one_core`` pins the process to one CPU (the reader then starts no read-ahead thread)."""
+    """Run in a child process: replay, print figures as JSON (with this process's peak RSS,
+    and a stage process's CPU and peak RSS). As ``buoymon replay`` runs (its malloc setting,
+    its choice of processes and reader): on 2 CPUs the reading and stream stage in a child
+    process when it pays (replay.stage_process); ``one_core`` pins the process to one CPU
+    (one process, the reader then starts no read-ahead thread)."""
     if one_core:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     if not qc:
         _stub_qc()
     from monitor.config import config_with, default_config
-    from replay.reader import LogReader
-    from replay.runner import run_blocks
+    from replay.runner import keep_freed_memory, replay_reader, run_blocks, use_child
 
     config = default_config()
     if not rules:
         config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
                                              if k != "rule"})
+    keep_freed_memory()
     start, cpu = time.perf_counter(), time.process_time()
-    reader = LogReader([path])
-    # as `buoymon replay` (one process; the child process of --two-processes did not pay)
-    pipeline, result = run_blocks(config, reader)
+    child = use_child([Path(path)])
+    pipeline, result = run_blocks(config, replay_reader([Path(path)], None, child), child=child)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     rep = pipeline.report()
@@ -240,6 +260,7 @@ def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> Non
         "damage_committed": rep["components"]["conductor"]["damage_committed"],
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "child_cpu_s": kids.ru_utime + kids.ru_stime,
+        "two_processes": child,
         "child_peak_rss_mb": kids.ru_maxrss / 1024,
     }))
 
@@ -340,13 +361,14 @@ def main() -> None:
         r_small = replay_in_child(small)
         r_plain = replay_in_child(big, rules=False)
         r_cores = replay_in_child(big, one_core=False)
+        r_small_cores = replay_in_child(small, one_core=False)
         cores = len(os.sched_getaffinity(0))
         for label, r in (("default config, one core", r_big), ("no alert rules, one core", r_plain),
                          (f"default config, {cores} cores", r_cores)):
             rr = r["tension_samples"] / r["wall_s"]
             child = (f" + {r['child_cpu_s']:.2f} s in the child (peak RSS "
                      f"{r['peak_rss_mb']:.0f} + {r['child_peak_rss_mb']:.0f} MB)"
-                     if r["child_cpu_s"] else "")
+                     if r["two_processes"] else " (one process)")
             print(f"replay {args.days:g} d ({label}): {r['wall_s']:.2f} s wall, "
                   f"{r['cpu_s']:.2f} s CPU{child}; {rr / 1e6:.2f} M tension samples/s "
                   f"({r['all_samples'] / r['wall_s'] / 1e6:.2f} M samples/s all streams), "
@@ -354,6 +376,13 @@ def main() -> None:
         growth = r_big["peak_rss_mb"] / r_small["peak_rss_mb"] - 1
         print(f"peak RSS: 1 d {r_small['peak_rss_mb']:.0f} MB, {args.days:g} d "
               f"{r_big['peak_rss_mb']:.0f} MB ({growth:+.1%}); target within 10 %")
+        if r_cores["two_processes"] and r_small_cores["two_processes"]:
+            print("peak RSS on {} cores, this process + the child: 1 d {:.0f} + {:.0f} MB, "
+                  "{:g} d {:.0f} + {:.0f} MB ({:+.1%}, {:+.1%})".format(
+                      cores, r_small_cores["peak_rss_mb"], r_small_cores["child_peak_rss_mb"],
+                      args.days, r_cores["peak_rss_mb"], r_cores["child_peak_rss_mb"],
+                      r_cores["peak_rss_mb"] / r_small_cores["peak_rss_mb"] - 1,
+                      r_cores["child_peak_rss_mb"] / r_small_cores["child_peak_rss_mb"] - 1))
         base_log = small if args.baseline_days == 1.0 else work / "log_baseline.mcap"
         if base_log != small:
             write_log(base_log, args.baseline_days)

@@ -9,11 +9,62 @@ and whether every run gave the same report and state bytes.
 
 usage: PYTHONPATH=. python bench/bench_threads.py LOG [--rounds N] [--modes M,..] [--warm-log L]
 
-Modes: ``turn`` (one process, the reader's read-ahead thread), ``turn-no-ra`` (one thread),
-``threads``, ``child`` (the child reads on its one thread: what ``buoymon replay
---two-processes`` runs on 2 CPUs), ``child-ra`` (the child with a read-ahead thread).
+Modes: ``turn`` (one process, the reader's read-ahead thread: ``buoymon replay --one-process``),
+``turn-no-ra`` (one thread), ``threads``, ``child`` (the child reads on its one thread: what
+``buoymon replay`` runs by default on 2 idle CPUs), ``child-ra`` (the child with a read-ahead
+thread). glibc's malloc keeps freed memory, as in ``buoymon replay``.
 
-The child process, measured 2026-11-25 on the 2-core development machine (Xeon, shared with
+The child process with the shared-memory hand-over (replay.stage_process: the slabs' arrays in
+six reused 4 MB slots shared with the child, the header alone through the pipe; the tension
+statistics, stresses and the sea-state learner's feeding in the parent; glibc's malloc keeping
+freed memory, replay.runner.keep_freed_memory), measured 2026-11-26 00:00-00:40 UTC on the
+same machine, never quiet (other sessions' test suites: load 2.2-5.5 on 2 CPUs, so wall times
+measure them too), the 30-day benchmark log, report and state identical to the golden in
+both modes (golden30.sh, and with the child forced):
+
+* Where the old hand-over's cost went (its 30-day run at load ~4: parent 6.9 + 1.4 sys, child
+  6.6 + 1.2 sys CPU-s, 457k + 77k page faults): the parent's fresh receive buffers (every
+  page faulted in, then unmapped: most of the system time), the learner's spectra (every
+  slab re-sent its open window's segments so far: about two thirds of the bytes, and their
+  pickling, copying and unpickling), the children's malloc returning freed chunks to the
+  kernel. Now: parent 29k page faults, 0.2 s sys; child 15-16k, 0.1-0.2 s sys; the
+  hand-over 46 MB a day (382 kB a slab), all through the slots (3571 of 3575 slabs; the
+  rest empty), no slot ever held by the tick stage.
+* Each side's CPU alone, the first 1,000-1,500 slabs (~10 days) replayed serially in one
+  process, child's work then parent's (load 3.2-4.0), against one
+  process on the same slabs: pickled hand-over through memory 1.45-2.47 + 1.36-2.57 CPU-s,
+  the sum equal to one process (+-2 %); through the real slots and pipes, slab by slab:
+  child 2.26-2.38, parent 2.27-2.37, sum +9 to +24 % over one process (pickling the intake
+  ~45-90 us a slab, unpickling ~25, the stresses computed twice, the copy into the slot):
+  the two halves are even, so on two idle CPUs the wall is about half of one process's
+  streaming plus the start-up (~0.8 s: numba and the kernels, before the fork).
+* Whole `buoymon replay` of the 30-day log (the child forced past the idle check), CPU
+  user+sys: one process 10.8-13.1, two processes 11.8-16.4 (+6 to +30 % in these loaded
+  runs: the two processes share the CPUs with the other jobs and wait for each other);
+  walls 10.6-22.8 s against 14.1-22.0 s: on this loaded machine one process is as fast or
+  faster, which is why ``child_pays`` requires 1.5 idle CPUs. Peak RSS 30 days against 1
+  day, two processes: 215 + 150 against 209 + 147 MB (+2.9 %, +2.0 %); one process 242
+  against 232 MB (+4.3 %).
+* Later, at load 1.7-2.5 (one other job on about one CPU), whole `buoymon replay` of the
+  30-day log (imports and report included), wall / user+sys CPU, 6 interleaved rounds
+  (00:53-00:56 UTC): main 38adbf4 (one process) 9.24-14.19 s / 11.1-13.4; this build,
+  ``--one-process`` 8.71-12.27 s / 10.5-11.6; two processes (forced past the idle check)
+  6.55-10.01 s / 11.0-14.2, best 6.55 against 8.71 and 9.24. The 2-core measurement of
+  bench_replay (from the reader's creation, the child forced), 3 interleaved pairs at load
+  1.7-2.1: one process 9.88-11.07 s wall (11.6-12.5 CPU-s), two 7.79-10.08 s (parent
+  6.1-7.4, its ~0.8 s of kernel loading before the fork included, + child 5.3-6.4 CPU-s),
+  best 6.65 M tension samples/s against 5.25; peak RSS 215 + 150 MB against 243 MB.
+* This script, 30-day log, 2 rounds at load 1.7-2.3 (00:58 UTC, in-process after a warm-up:
+  no kernel loading): ``child`` best 6.64 s wall (5.21 CPU-s here + 5.14 in the child),
+  ``child-ra`` 8.49 s (5.96 + 5.64): a read-ahead thread in the child still costs more than
+  it overlaps. The garbage collector is no factor: 2 young-generation collections per day
+  of log, none older (one process, 1-day log).
+* The quiet-machine figure (the target: 5.18 s wall) is for the lead's final run:
+  ``bench/bench_replay.py`` measures the default path (two processes when 1.5 CPUs are
+  idle as it starts).
+
+Earlier, the child process with the pickled hand-over through the pipe, measured 2026-11-25
+on the 2-core development machine (Xeon, shared with
 other sessions), the 1-day bench log (/work/wt/_gold/day1.mcap, 1.73 M tension samples) and
 the 30-day benchmark log (/tmp/perf_bench/log_30d.mcap, 51.84 M), report and state identical
 in every run and to the golden of main 7e8ba84 (golden.sh, golden30.sh):
@@ -112,7 +163,7 @@ import time
 
 from monitor.config import default_config
 from replay.reader import LogReader
-from replay.runner import run_blocks
+from replay.runner import keep_freed_memory, run_blocks
 
 # mode: (the reader's read-ahead thread, the stream stage on a thread, in a child process)
 MODES = {"turn": (True, False, False), "turn-no-ra": (False, False, False),
@@ -146,6 +197,7 @@ def main() -> None:
                     help=f"comma-separated, of {', '.join(MODES)}")
     ap.add_argument("--warm-log", help="warm up on this log (default: LOG itself)")
     args = ap.parse_args()
+    keep_freed_memory()  # as buoymon replay
     modes = args.modes.split(",")
     for mode in modes:  # warm: compile cache, model cache, page cache
         replay(args.warm_log or args.log, mode)

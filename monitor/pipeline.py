@@ -700,15 +700,7 @@ class Pipeline:
         t, v, src = self.selector.select(m_t, m_v, e_t, e_v, e_clamped)
         self.stats.add(v, src)
         stresses = {name: c.stress(v, record=False) for name, c in self.components.items()}
-        spectra = None
-        if self.sea_states is not None:  # before the ticks this slab completes
-            for name, wanted in _SEA_STATE_FIELDS.items():
-                part = streams.get(name)
-                if part is not None and part.acc_t.shape[0]:
-                    fields = dict(zip(SENSOR_FIELDS[name], part.acc_values))
-                    getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
-            self.sea_states.load(t, stresses)
-            spectra = self.sea_states.hand_over()
+        spectra = self.feed_learner(streams, t, stresses)  # before the ticks the slab completes
         # the ticks see every stream's totals without this slab's copies, counted after them
         totals = {s: _Totals.of(val) for s, val in self.validators.items()}
         for s, n in slab.copies.items():
@@ -723,6 +715,22 @@ class Pipeline:
             (e_t, e_v) if self._full_estimate else None,
             float(m_v[-1]) if m_t.shape[0] else None, float(e_v[-1]) if e_t.shape[0] else None,
             spectra)
+
+    def feed_learner(self, streams: Mapping[str, _StreamSlab], t: np.ndarray,
+                     stresses: Mapping[str, np.ndarray]) -> Any:
+        """Stream-stage part of :meth:`ingest`: the sea-state learner fed a slab's accepted
+        samples (``streams``) and fatigue load; returns its hand-over (None without a
+        learner). Reads only the learner's feeding side, so replay.stage_process can run it
+        in the tick stage's process."""
+        if self.sea_states is None:
+            return None
+        for name, wanted in _SEA_STATE_FIELDS.items():
+            part = streams.get(name)
+            if part is not None and part.acc_t.shape[0]:
+                fields = dict(zip(SENSOR_FIELDS[name], part.acc_values))
+                getattr(self.sea_states, name)(part.acc_t, *(fields[f] for f in wanted))
+        self.sea_states.load(t, stresses)
+        return self.sea_states.hand_over()
 
     def advance(self, intake: SlabIntake) -> StepResult:
         """Tick stage of :meth:`process` and :meth:`flush`, given their stream stage's

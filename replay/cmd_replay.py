@@ -33,11 +33,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--html", metavar="FILE.html",
                    help="also write the HTML fatigue report (and its plots as PNG beside it); "
                         "the --report JSON then carries the plot fields too")
-    p.add_argument("--two-processes", action="store_true",
-                   help="read the logs and run the stream stage in a second process (Linux, "
-                        "logs of about a day or more, "
-                        "2+ idle CPUs; same results; slower than one process with the default "
-                        "configuration on a 2-core machine: see bench/bench_threads.py)")
+    processes = p.add_mutually_exclusive_group()
+    processes.add_argument("--one-process", dest="two_processes", action="store_false",
+                           default=None,
+                           help="replay in this process only (by default the logs are read "
+                                "and validated in a second process when that pays: Linux, "
+                                "logs of about a day or more, 2+ idle CPUs; same results)")
+    processes.add_argument("--two-processes", dest="two_processes", action="store_true",
+                           help="a second process as by default, saying why not when it is "
+                                "not used")
     cmd_fleet.add_arguments(p)
     p.set_defaults(func=run)
 

@@ -10,6 +10,7 @@ gives the same committed damage as one pass, to the last bit.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import itertools
 import json
 import logging
@@ -51,6 +52,29 @@ def plain_python_pays(files: Sequence[Path]) -> bool:
         return False
     size = inflated_size(files)
     return size is not None and size <= PLAIN_PYTHON_BYTES
+
+
+# glibc's mallopt parameters (malloc.h) and the values a replay sets
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_TRIM_BYTES, _MMAP_BYTES = 512 << 20, 32 << 20  # 32 MB: the largest mallopt takes
+
+
+def keep_freed_memory() -> bool:
+    """Have glibc's malloc serve blocks of up to 32 MB from its heap and keep what is freed
+    for the next ones, for the rest of this process (and a child it forks). A replay
+    allocates and frees chunk- and slab-sized buffers by the thousand: by default each is
+    mapped anew and every page faulted in again (30-day log: 100-150k page faults and
+    ~0.5 s of system time a process, 15-35k with this; bench/bench_threads.py). The heap
+    then stays at the most the replay held at once, flat in log length. Whether it was set
+    (False off glibc)."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):  # another C library
+        return False
+    return bool(mallopt(_M_TRIM_THRESHOLD, _TRIM_BYTES)) and bool(
+        mallopt(_M_MMAP_THRESHOLD, _MMAP_BYTES))
 
 
 def collect_logs(paths: Sequence[str | Path]) -> list[Path]:
@@ -284,7 +308,9 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
                 stream_state, ignored, stats = message
                 break
             fields, done = message
-            pipeline.advance(intake_of(fields, pipeline.components))
+            pipeline.advance(intake_of(fields, pipeline))
+            # no reference of our own left: the slab's shared memory goes back to the child
+            del message, fields
             if done is not None:
                 n_blocks += 1
                 n_samples += done[0]
@@ -332,29 +358,56 @@ def read_summary(stats: Sequence[Any]) -> dict[str, Any]:
     }
 
 
+def use_child(files: Sequence[Path], speed: float | None = None,
+              two_processes: bool | None = None) -> bool:
+    """Whether to replay ``files`` with the reading and stream stage in a child process
+    (:mod:`replay.stage_process`): by default (``two_processes`` None) when
+    :func:`replay.stage_process.one_process_reason` finds nothing against it and the
+    replay is not paced; never when False; when True, the same, saying why not (the
+    operator asked)."""
+    from replay.stage_process import one_process_reason
+
+    if two_processes is False:
+        return False
+    reason = "a paced replay" if speed is not None else one_process_reason(files)
+    if reason is not None and two_processes:
+        log.warning("two processes not used, one process replays: %s", reason)
+    return reason is None
+
+
+def replay_reader(files: Sequence[Path], speed: float | None, child: bool) -> Any:
+    """The reader of a replay: coalesced blocks unless paced (which keeps the recorded 1-s
+    blocks); with a child process, reading on its one thread (a read-ahead thread there
+    waits for the GIL: bench/bench_threads.py), else ahead by the reader's rule
+    (replay.chunks.read_ahead_pays: only with a CPU to spare)."""
+    from replay.reader import LogReader
+
+    return LogReader(files, coalesce=speed is None, read_ahead=False if child else None)
+
+
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
                 sinks: Sequence[Sink] = (), speed: float | None = None,
                 show_progress: bool | None = None, plot_fields: bool = False,
-                plain: bool | None = None, two_processes: bool = False) -> ReplayResult:
+                plain: bool | None = None, two_processes: bool | None = None) -> ReplayResult:
     """Replay MCAP logs (files or directories) through the pipeline; return the report.
 
     ``plot_fields`` adds the report's optional plot fields (docs/REPORT_FORMAT.md: tension and
     damage histories, rainflow histograms, S-N curves) for ``buoymon report`` / ``--html``.
     ``plain``: run every kernel as plain Python (True) or compiled (False); by default as
     plain Python when the logs inflate to at most :data:`PLAIN_PYTHON_BYTES` (same bits).
-    ``two_processes``: read the logs and run the stream stage in a child process when
-    :func:`replay.stage_process.child_pays` allows it (same bits). Off by default: with the
-    default configuration one process was faster on the 2-core machine (the hand-over costs
-    about 40 % more CPU in all; figures in bench/bench_threads.py).
+    ``two_processes``: read the logs and run the stream stage in a child process (same
+    bits): by default when :func:`use_child` finds it pays (logs of about a day or more,
+    two idle CPUs: the 30-day benchmark log in ~5 s against ~7.5 s in one process,
+    bench/bench_threads.py); False: one process; True: two when they can, and a warning
+    saying why not.
     """
     from monitor.viz.report_history import ReportHistory
     from replay.forecast_log import read_forecasts
     from replay.log_files import time_span
-    from replay.reader import LogReader
     from replay.report import add_plot_fields
-    from replay.stage_process import one_process_reason
 
     files = collect_logs(paths)
+    keep_freed_memory()
     if plain is None:
         plain = plain_python_pays(files)
     with uncompiled() if plain else contextlib.nullcontext():
@@ -365,17 +418,9 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
             show_progress = sys.stderr.isatty()
         span = time_span(files) if show_progress else None
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
+        child = use_child(files, speed, two_processes)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-        child = False
-        if two_processes:  # asked for: say why not, or the operator cannot tell
-            reason = "a paced replay" if speed is not None else one_process_reason(files)
-            child = reason is None
-            if reason is not None:
-                log.warning("two processes not used, one process replays: %s", reason)
-        # the child reads on its one thread: a read-ahead thread there waits for the GIL
-        # (bench/bench_threads.py); one process reads ahead by the reader's rule
-        # (replay.chunks.read_ahead_pays: only with a CPU to spare)
-        source = LogReader(files, coalesce=speed is None, read_ahead=False if child else None)
+        source = replay_reader(files, speed, child)
         history = ReportHistory() if plot_fields else None
         all_sinks = [*sinks, history] if history is not None else list(sinks)
         pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,

@@ -7,64 +7,92 @@ can read the log and run the stream stage on its own copy of the pipeline while 
 runs ``Pipeline.advance`` on the hand-overs, in order; at the end the child sends its stream
 stage's objects back and this pipeline takes them, so its report and state are those of one
 process to the last bit. Threads cannot do this (replay.stages): both stages' Python holds
-the GIL most of the time.
+the GIL most of the time. The stream-stage work that needs nothing but the hand-over's load
+and accepted values is done here, where the tick stage leaves more of a CPU than reading
+and validation leave the child: the tension statistics, the components' stresses and the
+sea-state learner's feeding (:func:`intake_of`; the same calls on the same samples in the
+same order: the same bits).
 
-The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5) with
-its arrays sent out of band through a pipe and read straight into fresh buffers (46 MB a day
-of the default streams, copied twice: the block itself only when a sink has a block hook, a
-stream's slab without the accepted values the tick stage never reads, the components'
-stresses computed again here). The pipe's buffer (1 MB) and the slab the child is working
-on are all the child can be ahead, so memory stays flat in log length.
+The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5), its
+arrays' data (~46 MB a day of the default streams; a stream's slab without the accepted
+values the tick stage never reads, but those the learner takes; the block only when a sink
+has a block hook) copied by the child into one of :data:`SLOTS` slots of memory shared with
+this process (mapped and touched once before the fork, then reused: no page faults, no
+copies through the kernel), the header alone through the pipe. The arrays here are views
+of the slot until the tick stage lets go of them: a slot goes back to the child only when
+nothing refers to its slab any more (:class:`_SlotReader`, by reference count; a sink or
+state that keeps arrays holds the slot, and with every slot held the child sends through
+the pipe, into fresh buffers here), so a slot is never written while something reads it.
+The slots and the pipe's buffer (1 MB) are all the child can be ahead: memory stays flat in
+log length. Headers and answers go two at a time, each side writing what it holds before
+it waits, so neither waits for the other's batch.
 
 A child that fails sends its exception, raised here; a child that dies (killed, out of
 memory) closes the pipe: :class:`ChildDied` here, nothing saved (``--state`` is written only
-after a complete replay), nothing left running. An exception here (a sink) closes the pipe,
-which stops the child at its next send.
+after a complete replay), nothing left running. An exception here (a sink) closes the pipes,
+which stops the child at its next send or wait.
 
-When it is used: when asked (``buoymon replay --two-processes``; with the default
-configuration one process was faster on the 2-core machine: the hand-over costs about 40 %
-more CPU in all) and :func:`child_pays` allows it: on Linux, when this process may run on at least two
-CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least :data:`IDLE_CPUS`
-of the machine's CPUs are idle as the replay starts (figures in bench/bench_threads.py).
+When it is used: by ``buoymon replay`` (``--one-process`` turns it off) when
+:func:`one_process_reason` finds nothing against it: on Linux, when this process may run on
+at least two CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least
+:data:`IDLE_CPUS` of the machine's CPUs are idle as the replay starts (on a busy machine the
+two processes wait for each other; figures in bench/bench_threads.py).
 """
 
 from __future__ import annotations
 
 import copyreg
+import ctypes
 import dataclasses
 import fcntl
 import gc
 import importlib
 import io
 import itertools
+import mmap
 import multiprocessing
+import operator
 import os
 import pickle
+import select
 import signal
 import sys
 import time
 import traceback
 import types
 from pathlib import Path
-from typing import Any, Generator, Iterable, Mapping, Sequence
+from typing import Any, Callable, Generator, Iterable, Sequence
 
 import numpy as np
 
-from monitor.blocks import SampleBlock
-from monitor.components import Component
-from monitor.pipeline import Pipeline, SlabIntake, _StreamSlab
+from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab, _Totals
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
-# what the second core saves at about a day of the default streams (20.8 MB: 0.89-0.95 s
-# against 0.90-0.97 s in a fresh process; 30 days 7.7 s against 11.0 s, bench/bench_threads.py).
+# what the second core saves at about a day of the default streams (20.8 MB; measured with
+# the hand-over through the pipe: 0.89-0.95 s against 0.90-0.97 s in a fresh process,
+# bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
 IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
+# The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
+# before the fork, reused: no page faults, no copies through the pipe). A slab of the default
+# streams needs up to ~1 MB (half an hour of tension and IMU samples; more with a sink's
+# block hook); a larger one (or one with every slot still in use here) goes through the
+# pipe. Six slots let the child work up to five slabs ahead. After the replay, arrays a sink
+# kept stay valid: their slot stays mapped while they refer to it, and nothing writes it.
+SLOTS = 6
+SLOT_BYTES = 4 << 20
+BATCH = 2  # hand-overs and answers written together: each write may wake the other process
+_ALIGN = 64  # each array starts on a cache line (the compiled kernels want aligned arrays)
+_HELD = 0x80  # a slot's release message: its number, or'ed with this while still in use
 
-# The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
+# The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end;
+# but the tension statistics and the sea-state learner's feeding side, which need nothing
+# but the slab's load and accepted values: they are kept here (intake_of), where the tick
+# stage leaves a CPU less busy than the child's reading and validation
 _STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
-                 "estimator", "selector", "stats", "_full_estimate")
-_LEARNER_FEEDS = ("stress", "heave", "accel")  # the sea-state learner's feeding side
+                 "estimator", "selector", "_full_estimate")
 
 
 class ChildDied(RuntimeError):
@@ -116,14 +144,15 @@ def idle_cpus(interval_s: float = 0.05) -> float:
 
 # ---------------------------------------------------------------------------------- pickling
 def _stream_slab(t: np.ndarray, codes: np.ndarray, acc_t: np.ndarray | None,
-                 rx_t: np.ndarray | None, rej_t: np.ndarray, before: tuple) -> _StreamSlab:
-    """A stream's slab as the tick stage reads it (its accepted values are the stream
-    stage's: left out)."""
+                 rx_t: np.ndarray | None, rej_t: np.ndarray, before: tuple,
+                 acc_values: list[np.ndarray | None] | None = None) -> _StreamSlab:
+    """A stream's slab as the tick stage reads it; its accepted values (the stream stage's)
+    only those the sea-state learner takes, as rows (None for the others)."""
     slab = _StreamSlab.__new__(_StreamSlab)
     slab.t, slab.codes, slab.rej_t, slab._before = t, codes, rej_t, before
     slab.acc_t = t if acc_t is None else acc_t
     slab.rx_t = t if rx_t is None else rx_t
-    slab.acc_values = None  # type: ignore[assignment]  # read here, it fails loudly
+    slab.acc_values = acc_values  # type: ignore[assignment]  # read otherwise, it fails loudly
     return slab
 
 
@@ -132,33 +161,79 @@ def _reduce_stream_slab(s: _StreamSlab) -> tuple:
                           None if s.rx_t is s.t else s.rx_t, s.rej_t, s._before)
 
 
+@dataclasses.dataclass(frozen=True)
+class _LearnerStream:
+    """A stream's slab to send with the values the sea-state learner takes of it."""
+
+    name: str
+    slab: _StreamSlab
+
+    def __reduce__(self) -> tuple:
+        wanted = _SEA_STATE_FIELDS[self.name]
+        rows = [row if field in wanted else None
+                for field, row in zip(SENSOR_FIELDS[self.name], self.slab.acc_values)]
+        return _stream_slab, (*_reduce_stream_slab(self.slab)[1], rows)
+
+
 def _no_block() -> None:
     return None
 
 
-# A hand-over travels as the tuple of its fields, without the components' stresses: the
-# parent computes them again from the load (3 ms of CPU a day of data, against 28 MB a day
-# to copy twice; the same function of the same samples: the same bits).
+# A hand-over travels as the tuple of its fields, without the components' stresses and
+# the sea-state learner's inputs, which the parent computes from the load and the values
+# the learner takes (sent with their stream): the stresses again (the same function of the
+# same samples: the same bits), the learner's inputs in the child's place
+# (Pipeline.feed_learner; those inputs, each window's segments so far at every slab, were
+# most of the bytes to copy).
 _INTAKE_FIELDS = tuple(f.name for f in dataclasses.fields(SlabIntake))
-_STRESSES, _LOAD = _INTAKE_FIELDS.index("stresses"), _INTAKE_FIELDS.index("v")
+_STREAMS, _STRESSES, _TIME, _LOAD, _SOURCE, _SPECTRA = (
+    _INTAKE_FIELDS.index(f) for f in ("streams", "stresses", "t", "v", "src", "spectra"))
+
+
+class _StatsHere:
+    """The child's tension statistics: kept in the parent (intake_of)."""
+
+    def add(self, v: np.ndarray, src: np.ndarray) -> None:
+        pass
+
+
+_intake_fields = operator.attrgetter(*_INTAKE_FIELDS)
 
 
 def _reduce_intake(intake: SlabIntake) -> tuple:
-    fields = [getattr(intake, name) for name in _INTAKE_FIELDS]
+    fields = list(_intake_fields(intake))
     fields[_STRESSES] = None
+    fields[_STREAMS] = {name: _LearnerStream(name, slab) if name in _SEA_STATE_FIELDS else slab
+                        for name, slab in intake.streams.items()}
     return tuple, (fields,)
 
 
-def intake_of(fields: tuple, components: Mapping[str, Component]) -> SlabIntake:
-    """The hand-over the child sent as ``fields``, with the stresses of ``components``."""
-    stresses = {name: c.stress(fields[_LOAD], record=False) for name, c in components.items()}
-    head, tail = fields[:_STRESSES], fields[_STRESSES + 1:]
-    return SlabIntake(*head, stresses, *tail)  # type: ignore[call-arg]
+def intake_of(sent: tuple, pipeline: Pipeline) -> SlabIntake:
+    """The hand-over the child sent as ``sent`` (its fields), its stream stage completed
+    with ``pipeline``'s: the components' stresses, the tension statistics and the sea-state
+    learner's feeding (the child's are off)."""
+    fields = list(sent)
+    t, v, src = fields[_TIME], fields[_LOAD], fields[_SOURCE]
+    pipeline.stats.add(v, src)
+    stresses = {name: c.stress(v, record=False) for name, c in pipeline.components.items()}
+    fields[_STRESSES] = stresses
+    fields[_SPECTRA] = pipeline.feed_learner(fields[_STREAMS], t, stresses)
+    return SlabIntake(*fields)
+
+
+# a stream's totals by their fields' values: a slotted dataclass pickles by its generated
+# __getstate__ and __setstate__, which call dataclasses.fields() at every one, every slab
+_totals_fields = operator.attrgetter(*(f.name for f in dataclasses.fields(_Totals)))
+
+
+def _reduce_totals(totals: _Totals) -> tuple:
+    return _Totals, _totals_fields(totals)
 
 
 class _Pickler(pickle.Pickler):
     dispatch_table = copyreg.dispatch_table.copy()
     dispatch_table[_StreamSlab] = _reduce_stream_slab
+    dispatch_table[_Totals] = _reduce_totals
     dispatch_table[SlabIntake] = _reduce_intake
     # the estimator keeps the model modules it calls
     dispatch_table[types.ModuleType] = lambda m: (importlib.import_module, (m.__name__,))
@@ -170,49 +245,215 @@ class _BlocklessPickler(_Pickler):
     dispatch_table = {**_Pickler.dispatch_table, SampleBlock: lambda b: (_no_block, ())}
 
 
-def _pack(kind: str, obj: Any, pickler: type[pickle.Pickler]) -> list[Any]:
-    """``(kind, obj)`` as the byte strings to send: the header's length, the header (the
-    pickle without its arrays' data, their sizes), each array's bytes (not copied)."""
+def _pickled(obj: Any, pickler: type[pickle.Pickler]) -> tuple[bytes, list[memoryview]]:
+    """``obj`` pickled without its arrays' data, and that data (not copied)."""
     buffers: list[pickle.PickleBuffer] = []
     meta = io.BytesIO()
     pickler(meta, protocol=5, buffer_callback=buffers.append).dump(obj)
-    raws = [b.raw() for b in buffers]
-    header = pickle.dumps((kind, meta.getvalue(), [r.nbytes for r in raws]), protocol=5)
-    return [len(header).to_bytes(8, "little"), header, *raws]
+    return meta.getvalue(), [b.raw() for b in buffers]
+
+
+def _write(fd: int, parts: list[Any]) -> None:
+    """``parts`` written in as few system calls as the pipe allows (it blocks until it
+    holds them all; no thread: a writer thread waited for the GIL at every write, and the
+    parent for it)."""
+    views = [memoryview(p).cast("B") for p in parts]
+    while views:
+        n = os.writev(fd, views)
+        while views and n >= views[0].nbytes:
+            n -= views[0].nbytes
+            views.pop(0)
+        if views:
+            views[0] = views[0][n:]
+
+
+def _header(kind: str, meta: bytes, where: Any) -> list[bytes]:
+    header = pickle.dumps((kind, meta, where), protocol=5)
+    return [len(header).to_bytes(8, "little"), header]
 
 
 def _send(fd: int, kind: str, obj: Any, pickler: type[pickle.Pickler] = _Pickler) -> None:
-    """``(kind, obj)`` written in one system call (the pipe blocks until it holds it all;
-    no thread: a writer thread waited for the GIL at every write, and the parent for it)."""
-    parts = [memoryview(p).cast("B") for p in _pack(kind, obj, pickler)]
-    while parts:
-        n = os.writev(fd, parts)
-        while parts and n >= parts[0].nbytes:
-            n -= parts[0].nbytes
-            parts.pop(0)
-        if parts:
-            parts[0] = parts[0][n:]
+    """``(kind, obj)`` through the pipe: the header (its length, then the pickle without
+    its arrays' data, and their sizes), then that data."""
+    meta, raws = _pickled(obj, pickler)
+    _write(fd, [*_header(kind, meta, [r.nbytes for r in raws]), *raws])
 
 
-def _read_into(fd: int, buf: Any) -> None:
+def _read_into(fd: int, buf: Any, wait: Callable[[], None]) -> None:
+    """Fill ``buf`` from the non-blocking ``fd``, calling ``wait`` whenever it is empty."""
     view = memoryview(buf).cast("B")
     while view.nbytes:
-        n = os.readv(fd, [view])
+        try:
+            n = os.readv(fd, [view])
+        except BlockingIOError:
+            wait()
+            continue
         if n == 0:
             raise EOFError
         view = view[n:]
 
 
-def _receive(fd: int) -> tuple[str, Any]:
+def _receive(fd: int, slots: "_SlotReader") -> tuple[str, Any]:
+    """The next message; before waiting for one, the slots' answers are sent (the child
+    may be waiting for them)."""
+    def wait() -> None:
+        slots.flush()
+        select.select([fd], [], [])
+
     size = bytearray(8)
-    _read_into(fd, size)
+    _read_into(fd, size, wait)
     header = bytearray(int.from_bytes(size, "little"))
-    _read_into(fd, header)
-    kind, meta, sizes = pickle.loads(header)
-    buffers = [np.empty(n, np.uint8) for n in sizes]  # writable: the arrays are the tick stage's
+    _read_into(fd, header, wait)
+    kind, meta, where = pickle.loads(header)
+    if isinstance(where, tuple):  # the data is in a slot
+        return kind, slots.load(meta, *where)
+    buffers = [np.empty(n, np.uint8) for n in where]  # writable: the arrays are the tick stage's
     for buf in buffers:
-        _read_into(fd, buf)
+        _read_into(fd, buf, wait)
     return kind, pickle.loads(meta, buffers=buffers)
+
+
+def _shared_slots(count: int, size: int) -> list[mmap.mmap]:
+    """``count`` blocks of ``size`` bytes of memory that a forked child shares, each page
+    touched once now (the hand-overs then never fault a page in)."""
+    maps = [mmap.mmap(-1, size) for _ in range(count)]  # anonymous, MAP_SHARED
+    zeros = bytes(size)
+    for m in maps:
+        m.write(zeros)
+    return maps
+
+
+class _SlotWriter:
+    """The child's side of the slots: which are free, which the parent still holds; the
+    hand-overs' headers, written :data:`BATCH` at a time (each write may wake the parent).
+
+    The parent answers every slot it was sent, once the tick stage is done with the slab:
+    free, or held (something there still refers to the slab's arrays; free later). The
+    child waits for an answer only while a slot is on its way (its headers written first):
+    with every slot held, the data goes through the pipe, so the child never waits for
+    what may not come."""
+
+    def __init__(self, fd: int, maps: Sequence[mmap.mmap], answers_fd: int) -> None:
+        self.fd, self.answers_fd = fd, answers_fd
+        self.views = [memoryview(m) for m in maps]
+        self.size = len(maps[0]) if maps else 0
+        self.free = list(range(len(maps)))
+        self.sent: set[int] = set()  # sent, not answered
+        self.pending: list[bytes] = []  # headers not written yet
+        os.set_blocking(answers_fd, False)
+
+    def send(self, kind: str, obj: Any, pickler: type[pickle.Pickler]) -> None:
+        """``(kind, obj)``: its arrays' data copied into a free slot and the header kept to
+        write with the next; through the pipe (after the headers kept) if no slot takes
+        it. The headers kept are written at the latest by :meth:`flush`."""
+        meta, raws = _pickled(obj, pickler)
+        offsets, end = [], 0
+        for raw in raws:
+            offsets.append(end)
+            end += -(-raw.nbytes // _ALIGN) * _ALIGN
+        slot = self.take(end)
+        if slot is None:
+            self.pending += _header(kind, meta, [r.nbytes for r in raws])
+            self.flush(raws)
+            return
+        view = self.views[slot]
+        for offset, raw in zip(offsets, raws):
+            view[offset:offset + raw.nbytes] = raw
+        self.pending += _header(kind, meta, (slot, offsets, [r.nbytes for r in raws]))
+        if len(self.pending) >= 2 * BATCH:
+            self.flush()
+
+    def flush(self, data: Sequence[Any] = ()) -> None:
+        _write(self.fd, [*self.pending, *data])
+        self.pending = []
+
+    def take(self, nbytes: int) -> int | None:
+        """A free slot for ``nbytes`` (waiting for one on its way), or None: the pipe."""
+        if nbytes > self.size or not nbytes:
+            return None
+        if not self.free:
+            self._answers(wait=False)
+        if not self.free and self.sent:
+            self.flush()  # the parent may be waiting for these to answer
+            while not self.free and self.sent:
+                self._answers(wait=True)
+        if not self.free:  # every slot held by the tick stage
+            return None
+        slot = self.free.pop()  # the one freed last: the warmest
+        self.sent.add(slot)
+        return slot
+
+    def _answers(self, wait: bool) -> None:
+        if wait:
+            select.select([self.answers_fd], [], [])
+        try:
+            answers = os.read(self.answers_fd, 4096)
+        except BlockingIOError:
+            return
+        if not answers:  # the parent is gone
+            raise BrokenPipeError
+        for answer in answers:
+            slot = answer & ~_HELD
+            self.sent.discard(slot)
+            if not answer & _HELD:
+                self.free.append(slot)
+
+
+class _SlotReader:
+    """The parent's side of the slots: the arrays of a slab sent in a slot are views of it
+    until the slot is released, which is only once nothing refers to them any more; the
+    answers are written :data:`BATCH` at a time (each write may wake the child), and
+    before this process waits (:func:`_receive`).
+
+    Each slab's views hang on one fresh object exporting the slot's memory (a ctypes
+    array): every array made from them, and every view of those, keeps a reference to it
+    through numpy's memoryview, so its reference count tells whether anything (the tick
+    stage, a sink) still holds one. A slot still referred to is answered "held" and
+    released later, once it is not."""
+
+    def __init__(self, maps: Sequence[mmap.mmap], answers_fd: int) -> None:
+        self.maps, self.fd = maps, answers_fd
+        self.owners: dict[int, Any] = {}  # slot -> its current slab's exporting object
+        self.held: set[int] = set()
+        self.lost = 0  # slabs whose slot had to wait for a later slab to be released
+        self.answers = bytearray()  # not written yet
+
+    def load(self, meta: bytes, slot: int, offsets: Sequence[int], sizes: Sequence[int]) -> Any:
+        if slot in self.owners:  # the child wrote a slot not given back: nothing here is safe
+            raise RuntimeError(f"hand-over slot {slot} written while still in use")
+        owner = (ctypes.c_char * len(self.maps[slot])).from_buffer(self.maps[slot])
+        base = memoryview(owner).cast("B")
+        buffers = [base[o:o + n] for o, n in zip(offsets, sizes)]
+        obj = pickle.loads(meta, buffers=buffers)
+        del buffers
+        base.release()
+        self.owners[slot] = owner
+        return obj
+
+    def release(self) -> None:
+        """Answer every slot the tick stage is done with (call with no reference of one's
+        own left to a slab's arrays)."""
+        for slot in list(self.owners):
+            # the dictionary's reference and getrefcount's argument: 2 when nothing else
+            # (no array, no view of one) refers to it
+            if sys.getrefcount(self.owners[slot]) == 2:
+                del self.owners[slot]
+                self.held.discard(slot)
+                self.answers.append(slot)
+            elif slot not in self.held:
+                self.held.add(slot)
+                self.lost += 1
+                self.answers.append(slot | _HELD)
+        if len(self.answers) >= BATCH:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.answers:
+            try:
+                os.write(self.fd, self.answers)
+            except BrokenPipeError:  # the child ended: the pipe says how
+                pass
+            self.answers = bytearray()
 
 
 # ---------------------------------------------------------------------------------- the child
@@ -230,34 +471,23 @@ class WantsQc:
         pass
 
 
-def _stream_state(pipeline: Pipeline) -> dict[str, Any]:
-    learner = pipeline.sea_states
-    return {"pipeline": {a: getattr(pipeline, a) for a in _STREAM_ATTRS},
-            "learner": None if learner is None else {
-                "_new_waves": learner._new_waves,
-                **{f: (getattr(learner, f).current, getattr(learner, f)._finished)
-                   for f in _LEARNER_FEEDS}}}
-
-
 def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
-    """Give ``pipeline`` the stream stage's objects of the child's pipeline."""
-    for attr, value in state["pipeline"].items():
+    """Give ``pipeline`` the stream stage's objects of the child's pipeline (the tension
+    statistics and the learner's feeding side are its own: :func:`intake_of` kept them)."""
+    for attr, value in state.items():
         setattr(pipeline, attr, value)
-    learner = pipeline.sea_states
-    if state["learner"] is not None and learner is not None:
-        learner._new_waves = state["learner"]["_new_waves"]
-        for f in _LEARNER_FEEDS:
-            feed = getattr(learner, f)
-            feed.current, feed._finished = state["learner"][f]
 
 
-def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline: Any,
-           send_blocks: bool, reader: Any) -> None:
+def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mmap.mmap],
+           blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool,
+           reader: Any) -> None:
     """The child: read, send the first block's buoy id, run the stream stage, send the
     hand-overs, then the stream stage's state, the blocks of other buoys and the reader's
     statistics."""
-    os.close(other_fd)  # the parent's end: a parent gone then fails the next send
+    for other in other_fds:  # the parent's ends: a parent gone then fails the next send
+        os.close(other)
     try:
+        slots = _SlotWriter(fd, maps, release_fd)
         source = iter(blocks)
         first = next(source, None)
         _send(fd, "first", None if first is None else first.buoy_id)
@@ -266,14 +496,17 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
         pickler = _Pickler if send_blocks else _BlocklessPickler
         if first is not None:
             pipeline = make_pipeline(first.buoy_id)
+            pipeline.sea_states = None  # fed in the parent, as the statistics (intake_of)
+            pipeline.stats = _StatsHere()  # type: ignore[assignment]
             for block in itertools.chain([first], source):
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
                     continue
-                _send(fd, "slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
-                      pickler)
-            _send(fd, "slab", (pipeline.ingest_end(), None))
-            streams = _stream_state(pipeline)
+                slots.send("slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
+                           pickler)
+            slots.send("slab", (pipeline.ingest_end(), None), pickler)
+            slots.flush()
+            streams = {a: getattr(pipeline, a) for a in _STREAM_ATTRS}
         _send(fd, "end", (streams, ignored, getattr(reader, "stats", None)))
     except BrokenPipeError:  # the parent stopped reading: it has its own exception
         pass
@@ -288,6 +521,7 @@ def _child(fd: int, other_fd: int, blocks: Iterable[SampleBlock], make_pipeline:
             pass
     finally:
         os.close(fd)
+        os.close(release_fd)
 
 
 # --------------------------------------------------------------------------------- the parent
@@ -318,9 +552,12 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
         fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
     except OSError:  # pipe-max-size lowered, or the user's pipe pages spent: the default
         pass  # pipe (64 KB) only makes the child wait more often
+    answers_read, answers_write = os.pipe()  # the slots' answers, to the child
+    maps = _shared_slots(SLOTS, SLOT_BYTES)
     ctx = multiprocessing.get_context("fork")
     child = ctx.Process(target=_child, name="buoymon-stream",
-                        args=(write_fd, read_fd, blocks, make_pipeline, send_blocks,
+                        args=(write_fd, (read_fd, answers_write), answers_read, maps, blocks,
+                              make_pipeline, send_blocks,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)
     # (multiprocessing flushes the standard streams before it forks: nothing this process
     # buffered is written twice.) The child's garbage collections then skip the objects it
@@ -331,10 +568,13 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     finally:
         gc.unfreeze()
     os.close(write_fd)
+    os.close(answers_read)
+    os.set_blocking(read_fd, False)  # _receive sends the answers before it waits
+    slots = _SlotReader(maps, answers_write)
     try:
         while True:
             try:
-                kind, obj = _receive(read_fd)
+                kind, obj = _receive(read_fd, slots)
             except EOFError:
                 child.join(5)
                 raise ChildDied(f"the replay's reading process ended without finishing the "
@@ -344,8 +584,11 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
             yield kind, obj
             if kind == "end":
                 return
+            del obj  # the caller is done with the slab (it asks for the next): its slot
+            slots.release()  # goes back to the child unless something still refers to it
     finally:
         os.close(read_fd)  # the child's next send fails: it stops
+        os.close(answers_write)
         child.join(5)
         if child.is_alive():
             child.kill()

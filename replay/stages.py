@@ -10,7 +10,7 @@ results are the same to the bit as ``process`` block by block. Only the ``nogil`
 kernels (validation, QC, the estimator) and some numpy operations release the GIL, so the
 two overlap little: ``run_blocks`` uses this only when asked (``threads=True``; figures in
 bench/bench_threads.py). The same split across two processes (replay.stage_process) does
-overlap; ``buoymon replay`` uses it only when asked (``--two-processes``).
+overlap; ``buoymon replay`` uses it when it pays (``--one-process`` to turn it off).
 """
 
 from __future__ import annotations

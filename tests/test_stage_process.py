@@ -242,15 +242,16 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
 
     monkeypatch.setattr(Pipeline, "ingest", dying)
     capsys.readouterr()
-    # one process unless asked (no child to die)
-    assert main(["replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress"]) == 0
-    assert main(["replay", str(log), "--state", str(state), "--no-progress",
-                 "--two-processes"]) == 1
-    err = capsys.readouterr().err
-    assert "reading process ended without finishing the log (killed by SIGKILL)" in err
-    assert "no report or state written" in err
-    assert state.read_bytes() == saved
-    assert multiprocessing.active_children() == []
+    # --one-process: no child to die
+    assert main(["replay", str(log), "--report", str(tmp_path / "r.json"), "--no-progress",
+                 "--one-process"]) == 0
+    for asked in ([], ["--two-processes"]):  # the child by default, as when asked
+        assert main(["replay", str(log), "--state", str(state), "--no-progress", *asked]) == 1
+        err = capsys.readouterr().err
+        assert "reading process ended without finishing the log (killed by SIGKILL)" in err
+        assert "no report or state written" in err
+        assert state.read_bytes() == saved
+        assert multiprocessing.active_children() == []
 
 
 def test_a_pipe_that_cannot_grow_still_gives_the_same_bits(feed, monkeypatch):
@@ -269,3 +270,139 @@ def test_a_pipe_that_cannot_grow_still_gives_the_same_bits(feed, monkeypatch):
     monkeypatch.setattr(fcntl, "fcntl", refused)
     assert _replay(iter(feed), True)[0] == want
     assert multiprocessing.active_children() == []
+
+
+def _slots(monkeypatch) -> list:
+    """The parent's slot readers of the replays to come."""
+    made = []
+    real = stage_process._SlotReader.__init__
+
+    def init(self, *args):
+        real(self, *args)
+        made.append(self)
+
+    monkeypatch.setattr(stage_process._SlotReader, "__init__", init)
+    return made
+
+
+def test_the_hand_overs_go_through_the_shared_slots_and_come_back(feed, monkeypatch):
+    slots = _slots(monkeypatch)
+    sent = []
+    real = stage_process._SlotReader.load
+    monkeypatch.setattr(stage_process._SlotReader, "load",
+                        lambda self, *a: sent.append(a[1]) or real(self, *a))
+    assert _replay(iter(feed), True)[0] == _replay(iter(feed), False)[0]
+    # the slabs with samples came through the slots, each slot reused many times, and every
+    # slot was back with the child at the end
+    assert len(sent) > 50 and set(sent) == set(range(stage_process.SLOTS))
+    assert slots[0].lost == 0 and slots[0].owners == {}
+
+
+class Keeper(Recorder):
+    """A sink that keeps each step's load arrays (views of a slot's memory) for a while."""
+
+    def __init__(self, keep: int) -> None:
+        super().__init__()
+        self.keep, self.kept = keep, []
+
+    def on_step(self, step) -> None:
+        super().on_step(step)
+        self.kept = [*self.kept, (step.t_ns, step.tension_N)][-self.keep:]
+
+
+@pytest.mark.parametrize("keep", [1, 50])
+def test_a_slot_something_still_refers_to_is_not_given_back(feed, monkeypatch, keep):
+    """A sink keeping the steps' arrays (one slab's, or more than there are slots): those
+    slots are held until it lets go, the child sends through the pipe meanwhile, and every
+    kept array still holds its own samples: the same bits and steps as one process."""
+    slots = _slots(monkeypatch)
+    outs, kept = {}, {}
+    for child in (False, True):
+        keeper = Keeper(keep)
+        outs[child] = _replay(iter(feed), child, [keeper])[0]
+        kept[child] = [(t.tolist(), v.tolist()) for t, v in keeper.kept]
+        assert kept[child] and len(kept[child][-1][0]) > 0
+    assert outs[True] == outs[False] and kept[True] == kept[False]
+    assert slots[0].lost > 0  # held by the sink, answered so
+    assert multiprocessing.active_children() == []
+
+
+def test_a_slab_larger_than_a_slot_goes_through_the_pipe(feed, monkeypatch):
+    want = _replay(iter(feed), False)[0]
+    monkeypatch.setattr(stage_process, "SLOT_BYTES", 4096)
+    slots = _slots(monkeypatch)
+    assert _replay(iter(feed), True)[0] == want
+    assert slots[0].lost == 0
+
+
+def test_a_slot_is_released_only_once_nothing_refers_to_its_arrays():
+    """The two sides of the slots in this process: a slab's arrays live in the slot (no
+    copy); while one of them, or a view of one, is referred to, the slot is answered held
+    and the writer does not take it; once let go, it is freed and taken again."""
+    maps = stage_process._shared_slots(2, 1 << 16)
+    answers_read, answers_write = os.pipe()
+    data_read, data_write = os.pipe()
+    writer = stage_process._SlotWriter(data_write, maps, answers_read)
+    reader = stage_process._SlotReader(maps, answers_write)
+    os.set_blocking(data_read, False)
+    try:
+        def send(values):
+            writer.send("slab", values, stage_process._Pickler)
+            writer.flush()
+            got = stage_process._receive(data_read, reader)[1]
+            reader.flush()  # (answers are written two at a time, or before a wait)
+            return got
+
+        got = send([np.arange(1000.0), np.arange(7, dtype=np.int8)])
+        assert got[0].tolist() == list(range(1000)) and got[1].tolist() == list(range(7))
+        first = next(iter(reader.owners))
+        assert np.shares_memory(got[0], np.frombuffer(maps[first], np.uint8))  # no copy
+        view = got[0][10:20]
+        del got
+        reader.release()
+        reader.flush()
+        assert reader.held == {first} and reader.lost == 1
+        other = send([np.full(100, 3.0)])  # the other slot
+        reader.release()
+        reader.flush()
+        assert reader.held == {0, 1} and reader.lost == 2
+        # both held, none on its way: the writer sends through the pipe rather than wait
+        assert writer.take(800) is None
+        third = send([np.arange(5.0)])
+        assert third[0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0] and len(reader.owners) == 2
+        assert other[0].tolist() == [3.0] * 100  # the slots untouched meanwhile
+        del other
+        reader.release()
+        reader.flush()
+        assert reader.held == {first}
+        assert writer.take(800) == 1 - first  # freed: taken again
+        assert view.tolist() == list(range(10, 20))  # still its own samples
+        # a writer that broke the protocol (wrote the held slot) is caught, not trusted
+        writer.free.append(first)
+        with pytest.raises(RuntimeError, match=f"slot {first} written while still in use"):
+            send([np.zeros(10)])
+        del view
+        reader.release()
+        assert not reader.held and reader.owners == {}
+    finally:
+        for fd in (answers_read, answers_write, data_read, data_write):
+            os.close(fd)
+
+
+def test_a_replay_keeps_freed_memory_with_glibc_and_goes_on_without(monkeypatch):
+    """glibc's malloc takes the replay's thresholds; another C library (no mallopt, or no
+    libc.so.6) leaves the replay as it is."""
+    import ctypes
+    import platform
+
+    from replay import runner
+
+    if platform.libc_ver()[0] != "glibc":
+        pytest.skip("not a glibc system")
+    assert runner.keep_freed_memory() is True
+
+    def no_libc(name):
+        raise OSError(f"{name}: cannot open shared object file")
+
+    monkeypatch.setattr(ctypes, "CDLL", no_libc)
+    assert runner.keep_freed_memory() is False
