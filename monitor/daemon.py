@@ -543,11 +543,12 @@ class Daemon:
         self.counters["messages"] += 1
         self._stream(block.sensor).arrived(time.monotonic(), len(block))
         if len(block):
-            # skew against the time it was published: a message from a publisher's cache
-            # arrives late by design
-            sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else recv_ns
+            # ahead of the block's receive time, as the pipeline judges time_ahead; behind its
+            # publication (a message from a publisher's cache arrives late by design)
+            sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else None
             # the newest sample (a block need not be sorted): a corrupt time inside it shows
-            for msg in self.clocks.observe(block.sensor, int(block.t_ns.max()), sent_ns):
+            for msg in self.clocks.observe(block.sensor, int(block.t_ns.max()), block.recv_ns,
+                                           sent_ns):
                 self._faults.warning(f"clock {block.sensor}", "sensor clock fault: " + msg,
                                      sensor=block.sensor, **self.clocks.fields(block.sensor))
         try:

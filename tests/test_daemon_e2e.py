@@ -764,3 +764,47 @@ def test_a_late_publisher_s_data_behind_the_processed_time_is_counted_and_alerte
             pub.undeclare()
     finally:
         assert d.terminate() == 0
+
+
+def test_a_block_from_a_publisher_s_cache_is_judged_ahead_by_its_receive_time_as_the_pipeline(
+        tmp_path):
+    """A publisher process sends 15 s of tension (from ``now`` - 4 s) into its cache (the
+    daemon not yet up); the last sample of the last block is dated ``now`` + 40 s, so more
+    than the allowed 20 s ahead of its publication (a few seconds after ``now``; [health]
+    clock_skew_max_s, [ordering] max_ahead_s), but no longer of the time the daemon,
+    started 20 s after ``now``, fetches it. The pipeline judges ``time_ahead`` against the
+    receive time (what a replay of the recording has as its log_time) and takes the sample;
+    the clock-fault check judged it against the publication and alerted a clock skew of the
+    very sample the pipeline took (and did not take it as the stream's newest time). Now
+    both judge by the receive time: no skew, no time_ahead, live and in the replay of the
+    recording."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, record=True, load_source="measured")
+    cfg.write_text(cfg.read_text().replace("max_ahead_s = 600.0", "max_ahead_s = 20.0", 1)
+                   + "[health]\nclock_skew_max_s = 20.0\n")
+    now = time.time_ns() // 10**9 * 10**9
+    blocks = []
+    for k in range(15):  # within 20 s of the publication (not behind it)
+        t = now + (k - 4) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        if k == 14:
+            t[-1] = now + 40 * 10**9
+        blocks.append(SampleBlock(BUOY, "tension", t,
+                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)}))
+    log = write_log(tmp_path / "ahead.mcap", blocks)
+    pub = subprocess.Popen([sys.executable, "-m", "replay.publish", str(log), "--connect",
+                            f"tcp/127.0.0.1:{port}", "--linger-s", "90"], env=ENV,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(max(0.0, (now + 20 * 10**9 - time.time_ns()) / 1e9))  # sent; not fetched
+        d = start_daemon(cfg, tmp_path)
+        st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 15,
+                              buoy=BUOY, timeout=120)["status"]["streams"]["tension"]
+        assert d.terminate() == 0
+    finally:
+        pub.kill()
+        pub.wait(30)
+    assert st["accepted"] == 300 and not any(st["rejected"].values())
+    assert st["clock_skewed_blocks"] == 0 and st["clock_skew_s"] <= 18.0
+    replayed = replayed_figures(load_config(cfg), sorted((tmp_path / "rec").glob("*.mcap")))
+    tension = replayed["samples"]["tension"]
+    assert tension["accepted"] == 300 and not any(tension["rejected"].values())
