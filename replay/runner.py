@@ -375,7 +375,8 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         # the child reads on its one thread: a read-ahead thread there waits for the GIL
         # (bench/bench_threads.py); one process reads ahead by the reader's rule
         # (replay.chunks.read_ahead_pays: only with a CPU to spare)
-        source = LogReader(files, coalesce=speed is None, read_ahead=False if child else None)
+        source = LogReader(files, coalesce=speed is None, read_ahead=False if child else None,
+                           max_ahead_s=config.ordering.max_ahead_s)
         history = ReportHistory() if plot_fields else None
         all_sinks = [*sinks, history] if history is not None else list(sinks)
         pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,

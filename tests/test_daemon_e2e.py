@@ -808,3 +808,36 @@ def test_a_block_from_a_publisher_s_cache_is_judged_ahead_by_its_receive_time_as
     replayed = replayed_figures(load_config(cfg), sorted((tmp_path / "rec").glob("*.mcap")))
     tension = replayed["samples"]["tension"]
     assert tension["accepted"] == 300 and not any(tension["rejected"].values())
+
+
+def test_a_re_published_log_with_a_block_a_year_ahead_ends_without_a_clock_skew(tmp_path):
+    """A recording holds a tension block dated a year ahead of its receive time (a wrong
+    clock: time_ahead) among 30 right ones. ``replay.publish`` (a real process) plays it to
+    a daemon: the block goes out where it was received, so the daemon counts one skewed
+    block and the 20 samples as time_ahead, and ends on the last right block with no skew.
+    Was: the reader ordered it by its publish time, a year on: it went out last and the
+    daemon ended with clock_skew active."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, load_source="measured")
+    now = time.time_ns() // 10**9 * 10**9
+    year = 365 * 86400 * 10**9
+    blocks = []
+    for k in range(30):
+        t = now + (k - 40) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        recv = int(t[-1]) + 10**6
+        blocks.append(SampleBlock(BUOY, "tension", t + (year if k == 10 else 0),
+                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)},
+                                  recv))
+    log = write_log(tmp_path / "recorded.mcap", blocks)
+    d = start_daemon(cfg, tmp_path)
+    try:
+        pub = publish(log, port)
+        out, err = pub.communicate(timeout=120)
+        assert pub.returncode == 0 and out.strip() == "30", err
+        st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 30,
+                              buoy=BUOY)["status"]["streams"]["tension"]
+    finally:
+        assert d.terminate() == 0
+    assert st["clock_skewed_blocks"] == 1 and st["rejected"]["time_ahead"] == 20
+    assert -600.0 < st["clock_skew_s"] < 0.0  # the last block: right, behind its arrival
+    assert st["accepted"] == 29 * 20 and st["time_restarts"] == 0
