@@ -36,6 +36,7 @@ from monitor.checkpoint import CheckpointStore, PeriodicCheckpointer
 from monitor.clock_faults import ClockFaults
 from monitor.daemon_config import DaemonConfig
 from monitor.events import Sink, StepResult
+from monitor.forecast import ForecastExpired
 from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
@@ -217,7 +218,8 @@ class Daemon:
         saved = restored.state if restored is not None else {}
         self.counters: dict[str, int] = {"messages": 0, "undecodable": 0, "wrong_buoy": 0,
                                          "refused": 0, "status_published": 0, "queries": 0,
-                                         "forecasts": 0, "forecasts_refused": 0}
+                                         "forecasts": 0, "forecasts_refused": 0,
+                                         "forecasts_expired": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
         # ages across a restart: the last arrivals and fatigue feed, saved as wall-clock times,
@@ -585,7 +587,8 @@ class Daemon:
 
     def _on_forecast(self, key: str, payload: bytes, recv_ns: int) -> None:
         """A sea-state forecast: recorded as received, handed to the pipeline (applied at
-        sensor time, :mod:`monitor.forecast`); a malformed one is counted and logged."""
+        sensor time, :mod:`monitor.forecast`); a malformed one is counted and logged, and one
+        with no step left to project also as ``forecasts_expired``."""
         add = getattr(self.pipeline, "add_forecast", None)
         try:
             if add is None:
@@ -593,7 +596,11 @@ class Daemon:
             due_ns = add(json.loads(payload))
         except (ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
             self.counters["forecasts_refused"] += 1
-            self._faults.warning("forecast", "forecast refused", key=key, error=str(exc)[:300])
+            expired = isinstance(exc, ForecastExpired)
+            if expired:  # logged apart: not hidden behind the last malformed one's minute
+                self.counters["forecasts_expired"] += 1
+            self._faults.warning("forecast expired" if expired else "forecast",
+                                 "forecast refused", key=key, error=str(exc)[:300])
             return
         self.counters["forecasts"] += 1
         self._dirty_status = True

@@ -42,7 +42,7 @@ from monitor.components import Component, build_cable, endurance_stress_Pa
 from monitor.config import Config, ConfigError
 from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
-from monitor.forecast import ForecastAlerts, parse_forecast
+from monitor.forecast import ForecastAlerts, parse_forecast, refuse_expired
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.motion_rate import rate_problems
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
@@ -576,10 +576,11 @@ class Pipeline:
         """A sea-state forecast (JSON payload, :mod:`monitor.forecast`), applied at the first
         tick at or after its issue time and ``not_before_ns`` (default: the first tick not
         yet evaluated); returns that due time. ValueError if it is malformed or forecasting
-        is off."""
+        is off; ForecastExpired (a ValueError) if no step would be left to project."""
         if self.forecasts is None:
             raise ValueError("forecasting is off ([forecast] enabled = false)")
         fc = parse_forecast(doc, self.next_tick_ns if not_before_ns is None else not_before_ns)
+        refuse_expired(fc, self.tick_ns)
         self.forecasts.add(fc)
         return fc.due_ns
 
