@@ -11,9 +11,12 @@ values, or a time never accepted) stays ``time_backwards``.
 
 Memory is bounded: per stream, the accepted samples of the last ``span_s`` of its sensor time
 (``[ordering] copy_span_s``, default 3600 s: the sensor publishers' cache, 3,600 one-second
-blocks), about 1.2 MB an hour of 20 Hz tension. A copy is recognised if its original is among
-them when the copy is judged; they are part of the pipeline state (``late_copies``), so a
-restored pipeline judges as one that never stopped. The arrays of the accepted samples are
+blocks), from the start of the minute (UTC) that reaches back that far: about 1.2 MB an hour
+of 20 Hz tension. A copy is recognised if its original is among them when the copy is
+judged. They are part of the pipeline state (``late_copies``), so a restored pipeline judges
+as one that never stopped: per whole minute of sensor time, deflated (0.29 MB an hour of
+20 Hz tension), each minute packed once when the next has begun (a daemon checkpoints every
+few seconds), independent of how the slabs were cut. The arrays of the accepted samples are
 kept as the pipeline made them (no copy per slab); only the state and a lookup join them.
 """
 
@@ -31,25 +34,34 @@ from monitor.validate import REASONS
 _DUP, _BACK = REASONS.index("duplicate") + 1, REASONS.index("time_backwards") + 1
 
 
+_MINUTE_NS = 60 * 10**9
+
+
 def _pack(a: np.ndarray) -> str:
-    """Base64 of the deflated bytes (level 1: ~3 x smaller on sensor data, ~10 ms an hour)."""
-    return base64.b64encode(zlib.compress(np.ascontiguousarray(a).tobytes(), 1)).decode()
+    """Base64 of the deflated bytes (~3 x smaller on sensor data; a minute is packed once)."""
+    return base64.b64encode(zlib.compress(np.ascontiguousarray(a).tobytes(), 6)).decode()
 
 
 def _unpack(text: str, dtype: str) -> np.ndarray:
     return np.frombuffer(zlib.decompress(base64.b64decode(text)), dtype)
 
 
+def _cut(newest_ns: int, span_ns: int) -> int:
+    """The oldest time kept: the start of the minute ``span_ns`` before the newest."""
+    return (newest_ns - span_ns) // _MINUTE_NS * _MINUTE_NS
+
+
 class _Accepted:
     """One stream's accepted samples within the span: parts in time order (times strictly
-    increase across them: accepted times do)."""
+    increase across them: accepted times do), and the packed minutes already complete."""
 
     def __init__(self) -> None:
         self.parts: list[tuple[np.ndarray, np.ndarray]] = []
+        self.packed: dict[int, tuple[str, str]] = {}  # minute -> packed steps, values
 
     def add(self, t: np.ndarray, values: np.ndarray, span_ns: int) -> None:
         self.parts.append((t, values))
-        cut = int(t[-1]) - span_ns
+        cut = _cut(int(t[-1]), span_ns)
         drop = 0
         while drop < len(self.parts) - 1 and int(self.parts[drop][0][-1]) < cut:
             drop += 1
@@ -57,12 +69,30 @@ class _Accepted:
             del self.parts[:drop]
 
     def within(self, span_ns: int) -> tuple[np.ndarray, np.ndarray]:
-        """The samples no older than ``span_ns`` before the newest (exactly: whatever the
-        parts' cut), joined."""
+        """The samples kept (from :func:`_cut` exactly, whatever the parts' cut), joined."""
         t = np.concatenate([p[0] for p in self.parts])
         values = np.concatenate([p[1] for p in self.parts], axis=1)
-        keep = int(np.searchsorted(t, t[-1] - span_ns, side="left"))
+        keep = int(np.searchsorted(t, _cut(int(t[-1]), span_ns), side="left"))
         return t[keep:], values[:, keep:]
+
+    def state(self, span_ns: int) -> dict[str, list[str]]:
+        """Per minute: the first time and the steps after it (little-endian int64: regular
+        sampling deflates to almost nothing), and the float64 values field by field."""
+        t, values = self.within(span_ns)
+        minute = t // _MINUTE_NS
+        bounds = [0, *(np.flatnonzero(np.diff(minute)) + 1).tolist(), t.shape[0]]
+        steps, vals, packed = [], [], {}
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            m = int(minute[a])
+            pair = self.packed.get(m) or (
+                _pack(np.diff(t[a:b], prepend=np.int64(0)).astype("<i8")),
+                _pack(values[:, a:b].astype("<f8")))
+            if b < t.shape[0]:  # complete: a later minute has begun
+                packed[m] = pair
+            steps.append(pair[0])
+            vals.append(pair[1])
+        self.packed = packed
+        return {"t": steps, "v": vals}
 
 
 class LateCopies:
@@ -72,10 +102,11 @@ class LateCopies:
         self.span_ns = int(round(span_s * 1e9))
         self._streams: dict[str, _Accepted] = {}
         for sensor, saved in (state or {}).items():
-            t = np.cumsum(_unpack(saved["t"], "<i8"), dtype=np.int64)
-            values = _unpack(saved["v"], "<f8").astype(np.float64)
             self._streams[sensor] = acc = _Accepted()
-            acc.parts.append((t, values.reshape(len(SENSOR_FIELDS[sensor]), t.shape[0])))
+            nf = len(SENSOR_FIELDS[sensor])
+            for steps, vals in zip(saved["t"], saved["v"]):
+                t = np.cumsum(_unpack(steps, "<i8"), dtype=np.int64)
+                acc.parts.append((t, _unpack(vals, "<f8").reshape(nf, t.shape[0]).copy()))
 
     def judge(self, sensor: str, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
               rejected: dict[str, int]) -> None:
@@ -102,12 +133,5 @@ class LateCopies:
             self._streams.setdefault(sensor, _Accepted()).add(t, values, self.span_ns)
 
     def state(self) -> dict[str, Any]:
-        """The samples within the span per stream: the first time and the steps after it
-        (little-endian int64: regular sampling deflates to almost nothing), and the float64
-        values field by field, deflated, in base64; independent of how the slabs were cut."""
-        out = {}
-        for sensor, acc in sorted(self._streams.items()):
-            t, values = acc.within(self.span_ns)
-            steps = np.diff(t, prepend=np.int64(0)).astype("<i8")
-            out[sensor] = {"t": _pack(steps), "v": _pack(values.astype("<f8"))}
-        return out
+        """The samples kept per stream, per minute (:meth:`_Accepted.state`)."""
+        return {sensor: acc.state(self.span_ns) for sensor, acc in sorted(self._streams.items())}
