@@ -37,7 +37,7 @@ from monitor.clock_faults import ClockFaults
 from monitor.daemon_config import DaemonConfig
 from monitor.events import Sink, StepResult
 from monitor.forecast import ForecastExpired
-from monitor.listening import ListeningClock
+from monitor.listening import IntakeQueue, ListeningClock
 from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
@@ -213,7 +213,7 @@ class Daemon:
         self.codec = codec
         self.notifier = notifier or SdNotifier()
         self._stop = threading.Event()
-        self._q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+        self._q = IntakeQueue()
         self._store = CheckpointStore(config.state.path)
         restored = self._store.load()
         saved = restored.state if restored is not None else {}
@@ -458,7 +458,10 @@ class Daemon:
         if origin is not None and self.sequences.gap(block.sensor, origin.source,
                                                      origin.sn) is not None:
             self._catch_up()  # takes this message too, as long as its publisher's cache has it
-        self._take(key, payload, block, recv_ns, origin)
+        # timed at delivery (the Zenoh callback), not now: a backlog worked off late is no
+        # older than when it came (status() judges ages as of the oldest still waiting)
+        self._take(key, payload, block, recv_ns, origin,
+                   time.monotonic() - max(0, time.time_ns() - recv_ns) / 1e9)
 
     def _decode(self, key: str, payload: bytes, recv_ns: int) -> SampleBlock | None:
         block = zenoh_io.decode_counted(self.codec, key, payload, recv_ns, self.counters, log,
@@ -535,8 +538,10 @@ class Daemon:
             time.sleep(0.05)
 
     def _take(self, key: str, payload: bytes, block: SampleBlock, recv_ns: int,
-              origin: zenoh_io.Origin | None) -> bool:
-        """Record and process one decoded message; False if it was a redelivery (skipped)."""
+              origin: zenoh_io.Origin | None, delivered_mono: float | None = None) -> bool:
+        """Record and process one decoded message; False if it was a redelivery (skipped).
+        ``delivered_mono``: when it arrived (None: now, as a catch-up's messages, fetched
+        all at once from the caches and taken one by one)."""
         verdict = (self.sequences.observe(block.sensor, origin.source, origin.sn)
                    if origin is not None else None)
         if verdict is not None and verdict.missed:
@@ -549,10 +554,9 @@ class Daemon:
         if redelivered:
             return False  # already in the restored state (taken before the checkpoint)
         self.counters["messages"] += 1
-        # timed at delivery (the Zenoh callback), not now: a backlog worked off late is no
-        # older than when it came
-        delivered = time.monotonic() - max(0, time.time_ns() - recv_ns) / 1e9
-        self._stream(block.sensor).arrived(self.listening.at(delivered), len(block))
+        self._stream(block.sensor).arrived(
+            self.listening.now() if delivered_mono is None else self.listening.at(delivered_mono),
+            len(block))
         if len(block):
             # skew against the time it was published: a message from a publisher's cache
             # arrives late by design
@@ -649,7 +653,12 @@ class Daemon:
         alerts (sensor-time and live rules) and the health verdict of the live rules.
         """
         now = time.monotonic()
-        listen = self.listening.now()  # the ages: data, accepted samples, fatigue feed
+        # the ages (data, accepted samples, fatigue feed) in listening time, as of the oldest
+        # message still waiting: a backlog not yet looked at is no silence
+        listen = self.listening.now()
+        waiting = self._q.oldest_put()
+        if waiting is not None:
+            listen = min(listen, self.listening.at(waiting))
         wall_ns = time.time_ns()
         doc = dict(self.pipeline.status())
         ages = self.config.health.data_age_timeout_s

@@ -13,14 +13,21 @@ process (not one busy thread: the beat needs only the GIL for a moment) stood st
 gap beyond ``slack_s`` is left out. A stall still going on when the time is read (the reader
 resumed before the beat) is left out the same way, so the clock is continuous and never goes
 back.
+
+The daemon's intake queue (:class:`IntakeQueue`) remembers when each waiting item was put:
+while the daemon works off a backlog, ages are judged as of the oldest item still waiting
+(what it has not looked at yet cannot count as silence), so a backlog after a slow checkpoint
+does not read as old data either.
 """
 
 from __future__ import annotations
 
 import bisect
+import queue
 import threading
 import time
 from collections import deque
+from typing import Any
 
 BEAT_S = 0.1
 SLACK_S = 0.5  # a loaded machine's scheduling delays stay below this (seen: < 0.2 s)
@@ -80,3 +87,32 @@ class ListeningClock:
                 return min(mono, self._last_beat + self.slack_s) - self._stalled
             start, end, after = stalls[i]
             return min(mono, start) - (after - (end - start))
+
+
+class IntakeQueue(queue.SimpleQueue):
+    """A :class:`queue.SimpleQueue` that knows when its oldest waiting item was put."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        # put times (monotonic), appended before each item goes in and taken after each item
+        # comes out: never fewer than the items waiting
+        self._put_times: deque[float] = deque()
+
+    def put(self, item: Any, block: bool = True, timeout: float | None = None) -> None:
+        self._put_times.append(time.monotonic())
+        super().put(item, block, timeout)
+
+    def get(self, block: bool = True, timeout: float | None = None) -> Any:
+        item = super().get(block, timeout)
+        self._put_times.popleft()
+        return item
+
+    def get_nowait(self) -> Any:
+        return self.get(False)
+
+    def oldest_put(self) -> float | None:
+        """When the oldest item still waiting was put (monotonic; None: none waits)."""
+        try:
+            return self._put_times[0]
+        except IndexError:
+            return None

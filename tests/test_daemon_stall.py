@@ -25,11 +25,14 @@ from monitor.blocks import SampleBlock  # noqa: E402
 from monitor.daemon_config import ZenohConfig  # noqa: E402
 from replay.writer import LogWriter  # noqa: E402
 
-from daemon_harness import ENV, DaemonProcess, free_port, query_state  # noqa: E402
+from daemon_harness import (  # noqa: E402
+    BUOY as HARNESS_BUOY, ENV, DaemonProcess, free_port, query_state, write_config,
+)
 from waiting import wait_until  # noqa: E402
 
 pytestmark = pytest.mark.integration  # processes on loopback: not in `make test-fast`
 
+HARNESS = Path(__file__).resolve().parent / "daemon_harness.py"
 SHIPPED = Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml"
 BUOY = "vaps"
 TIMEOUT_S = 2.5  # data_age_timeout_s of tension and imu
@@ -112,3 +115,37 @@ def test_a_stalled_daemon_does_not_call_streams_that_kept_sending_silent(tmp_pat
         pub.kill()
         pub.wait(10)
         assert d.terminate() == 0
+
+
+def test_a_backlog_worked_off_late_is_no_silence(tmp_path):
+    """200 blocks arrive at once and take 20 ms each (the daemon harness's pipeline): 4 s of
+    backlog against a 1-s data_age timeout. Timed at delivery, the last blocks came 4 s
+    before they were worked off; judged as of the oldest message still waiting, the stream
+    never looks silent meanwhile (judged at the wall clock, its age reached 4 s)."""
+    port = free_port()
+    cfg = write_config(tmp_path / "cfg.toml", port, tmp_path / "state.sqlite",
+                       tension_age_s=1.0)
+    d = DaemonProcess([sys.executable, str(HARNESS), "run", str(cfg), "0.02"], tmp_path)
+    d.wait_for("READY=1")
+    statuses: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+    zc = ZenohConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",))
+    docs = []
+    try:
+        with zenoh_io.open_session(zc) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, zenoh_io.status_key(HARNESS_BUOY), statuses)
+            subprocess.run([sys.executable, str(HARNESS), "publish", f"tcp/127.0.0.1:{port}",
+                            "200", "0"], env=ENV, check=True, capture_output=True, timeout=60)
+            while not docs or docs[-1]["counters"]["messages"] < 200:
+                docs.append(json.loads(statuses.get(timeout=30)[2]))
+            sub.undeclare()
+    finally:
+        assert d.terminate() == 0
+    during = [doc for doc in docs if doc["queue_depth"] > 0
+              and doc["streams"].get("tension", {}).get("data_age_s") is not None]
+    assert len(during) >= 4  # a backlog, judged by several statuses
+    assert max(doc["streams"]["tension"]["data_age_s"] for doc in during) < 1.0
+    assert not [a for doc in during for a in doc["alerts"]["active"] if a["rule"] == "data_age"]
+    # worked off: the age is the real silence since the last block was delivered (the
+    # publisher sent all 200 in a burst, about 4 s before the daemon was through)
+    assert docs[-1]["streams"]["tension"]["data_age_s"] > 2.0

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from monitor.listening import ListeningClock
+from monitor.listening import IntakeQueue, ListeningClock
 
 
 def test_stalls_are_left_out_beyond_the_slack_and_past_times_convert_by_them():
@@ -50,3 +50,18 @@ def test_a_gil_holding_pause_is_left_out_and_a_sleep_is_not():
         c.close()
     assert 0.0 < during <= 0.3 + 0.05 + 0.01
     assert 0.2 <= after <= 0.3 + 0.05 + 0.2 + 0.05
+
+
+def test_the_intake_queue_knows_when_its_oldest_waiting_item_was_put():
+    q = IntakeQueue()
+    assert q.oldest_put() is None
+    before = time.monotonic()
+    q.put("a")
+    time.sleep(0.05)
+    mid = time.monotonic()
+    q.put("b")
+    first = q.oldest_put()
+    assert before <= first <= mid
+    assert q.get_nowait() == "a"
+    assert mid <= q.oldest_put() <= time.monotonic()
+    assert q.get(timeout=1) == "b" and q.oldest_put() is None and q.qsize() == 0
