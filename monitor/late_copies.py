@@ -58,15 +58,27 @@ class _Accepted:
     def __init__(self) -> None:
         self.parts: list[tuple[np.ndarray, np.ndarray]] = []
         self.packed: dict[int, tuple[str, str]] = {}  # minute -> packed steps, values
+        self._tail = 0  # the first part not joined yet
 
     def add(self, t: np.ndarray, values: np.ndarray, span_ns: int) -> None:
-        self.parts.append((t, values))
+        parts = self.parts
+        # a part per slab costs ~0.3 kB of array headers, as much as a live slab of tension
+        # holds: the parts of a minute are joined once a later one begins (which also lets
+        # go of any larger arrays the slabs' were views of)
+        if parts and t[0] // _MINUTE_NS > parts[self._tail][0][0] // _MINUTE_NS:
+            if len(parts) - self._tail > 1:
+                parts[self._tail:] = [(np.concatenate([p[0] for p in parts[self._tail:]]),
+                                       np.concatenate([p[1] for p in parts[self._tail:]],
+                                                      axis=1))]
+            self._tail = len(parts)
+        parts.append((t, values))
         cut = _cut(int(t[-1]), span_ns)
         drop = 0
-        while drop < len(self.parts) - 1 and int(self.parts[drop][0][-1]) < cut:
+        while drop < len(parts) - 1 and int(parts[drop][0][-1]) < cut:
             drop += 1
         if drop:
-            del self.parts[:drop]
+            del parts[:drop]
+            self._tail = max(0, self._tail - drop)
 
     def within(self, span_ns: int) -> tuple[np.ndarray, np.ndarray]:
         """The samples kept (from :func:`_cut` exactly, whatever the parts' cut), joined."""

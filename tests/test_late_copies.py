@@ -82,3 +82,27 @@ def test_what_it_keeps_is_in_the_state_and_a_restored_pipeline_judges_the_same()
     old = Pipeline(_config(), state=saved, horizon_s=10.0)
     feed(old, [block(k) for k in range(45, 50)] + [block(k) for k in range(30, 35)])
     assert rejected(old) == {"time_backwards": 100}
+
+
+def test_the_slabs_of_each_minute_are_joined_and_the_span_cut_at_a_whole_minute():
+    """Live slabs are tiny (a second of tension: 0.3 kB of samples, as much in array
+    headers): a minute's parts are joined once the next begins, and what is kept starts at
+    the minute the span reaches back to, whatever the parts."""
+    from monitor.late_copies import LateCopies
+
+    lc = LateCopies(90.0)
+    blocks = [block(k) for k in range(200)]  # T0 is 40 s into a minute
+    for b in blocks:
+        lc.accepted("tension", b.t_ns, b.fields["tension_N"][None, :])
+    acc = lc._streams["tension"]
+    # kept from 80 s on (the minute 90 s before the newest): the minute from 80 s joined, and
+    # the 60 one-second slabs of the minute from 140 s, not yet over (unjoined: 120 parts)
+    assert len(acc.parts) == 61
+    t, values = acc.within(lc.span_ns)
+    newest = int(blocks[-1].t_ns[-1])
+    cut = (newest - 90 * 10**9) // (60 * 10**9) * 60 * 10**9
+    every_t = np.concatenate([b.t_ns for b in blocks])
+    every_v = np.concatenate([b.fields["tension_N"] for b in blocks])
+    assert np.array_equal(t, every_t[every_t >= cut])
+    assert np.array_equal(values[0], every_v[every_t >= cut])
+    assert t[0] == cut  # a sample on the minute itself
