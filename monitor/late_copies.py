@@ -17,7 +17,7 @@ judged. They are part of the pipeline state (``late_copies``), so a restored pip
 as one that never stopped: per whole minute of sensor time, deflated (0.29 MB an hour of
 20 Hz tension), each minute packed once when the next has begun (a daemon checkpoints every
 few seconds), independent of how the slabs were cut. The arrays of the accepted samples are
-kept as the pipeline made them (no copy per slab); only the state and a lookup join them.
+kept as the pipeline made them (no copy per slab), a minute's joined once it is over.
 """
 
 from __future__ import annotations
@@ -32,8 +32,6 @@ from monitor.blocks import SENSOR_FIELDS
 from monitor.validate import REASONS
 
 _DUP, _BACK = REASONS.index("duplicate") + 1, REASONS.index("time_backwards") + 1
-
-
 _MINUTE_NS = 60 * 10**9
 
 
