@@ -62,8 +62,8 @@ IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 
 # The stream stage's state (monitor.pipeline, "core step"), taken from the child at the end.
-_STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
-                 "estimator", "selector", "stats", "_full_estimate")
+_STREAM_ATTRS = ("reorder", "validators", "late_copies", "taken_upto", "processed_ns",
+                 "motion_sensor", "estimator", "selector", "stats", "_full_estimate")
 _LEARNER_FEEDS = ("stress", "heave", "accel")  # the sea-state learner's feeding side
 
 
