@@ -4,20 +4,23 @@ A publisher that restarts and re-sends its cache, or a late one with a backlog, 
 samples behind the time the pipeline has processed (the live ordering horizon is 10 s). The
 validation calls them ``time_backwards`` (:mod:`monitor.validate`), a rejection in the
 ``rejected_rate`` alert, so a routine re-send read as bad data. Here a ``time_backwards``
-sample that is an exact copy of a sample already ACCEPTED on its stream (the same time, every
-field equal) becomes a ``duplicate``: no measurement, outside a tick's received and rejected
-counts, as the ordering's copies (:mod:`monitor.ordering`). A late sample that is no copy (other
-values, or a time never accepted) stays ``time_backwards``.
+sample that is an exact copy of a sample already RECEIVED on its stream (the same time, every
+field equal, NaN matching NaN as in the ordering's copy test) becomes a ``duplicate``: no
+measurement, outside a tick's received and rejected counts, as the ordering's copies
+(:mod:`monitor.ordering`). Received: accepted, or rejected for its values (``nan``, a spike,
+...): a cache re-sent holds those too, and their first verdict was counted. A late sample
+that is no copy (other values, or a time never received) stays ``time_backwards``.
 
-Memory is bounded: per stream, the accepted samples of the last ``span_s`` of its sensor time
+Memory is bounded: per stream, the received samples of the last ``span_s`` of its sensor time
 (``[ordering] copy_span_s``, default 3600 s: the sensor publishers' cache, 3,600 one-second
 blocks), from the start of the minute (UTC) that reaches back that far: about 1.2 MB an hour
 of 20 Hz tension. A copy is recognised if its original is among them when the copy is
 judged. They are part of the pipeline state (``late_copies``), so a restored pipeline judges
 as one that never stopped: per whole minute of sensor time, deflated (0.29 MB an hour of
 20 Hz tension), each minute packed once when the next has begun (a daemon checkpoints every
-few seconds), independent of how the slabs were cut. The arrays of the accepted samples are
-kept as the pipeline made them (no copy per slab), a minute's joined once it is over.
+few seconds), independent of how the slabs were cut. The arrays of the received samples are
+kept as the pipeline made them (no copy per slab when none was rejected), a minute's joined
+once it is over.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS
+from monitor.ordering import same_values
 from monitor.validate import REASONS
 
 _DUP, _BACK = REASONS.index("duplicate") + 1, REASONS.index("time_backwards") + 1
@@ -50,13 +54,14 @@ def _cut(newest_ns: int, span_ns: int) -> int:
 
 
 class _Accepted:
-    """One stream's accepted samples within the span: parts in time order (times strictly
-    increase across them: accepted times do), and the packed minutes already complete."""
+    """One stream's received samples within the span: parts in time order (times strictly
+    increase across them: a sample not late nor a duplicate is after every one before it),
+    and the packed minutes already complete."""
 
     def __init__(self) -> None:
         self.parts: list[tuple[np.ndarray, np.ndarray]] = []
         self.packed: dict[int, tuple[str, str]] = {}  # minute -> packed steps, values
-        self._tail = 0  # the first part not joined yet
+        self._tail = 0  # the first part of the minute not joined yet
 
     def add(self, t: np.ndarray, values: np.ndarray, span_ns: int) -> None:
         parts = self.parts
@@ -106,7 +111,7 @@ class _Accepted:
 
 
 class LateCopies:
-    """Per stream, the recent accepted samples, and the copy test of late samples."""
+    """Per stream, the recent received samples, and the copy test of late samples."""
 
     def __init__(self, span_s: float, state: Mapping[str, Any] | None = None) -> None:
         self.span_ns = int(round(span_s * 1e9))
@@ -121,7 +126,7 @@ class LateCopies:
     def judge(self, sensor: str, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
               rejected: dict[str, int]) -> None:
         """Turn the ``time_backwards`` verdicts (:meth:`StreamValidator.check`'s ``codes``) of
-        exact copies of recent accepted samples into ``duplicate``, in ``codes`` and in the
+        exact copies of recent received samples into ``duplicate``, in ``codes`` and in the
         validator's counts ``rejected``."""
         acc = self._streams.get(sensor)
         if acc is None:
@@ -131,14 +136,19 @@ class LateCopies:
             return
         kept_t, kept_v = acc.within(self.span_ns)
         at = np.minimum(np.searchsorted(kept_t, t[late]), kept_t.shape[0] - 1)
-        copy = (kept_t[at] == t[late]) & (kept_v[:, at] == values[:, late]).all(axis=0)
+        copy = (kept_t[at] == t[late]) & same_values(kept_v[:, at], values[:, late])
         codes[late[copy]] = _DUP
         n = int(np.count_nonzero(copy))
         rejected["time_backwards"] -= n
         rejected["duplicate"] += n
 
-    def accepted(self, sensor: str, t: np.ndarray, values: np.ndarray) -> None:
-        """The samples of ``sensor`` accepted now (after every earlier one)."""
+    def received(self, sensor: str, t: np.ndarray, values: np.ndarray,
+                 codes: np.ndarray) -> None:
+        """A slab of ``sensor`` with its final verdicts ``codes``: keeps the samples neither
+        late nor duplicates (after every earlier one kept)."""
+        if codes.any():
+            new = (codes != _DUP) & (codes != _BACK)
+            t, values = t[new], values[:, new]
         if t.shape[0]:
             self._streams.setdefault(sensor, _Accepted()).add(t, values, self.span_ns)
 

@@ -467,7 +467,7 @@ class Pipeline:
                                      gate_all, st.get("reorder"))
         # sensor time processed so far by watermark (not by flush): older samples are late
         self.processed_ns = int(st.get("processed_ns", _NEVER))
-        # a late exact copy of a recent accepted sample is a duplicate, not time_backwards
+        # a late exact copy of a recent received sample is a duplicate, not time_backwards
         # (stream stage, as the validators)
         self.late_copies = LateCopies(config.ordering.copy_span_s, st.get("late_copies"))
         self._max_ahead_ns = int(round(config.ordering.max_ahead_s * 1e9))
@@ -643,7 +643,7 @@ class Pipeline:
                 self.late_copies.judge(s, t, values, codes, validator.rejected)
             self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
             streams[s] = info = _StreamSlab(t, values, codes, before)
-            self.late_copies.accepted(s, info.acc_t, info.acc_values)
+            self.late_copies.received(s, t, values, codes)
             n_acc += info.acc_t.shape[0]
             for reason, n in before[1].items():  # the validator counted them
                 rejected[reason] += validator.rejected[reason] - n

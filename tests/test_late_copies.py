@@ -93,7 +93,7 @@ def test_the_slabs_of_each_minute_are_joined_and_the_span_cut_at_a_whole_minute(
     lc = LateCopies(90.0)
     blocks = [block(k) for k in range(200)]  # T0 is 40 s into a minute
     for b in blocks:
-        lc.accepted("tension", b.t_ns, b.fields["tension_N"][None, :])
+        lc.received("tension", b.t_ns, b.fields["tension_N"][None, :], np.zeros(20, np.int8))
     acc = lc._streams["tension"]
     # kept from 80 s on (the minute 90 s before the newest): the minute from 80 s joined, and
     # the 60 one-second slabs of the minute from 140 s, not yet over (unjoined: 120 parts)
@@ -106,3 +106,44 @@ def test_the_slabs_of_each_minute_are_joined_and_the_span_cut_at_a_whole_minute(
     assert np.array_equal(t, every_t[every_t >= cut])
     assert np.array_equal(values[0], every_v[every_t >= cut])
     assert t[0] == cut  # a sample on the minute itself
+
+
+def imu_block(k: int) -> SampleBlock:
+    """Second ``k`` of 10 Hz IMU (three fields)."""
+    t = T0_NS + k * 10**9 + 100_000_000 * np.arange(10, dtype=np.int64)
+    a = np.arange(10.0) + k
+    return SampleBlock("vaps", "imu", t, {"accel_x_mps2": 0.1 * np.sin(a),
+                                          "accel_y_mps2": 0.1 * np.cos(a),
+                                          "accel_z_mps2": 9.81 + 0.01 * np.sin(2 * a)}, int(t[-1]))
+
+
+def test_a_late_copy_of_a_rejected_sample_nan_too_is_a_duplicate_on_any_stream():
+    """A re-sent cache holds the samples rejected the first time too (a NaN dropout, a value
+    out of range): their copies are duplicates as well (the first verdict was counted), a NaN
+    matching a NaN (NaN != NaN: was time_backwards, a 10-min NaN dropout re-sent fired
+    rejected_rate). A late NaN where a value was is no copy."""
+    def send(k: int, nan_imu: bool = False) -> list[SampleBlock]:
+        t, imu = block(k), imu_block(k)
+        if k == 35:  # two tension samples missing, one far out of range; an IMU field missing
+            t.fields["tension_N"][[3, 4]] = np.nan
+            t.fields["tension_N"][9] = 1e9
+            imu.fields["accel_y_mps2"][2] = np.nan
+        if nan_imu:
+            imu.fields["accel_x_mps2"][5] = np.nan
+        return [imu, t]  # the IMU first: tension gates (it would pass the IMU by)
+
+    p = Pipeline(_config(), horizon_s=10.0)
+    for k in range(60):
+        feed(p, send(k))
+    first = {s: {r: n for r, n in p.validators[s].rejected.items() if n}
+             for s in ("tension", "imu")}
+    assert first == {"tension": {"nan": 2, "out_of_range": 1}, "imu": {"nan": 1}}
+    for k in range(30, 40):  # re-sent exactly, 20 to 30 s behind the processed time
+        feed(p, send(k))
+    feed(p, send(40, nan_imu=True))  # a NaN where a value was accepted: no copy
+    for k in range(60, 70):
+        feed(p, send(k))
+    got = {s: {r: n for r, n in p.validators[s].rejected.items() if n} for s in ("tension", "imu")}
+    # was tension 197 duplicates + 3 time_backwards, imu 99 + 1
+    assert got == {"tension": {"nan": 2, "out_of_range": 1, "duplicate": 220},
+                   "imu": {"nan": 1, "duplicate": 109, "time_backwards": 1}}
