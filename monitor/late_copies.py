@@ -122,6 +122,9 @@ class LateCopies:
             for steps, vals in zip(saved["t"], saved["v"]):
                 t = np.cumsum(_unpack(steps, "<i8"), dtype=np.int64)
                 acc.parts.append((t, _unpack(vals, "<f8").reshape(nf, t.shape[0]).copy()))
+            # restored per minute: the minutes before the newest are over (joined they would
+            # be one part, dropped only once its newest sample left the span)
+            acc._tail = max(0, len(acc.parts) - 1)
 
     def judge(self, sensor: str, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
               rejected: dict[str, int]) -> None:

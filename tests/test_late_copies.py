@@ -147,3 +147,26 @@ def test_a_late_copy_of_a_rejected_sample_nan_too_is_a_duplicate_on_any_stream()
     # was tension 197 duplicates + 3 time_backwards, imu 99 + 1
     assert got == {"tension": {"nan": 2, "out_of_range": 1, "duplicate": 220},
                    "imu": {"nan": 1, "duplicate": 109, "time_backwards": 1}}
+
+
+def test_a_restored_stream_keeps_no_more_than_one_that_never_stopped():
+    """Restored per minute, the kept minutes stay apart: the slabs after them join only their
+    own minute, so the oldest minute goes as the span moves on (was: every restored minute
+    joined into one part with the first new minute, kept whole until its newest sample left
+    the span: 190 s of samples held for a 90-s span)."""
+    from monitor.late_copies import LateCopies
+
+    def add(lc, ks):
+        for k in ks:
+            b = block(k)
+            lc.received("tension", b.t_ns, b.fields["tension_N"][None, :], np.zeros(20, np.int8))
+
+    never, first = LateCopies(90.0), LateCopies(90.0)
+    add(never, range(270))
+    add(first, range(200))  # T0 is 40 s into a minute: minutes from 120 and 180 s kept
+    restored = LateCopies(90.0, json.loads(json.dumps(first.state())))
+    add(restored, range(200, 270))  # the span reaches back to the minute from 180 s
+    held = [sum(p[0].shape[0] for p in lc._streams["tension"].parts) for lc in (never, restored)]
+    assert held[1] == held[0] <= 20 * (90 + 60)
+    assert all(np.array_equal(a, b) for a, b in zip(never._streams["tension"].within(never.span_ns),
+                                                   restored._streams["tension"].within(never.span_ns)))
