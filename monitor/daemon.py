@@ -137,21 +137,22 @@ _RATE_WINDOW_S = 10.0  # the status's per-stream rate: samples received over thi
 @dataclass
 class StreamHealth:
     """Wall-clock view of one sensor stream: data age, rate and liveliness (not in the
-    checkpoint). Times are listening times (:mod:`monitor.listening`) of delivery."""
+    checkpoint). The age is in listening time (:mod:`monitor.listening`) of delivery; the
+    rate in monotonic time (a stall's backlog, delivered after it, is no faster stream)."""
 
     last_arrival: float | None = None
     alive: bool | None = None  # None: no liveliness token seen either way
-    arrivals: "deque[tuple[float, int]]" = field(default_factory=deque)  # (time, samples)
+    arrivals: "deque[tuple[float, int]]" = field(default_factory=deque)  # (monotonic, samples)
 
-    def arrived(self, at: float, n_samples: int) -> None:
+    def arrived(self, at: float, at_mono: float, n_samples: int) -> None:
         self.last_arrival = at if self.last_arrival is None else max(at, self.last_arrival)
-        self.arrivals.append((at, n_samples))
-        while self.arrivals[0][0] < at - _RATE_WINDOW_S:
+        self.arrivals.append((at_mono, n_samples))
+        while self.arrivals[0][0] < at_mono - _RATE_WINDOW_S:
             self.arrivals.popleft()
 
-    def to_dict(self, now: float, timeout_s: float) -> dict[str, Any]:
+    def to_dict(self, now: float, now_mono: float, timeout_s: float) -> dict[str, Any]:
         age = None if self.last_arrival is None else max(0.0, now - self.last_arrival)
-        recent = sum(n for t, n in self.arrivals if t >= now - _RATE_WINDOW_S)
+        recent = sum(n for t, n in self.arrivals if t >= now_mono - _RATE_WINDOW_S)
         return {"data_age_s": age, "data_age_timeout_s": timeout_s,
                 "data_stale": age is None or age > timeout_s, "alive": self.alive,
                 "rate_hz": recent / _RATE_WINDOW_S}
@@ -554,9 +555,8 @@ class Daemon:
         if redelivered:
             return False  # already in the restored state (taken before the checkpoint)
         self.counters["messages"] += 1
-        self._stream(block.sensor).arrived(
-            self.listening.now() if delivered_mono is None else self.listening.at(delivered_mono),
-            len(block))
+        at_mono = time.monotonic() if delivered_mono is None else delivered_mono
+        self._stream(block.sensor).arrived(self.listening.at(at_mono), at_mono, len(block))
         if len(block):
             # ahead of the block's receive time, as the pipeline judges time_ahead; behind its
             # publication (a message from a publisher's cache arrives late by design)
@@ -668,7 +668,7 @@ class Daemon:
         for name in sorted(set(streams) | set(self.streams) | set(required)):
             health = self.streams.get(name, StreamHealth())
             s = streams.setdefault(name, {})
-            s.update(health.to_dict(listen, ages[name]))
+            s.update(health.to_dict(listen, now, ages[name]))
             s.update(self.clocks.fields(name))
             s.update(self.sequences.fields(name))
             # wall-clock age of the last accepted sample: blocks that keep arriving but are

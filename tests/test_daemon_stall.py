@@ -106,6 +106,9 @@ def test_a_stalled_daemon_does_not_call_streams_that_kept_sending_silent(tmp_pat
                 state = query_state(port, buoy=BUOY)["status"]
                 tension = state["streams"]["tension"]
                 assert tension["data_age_s"] < TIMEOUT_S and not tension["data_stale"]
+                # its rate counts real time: the stall's backlog is no burst of 20 Hz x 1.6
+                # (was 32 Hz: listening time left the stall out of the 10-s window)
+                assert tension["rate_hz"] <= 22.0, tension["rate_hz"]
                 assert state["streams"]["imu"]["data_stale"]
             assert alerts.empty(), alerts.get()[1]
             assert [a["component"] for a in state["alerts"]["active"]
