@@ -49,6 +49,9 @@ class ListeningClock:
         self._thread = threading.Thread(target=self._run, name="listening-clock", daemon=True)
 
     def start(self) -> None:
+        """Start the beat; the time before it (the daemon's start-up) is listened, no stall."""
+        with self._lock:
+            self._last_beat = time.monotonic()
         self._thread.start()
 
     def close(self) -> None:

@@ -65,3 +65,18 @@ def test_the_intake_queue_knows_when_its_oldest_waiting_item_was_put():
     assert q.get_nowait() == "a"
     assert mid <= q.oldest_put() <= time.monotonic()
     assert q.get(timeout=1) == "b" and q.oldest_put() is None and q.qsize() == 0
+
+
+def test_the_time_before_the_beat_starts_is_listened():
+    """The daemon makes its clock, then restores its pipeline (seconds, from a large state)
+    and opens its session before the beat starts: that start-up is no stall (was: left out,
+    so a stream silent since before a restart was called younger by the start-up's length)."""
+    c = ListeningClock(beat_s=0.05, slack_s=0.3)
+    l0, m0 = c.now(), time.monotonic()
+    time.sleep(0.8)  # the start-up, before start()
+    c.start()
+    try:
+        time.sleep(0.2)
+        assert c.now() - l0 == pytest.approx(time.monotonic() - m0, abs=0.05)
+    finally:
+        c.close()
