@@ -106,6 +106,9 @@ class IntakeQueue(queue.SimpleQueue):
         self._put_times.append(time.monotonic())
         super().put(item, block, timeout)
 
+    def put_nowait(self, item: Any) -> None:  # SimpleQueue's own would not call put()
+        self.put(item, False)
+
     def get(self, block: bool = True, timeout: float | None = None) -> Any:
         item = super().get(block, timeout)
         self._put_times.popleft()

@@ -65,6 +65,10 @@ def test_the_intake_queue_knows_when_its_oldest_waiting_item_was_put():
     assert q.get_nowait() == "a"
     assert mid <= q.oldest_put() <= time.monotonic()
     assert q.get(timeout=1) == "b" and q.oldest_put() is None and q.qsize() == 0
+    # every way in and out keeps the times (SimpleQueue's C put_nowait skipped put(): a get
+    # then popped an empty deque, IndexError in the daemon's loop)
+    q.put_nowait("c")
+    assert q.oldest_put() is not None and q.get() == "c" and q.oldest_put() is None
 
 
 def test_the_time_before_the_beat_starts_is_listened():
