@@ -3,15 +3,20 @@
 Two faults, per stream, checked on every received block (before the pipeline sees it; the
 pipeline still decides what is accepted, so rejected data stays rejected):
 
-* **clock skew**: the block's newest sample time differs from the logger clock at arrival by
-  more than ``[health] clock_skew_max_s`` (a sensor clock a year ahead or behind, an unset RTC);
+* **clock skew**: the block's newest sample time lies more than ``[health] clock_skew_max_s``
+  outside the span in which the block is known to have existed, from its publication (the
+  publisher's clock) to its arrival (the logger clock): ahead of its arrival, the reference
+  of the pipeline's ``time_ahead`` (:mod:`monitor.time_ahead`; a replay's MCAP log_time),
+  or behind its publication (a message fetched from a publisher's cache arrives late by
+  design: not behind for that) (a sensor clock a year ahead or behind, an unset RTC);
 * **time restart**: the block's newest sample is older, by more than ``[health]
   time_restart_min_s``, than the newest sample time this stream already sent in this daemon
   life (a sensor or publisher restarted with an older clock). Only this life is compared: a
   re-delivery after a daemon restart (samples at or before the checkpoint) is not a restart.
   The fault holds until the stream catches up with its previous newest time. A block time
-  ``time_ahead`` of its arrival (:mod:`monitor.time_ahead`: the pipeline rejects it) is not
-  taken as the newest: the stream going on at the right time after it is no restart.
+  ``time_ahead`` of its arrival (:func:`monitor.time_ahead.is_ahead` of the block's receive
+  time, as the pipeline rejects it) is not taken as the newest: the stream going on at the
+  right time after it is no restart.
 
 Both are counted, give a log line (the caller rate-limits it) and show as status fields,
 from which :mod:`monitor.alerts.live` raises the ``clock_skew`` and ``time_restart`` alerts.
@@ -54,11 +59,17 @@ class ClockFaults:
         self.max_ahead_ns = int(round(max_ahead_s * NS))
         self.streams: dict[str, StreamClock] = {}
 
-    def observe(self, sensor: str, t_last_ns: int, recv_ns: int) -> list[str]:
-        """Check one block; returns a message per fault found (for the caller to log)."""
+    def observe(self, sensor: str, t_last_ns: int, recv_ns: int,
+                sent_ns: int | None = None) -> list[str]:
+        """Check one block of newest sample time ``t_last_ns``, received at ``recv_ns`` (the
+        block's ``recv_ns``: what the pipeline judges ``time_ahead`` against) and published
+        at ``sent_ns`` (None: unknown); returns a message per fault found (for the caller to
+        log)."""
         s = self.streams.setdefault(sensor, StreamClock())
         out = []
-        s.skew_s = (t_last_ns - recv_ns) / NS
+        # the distance of the sample time from [publication, arrival] (module docstring)
+        first_ns = recv_ns if sent_ns is None else min(sent_ns, recv_ns)
+        s.skew_s = (t_last_ns - min(max(t_last_ns, first_ns), recv_ns)) / NS
         if abs(s.skew_s) > self.skew_max_s:
             s.skewed_blocks += 1
             out.append(f"stream {sensor}: sensor time is {abs(s.skew_s):.6g} s "

@@ -29,6 +29,9 @@ from monitor import zenoh_io
 log = logging.getLogger("buoymon.record")
 
 _FETCH_TIMEOUT_S = 5.0  # longest wait for a sensor publisher's cache
+# publishers appearing within this of each other have their caches recorded together, in
+# time order across streams (liveliness tokens arrive one by one)
+_SETTLE_S = 0.5
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
@@ -56,10 +59,14 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
     """Record until ``stop`` is set; returns the number of messages written.
 
     Sensor messages are taken by their publishers' sequence numbers
-    (:class:`monitor.sequence.SequenceTracker`, in memory): when a sensor publisher appears
-    (at start too) its whole cache is recorded, and a gap in the numbers is filled from the
-    cache first, so a recorder restarted within the cache window loses nothing (what it
-    recorded before is recorded again; a replay rejects the duplicate samples)."""
+    (:class:`monitor.sequence.SequenceTracker`, in memory): when sensor publishers appear
+    (at start too) their whole caches are recorded, and a gap in the numbers is filled from
+    the cache first, so a recorder restarted within the cache window loses nothing (what it
+    recorded before is recorded again; a replay rejects the duplicate samples). The caches
+    of publishers appearing within ``_SETTLE_S`` of each other are recorded together in
+    sensor-time order, the messages arriving meanwhile after them: one stream's hour after
+    another's was out of order by up to the cache's length, beyond a replay's reorder
+    window (``late`` messages; as the daemon's catch-up, :mod:`monitor.daemon`)."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     seqs = SequenceTracker()
     with zenoh_io.open_session(zc) as session:
@@ -68,53 +75,92 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
         # tells the shore (and tests) that this buoy's traffic is being recorded
         token = session.liveliness().declare_token(recorder_token_key(buoy_id))
 
+        appeared: dict[tuple[str, str], None] = {}  # publishers whose caches are due
+        held: list[tuple] = []  # what arrived while they were due
+        due = 0.0  # monotonic time: _SETTLE_S after the last of them appeared
+
         def take(item: tuple) -> None:
+            nonlocal due
             if item[0] == "publisher":
-                _fill(session, recorder, codec, seqs, item[1], item[2], None)
+                appeared[(item[1], item[2])] = None
+                due = time.monotonic() + _SETTLE_S
+                return
+            if appeared:
+                held.append(item)
                 return
             _, key, payload, recv_ns, origin = item
             if origin is not None:
                 _, sensor = parse_sensor_topic(key)
                 if seqs.gap(sensor, origin.source, origin.sn) is not None:
-                    _fill(session, recorder, codec, seqs, key, origin.source, origin.sn)
+                    _fill(session, recorder, codec, seqs, [(key, origin.source)], origin.sn)
                 if seqs.observe(sensor, origin.source, origin.sn).redelivered:
                     return
             _write(recorder, codec, key, payload, recv_ns)
 
+        def fill_appeared() -> None:
+            _fill(session, recorder, codec, seqs, list(appeared), None)
+            appeared.clear()
+            for item in held:
+                take(item)
+            held.clear()
+
         try:
             while not stop.is_set():
                 try:
-                    item = q.get(timeout=0.2)
+                    item = q.get(timeout=max(0.0, due - time.monotonic()) if appeared else 0.2)
                 except queue.Empty:
+                    item = None
+                if item is not None:
+                    take(item)
+                if appeared and time.monotonic() >= due:
+                    fill_appeared()
+                if item is None:
                     recorder.maybe_flush()
-                    continue
-                take(item)
         finally:
             token.undeclare()
             watch.undeclare()
             sub.undeclare()
             while not q.empty():
                 take(q.get_nowait())
+            if appeared:
+                fill_appeared()
             recorder.close()
     return recorder.messages
 
 
 def _fill(session: Any, recorder: McapRecorder, codec: zenoh_io.BlockCodec,
-          seqs: SequenceTracker, key: str, source: str, before_sn: int | None) -> None:
-    """Record what publisher ``source`` of ``key`` still caches after the last message taken
-    from it (and before ``before_sn``, if given)."""
-    _, sensor = parse_sensor_topic(key)
-    first = seqs.gap(sensor, source, None)[0]
-    last = None if before_sn is None else before_sn - 1
+          seqs: SequenceTracker, publishers: list[tuple[str, str]], before_sn: int | None
+          ) -> None:
+    """Record what the ``publishers`` (key, source) still cache after the last message taken
+    from each (and before ``before_sn``, if given), in sensor-time order across them (each
+    publisher's own order kept)."""
+    fetched = []
+    for key, source in publishers:
+        _, sensor = parse_sensor_topic(key)
+        first = seqs.gap(sensor, source, None)[0]
+        last = None if before_sn is None else before_sn - 1
+        try:
+            replies = zenoh_io.fetch_cached(session, key, source, (first, last),
+                                            _FETCH_TIMEOUT_S)
+        except zenoh_io.zenoh.ZError as exc:
+            log.warning("could not ask a sensor publisher's cache",
+                        extra={"fields": {"key": key, "error": repr(exc)}})
+            continue
+        fetched.extend((_first_time(codec, key, payload), key, payload)
+                       for payload, origin in replies
+                       if not seqs.observe(sensor, origin.source, origin.sn).redelivered)
+    fetched.sort(key=lambda f: f[0])  # stable
+    for _, key, payload in fetched:
+        _write(recorder, codec, key, payload, time.time_ns())
+
+
+def _first_time(codec: zenoh_io.BlockCodec, key: str, payload: bytes) -> int:
+    """A sensor message's first sample time, the time a replay orders it by (0 if it does
+    not decode: :func:`_write` logs it)."""
     try:
-        replies = zenoh_io.fetch_cached(session, key, source, (first, last), _FETCH_TIMEOUT_S)
-    except zenoh_io.zenoh.ZError as exc:
-        log.warning("could not ask a sensor publisher's cache",
-                    extra={"fields": {"key": key, "error": repr(exc)}})
-        return
-    for payload, origin in replies:
-        if not seqs.observe(sensor, origin.source, origin.sn).redelivered:
-            _write(recorder, codec, key, payload, time.time_ns())
+        return codec.decode(key, payload, 0).t_first_ns
+    except ValueError:
+        return 0
 
 
 def _document_time(payload: bytes, recv_ns: int) -> int:

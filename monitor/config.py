@@ -228,6 +228,8 @@ class OrderingConfig(msgspec.Struct, frozen=True):
     replay_horizon_s: Seconds = 3600.0  # replay: same, sized for coalesced log blocks
     max_ahead_s: Seconds = DEFAULT_MAX_AHEAD_S  # a sample time further ahead of its receive time is
     #                               time_ahead (monitor.time_ahead)
+    copy_span_s: Seconds = 3600.0  # a late exact copy of a sample received within this much
+    #                               sensor time is a duplicate (monitor.late_copies)
 
 
 @dataclass(frozen=True)

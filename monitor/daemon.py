@@ -36,6 +36,8 @@ from monitor.checkpoint import CheckpointStore, PeriodicCheckpointer
 from monitor.clock_faults import ClockFaults
 from monitor.daemon_config import DaemonConfig
 from monitor.events import Sink, StepResult
+from monitor.forecast import ForecastExpired
+from monitor.listening import IntakeQueue, ListeningClock
 from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
@@ -135,20 +137,21 @@ _RATE_WINDOW_S = 10.0  # the status's per-stream rate: samples received over thi
 @dataclass
 class StreamHealth:
     """Wall-clock view of one sensor stream: data age, rate and liveliness (not in the
-    checkpoint)."""
+    checkpoint). The age is in listening time (:mod:`monitor.listening`) of delivery; the
+    rate in monotonic time (a stall's backlog, delivered after it, is no faster stream)."""
 
-    last_arrival_mono: float | None = None
+    last_arrival: float | None = None
     alive: bool | None = None  # None: no liveliness token seen either way
-    arrivals: "deque[tuple[float, int]]" = field(default_factory=deque)  # (mono, samples)
+    arrivals: "deque[tuple[float, int]]" = field(default_factory=deque)  # (monotonic, samples)
 
-    def arrived(self, now_mono: float, n_samples: int) -> None:
-        self.last_arrival_mono = now_mono
-        self.arrivals.append((now_mono, n_samples))
-        while self.arrivals[0][0] < now_mono - _RATE_WINDOW_S:
+    def arrived(self, at: float, at_mono: float, n_samples: int) -> None:
+        self.last_arrival = at if self.last_arrival is None else max(at, self.last_arrival)
+        self.arrivals.append((at_mono, n_samples))
+        while self.arrivals[0][0] < at_mono - _RATE_WINDOW_S:
             self.arrivals.popleft()
 
-    def to_dict(self, now_mono: float, timeout_s: float) -> dict[str, Any]:
-        age = None if self.last_arrival_mono is None else now_mono - self.last_arrival_mono
+    def to_dict(self, now: float, now_mono: float, timeout_s: float) -> dict[str, Any]:
+        age = None if self.last_arrival is None else max(0.0, now - self.last_arrival)
         recent = sum(n for t, n in self.arrivals if t >= now_mono - _RATE_WINDOW_S)
         return {"data_age_s": age, "data_age_timeout_s": timeout_s,
                 "data_stale": age is None or age > timeout_s, "alive": self.alive,
@@ -211,25 +214,29 @@ class Daemon:
         self.codec = codec
         self.notifier = notifier or SdNotifier()
         self._stop = threading.Event()
-        self._q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+        self._q = IntakeQueue()
         self._store = CheckpointStore(config.state.path)
         restored = self._store.load()
         saved = restored.state if restored is not None else {}
         self.counters: dict[str, int] = {"messages": 0, "undecodable": 0, "wrong_buoy": 0,
                                          "refused": 0, "status_published": 0, "queries": 0,
-                                         "forecasts": 0, "forecasts_refused": 0}
+                                         "forecasts": 0, "forecasts_refused": 0,
+                                         "forecasts_expired": 0}
         self.counters.update(saved.get("daemon", {}).get("counters", {}))
         self.streams: dict[str, StreamHealth] = {}
+        # wall-clock ages (data, accepted samples, fatigue feed) in listening time: a stall of
+        # the whole process (SIGSTOP, a GC pause) is no silence of the sensors
+        self.listening = ListeningClock()
         # ages across a restart: the last arrivals and fatigue feed, saved as wall-clock times,
-        # in this life's monotonic frame (a stream silent since before the crash stays late)
+        # in this life's frame (a stream silent since before the crash stays late)
         saved_daemon = saved.get("daemon", {})
-        now_mono, now_wall = time.monotonic(), time.time_ns()
+        now_listen, now_wall = self.listening.now(), time.time_ns()
 
-        def mono_of(wall_ns: int) -> float:
-            return now_mono - max(0, now_wall - int(wall_ns)) / 1e9
+        def listen_of(wall_ns: int) -> float:
+            return now_listen - max(0, now_wall - int(wall_ns)) / 1e9
 
         for name, wall_ns in saved_daemon.get("arrivals", {}).items():
-            self.streams[name] = StreamHealth(last_arrival_mono=mono_of(wall_ns))
+            self.streams[name] = StreamHealth(last_arrival=listen_of(wall_ns))
         self.sequences = SequenceTracker(saved.get("daemon", {}).get("sequences"))
         # per (stream, publisher): the last sequence number written to the recording, and the
         # one the recording held at its last flush (kept in the checkpoint): a redelivered
@@ -255,7 +262,7 @@ class Daemon:
         # the pipeline's newest load time, and when it last moved
         fed = saved_daemon.get("fatigue_fed")
         self._load_t_ns: Any = fed[0] if fed else None
-        self._load_mono = mono_of(fed[1]) if fed else time.monotonic()
+        self._load_listen = listen_of(fed[1]) if fed else now_listen
         # stream -> (accepted, rejected, when accepted last moved)
         self._accepted: dict[str, tuple[int, int, float]] = {}
         self.metrics = None
@@ -293,6 +300,7 @@ class Daemon:
         """Serve until :meth:`stop`; always checkpoints and closes on the way out."""
         zc = self.config.zenoh
         self.session = zenoh_io.open_session(zc)
+        self.listening.start()
         declared: list[Any] = []
         try:
             declared.append(zenoh_io.declare_liveliness_watch(
@@ -354,6 +362,7 @@ class Daemon:
                 self.metrics.close()
             self._store.close()
             self.session.close()
+            self.listening.close()
 
     def _serve(self) -> None:
         zc = self.config.zenoh
@@ -450,7 +459,10 @@ class Daemon:
         if origin is not None and self.sequences.gap(block.sensor, origin.source,
                                                      origin.sn) is not None:
             self._catch_up()  # takes this message too, as long as its publisher's cache has it
-        self._take(key, payload, block, recv_ns, origin)
+        # timed at delivery (the Zenoh callback), not now: a backlog worked off late is no
+        # older than when it came (status() judges ages as of the oldest still waiting)
+        self._take(key, payload, block, recv_ns, origin,
+                   time.monotonic() - max(0, time.time_ns() - recv_ns) / 1e9)
 
     def _decode(self, key: str, payload: bytes, recv_ns: int) -> SampleBlock | None:
         block = zenoh_io.decode_counted(self.codec, key, payload, recv_ns, self.counters, log,
@@ -527,8 +539,10 @@ class Daemon:
             time.sleep(0.05)
 
     def _take(self, key: str, payload: bytes, block: SampleBlock, recv_ns: int,
-              origin: zenoh_io.Origin | None) -> bool:
-        """Record and process one decoded message; False if it was a redelivery (skipped)."""
+              origin: zenoh_io.Origin | None, delivered_mono: float | None = None) -> bool:
+        """Record and process one decoded message; False if it was a redelivery (skipped).
+        ``delivered_mono``: when it arrived (None: now, as a catch-up's messages, fetched
+        all at once from the caches and taken one by one)."""
         verdict = (self.sequences.observe(block.sensor, origin.source, origin.sn)
                    if origin is not None else None)
         if verdict is not None and verdict.missed:
@@ -541,13 +555,15 @@ class Daemon:
         if redelivered:
             return False  # already in the restored state (taken before the checkpoint)
         self.counters["messages"] += 1
-        self._stream(block.sensor).arrived(time.monotonic(), len(block))
+        at_mono = time.monotonic() if delivered_mono is None else delivered_mono
+        self._stream(block.sensor).arrived(self.listening.at(at_mono), at_mono, len(block))
         if len(block):
-            # skew against the time it was published: a message from a publisher's cache
-            # arrives late by design
-            sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else recv_ns
+            # ahead of the block's receive time, as the pipeline judges time_ahead; behind its
+            # publication (a message from a publisher's cache arrives late by design)
+            sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else None
             # the newest sample (a block need not be sorted): a corrupt time inside it shows
-            for msg in self.clocks.observe(block.sensor, int(block.t_ns.max()), sent_ns):
+            for msg in self.clocks.observe(block.sensor, int(block.t_ns.max()), block.recv_ns,
+                                           sent_ns):
                 self._faults.warning(f"clock {block.sensor}", "sensor clock fault: " + msg,
                                      sensor=block.sensor, **self.clocks.fields(block.sensor))
         try:
@@ -585,7 +601,8 @@ class Daemon:
 
     def _on_forecast(self, key: str, payload: bytes, recv_ns: int) -> None:
         """A sea-state forecast: recorded as received, handed to the pipeline (applied at
-        sensor time, :mod:`monitor.forecast`); a malformed one is counted and logged."""
+        sensor time, :mod:`monitor.forecast`); a malformed one is counted and logged, and one
+        with no step left to project also as ``forecasts_expired``."""
         add = getattr(self.pipeline, "add_forecast", None)
         try:
             if add is None:
@@ -593,7 +610,11 @@ class Daemon:
             due_ns = add(json.loads(payload))
         except (ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
             self.counters["forecasts_refused"] += 1
-            self._faults.warning("forecast", "forecast refused", key=key, error=str(exc)[:300])
+            expired = isinstance(exc, ForecastExpired)
+            if expired:  # logged apart: not hidden behind the last malformed one's minute
+                self.counters["forecasts_expired"] += 1
+            self._faults.warning("forecast expired" if expired else "forecast",
+                                 "forecast refused", key=key, error=str(exc)[:300])
             return
         self.counters["forecasts"] += 1
         self._dirty_status = True
@@ -633,6 +654,12 @@ class Daemon:
         alerts (sensor-time and live rules) and the health verdict of the live rules.
         """
         now = time.monotonic()
+        # the ages (data, accepted samples, fatigue feed) in listening time, as of the oldest
+        # message still waiting: a backlog not yet looked at is no silence
+        listen = self.listening.now()
+        waiting = self._q.oldest_put()
+        if waiting is not None:
+            listen = min(listen, self.listening.at(waiting))
         wall_ns = time.time_ns()
         doc = dict(self.pipeline.status())
         ages = self.config.health.data_age_timeout_s
@@ -641,7 +668,7 @@ class Daemon:
         for name in sorted(set(streams) | set(self.streams) | set(required)):
             health = self.streams.get(name, StreamHealth())
             s = streams.setdefault(name, {})
-            s.update(health.to_dict(now, ages[name]))
+            s.update(health.to_dict(listen, now, ages[name]))
             s.update(self.clocks.fields(name))
             s.update(self.sequences.fields(name))
             # wall-clock age of the last accepted sample: blocks that keep arriving but are
@@ -649,12 +676,12 @@ class Daemon:
             accepted, rejected = s.get("accepted", 0), sum((s.get("rejected") or {}).values())
             seen = self._accepted.get(name)
             if seen is None or seen[0] != accepted:
-                seen = self._accepted[name] = (accepted, rejected, now)
-            s["accepted_age_s"] = now - seen[2]
+                seen = self._accepted[name] = (accepted, rejected, listen)
+            s["accepted_age_s"] = listen - seen[2]
             s["rejected_since_accepted"] = rejected - seen[1]
         load_t = doc.get("load_t_ns")
         if load_t is not None and load_t != self._load_t_ns:
-            self._load_t_ns, self._load_mono = load_t, now
+            self._load_t_ns, self._load_listen = load_t, listen
         doc.update({
             "buoy_id": self.buoy_id,
             "wall_time_ns": wall_ns,
@@ -662,7 +689,7 @@ class Daemon:
             "counters": dict(self.counters),
             "uptime_s": now - self._started_mono,
             "queue_depth": self._q.qsize(),  # received but not yet processed
-            "fatigue_feed_age_s": now - self._load_mono,
+            "fatigue_feed_age_s": listen - self._load_listen,
             "checkpoint": self._ckpt.to_dict(wall_ns),
         })
         for ext in self._extensions:
@@ -687,18 +714,18 @@ class Daemon:
         """The pipeline's state, the daemon's counters and live-rule state, the wall-clock
         times of the last arrivals and fatigue feed, and the last status (shown by ``buoymon
         status`` while the daemon is stopped)."""
-        now_mono, now_wall = time.monotonic(), time.time_ns()
+        now_listen, now_wall = self.listening.now(), time.time_ns()
 
-        def wall_of(mono: float) -> int:
-            return now_wall - int((now_mono - mono) * 1e9)
+        def wall_of(listen: float) -> int:  # the wall time as old, in listening time
+            return now_wall - int((now_listen - listen) * 1e9)
 
         return {
             "pipeline": self.pipeline.state(),
             "daemon": {"counters": dict(self.counters), "live": self.live.state(),
-                       "arrivals": {name: wall_of(h.last_arrival_mono)
+                       "arrivals": {name: wall_of(h.last_arrival)
                                     for name, h in self.streams.items()
-                                    if h.last_arrival_mono is not None},
-                       "fatigue_fed": [self._load_t_ns, wall_of(self._load_mono)],
+                                    if h.last_arrival is not None},
+                       "fatigue_fed": [self._load_t_ns, wall_of(self._load_listen)],
                        "sequences": self.sequences.state(),
                        "recorded": {s: dict(d) for s, d in self._flushed.items()},
                        "last_status": self._last_doc},

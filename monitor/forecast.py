@@ -95,6 +95,25 @@ def parse_forecast(doc: Any, not_before_ns: int | None = None) -> WaveForecast:
     return WaveForecast(issued, t, hs, tp, not_before_ns)
 
 
+class ForecastExpired(ValueError):
+    """A forecast with no step left to project when it would be applied (every step ends
+    before its issue time, or it arrived after its last step): refused and counted, since
+    applying it would project 0 steps and clear a ``forecast_damage`` alert on nothing."""
+
+
+def refuse_expired(fc: WaveForecast, tick_ns: int) -> None:
+    """Raise :class:`ForecastExpired` unless a step of ``fc`` reaches past the first tick end
+    it can be applied at (ticks end on multiples of ``tick_ns``): the test of
+    :meth:`ForecastAlerts.apply`, at the earliest tick that may apply it."""
+    first_end_ns = -(-fc.due_ns // tick_ns) * tick_ns
+    t_end = fc.t_s + 3600.0 * step_hours(fc.t_s)
+    if not t_end[-1] > first_end_ns / 1e9:
+        raise ForecastExpired(
+            f"forecast: nothing to project: its last step ends {iso(float(t_end[-1]))}, not "
+            f"after the first tick it can be applied at ({iso(first_end_ns / 1e9)}; issued "
+            f"{iso(fc.issued_s)})")
+
+
 def iso(t_s: float | None) -> str | None:
     if t_s is None or not math.isfinite(t_s):
         return None

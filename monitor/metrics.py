@@ -129,7 +129,9 @@ def _component_metrics(buoy: str, comps: Mapping[str, Any]) -> Iterator[Metric]:
 def _daemon_metrics(buoy: str, doc: Mapping[str, Any]) -> Iterator[Metric]:
     for key, c_name in (("messages", "messages"), ("undecodable", "undecodable_messages"),
                         ("refused", "refused_blocks"), ("wrong_buoy", "wrong_buoy_messages"),
-                        ("queries", "queries")):
+                        ("queries", "queries"), ("forecasts", "forecasts"),
+                        ("forecasts_refused", "forecasts_refused"),
+                        ("forecasts_expired", "forecasts_expired")):
         c = CounterMetricFamily(f"buoymon_{c_name}", f"Daemon counter {key!r}", labels=["buoy"])
         c.add_metric([buoy], _f((doc.get("counters") or {}).get(key, 0)))
         yield c

@@ -40,6 +40,12 @@ SENSOR_ORDER: tuple[str, ...] = tuple(SENSOR_FIELDS)
 _NEVER = np.iinfo(np.int64).min
 
 
+def same_values(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per column of two ``(n_fields, n)`` arrays: every field equal, NaN matching NaN (a
+    re-sent missing value is still a copy; NaN != NaN)."""
+    return ((a == b) | (np.isnan(a) & np.isnan(b))).all(axis=0)
+
+
 class Slab(dict):
     """``{sensor: (t_ns int64 (n,), values float64 (n_fields, n))}``, samples sorted by time;
     ``copies``: per sensor, the exact copies dropped while sorting."""
@@ -144,8 +150,7 @@ class ReorderBuffer:
                 t, values = _joined(parts)
                 order = np.argsort(t, kind="stable")
                 t, values = t[order], values[:, order]
-                copy = (t[1:] == t[:-1]) & ((values[:, 1:] == values[:, :-1]) | (
-                    np.isnan(values[:, 1:]) & np.isnan(values[:, :-1]))).all(axis=0)
+                copy = (t[1:] == t[:-1]) & same_values(values[:, 1:], values[:, :-1])
                 if copy.any():
                     keep = np.r_[True, ~copy]
                     t, values = t[keep], values[:, keep]

@@ -42,7 +42,8 @@ from monitor.components import Component, TickRun, build_cable, endurance_stress
 from monitor.config import Config, ConfigError
 from monitor.damage_split import DamageSplit
 from monitor.events import ComponentObs, ComponentStep, Observation, Sink, StepResult, StreamObs
-from monitor.forecast import ForecastAlerts, parse_forecast
+from monitor.forecast import ForecastAlerts, parse_forecast, refuse_expired
+from monitor.late_copies import LateCopies
 from monitor.load_source import MEASURED, SOURCE_NAMES, LoadSelector, build_estimator
 from monitor.motion_rate import rate_problems
 from monitor.ordering import SENSOR_ORDER, ReorderBuffer
@@ -505,6 +506,9 @@ class Pipeline:
                                      gate_all, st.get("reorder"))
         # sensor time processed so far by watermark (not by flush): older samples are late
         self.processed_ns = int(st.get("processed_ns", _NEVER))
+        # a late exact copy of a recent received sample is a duplicate, not time_backwards
+        # (stream stage, as the validators)
+        self.late_copies = LateCopies(config.ordering.copy_span_s, st.get("late_copies"))
         self._max_ahead_ns = int(round(config.ordering.max_ahead_s * 1e9))
         self.alerts = build_alert_engine(
             config, self.buoy_id,
@@ -615,10 +619,11 @@ class Pipeline:
         """A sea-state forecast (JSON payload, :mod:`monitor.forecast`), applied at the first
         tick at or after its issue time and ``not_before_ns`` (default: the first tick not
         yet evaluated); returns that due time. ValueError if it is malformed or forecasting
-        is off."""
+        is off; ForecastExpired (a ValueError) if no step would be left to project."""
         if self.forecasts is None:
             raise ValueError("forecasting is off ([forecast] enabled = false)")
         fc = parse_forecast(doc, self.next_tick_ns if not_before_ns is None else not_before_ns)
+        refuse_expired(fc, self.tick_ns)
         self.forecasts.add(fc)
         return fc.due_ns
 
@@ -673,8 +678,11 @@ class Pipeline:
             validator = self.validators[s]
             before = _StreamSlab.before(validator)
             codes = validator.check(t, values, max(self.processed_ns, self.taken_upto.get(s, _NEVER)))
+            if codes.any():
+                self.late_copies.judge(s, t, values, codes, validator.rejected)
             self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
             streams[s] = info = _StreamSlab(t, values, codes, before)
+            self.late_copies.received(s, t, values, codes)
             n_acc += info.acc_t.shape[0]
             for reason, n in before[1].items():  # the validator counted them
                 rejected[reason] += validator.rejected[reason] - n
@@ -1257,6 +1265,7 @@ class Pipeline:
             "stats": self.stats.state(),
             "taken_upto": dict(self.taken_upto),
             "processed_ns": self.processed_ns,
+            "late_copies": self.late_copies.state(),
             "next_tick_ns": self.next_tick_ns,
             "tick_counts": {s: list(c) for s, c in self.tick_counts.items()},
             "open_tick": [a.tolist() for a in self.open_tick],

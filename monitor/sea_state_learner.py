@@ -334,9 +334,16 @@ class _WindowSpectra:
         out = self.done.pop(k, None)
         if out is None and self._open.index == k:
             out = self._open
+        self.drop_before(k)
+        return None if out is None else out.summed(self.work)
+
+    def drop_before(self, k: int) -> None:
+        """Forget the finished windows before window ``k`` (closed, or never to be): one
+        taken from the open copy and handed over again when the next window's samples came
+        would otherwise stay until a later :meth:`take`, in the state of some block splits
+        and not others."""
         for old in [i for i in self.done if i < k]:
             del self.done[old]
-        return None if out is None else out.summed(self.work)
 
     def state(self) -> dict[str, Any]:
         return {"current": self.current.state(),
@@ -442,12 +449,21 @@ class SeaStateLearner:
         self.stress.receive(stress)
         self.heave.receive(heave)
         self.accel.receive(accel)
+        self._drop_closed()
+
+    def _drop_closed(self) -> None:
+        """Keep only the finished windows still to be closed (from the open learning window
+        on): what is kept is then the same for any block split (:meth:`_WindowSpectra.drop_before`)."""
+        if self.window_end is not None:
+            for spectra in (self.stress, self.heave, self.accel):
+                spectra.drop_before(self.window_end // self.window_ns)
 
     def tick(self, end_ns: int, committed: Mapping[str, float], n_samples: int) -> None:
         """An alert tick ended at ``end_ns`` with these committed damages."""
         if self.window_end is None:  # the first tick seen: a window starts here
             self.window_end = (end_ns // self.window_ns + 1) * self.window_ns
             self.start_damage = dict(committed)
+            self._drop_closed()  # windows before it are never closed
             return
         if n_samples:
             self.covered_s += self.tick_s
@@ -456,6 +472,7 @@ class SeaStateLearner:
             self.window_end = (end_ns // self.window_ns + 1) * self.window_ns
             self.start_damage = dict(committed)
             self.covered_s = 0.0
+            self._drop_closed()  # windows skipped by a gap in the ticks too
 
     def ticks(self, ends: np.ndarray, committed: Callable[[int], Mapping[str, float]],
               n_samples: np.ndarray, a: int, b: int) -> None:

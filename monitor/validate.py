@@ -42,7 +42,9 @@ A genuine step in the signal is accepted once ``max_rate_per_s * elapsed`` cover
 Duplicates are removed and counted in the pipeline only, live and in replay alike (the log
 reader delivers every copy it reads): the ordering (:mod:`monitor.ordering`, stable) drops an
 exact copy it finds right behind its original, this rule rejects any other sample at a time
-already seen; both land in the one ``duplicate`` count. A copy is no measurement: it is not
+already seen, and :mod:`monitor.late_copies` turns a ``time_backwards`` sample that is an exact
+copy of a recent accepted one into a ``duplicate`` (a re-sent cache arriving behind the
+processed time); all land in the one ``duplicate`` count. A copy is no measurement: it is not
 among the samples a tick received or rejected (the ``rejected_rate`` alert rule), so
 re-deliveries never read as a glitching sensor. (A different value at a time already seen is
 a ``duplicate`` too, and likewise outside the rate.)

@@ -157,7 +157,8 @@ def replay_buoy(job: BuoyJob) -> dict[str, Any]:
     from replay.runner import read_summary, run_blocks
 
     config = parse_config(job.config_raw, source=job.config_source)
-    reader = LogReader(list(job.files), read_ahead=job.read_ahead)
+    reader = LogReader(list(job.files), read_ahead=job.read_ahead,
+                       max_ahead_s=config.ordering.max_ahead_s)
     ignored: dict[str, int] = {}
     pipeline, _ = run_blocks(config, _only_buoy(reader, job.buoy_id, ignored))
     report = build_report(pipeline.config, pipeline.report(), list(job.files),

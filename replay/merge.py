@@ -81,6 +81,14 @@ def _gather_index(start: np.ndarray, n: np.ndarray) -> np.ndarray:
     return np.repeat(start - first, n) + np.arange(total)
 
 
+def order_times(pub: np.ndarray, log: np.ndarray, max_ahead_ns: int) -> np.ndarray:
+    """The times messages are ordered by: the publish time, or the log (receive) time of a
+    message published more than ``max_ahead_ns`` after it (:func:`monitor.time_ahead.is_ahead`,
+    a log time 0 being unknown; the ordering guarantees in :mod:`replay.reader`)."""
+    ahead = (pub - log > max_ahead_ns) & (log > 0)
+    return np.where(ahead, log, pub) if ahead.any() else pub
+
+
 _COLS = ("stream", "pub", "log", "start", "n", "seq")
 # Longest stretch of sensor time (by publish time) one coalesced block covers. The replay's
 # ordering passes by a stream lagging the newest data by more than [ordering]
@@ -96,9 +104,10 @@ class StreamMerge:
     """Pending messages of every sensor topic across files (a :class:`replay.salvage.RecordSink`)
     and their release in order (:meth:`release`)."""
 
-    def __init__(self, window_ns: int, coalesce: bool) -> None:
+    def __init__(self, window_ns: int, coalesce: bool, max_ahead_ns: int) -> None:
         self.window_ns = window_ns
         self.coalesce = coalesce
+        self.max_ahead_ns = max_ahead_ns
         self._streams: list[_Stream] = []
         self._stream_of: dict[str, int] = {}
         self._pending: list[dict[str, np.ndarray]] = []
@@ -116,6 +125,7 @@ class StreamMerge:
         ch, log, pub, doff, dlen = d.scan[:5]
         if ch.shape[0] == 0:
             return 0
+        pub = order_times(pub, log, self.max_ahead_ns)
         ctx.last_log = int(log[-1])
         seq = self._seq + np.arange(ch.shape[0], dtype=np.int64)
         self._seq += ch.shape[0]

@@ -38,7 +38,11 @@ Nothing raises on a damaged file; a file where nothing could be read has ``error
 Ordering guarantees (deterministic for the same files in the same order):
 
 1. Messages of all files pass through one reorder buffer, keyed by MCAP ``publish_time``
-   (= sensor time of the block's first sample). A message is released once a message with a
+   (= sensor time of the block's first sample), or by ``log_time`` (the receive time) for
+   a message whose publish time is more than ``max_ahead_s`` after it: a corrupt or wrong
+   sensor clock (``time_ahead``, :mod:`monitor.time_ahead`) is read where it was received,
+   not after everything (a re-published recording ended on a clock skew, and the reorder
+   window let everything after it through at once). A message is released once a message with a
    publish time more than ``reorder_window_s`` later has been read (at the end, all are).
 2. Released messages are delivered sorted by ``(publish_time, topic, read order)``; so
    messages that are out of order by less than the window are delivered in sensor-time order.
@@ -64,6 +68,7 @@ from os import PathLike
 from typing import Iterator, Sequence
 
 from monitor.blocks import SampleBlock
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S
 from replay.chunks import read_ahead_pays
 from replay.log_files import expand_paths
 from replay.merge import StreamMerge
@@ -77,6 +82,9 @@ class LogReader:
         paths: files or directories (see :func:`replay.log_files.expand_paths`), read in the given order.
         coalesce: concatenate messages per topic and release (see module doc) for speed.
         reorder_window_s: sensor-time horizon within which out-of-order messages are sorted.
+        max_ahead_s: a message whose publish time is more than this after its log time is
+            ordered by its log time (``[ordering] max_ahead_s``: the pipeline rejects its
+            samples that far ahead).
         read_ahead: inflate the next chunk in a worker thread while the caller processes the
             blocks of the current one (same results; uses a second core). None (default):
             only when the process may use more than one CPU
@@ -86,7 +94,8 @@ class LogReader:
     """
 
     def __init__(self, paths: Sequence[str | PathLike] | str | PathLike, *, coalesce: bool = True,
-                 reorder_window_s: float = 60.0, read_ahead: bool | None = None):
+                 reorder_window_s: float = 60.0, read_ahead: bool | None = None,
+                 max_ahead_s: float = DEFAULT_MAX_AHEAD_S):
         if isinstance(paths, (str, PathLike)):
             paths = [paths]
         if not reorder_window_s >= 0:
@@ -96,7 +105,7 @@ class LogReader:
         self.read_ahead = read_ahead_pays() if read_ahead is None else read_ahead
         self.window_ns = int(round(reorder_window_s * 1e9))
         self.stats: list[FileStats] = []
-        self._merge = StreamMerge(self.window_ns, coalesce)
+        self._merge = StreamMerge(self.window_ns, coalesce, int(round(max_ahead_s * 1e9)))
         self._files = FileSalvage(self._merge, self.read_ahead)
 
     @property

@@ -25,7 +25,7 @@ from monitor.blocks import SampleBlock
 from monitor.config import Config, config_with
 from monitor.events import Sink
 from monitor.pipeline import Pipeline
-from monitor.time_ahead import pace_ns
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S, pace_ns
 from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
 from replay.stages import ingest_ahead
@@ -375,14 +375,17 @@ def use_child(files: Sequence[Path], speed: float | None = None,
     return reason is None
 
 
-def replay_reader(files: Sequence[Path], speed: float | None, child: bool) -> Any:
+def replay_reader(files: Sequence[Path], speed: float | None, child: bool,
+                  max_ahead_s: float = DEFAULT_MAX_AHEAD_S) -> Any:
     """The reader of a replay: coalesced blocks unless paced (which keeps the recorded 1-s
     blocks); with a child process, reading on its one thread (a read-ahead thread there
     waits for the GIL: bench/bench_threads.py), else ahead by the reader's rule
-    (replay.chunks.read_ahead_pays: only with a CPU to spare)."""
+    (replay.chunks.read_ahead_pays: only with a CPU to spare); a message more than
+    ``max_ahead_s`` ahead of its log time ordered by its log time (``[ordering]``)."""
     from replay.reader import LogReader
 
-    return LogReader(files, coalesce=speed is None, read_ahead=False if child else None)
+    return LogReader(files, coalesce=speed is None, read_ahead=False if child else None,
+                     max_ahead_s=max_ahead_s)
 
 
 def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str | Path | None = None,
@@ -420,7 +423,7 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
         child = use_child(files, speed, two_processes)
         # paced replay keeps the recorded 1-s blocks; as fast as possible, coalesced blocks
-        source = replay_reader(files, speed, child)
+        source = replay_reader(files, speed, child, config.ordering.max_ahead_s)
         history = ReportHistory() if plot_fields else None
         all_sinks = [*sinks, history] if history is not None else list(sinks)
         pipeline, result = run_blocks(config, source, state=state, sinks=all_sinks, speed=speed,

@@ -91,8 +91,8 @@ _HELD = 0x80  # a slot's release message: its number, or'ed with this while stil
 # but the tension statistics and the sea-state learner's feeding side, which need nothing
 # but the slab's load and accepted values: they are kept here (intake_of), where the tick
 # stage leaves a CPU less busy than the child's reading and validation
-_STREAM_ATTRS = ("reorder", "validators", "taken_upto", "processed_ns", "motion_sensor",
-                 "estimator", "selector", "_full_estimate")
+_STREAM_ATTRS = ("reorder", "validators", "late_copies", "taken_upto", "processed_ns",
+                 "motion_sensor", "estimator", "selector", "_full_estimate")
 
 
 class ChildDied(RuntimeError):

@@ -764,3 +764,125 @@ def test_a_late_publisher_s_data_behind_the_processed_time_is_counted_and_alerte
             pub.undeclare()
     finally:
         assert d.terminate() == 0
+
+
+def test_a_block_from_a_publisher_s_cache_is_judged_ahead_by_its_receive_time_as_the_pipeline(
+        tmp_path):
+    """A publisher process sends 15 s of tension (from ``now`` - 4 s) into its cache (the
+    daemon not yet up); the last sample of the last block is dated ``now`` + 40 s, so more
+    than the allowed 20 s ahead of its publication (a few seconds after ``now``; [health]
+    clock_skew_max_s, [ordering] max_ahead_s), but no longer of the time the daemon,
+    started 20 s after ``now``, fetches it. The pipeline judges ``time_ahead`` against the
+    receive time (what a replay of the recording has as its log_time) and takes the sample;
+    the clock-fault check judged it against the publication and alerted a clock skew of the
+    very sample the pipeline took (and did not take it as the stream's newest time). Now
+    both judge by the receive time: no skew, no time_ahead, live and in the replay of the
+    recording."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, record=True, load_source="measured")
+    cfg.write_text(cfg.read_text().replace("max_ahead_s = 600.0", "max_ahead_s = 20.0", 1)
+                   + "[health]\nclock_skew_max_s = 20.0\n")
+    now = time.time_ns() // 10**9 * 10**9
+    blocks = []
+    for k in range(15):  # within 20 s of the publication (not behind it)
+        t = now + (k - 4) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        if k == 14:
+            t[-1] = now + 40 * 10**9
+        blocks.append(SampleBlock(BUOY, "tension", t,
+                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)}))
+    log = write_log(tmp_path / "ahead.mcap", blocks)
+    pub = subprocess.Popen([sys.executable, "-m", "replay.publish", str(log), "--connect",
+                            f"tcp/127.0.0.1:{port}", "--linger-s", "90"], env=ENV,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(max(0.0, (now + 20 * 10**9 - time.time_ns()) / 1e9))  # sent; not fetched
+        d = start_daemon(cfg, tmp_path)
+        st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 15,
+                              buoy=BUOY, timeout=120)["status"]["streams"]["tension"]
+        assert d.terminate() == 0
+    finally:
+        pub.kill()
+        pub.wait(30)
+    assert st["accepted"] == 300 and not any(st["rejected"].values())
+    assert st["clock_skewed_blocks"] == 0 and st["clock_skew_s"] <= 18.0
+    replayed = replayed_figures(load_config(cfg), sorted((tmp_path / "rec").glob("*.mcap")))
+    tension = replayed["samples"]["tension"]
+    assert tension["accepted"] == 300 and not any(tension["rejected"].values())
+
+
+def test_a_re_published_log_with_a_block_a_year_ahead_ends_without_a_clock_skew(tmp_path):
+    """A recording holds a tension block dated a year ahead of its receive time (a wrong
+    clock: time_ahead) among 30 right ones. ``replay.publish`` (a real process) plays it to
+    a daemon: the block goes out where it was received, so the daemon counts one skewed
+    block and the 20 samples as time_ahead, and ends on the last right block with no skew.
+    Was: the reader ordered it by its publish time, a year on: it went out last and the
+    daemon ended with clock_skew active."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, load_source="measured")
+    now = time.time_ns() // 10**9 * 10**9
+    year = 365 * 86400 * 10**9
+    blocks = []
+    for k in range(30):
+        t = now + (k - 40) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        recv = int(t[-1]) + 10**6
+        blocks.append(SampleBlock(BUOY, "tension", t + (year if k == 10 else 0),
+                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)},
+                                  recv))
+    log = write_log(tmp_path / "recorded.mcap", blocks)
+    d = start_daemon(cfg, tmp_path)
+    try:
+        pub = publish(log, port)
+        out, err = pub.communicate(timeout=120)
+        assert pub.returncode == 0 and out.strip() == "30", err
+        st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 30,
+                              buoy=BUOY)["status"]["streams"]["tension"]
+    finally:
+        assert d.terminate() == 0
+    assert st["clock_skewed_blocks"] == 1 and st["rejected"]["time_ahead"] == 20
+    assert -600.0 < st["clock_skew_s"] < 0.0  # the last block: right, behind its arrival
+    assert st["accepted"] == 29 * 20 and st["time_restarts"] == 0
+
+
+def test_a_recorder_started_after_the_publishers_records_their_caches_in_time_order(tmp_path):
+    """`buoymon record` started once a publisher process has sent 2 minutes of tension and
+    IMU into its caches records both caches; written one stream's after the other's, the
+    second's were up to 2 minutes behind the first's in the file and a replay counted 60 of
+    them late (``damaged input: late``); recorded together in time order, the replay reads
+    none late and equals the log's."""
+    port = free_port()
+    blocks = synthetic_blocks(120)
+    log = write_log(tmp_path / "sim.mcap", blocks)
+    cfg = write_config(tmp_path, port, load_source="measured")
+    config = load_config(cfg)
+    d = start_daemon(cfg, tmp_path)
+    out_dir = tmp_path / "recorded"
+    pub = subprocess.Popen([sys.executable, "-m", "replay.publish", str(log), "--connect",
+                            f"tcp/127.0.0.1:{port}", "--linger-s", "60"], env=ENV,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == len(blocks),
+                         buoy=BUOY)
+        rec = subprocess.Popen([sys.executable, "-m", "monitor.cli", "record", "--config",
+                                str(cfg), "-o", str(out_dir)], env=ENV, stderr=subprocess.PIPE,
+                               text=True)
+        deadline = time.monotonic() + 60
+        while not _recorded_up_to(out_dir, blocks[-1].t_last_ns):
+            assert time.monotonic() < deadline and rec.poll() is None, "nothing recorded"
+            time.sleep(0.2)
+        rec.terminate()
+        assert rec.wait(30) == 0, rec.stderr.read()
+        assert d.terminate() == 0
+    finally:
+        pub.kill()
+        pub.wait(30)
+    from replay.reader import LogReader
+    from replay.runner import read_summary
+
+    files = sorted(out_dir.glob("*.mcap"))
+    reader = LogReader([str(f) for f in files])
+    recorded, _ = run_blocks(config, reader)
+    assert read_summary(reader.stats)["late"] == 0
+    assert read_summary(reader.stats)["messages"] == len(blocks)
+    from_log = replayed_figures(config, [log])
+    assert recorded.report()["samples"] == from_log["samples"]
+    assert committed(recorded.report()) == committed(from_log)

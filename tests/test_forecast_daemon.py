@@ -13,6 +13,7 @@ import queue
 import subprocess
 import sys
 import time
+import urllib.request
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -169,15 +170,36 @@ def test_daemon_counts_and_survives_bad_forecasts(tmp_path):
                 time.sleep(0.01)
             for payload in (b"not json", b"\xff\xfe", b"[1, 2]",
                             b'{"time_s": [1, 2], "hs_m": [1], "tp_s": [5, 5]}',
-                            b'{"time_s": [1], "hs_m": [1.0], "tp_s": [5.0]}'):
+                            b'{"time_s": [1], "hs_m": [1.0], "tp_s": [5.0]}',
+                            # two hourly steps ending 7201 s, issued at 7300 s: nothing left
+                            # to project (was: applied with 0 steps, unsaid)
+                            b'{"issued_s": 7300, "time_s": [1, 3601], "hs_m": [1.0, 1.0], '
+                            b'"tp_s": [5.0, 5.0]}'):
                 pub.put(payload)
             st = wait_until_state(port, lambda s: s["status"]["counters"]["forecasts"]
-                                  + s["status"]["counters"]["forecasts_refused"] == 5,
+                                  + s["status"]["counters"]["forecasts_refused"] == 6,
                                   buoy=BUOY)
-        assert st["status"]["counters"]["forecasts_refused"] == 4
+        counters = st["status"]["counters"]
+        assert (counters["forecasts_refused"], counters["forecasts_expired"]) == (5, 1)
         assert st["status"]["forecast"]["pending"] == 1  # no sensor data: not applied yet
+        metrics = int(cfg_text(tmp_path).split("[metrics]\nport = ")[1].split()[0])
+        with urllib.request.urlopen(f"http://127.0.0.1:{metrics}/metrics", timeout=10) as r:
+            text = r.read().decode()
+        assert f'buoymon_forecasts_refused_total{{buoy="{BUOY}"}} 5.0' in text
+        assert f'buoymon_forecasts_expired_total{{buoy="{BUOY}"}} 1.0' in text
+        assert f'buoymon_forecasts_total{{buoy="{BUOY}"}} 1.0' in text
     finally:
         assert d.terminate() == 0
+    logged = [json.loads(line) for line in d.stderr_path.read_text().splitlines()
+              if '"forecast refused"' in line]
+    assert len(logged) == 2  # the first malformed one, and the expired one on its own subject
+    assert logged[1]["error"] == ("forecast: nothing to project: its last step ends "
+                                  "1970-01-01 02:00 UTC, not after the first tick it can be "
+                                  "applied at (1970-01-01 02:01 UTC; issued 1970-01-01 02:01 UTC)")
+
+
+def cfg_text(tmp: Path) -> str:
+    return (tmp / "buoymon.toml").read_text()
 
 
 def _drain(q: "queue.SimpleQueue[tuple]") -> list[dict]:

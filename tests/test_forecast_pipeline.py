@@ -19,6 +19,7 @@ from models import fatigue
 from models.fatigue.spectral import damage_rate_from_psd
 from monitor.blocks import SampleBlock
 from monitor.config import ConfigError, config_with, default_config
+from monitor.forecast import ForecastExpired
 from monitor.pipeline import Pipeline
 from monitor.sea_state_learner import SEGMENT
 from replay.sea_state_files import read_sea_states
@@ -180,6 +181,31 @@ def test_forecast_bad_payloads_and_config_are_refused():
         Pipeline(config_with(default_config(), forecast={"window_s": 15.0}))
     with pytest.raises(ConfigError, match="forecast.alert_damage"):
         Pipeline(config_with(default_config(), forecast={"alert_damage": -1}))
+
+
+def test_a_forecast_with_no_step_ahead_of_its_tick_is_refused_as_expired(storm):
+    """Steps that all end by the first tick the forecast can be applied at (its issue time, a
+    whole tick here) were applied with 0 steps, unsaid (and cleared a forecast_damage alert on
+    nothing): now refused as expired, counted by the daemon. One ending a second later is
+    applied with that one step."""
+    t0, _, sea = storm
+    issued = t0 / 1e9 + 1800.0  # t0 on the 10-s tick grid: its tick ends at the issue time
+    p = Pipeline(default_config(), horizon_s=10.0)
+
+    def doc(end_s: float) -> dict:  # two hourly steps, the last ending at end_s
+        return {"issued_s": issued, "time_s": [end_s - 7200.0, end_s - 3600.0],
+                "hs_m": [sea[0][0]] * 2, "tp_s": [sea[0][1]] * 2}
+
+    for end in (issued - 3600.0, issued):
+        with pytest.raises(ForecastExpired, match="nothing to project: its last step ends"):
+            p.add_forecast(doc(end))
+    assert p.add_forecast(doc(issued + 1.0)) == int(issued * 1e9)
+    for b in blocks(storm, 60):
+        p.process(b)
+        if p.forecasts.last is not None:
+            break
+    assert (p.forecasts.last["applied_ns"], p.forecasts.last["steps"]) == (int(issued * 1e9), 1)
+    assert p.forecasts.counts["received"] == 1
 
 
 def test_windows_in_rerun(storm, tmp_path):

@@ -179,6 +179,33 @@ def test_a_block_time_ahead_of_its_arrival_is_skewed_but_the_next_right_one_no_r
     assert cf.fields("tension")["time_restarts"] == 1
 
 
+def test_a_late_block_is_ahead_by_its_receive_time_and_behind_by_its_publication():
+    """A block fetched from a publisher's cache 100 s after it was published: a sample 50 s
+    after the publication is ahead of nothing (the pipeline judges time_ahead against the
+    receive time: it takes the sample, so it is the stream's newest time: going back 40 s
+    from it is a restart); one 20 s before the publication is behind it within the allowed
+    30 s (arriving late is no skew), one 40 s before is skewed by 40 s."""
+    sent, recv = T0, T0 + 100 * NS
+    cf = ClockFaults(skew_max_s=30.0, restart_min_s=1.0, max_ahead_s=30.0)
+    assert cf.observe("tension", T0 + 50 * NS, recv, sent) == []
+    assert cf.fields("tension")["clock_skew_s"] == 0.0
+    assert len(cf.observe("tension", T0 + 10 * NS, recv, sent)) == 1  # back 40 s: a restart
+    assert cf.fields("tension")["time_restarts"] == 1
+    assert cf.observe("tension", T0 + 60 * NS, recv, sent) == []
+    assert cf.fields("tension")["clock_skew_s"] == 0.0
+    assert cf.observe("tension", T0 - 20 * NS, T0 + 100 * NS, sent)[0].startswith(
+        "stream tension: time restarted")  # not skewed: the restart's message alone
+    assert cf.fields("tension")["clock_skew_s"] == -20.0
+    assert cf.fields("tension")["clock_skewed_blocks"] == 0
+    msgs = cf.observe("tension", T0 - 40 * NS, recv, sent)
+    assert msgs[0] == ("stream tension: sensor time is 40 s behind the logger clock "
+                       "(allowed 30 s)")
+    # a sample 31 s ahead of its arrival: skewed, and not the newest (the pipeline rejects it)
+    assert len(cf.observe("imu", recv + 31 * NS, recv, sent)) == 1
+    assert cf.fields("imu")["clock_skew_s"] == 31.0
+    assert cf.streams["imu"].newest_ns is None
+
+
 def test_time_restart_is_counted_once_and_holds_until_the_stream_catches_up():
     cf = ClockFaults(skew_max_s=1e12, restart_min_s=1.0)
     for k in range(10):

@@ -204,6 +204,33 @@ def test_messages_later_than_the_window_are_counted_late_and_delivered(tmp_path)
     assert firsts == [3, *range(10, 200)]
 
 
+def test_a_message_far_ahead_of_its_receive_time_is_read_where_it_was_received(tmp_path):
+    """A block dated a year ahead of its log time (time_ahead: a wrong clock) was ordered by
+    its publish time: read last, and while it was pending every message after it was
+    released as soon as read (no reordering: 41 before 40 counted late). Ordered by its log
+    time it is read in its place and the window sorts the rest; a block ahead by no more
+    than ``max_ahead_s`` keeps its publish time (and a log time 0 is unknown: publish time)."""
+    path = tmp_path / "ahead.mcap"
+    year = 365 * 86400 * S
+    with LogWriter(path) as w:
+        for k in [*range(40), 41, 40, *range(42, 60)]:
+            t = _seconds("tension", k, 20) + (year if k == 20 else 0)
+            w.write_block(_blk("tension", t, seed=k), T0 + (k + 1) * S)
+            w.flush(fsync=False)  # one message per chunk: the reader releases after each
+    reader = LogReader(path, coalesce=False, reorder_window_s=5)
+    firsts = [(b.t_first_ns - T0) // S for b in reader]
+    assert firsts == [*range(20), 20 + year // S, *range(21, 60)]
+    assert reader.stats[0].late == 0
+    # the pipeline's limit: a year is within it, the block keeps its publish time
+    reader = LogReader(path, coalesce=False, reorder_window_s=5, max_ahead_s=2 * year / S)
+    firsts = [(b.t_first_ns - T0) // S for b in reader]
+    assert firsts[-1] == 20 + year // S and reader.stats[0].late == 1
+    from replay.merge import order_times
+
+    pub, log = np.array([5 * S, 700 * S, 900 * S]), np.array([4 * S, 99 * S, 0])
+    assert order_times(pub, log, 600 * S).tolist() == [5 * S, 99 * S, 900 * S]
+
+
 def test_overlapping_files_are_merged_in_order_with_every_copy(tmp_path):
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     for path, ks in ((a, range(0, 30)), (b, range(25, 50))):

@@ -1,0 +1,75 @@
+"""A publisher re-sending history the daemon already took (a restart that re-sends its cache):
+`buoymon run`, tension from a plain Zenoh publisher, and a separate `replay.publish` process
+that re-sends 40 s of it, 50 to 90 s behind the processed time. Was: 800 `time_backwards` and
+`rejected_rate` fired on tension (800 of 3,800 samples in its 600-s window). Now: 800
+`duplicate`, no alert, and a replay of the daemon's recording counts the same."""
+
+from __future__ import annotations
+
+import queue
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("monitor.pipeline")
+
+from monitor import zenoh_io  # noqa: E402
+from monitor.blocks import SampleBlock  # noqa: E402
+from monitor.config import load_config  # noqa: E402
+
+from daemon_harness import free_port, wait_until_state  # noqa: E402
+from test_daemon_e2e import (  # noqa: E402
+    BUOY, checkpoint, client_session, flushed_figures, publish, replayed_figures,
+    start_daemon, write_config, write_log,
+)
+
+pytestmark = pytest.mark.integration  # processes on loopback: not in `make test-fast`
+
+
+def test_a_re_sent_history_is_counted_as_duplicates_not_alerted_and_replays_the_same(tmp_path):
+    port = free_port()
+    cfg = write_config(tmp_path, port, record=True, load_source="measured")
+    d = start_daemon(cfg, tmp_path)
+    codec = zenoh_io.ProtobufCodec()
+    alerts: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+    t0 = time.time_ns() // 10**9 * 10**9 - 300 * 10**9
+
+    def tension(k: int) -> SampleBlock:
+        t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        return SampleBlock(BUOY, "tension", t, {
+            "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0) + 0.1 * k)}, int(t[-1]))
+
+    history = write_log(tmp_path / "history.mcap", [tension(k) for k in range(100, 140)])
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/rejected_rate/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+            for k in range(200):
+                pub.put(codec.encode(tension(k)))
+            wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 200,
+                             buoy=BUOY)
+            again = publish(history, port)
+            out, err = again.communicate(timeout=60)
+            assert again.returncode == 0 and out.strip() == "40", err
+            for k in range(200, 220):  # tension goes on: the ticks that judge the re-send
+                pub.put(codec.encode(tension(k)))
+            st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 260
+                                  and s["status"]["now_ns"] >= t0 + 209 * 10**9,
+                                  buoy=BUOY)["status"]
+            live = st["streams"]["tension"]
+            assert {r: n for r, n in live["rejected"].items() if n} == {"duplicate": 800}
+            time.sleep(1.0)  # two status intervals: an alert would be out by now
+            assert alerts.empty(), alerts.get()[1]
+            assert not [a for a in st["alerts"]["active"] if a["rule"] == "rejected_rate"]
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0
+    config = load_config(cfg)
+    flushed = flushed_figures(config, checkpoint(tmp_path)["pipeline"])["samples"]["tension"]
+    assert flushed["accepted"] == 220 * 20
+    assert {r: n for r, n in flushed["rejected"].items() if n} == {"duplicate": 800}
+    replayed = replayed_figures(config, sorted((tmp_path / "rec").glob("*.mcap")))
+    assert replayed["samples"]["tension"] == flushed
