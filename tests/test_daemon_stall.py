@@ -141,14 +141,21 @@ def test_a_backlog_worked_off_late_is_no_silence(tmp_path):
                             "200", "0"], env=ENV, check=True, capture_output=True, timeout=60)
             while not docs or docs[-1]["counters"]["messages"] < 200:
                 docs.append(json.loads(statuses.get(timeout=30)[2]))
+            worked_off = len(docs)
+            # then the stream is silent for real: data_age fires within a few statuses
+            while not [a for a in docs[-1]["alerts"]["active"] if a["rule"] == "data_age"]:
+                docs.append(json.loads(statuses.get(timeout=30)[2]))
+                assert len(docs) - worked_off < 20, "no data_age alert after the backlog"
             sub.undeclare()
     finally:
         assert d.terminate() == 0
-    during = [doc for doc in docs if doc["queue_depth"] > 0
+    during = [doc for doc in docs[:worked_off] if doc["queue_depth"] > 0
               and doc["streams"].get("tension", {}).get("data_age_s") is not None]
     assert len(during) >= 4  # a backlog, judged by several statuses
     assert max(doc["streams"]["tension"]["data_age_s"] for doc in during) < 1.0
     assert not [a for doc in during for a in doc["alerts"]["active"] if a["rule"] == "data_age"]
-    # worked off: the age is the real silence since the last block was delivered (the
-    # publisher sent all 200 in a burst, about 4 s before the daemon was through)
-    assert docs[-1]["streams"]["tension"]["data_age_s"] > 2.0
+    # worked off, the stream is silent for real and said so (how soon after the backlog
+    # depends on how the burst was delivered: no fixed figure on a loaded machine)
+    assert [a["component"] for a in docs[-1]["alerts"]["active"]
+            if a["rule"] == "data_age"] == ["tension"]
+    assert docs[-1]["streams"]["tension"]["data_age_s"] > 1.0
