@@ -215,7 +215,7 @@ def intake_of(sent: tuple, pipeline: Pipeline) -> SlabIntake:
     fields = list(sent)
     t, v, src = fields[_TIME], fields[_LOAD], fields[_SOURCE]
     pipeline.stats.add(v, src)
-    stresses = {name: c.stress(v, record=False) for name, c in pipeline.components.items()}
+    stresses = pipeline.stresses(v)
     fields[_STRESSES] = stresses
     fields[_SPECTRA] = pipeline.feed_learner(fields[_STREAMS], t, stresses)
     return SlabIntake(*fields)
