@@ -442,7 +442,7 @@ class Pipeline:
 
     def __init__(self, config: Config, sinks: Iterable[Sink] = (),
                  state: Mapping[str, Any] | None = None, *, horizon_s: float | None = None,
-                 gate_all: bool = False) -> None:
+                 gate_all: bool = False, warm: bool = True) -> None:
         if state is not None and state.get("version") != STATE_VERSION:
             raise ValueError(f"pipeline state version {state.get('version')!r} is not "
                              f"{STATE_VERSION}; cannot restore")
@@ -544,12 +544,16 @@ class Pipeline:
         self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
         self.sea_states, self.forecasts = _build_forecasting(config, self.components,
                                                              self.tick_ns / 1e9, st)
-        self._warm_up()
+        if warm:  # (False: the caller loads the kernels of the stage it runs, or none)
+            self.warm_up_stream()
+            self.warm_up_ticks()
 
-    def _warm_up(self) -> None:
-        """Pay the compiled kernels' first-call cost now (over a second for the first numba
-        call in a process), before a daemon reports ready: the first block after a restart is
-        then processed at once. Touches no state."""
+    # Pay the compiled kernels' first-call cost now (over a second for the first numba call
+    # in a process), before a daemon reports ready: the first block after a restart is then
+    # processed at once. Per stage, so that a process running one stage
+    # (replay.stage_process) loads only that stage's. Neither touches any state.
+    def warm_up_stream(self) -> None:
+        """The stream stage's kernels (:meth:`ingest`): validation, QC, the stresses."""
         tension = self.validators["tension"]
         tension.check(np.zeros(0, np.int64), np.zeros((1, 0)), _NEVER)
         # both QARTOD kernels (the general one for a stream's first samples, then the fast
@@ -557,6 +561,11 @@ class Pipeline:
         qc = StreamQC(tension.qc.fields)
         for part in (np.arange(3, dtype=np.int64), np.arange(3, 6, dtype=np.int64)):
             qc.check(part, np.zeros((1, 3)))
+        self.stresses(np.array([1000.0, 2000.0]))
+
+    def warm_up_ticks(self) -> None:
+        """The tick stage's kernels (:meth:`advance`): rainflow and Miner sums, the sea-state
+        learner's spectra, the alerts."""
         for comp in self.components.values():
             comp.warm_up()
         if self.sea_states is not None:

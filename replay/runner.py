@@ -182,11 +182,12 @@ def _pace(block: SampleBlock, speed: float, origin: list[float]) -> None:
         time.sleep(delay)
 
 
-def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | None = None
-                    ) -> Pipeline:
-    """A pipeline set up for logs: every stream gates, with the replay horizon."""
+def replay_pipeline(config: Config, sinks: Sequence[Sink] = (), state: dict | None = None,
+                    warm: bool = True) -> Pipeline:
+    """A pipeline set up for logs: every stream gates, with the replay horizon; ``warm``:
+    its kernels loaded now (else on their first call, or as its user chooses)."""
     return Pipeline(config, sinks, state, horizon_s=config.ordering.replay_horizon_s,
-                    gate_all=True)
+                    gate_all=True, warm=warm)
 
 
 def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | None = None,
@@ -288,11 +289,12 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
 
     def child_pipeline(buoy_id: str) -> Pipeline:  # called in the child (no sink is called)
         return replay_pipeline(_log_config(config, state, buoy_id, warn=False),
-                               [WantsQc(wants_qc)], state)
+                               [WantsQc(wants_qc)], state, warm=False)
 
-    # before the fork: the compiled kernels both processes call are loaded once (the
-    # pipeline's warm-up; about 0.3 s of CPU each would load them again)
-    child_pipeline(config.buoy.id)
+    # before the fork: numba and the stream stage's kernels, which the child needs first
+    # (the stresses this process too); the tick stage's, this process loads after the fork
+    # while the child reads and validates (~0.1 s off the replay's wall)
+    child_pipeline(config.buoy.id).warm_up_stream()
     n_blocks = n_samples = 0
     messages = run_in_child(blocks, child_pipeline,
                             send_blocks=any(hasattr(s, "on_block") for s in sinks))
@@ -300,7 +302,8 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
         _, buoy_id = next(messages)
         if buoy_id is not None:
             config = _log_config(config, state, buoy_id)
-        pipeline = replay_pipeline(config, sinks, state)
+        pipeline = replay_pipeline(config, sinks, state, warm=False)
+        pipeline.warm_up_ticks()
         if buoy_id is not None:
             _add_forecasts(pipeline, forecasts)
         for kind, message in messages:
