@@ -105,12 +105,14 @@ def child_pays(files: Sequence[Path]) -> bool:
     return one_process_reason(files) is None
 
 
-def one_process_reason(files: Sequence[Path]) -> str | None:
+def one_process_reason(files: Sequence[Path], meanwhile: Callable[[], Any] | None = None
+                       ) -> str | None:
     """Why these logs replay in one process, or None when the child pays: on Linux, with at
     least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of data, and at least
     :data:`IDLE_CPUS` of the machine's CPUs idle just before (with another job on the second
     CPU the two processes keep waiting for each other: the 30-day log took 15.2 s against
-    11.6 s in one process). The reason is for the operator who asked for two processes."""
+    11.6 s in one process). The reason is for the operator who asked for two processes.
+    ``meanwhile``: work run while the idle CPUs are measured (:func:`idle_cpus`)."""
     from replay.log_files import inflated_size
 
     # fork, CPU affinity and pipe sizes as Linux has them (elsewhere: one process)
@@ -122,24 +124,32 @@ def one_process_reason(files: Sequence[Path]) -> str | None:
     if size is None or size < CHILD_MIN_BYTES:
         return (f"the logs hold less than {CHILD_MIN_BYTES / 1e6:g} MB of data (about a day "
                 "of the default streams), where a child costs what it saves")
-    idle = idle_cpus()
+    idle = idle_cpus(meanwhile=meanwhile)
     if idle < IDLE_CPUS:
         return f"{idle:.1f} of the machine's CPUs idle, {IDLE_CPUS:g} needed"
     return None
 
 
-def idle_cpus(interval_s: float = 0.05) -> float:
-    """The machine's CPUs idle on average over ``interval_s`` from now (/proc/stat's idle
-    and iowait times; this process sleeps meanwhile, so its own CPU counts as idle)."""
-    def idle_total() -> tuple[int, int]:
+def idle_cpus(interval_s: float = 0.05, meanwhile: Callable[[], Any] | None = None) -> float:
+    """The machine's CPUs idle on average over at least ``interval_s`` from now
+    (/proc/stat's idle and iowait times), this process's own CPU counted as idle: it runs
+    ``meanwhile`` (work it would do anyway: the replay's kernels loaded while it measures,
+    not after), then sleeps what is left of the interval."""
+    def sample() -> tuple[int, int, float]:
         with open("/proc/stat") as f:
             ticks = [int(x) for x in f.readline().split()[1:]]
-        return ticks[3] + ticks[4], sum(ticks)
+        own = os.times()
+        return ticks[3] + ticks[4], sum(ticks), own.user + own.system
 
-    idle0, total0 = idle_total()
-    time.sleep(interval_s)
-    idle1, total1 = idle_total()
-    return (os.cpu_count() or 1) * (idle1 - idle0) / max(total1 - total0, 1)
+    end = time.monotonic() + interval_s
+    idle0, total0, own0 = sample()
+    if meanwhile is not None:
+        meanwhile()
+    time.sleep(max(end - time.monotonic(), 0.0))
+    idle1, total1, own1 = sample()
+    cpus = os.cpu_count() or 1
+    idle = idle1 - idle0 + (own1 - own0) * os.sysconf("SC_CLK_TCK")
+    return min(cpus * idle / max(total1 - total0, 1), cpus)
 
 
 # ---------------------------------------------------------------------------------- pickling
