@@ -9,8 +9,8 @@ stage's objects back and this pipeline takes them, so its report and state are t
 process to the last bit. Threads cannot do this (replay.stages): both stages' Python holds
 the GIL most of the time. The stream-stage work that needs nothing but the hand-over's load
 and accepted values is done here, where the tick stage leaves more of a CPU than reading
-and validation leave the child: the tension statistics, the components' stresses and the
-sea-state learner's feeding (:func:`intake_of`; the same calls on the same samples in the
+and validation leave the child: the tension statistics, the components' stresses and
+peaks, and the sea-state learner's feeding (:func:`intake_of`; the same calls on the same samples in the
 same order: the same bits).
 
 The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5), its
@@ -190,14 +190,15 @@ def _no_block() -> None:
 
 
 # A hand-over travels as the tuple of its fields, without the components' stresses and
-# the sea-state learner's inputs, which the parent computes from the load and the values
-# the learner takes (sent with their stream): the stresses again (the same function of the
-# same samples: the same bits), the learner's inputs in the child's place
-# (Pipeline.feed_learner; those inputs, each window's segments so far at every slab, were
-# most of the bytes to copy).
+# peaks (the child computes none) and the sea-state learner's inputs, which the parent
+# computes from the load and the values the learner takes (sent with their stream), in the
+# child's place (the same functions of the same samples: the same bits; the learner's
+# inputs, Pipeline.feed_learner, each window's segments so far at every slab, were most of
+# the bytes to copy).
 _INTAKE_FIELDS = tuple(f.name for f in dataclasses.fields(SlabIntake))
-_STREAMS, _STRESSES, _TIME, _LOAD, _SOURCE, _SPECTRA = (
-    _INTAKE_FIELDS.index(f) for f in ("streams", "stresses", "t", "v", "src", "spectra"))
+_STREAMS, _STRESSES, _PEAKS, _TIME, _LOAD, _SOURCE, _SPECTRA = (
+    _INTAKE_FIELDS.index(f)
+    for f in ("streams", "stresses", "peaks", "t", "v", "src", "spectra"))
 
 
 class _StatsHere:
@@ -212,7 +213,6 @@ _intake_fields = operator.attrgetter(*_INTAKE_FIELDS)
 
 def _reduce_intake(intake: SlabIntake) -> tuple:
     fields = list(_intake_fields(intake))
-    fields[_STRESSES] = None
     fields[_STREAMS] = {name: _LearnerStream(name, slab) if name in _SEA_STATE_FIELDS else slab
                         for name, slab in intake.streams.items()}
     return tuple, (fields,)
@@ -220,13 +220,13 @@ def _reduce_intake(intake: SlabIntake) -> tuple:
 
 def intake_of(sent: tuple, pipeline: Pipeline) -> SlabIntake:
     """The hand-over the child sent as ``sent`` (its fields), its stream stage completed
-    with ``pipeline``'s: the components' stresses, the tension statistics and the sea-state
-    learner's feeding (the child's are off)."""
+    with ``pipeline``'s: the components' stresses and peaks, the tension statistics and the
+    sea-state learner's feeding (the child's are off)."""
     fields = list(sent)
     t, v, src = fields[_TIME], fields[_LOAD], fields[_SOURCE]
     pipeline.stats.add(v, src)
     stresses = pipeline.stresses(v)
-    fields[_STRESSES] = stresses
+    fields[_STRESSES], fields[_PEAKS] = stresses, pipeline.peaks(stresses)
     fields[_SPECTRA] = pipeline.feed_learner(fields[_STREAMS], t, stresses)
     return SlabIntake(*fields)
 
@@ -508,6 +508,9 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
             pipeline = make_pipeline(first.buoy_id)
             pipeline.sea_states = None  # fed in the parent, as the statistics (intake_of)
             pipeline.stats = _StatsHere()  # type: ignore[assignment]
+            # no stresses, no peaks (the intake's are empty): the parent computes the
+            # stresses for the tick stage anyway, and the peaks of them (intake_of)
+            pipeline.components = {}
             for block in itertools.chain([first], source):
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
