@@ -240,8 +240,22 @@ def _reduce_totals(totals: _Totals) -> tuple:
     return _Totals, _totals_fields(totals)
 
 
+def _array(data: Any, dtype: str, shape: tuple[int, ...]) -> np.ndarray:
+    return np.frombuffer(data, dtype).reshape(shape)
+
+
+def _reduce_array(a: np.ndarray) -> Any:
+    """A plain C-ordered array as its data out of band, its dtype's string and its shape:
+    what numpy's own reduction sends, at 2 us an array less (numpy looks up the pickle
+    module and pickles the dtype object at every one; ~10 arrays a slab)."""
+    if a.flags.c_contiguous and a.dtype.fields is None and not a.dtype.hasobject:
+        return _array, (pickle.PickleBuffer(a), a.dtype.str, a.shape)
+    return a.__reduce_ex__(5)
+
+
 class _Pickler(pickle.Pickler):
     dispatch_table = copyreg.dispatch_table.copy()
+    dispatch_table[np.ndarray] = _reduce_array
     dispatch_table[_StreamSlab] = _reduce_stream_slab
     dispatch_table[_Totals] = _reduce_totals
     dispatch_table[SlabIntake] = _reduce_intake
