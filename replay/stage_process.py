@@ -10,8 +10,8 @@ process to the last bit. Threads cannot do this (replay.stages): both stages' Py
 the GIL most of the time. The stream-stage work that needs nothing but the hand-over's load
 and accepted values is done here, where the tick stage leaves more of a CPU than reading
 and validation leave the child: the tension statistics, the components' stresses and
-peaks, and the sea-state learner's feeding (:func:`intake_of`; the same calls on the same samples in the
-same order: the same bits).
+peaks, and the sea-state learner's feeding (:func:`intake_of`; the same calls on the same
+samples in the same order: the same bits).
 
 The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5), its
 arrays' data (~46 MB a day of the default streams; a stream's slab without the accepted
