@@ -443,7 +443,7 @@ class Pipeline:
 
     def __init__(self, config: Config, sinks: Iterable[Sink] = (),
                  state: Mapping[str, Any] | None = None, *, horizon_s: float | None = None,
-                 gate_all: bool = False) -> None:
+                 gate_all: bool = False, warm: bool = True) -> None:
         if state is not None and state.get("version") != STATE_VERSION:
             raise ValueError(f"pipeline state version {state.get('version')!r} is not "
                              f"{STATE_VERSION}; cannot restore")
@@ -548,12 +548,16 @@ class Pipeline:
         self.alerts_dropped = int(st.get("alerts_dropped", 0))  # oldest, past the limit
         self.sea_states, self.forecasts = _build_forecasting(config, self.components,
                                                              self.tick_ns / 1e9, st)
-        self._warm_up()
+        if warm:  # (False: the caller loads the kernels of the stage it runs, or none)
+            self.warm_up_stream()
+            self.warm_up_ticks()
 
-    def _warm_up(self) -> None:
-        """Pay the compiled kernels' first-call cost now (over a second for the first numba
-        call in a process), before a daemon reports ready: the first block after a restart is
-        then processed at once. Touches no state."""
+    # Pay the compiled kernels' first-call cost now (over a second for the first numba call
+    # in a process), before a daemon reports ready: the first block after a restart is then
+    # processed at once. Per stage, so that a process running one stage
+    # (replay.stage_process) loads only that stage's. Neither touches any state.
+    def warm_up_stream(self) -> None:
+        """The stream stage's kernels (:meth:`ingest`): validation, QC, the stresses."""
         tension = self.validators["tension"]
         tension.check(np.zeros(0, np.int64), np.zeros((1, 0)), _NEVER)
         # both QARTOD kernels (the general one for a stream's first samples, then the fast
@@ -561,6 +565,11 @@ class Pipeline:
         qc = StreamQC(tension.qc.fields)
         for part in (np.arange(3, dtype=np.int64), np.arange(3, 6, dtype=np.int64)):
             qc.check(part, np.zeros((1, 3)))
+        self.stresses(np.array([1000.0, 2000.0]))
+
+    def warm_up_ticks(self) -> None:
+        """The tick stage's kernels (:meth:`advance`): rainflow and Miner sums, the sea-state
+        learner's spectra, the alerts."""
         for comp in self.components.values():
             comp.warm_up()
         if self.sea_states is not None:
@@ -707,7 +716,7 @@ class Pipeline:
                 e_t, e_v, e_clamped = self.estimator.feed(info.acc_t, fields, want)
         t, v, src = self.selector.select(m_t, m_v, e_t, e_v, e_clamped)
         self.stats.add(v, src)
-        stresses = {name: c.stress(v, record=False) for name, c in self.components.items()}
+        stresses = self.stresses(v)
         spectra = self.feed_learner(streams, t, stresses)  # before the ticks the slab completes
         # the ticks see every stream's totals without this slab's copies, counted after them
         totals = {s: _Totals.of(val) for s, val in self.validators.items()}
@@ -719,10 +728,29 @@ class Pipeline:
         return SlabIntake(
             block, sensor, upto, tick_limit, streams, totals, span, n_acc, rejected,
             {s: self.validators[s].qc_counts() for s in streams} if self._qc_sinks else {},
-            t, v, src, stresses, {n: c.peak(stresses[n]) for n, c in self.components.items()},
+            t, v, src, stresses, self.peaks(stresses),
             (e_t, e_v) if self._full_estimate else None,
             float(m_v[-1]) if m_t.shape[0] else None, float(e_v[-1]) if e_t.shape[0] else None,
             spectra)
+
+    def stresses(self, v: np.ndarray) -> dict[str, np.ndarray]:
+        """Each component's stress under the load ``v``; a component counting as an earlier
+        one (the default conductor and its termination) has the same function of the load,
+        so the same array, computed once."""
+        stresses: dict[str, np.ndarray] = {}
+        for name, c in self.components.items():
+            lead = self._counts_as.get(name)
+            stresses[name] = stresses[lead] if lead is not None else c.stress(v, record=False)
+        return stresses
+
+    def peaks(self, stresses: Mapping[str, np.ndarray]) -> dict[str, tuple[float, int]]:
+        """Each component's :meth:`Component.peak` of its ``stresses``; a component counting
+        as an earlier one has its stress and yield stress: its peak, computed once."""
+        peaks: dict[str, tuple[float, int]] = {}
+        for name, c in self.components.items():
+            lead = self._counts_as.get(name)
+            peaks[name] = peaks[lead] if lead is not None else c.peak(stresses[name])
+        return peaks
 
     def feed_learner(self, streams: Mapping[str, _StreamSlab], t: np.ndarray,
                      stresses: Mapping[str, np.ndarray]) -> Any:
@@ -747,8 +775,7 @@ class Pipeline:
             for hook in self._block_hooks:
                 hook(intake.block)
         t, v, src = intake.t, intake.v, intake.src
-        # a component counting with another has its stress (the same bits): one array
-        stresses = {n: intake.stresses[self._counts_as.get(n, n)] for n in intake.stresses}
+        stresses = intake.stresses
         if intake.span is not None:
             first, last = intake.span
             start, end = self.last["time_start_ns"], self.last["time_end_ns"]
@@ -1011,11 +1038,7 @@ class Pipeline:
         tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
         if k == 0 and self.open_tick[0].shape[0]:  # the tick began in an earlier slab
             tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
-            stresses: dict[str, np.ndarray] = {}
-            for n, c in self.components.items():
-                lead = self._counts_as.get(n)
-                stresses[n] = stresses[lead] if lead is not None else c.stress(tv, record=False)
-            tick = _TickLoad(tv, ts, stresses, np.zeros(1, np.int64), np.full(1, tv.shape[0]))
+            tick = _TickLoad(tv, ts, self.stresses(tv), np.zeros(1, np.int64), np.full(1, tv.shape[0]))
             return tt, tv, ts, tick, 0
         return tt, tv, ts, ticks.load, k
 

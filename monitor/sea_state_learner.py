@@ -407,7 +407,7 @@ class SeaStateLearner:
 
     def warm_up(self) -> None:
         """Run the compiled kernels once on throwaway data (a process's first numba call
-        costs a second or more; :meth:`monitor.pipeline.Pipeline._warm_up`): a window's
+        costs a second or more; :meth:`monitor.pipeline.Pipeline.warm_up_ticks`): a window's
         periodograms and the Dirlik damage of its spectrum."""
         t = np.arange(SEGMENT, dtype=np.int64) * 50_000_000  # 20 Hz
         x = np.sin(np.arange(SEGMENT) * 0.3)

@@ -73,7 +73,7 @@ def warm_up(folder: Path, config_path: str | None = None) -> None:
         from monitor.pipeline import Pipeline
 
         config = load_config(config_path)
-        Pipeline(config).close()  # runs each kernel once (Pipeline._warm_up)
+        Pipeline(config).close()  # runs each kernel once (Pipeline.warm_up_stream, warm_up_ticks)
         if config.load.source != "measured":  # built at the first motion block otherwise
             build_estimator(config)  # its catenary table goes to the model cache
 

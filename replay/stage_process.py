@@ -9,9 +9,9 @@ stage's objects back and this pipeline takes them, so its report and state are t
 process to the last bit. Threads cannot do this (replay.stages): both stages' Python holds
 the GIL most of the time. The stream-stage work that needs nothing but the hand-over's load
 and accepted values is done here, where the tick stage leaves more of a CPU than reading
-and validation leave the child: the tension statistics, the components' stresses and the
-sea-state learner's feeding (:func:`intake_of`; the same calls on the same samples in the
-same order: the same bits).
+and validation leave the child: the tension statistics, the components' stresses and
+peaks, and the sea-state learner's feeding (:func:`intake_of`; the same calls on the same
+samples in the same order: the same bits).
 
 The hand-over: each slab's :class:`~monitor.pipeline.SlabIntake`, pickled (protocol 5), its
 arrays' data (~46 MB a day of the default streams; a stream's slab without the accepted
@@ -105,12 +105,14 @@ def child_pays(files: Sequence[Path]) -> bool:
     return one_process_reason(files) is None
 
 
-def one_process_reason(files: Sequence[Path]) -> str | None:
+def one_process_reason(files: Sequence[Path], meanwhile: Callable[[], Any] | None = None
+                       ) -> str | None:
     """Why these logs replay in one process, or None when the child pays: on Linux, with at
     least two CPUs for this process, at least :data:`CHILD_MIN_BYTES` of data, and at least
     :data:`IDLE_CPUS` of the machine's CPUs idle just before (with another job on the second
     CPU the two processes keep waiting for each other: the 30-day log took 15.2 s against
-    11.6 s in one process). The reason is for the operator who asked for two processes."""
+    11.6 s in one process). The reason is for the operator who asked for two processes.
+    ``meanwhile``: work run while the idle CPUs are measured (:func:`idle_cpus`)."""
     from replay.log_files import inflated_size
 
     # fork, CPU affinity and pipe sizes as Linux has them (elsewhere: one process)
@@ -122,24 +124,32 @@ def one_process_reason(files: Sequence[Path]) -> str | None:
     if size is None or size < CHILD_MIN_BYTES:
         return (f"the logs hold less than {CHILD_MIN_BYTES / 1e6:g} MB of data (about a day "
                 "of the default streams), where a child costs what it saves")
-    idle = idle_cpus()
+    idle = idle_cpus(meanwhile=meanwhile)
     if idle < IDLE_CPUS:
         return f"{idle:.1f} of the machine's CPUs idle, {IDLE_CPUS:g} needed"
     return None
 
 
-def idle_cpus(interval_s: float = 0.05) -> float:
-    """The machine's CPUs idle on average over ``interval_s`` from now (/proc/stat's idle
-    and iowait times; this process sleeps meanwhile, so its own CPU counts as idle)."""
-    def idle_total() -> tuple[int, int]:
+def idle_cpus(interval_s: float = 0.05, meanwhile: Callable[[], Any] | None = None) -> float:
+    """The machine's CPUs idle on average over at least ``interval_s`` from now
+    (/proc/stat's idle and iowait times), this process's own CPU counted as idle: it runs
+    ``meanwhile`` (work it would do anyway: the replay's kernels loaded while it measures,
+    not after), then sleeps what is left of the interval."""
+    def sample() -> tuple[int, int, float]:
         with open("/proc/stat") as f:
             ticks = [int(x) for x in f.readline().split()[1:]]
-        return ticks[3] + ticks[4], sum(ticks)
+        own = os.times()
+        return ticks[3] + ticks[4], sum(ticks), own.user + own.system
 
-    idle0, total0 = idle_total()
-    time.sleep(interval_s)
-    idle1, total1 = idle_total()
-    return (os.cpu_count() or 1) * (idle1 - idle0) / max(total1 - total0, 1)
+    end = time.monotonic() + interval_s
+    idle0, total0, own0 = sample()
+    if meanwhile is not None:
+        meanwhile()
+    time.sleep(max(end - time.monotonic(), 0.0))
+    idle1, total1, own1 = sample()
+    cpus = os.cpu_count() or 1
+    idle = idle1 - idle0 + (own1 - own0) * os.sysconf("SC_CLK_TCK")
+    return min(cpus * idle / max(total1 - total0, 1), cpus)
 
 
 # ---------------------------------------------------------------------------------- pickling
@@ -180,14 +190,15 @@ def _no_block() -> None:
 
 
 # A hand-over travels as the tuple of its fields, without the components' stresses and
-# the sea-state learner's inputs, which the parent computes from the load and the values
-# the learner takes (sent with their stream): the stresses again (the same function of the
-# same samples: the same bits), the learner's inputs in the child's place
-# (Pipeline.feed_learner; those inputs, each window's segments so far at every slab, were
-# most of the bytes to copy).
+# peaks (the child computes none) and the sea-state learner's inputs, which the parent
+# computes from the load and the values the learner takes (sent with their stream), in the
+# child's place (the same functions of the same samples: the same bits; the learner's
+# inputs, Pipeline.feed_learner, each window's segments so far at every slab, were most of
+# the bytes to copy).
 _INTAKE_FIELDS = tuple(f.name for f in dataclasses.fields(SlabIntake))
-_STREAMS, _STRESSES, _TIME, _LOAD, _SOURCE, _SPECTRA = (
-    _INTAKE_FIELDS.index(f) for f in ("streams", "stresses", "t", "v", "src", "spectra"))
+_STREAMS, _STRESSES, _PEAKS, _TIME, _LOAD, _SOURCE, _SPECTRA = (
+    _INTAKE_FIELDS.index(f)
+    for f in ("streams", "stresses", "peaks", "t", "v", "src", "spectra"))
 
 
 class _StatsHere:
@@ -202,7 +213,6 @@ _intake_fields = operator.attrgetter(*_INTAKE_FIELDS)
 
 def _reduce_intake(intake: SlabIntake) -> tuple:
     fields = list(_intake_fields(intake))
-    fields[_STRESSES] = None
     fields[_STREAMS] = {name: _LearnerStream(name, slab) if name in _SEA_STATE_FIELDS else slab
                         for name, slab in intake.streams.items()}
     return tuple, (fields,)
@@ -210,13 +220,13 @@ def _reduce_intake(intake: SlabIntake) -> tuple:
 
 def intake_of(sent: tuple, pipeline: Pipeline) -> SlabIntake:
     """The hand-over the child sent as ``sent`` (its fields), its stream stage completed
-    with ``pipeline``'s: the components' stresses, the tension statistics and the sea-state
-    learner's feeding (the child's are off)."""
+    with ``pipeline``'s: the components' stresses and peaks, the tension statistics and the
+    sea-state learner's feeding (the child's are off)."""
     fields = list(sent)
     t, v, src = fields[_TIME], fields[_LOAD], fields[_SOURCE]
     pipeline.stats.add(v, src)
-    stresses = {name: c.stress(v, record=False) for name, c in pipeline.components.items()}
-    fields[_STRESSES] = stresses
+    stresses = pipeline.stresses(v)
+    fields[_STRESSES], fields[_PEAKS] = stresses, pipeline.peaks(stresses)
     fields[_SPECTRA] = pipeline.feed_learner(fields[_STREAMS], t, stresses)
     return SlabIntake(*fields)
 
@@ -230,8 +240,22 @@ def _reduce_totals(totals: _Totals) -> tuple:
     return _Totals, _totals_fields(totals)
 
 
+def _array(data: Any, dtype: str, shape: tuple[int, ...]) -> np.ndarray:
+    return np.frombuffer(data, dtype).reshape(shape)
+
+
+def _reduce_array(a: np.ndarray) -> Any:
+    """A plain C-ordered array as its data out of band, its dtype's string and its shape:
+    what numpy's own reduction sends, at 2 us an array less (numpy looks up the pickle
+    module and pickles the dtype object at every one; ~10 arrays a slab)."""
+    if a.flags.c_contiguous and a.dtype.fields is None and not a.dtype.hasobject:
+        return _array, (pickle.PickleBuffer(a), a.dtype.str, a.shape)
+    return a.__reduce_ex__(5)
+
+
 class _Pickler(pickle.Pickler):
     dispatch_table = copyreg.dispatch_table.copy()
+    dispatch_table[np.ndarray] = _reduce_array
     dispatch_table[_StreamSlab] = _reduce_stream_slab
     dispatch_table[_Totals] = _reduce_totals
     dispatch_table[SlabIntake] = _reduce_intake
@@ -498,6 +522,9 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
             pipeline = make_pipeline(first.buoy_id)
             pipeline.sea_states = None  # fed in the parent, as the statistics (intake_of)
             pipeline.stats = _StatsHere()  # type: ignore[assignment]
+            # no stresses, no peaks (the intake's are empty): the parent computes the
+            # stresses for the tick stage anyway, and the peaks of them (intake_of)
+            pipeline.components = {}
             for block in itertools.chain([first], source):
                 if block.buoy_id != pipeline.buoy_id:
                     ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1

@@ -10,6 +10,8 @@ import json
 import multiprocessing
 import os
 import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -168,6 +170,29 @@ def test_idle_cpus_counts_a_busy_cpu_as_busy():
     assert 0 <= idle <= (os.cpu_count() or 1) - 0.7
 
 
+def test_idle_cpus_counts_the_work_it_runs_meanwhile_as_idle():
+    """The replay loads its kernels while it measures: that CPU is this process's own,
+    which the replay will have, so it counts as idle (else a busy measurement)."""
+    import time
+
+    def spin() -> None:
+        stop = time.monotonic() + 0.3
+        while time.monotonic() < stop:
+            pass
+
+    # another process busy meanwhile (on a 2-CPU machine: nothing idle but this one's CPU)
+    other = subprocess.Popen([sys.executable, "-c", "import time\nstop = time.monotonic() + 0.5"
+                              "\nwhile time.monotonic() < stop: pass"])
+    time.sleep(0.05)
+    wall, cpu = time.monotonic(), time.process_time()
+    idle = stage_process.idle_cpus(0.05, meanwhile=spin)
+    wall, cpu = time.monotonic() - wall, time.process_time() - cpu
+    other.wait()
+    assert wall >= 0.3
+    # at least the CPU this process had meanwhile (/proc/stat counts in 10-ms ticks)
+    assert cpu / wall - 0.1 <= idle <= (os.cpu_count() or 1)
+
+
 def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkeypatch, capsys):
     csv = tmp_path / "in.csv"
     csv.write_text("time_s,tension_N\n" + "\n".join(f"{i / 20},{5000 + i % 7}"
@@ -178,11 +203,11 @@ def test_the_child_is_used_with_two_cpus_and_a_large_enough_log(tmp_path, monkey
     assert not child_pays([log])  # a small log: one process
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.6)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 1.6)
     assert child_pays([log])
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.4)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 1.4)
     assert not child_pays([log])  # another job on the second CPU: one process
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 1.6)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 1.6)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {1})
     assert not child_pays([log])  # one CPU: one process
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
@@ -207,10 +232,10 @@ def test_buoymon_replay_says_why_two_processes_were_not_used(tmp_path, feed, mon
     assert "two processes not used, one process replays: the logs hold less than 20 MB" in err
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 0.7)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 0.7)
     assert main(args) == 0
     assert "one process replays: 0.7 of the machine's CPUs idle, 1.5 needed" in capsys.readouterr().err
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 2.0)
     assert main(args) == 0
     assert "two processes not used" not in capsys.readouterr().err
     assert main(["replay", str(log), "--no-progress"]) == 0  # not asked: nothing to say
@@ -231,7 +256,7 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", 1)
     # the child whatever the machine's load (child_pays measures the idle CPUs: on a busy
     # machine one process replayed, nothing died and the test failed)
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 2.0)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     parent, ingest = os.getpid(), Pipeline.ingest
 
