@@ -34,7 +34,8 @@ which stops the child at its next send or wait.
 
 When it is used: by ``buoymon replay`` (``--one-process`` turns it off) when
 :func:`one_process_reason` finds nothing against it: on Linux, when this process may run on
-at least two CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least
+at least two CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` (a log cut short,
+without a summary: its bytes on disk) and at least
 :data:`IDLE_CPUS` of the machine's CPUs are idle as the replay starts (on a busy machine the
 two processes wait for each other; figures in bench/bench_threads.py).
 """
@@ -119,13 +120,26 @@ def one_process_reason(files: Sequence[Path]) -> str | None:
     if len(os.sched_getaffinity(0)) < 2:
         return "this process may run on one CPU only"
     size = inflated_size(files)
-    if size is None or size < CHILD_MIN_BYTES:
+    if size is None:  # no summary (a log cut short by a crash, a damaged end): its bytes on
+        # disk, a lower bound of what its chunks inflate to (compression only shrinks them)
+        size = sum(_stored_bytes(p) for p in files)
+        if size < CHILD_MIN_BYTES:
+            return (f"the logs have no summary (cut short or damaged) and their files hold "
+                    f"less than {CHILD_MIN_BYTES / 1e6:g} MB")
+    if size < CHILD_MIN_BYTES:
         return (f"the logs hold less than {CHILD_MIN_BYTES / 1e6:g} MB of data (about a day "
                 "of the default streams), where a child costs what it saves")
     idle = idle_cpus()
     if idle < IDLE_CPUS:
         return f"{idle:.1f} of the machine's CPUs idle, {IDLE_CPUS:g} needed"
     return None
+
+
+def _stored_bytes(path: Path) -> int:
+    try:
+        return os.path.getsize(path)
+    except OSError:  # gone since it was listed: the reader says so
+        return 0
 
 
 def idle_cpus(interval_s: float = 0.05) -> float:
