@@ -442,3 +442,25 @@ def test_a_log_cut_short_replays_in_two_processes_by_its_size_on_disk(tmp_path, 
     assert reports["--one-process"] == reports["--two-processes"]
     assert json.loads(reports["--one-process"])["inputs"]["read"]["incomplete_files"] == [str(cut)]
     assert multiprocessing.active_children() == []
+
+
+def test_buoymon_replay_says_why_two_processes_were_not_used_in_a_fleet(tmp_path, feed,
+                                                                        capsys):
+    """Logs of two buoys (a fleet replay) with --two-processes replayed each buoy in one
+    process and said nothing, where one buoy's replay says why."""
+    from replay.writer import LogWriter
+
+    for buoy in ("vaps", "other"):
+        (tmp_path / buoy).mkdir()
+        with LogWriter(tmp_path / buoy / "a.mcap") as w:
+            for b in feed[:200]:
+                w.write_block(SampleBlock(buoy, b.sensor, b.t_ns, b.fields))
+    said = "--two-processes not used: a fleet replay runs each buoy in one process"
+    capsys.readouterr()
+    for flags, says in ((["--two-processes"], True), ([], False)):
+        args = ["replay", str(tmp_path / "vaps"), str(tmp_path / "other"), "--no-progress",
+                "--report-dir", str(tmp_path / "out"), *flags]
+        assert main(args) == 0
+        assert (said in capsys.readouterr().err) is says
+    assert sorted(p.name for p in (tmp_path / "out/buoys").iterdir()) == ["other.json",
+                                                                          "vaps.json"]
