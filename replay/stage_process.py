@@ -74,6 +74,7 @@ from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSla
 # the hand-over through the pipe: 0.89-0.95 s against 0.90-0.97 s in a fresh process,
 # bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
+CHILD_NAME = "buoymon-stream"  # the child's name in ps -C, top and pgrep (at most 15 bytes)
 IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 # The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
@@ -492,6 +493,15 @@ def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
         setattr(pipeline, attr, value)
 
 
+def _name_process(name: str) -> None:
+    """Give this process ``name`` in ps, top and pgrep (Linux's prctl PR_SET_NAME): a forked
+    child's command line is its parent's, so an operator could not tell the two apart."""
+    try:
+        ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)  # 15: PR_SET_NAME
+    except (OSError, AttributeError):  # not Linux: the name stays the parent's
+        pass
+
+
 def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mmap.mmap],
            blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool,
            reader: Any) -> None:
@@ -500,6 +510,7 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
     statistics."""
     for other in other_fds:  # the parent's ends: a parent gone then fails the next send
         os.close(other)
+    _name_process(CHILD_NAME)
     try:
         slots = _SlotWriter(fd, maps, release_fd)
         source = iter(blocks)
@@ -569,7 +580,7 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     answers_read, answers_write = os.pipe()  # the slots' answers, to the child
     maps = _shared_slots(SLOTS, SLOT_BYTES)
     ctx = multiprocessing.get_context("fork")
-    child = ctx.Process(target=_child, name="buoymon-stream",
+    child = ctx.Process(target=_child, name=CHILD_NAME,
                         args=(write_fd, (read_fd, answers_write), answers_read, maps, blocks,
                               make_pipeline, send_blocks,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)

@@ -464,3 +464,19 @@ def test_buoymon_replay_says_why_two_processes_were_not_used_in_a_fleet(tmp_path
         assert (said in capsys.readouterr().err) is says
     assert sorted(p.name for p in (tmp_path / "out/buoys").iterdir()) == ["other.json",
                                                                           "vaps.json"]
+
+
+@pytest.mark.skipif(not Path("/proc/self/comm").exists(), reason="Linux's /proc only")
+def test_the_child_is_named_so_an_operator_can_find_it_in_ps():
+    """The child's command line is its parent's: ps, top and pgrep showed two identical
+    `buoymon replay` processes, and `pkill -9 -f` of the reading one killed both. It names
+    itself: `pgrep -x buoymon-stream`, `ps -C buoymon-stream`."""
+    def blocks():  # read in the child: it tells the name it runs under
+        raise RuntimeError(Path("/proc/self/comm").read_text().strip())
+        yield
+
+    with pytest.raises(RuntimeError) as caught:
+        run_blocks(CONFIG, blocks(), child=True)
+    assert str(caught.value) == stage_process.CHILD_NAME == "buoymon-stream"
+    assert Path("/proc/self/comm").read_text().strip() != "buoymon-stream"  # not this one
+    assert multiprocessing.active_children() == []
