@@ -59,5 +59,13 @@ def test_buoymon_replay_on_a_full_disk_names_the_report_it_could_not_write(tmp_p
         err = capsys.readouterr().err
         assert f"buoymon replay: [Errno 28] No space left on device: '{report}'" in err
         assert sorted(f.name for f in full.iterdir()) == ["fill"]
+        # the HTML report's PNGs: one was left cut short at the disk's last 4 kB
+        html = full / "r.html"
+        assert main(["replay", str(log), "--no-progress", "--html", str(html)]) == 1
+        assert "No space left on device: '" in capsys.readouterr().err
+        for png in full.glob("*.png"):  # those written whole (none here) are whole PNGs
+            assert png.read_bytes().endswith(b"IEND\xaeB`\x82"), png
+        assert not [f for f in full.iterdir() if f.name.startswith(".")]  # no temporary
+        assert not html.exists()
     finally:
         subprocess.run(["umount", str(full)], check=True)
