@@ -67,5 +67,9 @@ def test_buoymon_replay_on_a_full_disk_names_the_report_it_could_not_write(tmp_p
             assert png.read_bytes().endswith(b"IEND\xaeB`\x82"), png
         assert not [f for f in full.iterdir() if f.name.startswith(".")]  # no temporary
         assert not html.exists()
+        # the Rerun recording: a traceback from Rerun's flush at the end
+        rrd = full / "r.rrd"
+        assert main(["replay", str(log), "--no-progress", "--rrd", str(rrd)]) == 1
+        assert "buoymon replay: Rerun recording not written whole: " in capsys.readouterr().err
     finally:
         subprocess.run(["umount", str(full)], check=True)
