@@ -24,8 +24,11 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.filename is None:
+            # a full disk fails the write with no file named: the operator's message names it
+            exc.filename = str(path)
         raise
     dir_fd = os.open(path.parent, os.O_RDONLY)
     try:

@@ -93,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
         return 1
     args.logs = [str(p) for p in inputs]  # folders expanded once: each warning said once
     if cmd_fleet.wanted(args):
+        if args.two_processes:  # asked for: say why not, as a single buoy's replay does
+            print("replay: --two-processes not used: a fleet replay runs each buoy in one "
+                  "process (--workers N of them at once)", file=sys.stderr)
         return cmd_fleet.run(args, config)
     speed = 1.0 if args.realtime else args.speed
     try:

@@ -130,10 +130,13 @@ def save_state(path: str | Path, state: dict[str, Any]) -> None:
 class Progress:
     """A one-line progress bar on a terminal (stderr); silent otherwise."""
 
-    def __init__(self, stream: TextIO, span_ns: int | None, enabled: bool) -> None:
+    def __init__(self, stream: TextIO, span_ns: int | None, enabled: bool,
+                 t0_ns: int | None = None) -> None:
         self.stream, self.span_ns, self.enabled = stream, span_ns, enabled
         self.start_wall = time.monotonic()
-        self.t0: int | None = None
+        # the log's first time (else the first update's): a coalesced block's last time is
+        # up to half an hour in, and the bar ended short of 100% by that much
+        self.t0: int | None = t0_ns
         self._last = 0.0
 
     def update(self, t_ns: int, samples: int, force: bool = False) -> None:
@@ -274,7 +277,10 @@ def _log_config(config: Config, state: dict | None, buoy_id: str, warn: bool = T
 
 def _close_progress(progress: Progress | None, pipeline: Pipeline, n_samples: int) -> None:
     if progress is not None and n_samples:
-        progress.update(pipeline.last["now_ns"], n_samples, force=True)
+        end = pipeline.last["now_ns"]
+        if progress.span_ns and progress.t0 is not None:  # all read: the log's last time,
+            end = max(end, progress.t0 + progress.span_ns)  # a stream's later than the ticks'
+        progress.update(end, n_samples, force=True)
         progress.close()
 
 
@@ -424,7 +430,8 @@ def replay_logs(config: Config, paths: Sequence[str | Path], *, state_path: str 
         if show_progress is None:
             show_progress = sys.stderr.isatty()
         span = time_span(files) if show_progress else None
-        progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress)
+        progress = Progress(sys.stderr, span[1] - span[0] if span else None, show_progress,
+                            span[0] if span else None)
         # the stream stage's kernels (which either way are loaded first) while the idle
         # CPUs are measured: 0.05 s less of sleeping before the replay starts
         child = use_child(files, speed, two_processes,

@@ -34,7 +34,8 @@ which stops the child at its next send or wait.
 
 When it is used: by ``buoymon replay`` (``--one-process`` turns it off) when
 :func:`one_process_reason` finds nothing against it: on Linux, when this process may run on
-at least two CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` and at least
+at least two CPUs, the logs inflate to at least :data:`CHILD_MIN_BYTES` (a log cut short,
+without a summary: its bytes on disk) and at least
 :data:`IDLE_CPUS` of the machine's CPUs are idle as the replay starts (on a busy machine the
 two processes wait for each other; figures in bench/bench_threads.py).
 """
@@ -73,6 +74,7 @@ from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSla
 # the hand-over through the pipe: 0.89-0.95 s against 0.90-0.97 s in a fresh process,
 # bench/bench_threads.py).
 CHILD_MIN_BYTES = 20_000_000
+CHILD_NAME = "buoymon-stream"  # the child's name in ps -C, top and pgrep (at most 15 bytes)
 IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 # The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
@@ -121,13 +123,26 @@ def one_process_reason(files: Sequence[Path], meanwhile: Callable[[], Any] | Non
     if len(os.sched_getaffinity(0)) < 2:
         return "this process may run on one CPU only"
     size = inflated_size(files)
-    if size is None or size < CHILD_MIN_BYTES:
+    if size is None:  # no summary (a log cut short by a crash, a damaged end): its bytes on
+        # disk, a lower bound of what its chunks inflate to (compression only shrinks them)
+        size = sum(_stored_bytes(p) for p in files)
+        if size < CHILD_MIN_BYTES:
+            return (f"the logs have no summary (cut short or damaged) and their files hold "
+                    f"less than {CHILD_MIN_BYTES / 1e6:g} MB")
+    if size < CHILD_MIN_BYTES:
         return (f"the logs hold less than {CHILD_MIN_BYTES / 1e6:g} MB of data (about a day "
                 "of the default streams), where a child costs what it saves")
     idle = idle_cpus(meanwhile=meanwhile)
     if idle < IDLE_CPUS:
         return f"{idle:.1f} of the machine's CPUs idle, {IDLE_CPUS:g} needed"
     return None
+
+
+def _stored_bytes(path: Path) -> int:
+    try:
+        return os.path.getsize(path)
+    except OSError:  # gone since it was listed: the reader says so
+        return 0
 
 
 def idle_cpus(interval_s: float = 0.05, meanwhile: Callable[[], Any] | None = None) -> float:
@@ -502,6 +517,15 @@ def take_stream_state(pipeline: Pipeline, state: dict[str, Any]) -> None:
         setattr(pipeline, attr, value)
 
 
+def _name_process(name: str) -> None:
+    """Give this process ``name`` in ps, top and pgrep (Linux's prctl PR_SET_NAME): a forked
+    child's command line is its parent's, so an operator could not tell the two apart."""
+    try:
+        ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)  # 15: PR_SET_NAME
+    except (OSError, AttributeError):  # not Linux: the name stays the parent's
+        pass
+
+
 def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mmap.mmap],
            blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool,
            reader: Any) -> None:
@@ -510,6 +534,7 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
     statistics."""
     for other in other_fds:  # the parent's ends: a parent gone then fails the next send
         os.close(other)
+    _name_process(CHILD_NAME)
     try:
         slots = _SlotWriter(fd, maps, release_fd)
         source = iter(blocks)
@@ -582,7 +607,7 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     answers_read, answers_write = os.pipe()  # the slots' answers, to the child
     maps = _shared_slots(SLOTS, SLOT_BYTES)
     ctx = multiprocessing.get_context("fork")
-    child = ctx.Process(target=_child, name="buoymon-stream",
+    child = ctx.Process(target=_child, name=CHILD_NAME,
                         args=(write_fd, (read_fd, answers_write), answers_read, maps, blocks,
                               make_pipeline, send_blocks,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)

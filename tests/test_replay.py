@@ -239,3 +239,19 @@ def test_replay_reads_ahead_only_with_a_cpu_to_spare(tmp_path, monkeypatch):
         monkeypatch.setattr(os, "sched_getaffinity", lambda pid, c=cpus: set(c))
         assert replay_logs(default_config(), [path], show_progress=False).samples > 0
     assert made == [False, True]
+
+
+def test_the_progress_bar_of_a_finished_replay_reads_100_percent(tmp_path, capsys):
+    """The bar counted from the first block's last time, not the log's start: coalesced
+    blocks reach up to half an hour in, so a whole day's replay ended at 97.9% (23.5 h) and
+    a 3-min log's at 0.0%: the operator could not tell it had read everything."""
+    from monitor.cli import main
+    from replay.runner import replay_logs
+
+    log = tmp_path / "a.mcap"
+    assert main(["simulate", "-o", str(log), "--hours", "0.05", "--hs", "1", "--tp", "6",
+                 "--seed", "1"]) == 0
+    capsys.readouterr()
+    replay_logs(default_config(), [log], show_progress=True, two_processes=False)
+    last = capsys.readouterr().err.rstrip("\n").split("\r")[-1]
+    assert "100.0%" in last and "0.0 h" in last, last

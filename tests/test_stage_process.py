@@ -426,3 +426,77 @@ def test_a_replay_keeps_freed_memory_with_glibc_and_goes_on_without(monkeypatch)
 
     monkeypatch.setattr(ctypes, "CDLL", no_libc)
     assert runner.keep_freed_memory() is False
+
+
+def test_a_log_cut_short_replays_in_two_processes_by_its_size_on_disk(tmp_path, feed,
+                                                                      monkeypatch, capsys):
+    """A log cut short by a crash (no summary) replayed in one process whatever its size,
+    and --two-processes said it held "less than 20 MB of data": a 30-day log whose logger
+    died took the slow path with a false reason. Its bytes on disk bound its data from
+    below; with them, the child runs, to the same bits as one process."""
+    from replay.log_files import inflated_size
+    from replay.writer import LogWriter
+
+    whole, cut = tmp_path / "whole.mcap", tmp_path / "cut.mcap"
+    with LogWriter(whole) as w:
+        for b in feed:
+            w.write_block(b)
+    data = whole.read_bytes()
+    cut.write_bytes(data[:len(data) * 9 // 10])
+    assert inflated_size([cut]) is None
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", cut.stat().st_size + 1)
+    assert stage_process.one_process_reason([cut]) == (
+        f"the logs have no summary (cut short or damaged) and their files hold less than "
+        f"{(cut.stat().st_size + 1) / 1e6:g} MB")
+    monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", cut.stat().st_size)
+    assert child_pays([cut])
+    capsys.readouterr()
+    reports = {}
+    for mode in ("--one-process", "--two-processes"):
+        out = tmp_path / f"r{mode}.json"
+        assert main(["replay", str(cut), "--no-progress", mode, "--report", str(out)]) == 0
+        assert "two processes not used" not in capsys.readouterr().err
+        reports[mode] = out.read_bytes()
+    assert reports["--one-process"] == reports["--two-processes"]
+    assert json.loads(reports["--one-process"])["inputs"]["read"]["incomplete_files"] == [str(cut)]
+    assert multiprocessing.active_children() == []
+
+
+def test_buoymon_replay_says_why_two_processes_were_not_used_in_a_fleet(tmp_path, feed,
+                                                                        capsys):
+    """Logs of two buoys (a fleet replay) with --two-processes replayed each buoy in one
+    process and said nothing, where one buoy's replay says why."""
+    from replay.writer import LogWriter
+
+    for buoy in ("vaps", "other"):
+        (tmp_path / buoy).mkdir()
+        with LogWriter(tmp_path / buoy / "a.mcap") as w:
+            for b in feed[:200]:
+                w.write_block(SampleBlock(buoy, b.sensor, b.t_ns, b.fields))
+    said = "--two-processes not used: a fleet replay runs each buoy in one process"
+    capsys.readouterr()
+    for flags, says in ((["--two-processes"], True), ([], False)):
+        args = ["replay", str(tmp_path / "vaps"), str(tmp_path / "other"), "--no-progress",
+                "--report-dir", str(tmp_path / "out"), *flags]
+        assert main(args) == 0
+        assert (said in capsys.readouterr().err) is says
+    assert sorted(p.name for p in (tmp_path / "out/buoys").iterdir()) == ["other.json",
+                                                                          "vaps.json"]
+
+
+@pytest.mark.skipif(not Path("/proc/self/comm").exists(), reason="Linux's /proc only")
+def test_the_child_is_named_so_an_operator_can_find_it_in_ps():
+    """The child's command line is its parent's: ps, top and pgrep showed two identical
+    `buoymon replay` processes, and `pkill -9 -f` of the reading one killed both. It names
+    itself: `pgrep -x buoymon-stream`, `ps -C buoymon-stream`."""
+    def blocks():  # read in the child: it tells the name it runs under
+        raise RuntimeError(Path("/proc/self/comm").read_text().strip())
+        yield
+
+    with pytest.raises(RuntimeError) as caught:
+        run_blocks(CONFIG, blocks(), child=True)
+    assert str(caught.value) == stage_process.CHILD_NAME == "buoymon-stream"
+    assert Path("/proc/self/comm").read_text().strip() != "buoymon-stream"  # not this one
+    assert multiprocessing.active_children() == []

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from monitor.atomic_file import atomic_write_bytes, atomic_write_text
 from monitor.viz.alert_view import alert_episodes
 from monitor.viz.findings import findings
 from monitor.viz.human import number_text, remaining_life_text, stress_text
@@ -165,7 +166,7 @@ def write_report(report: Report, html_path: str | Path) -> RenderedReport:
             continue
         data = render_png(fig)
         png = html_path.with_name(f"{html_path.stem}_{key}.png")
-        png.write_bytes(data)
+        atomic_write_bytes(png, data)  # a full disk leaves no PNG cut short
         pngs[key] = png
         uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
         what = html.escape(caption(fig), quote=True)
@@ -185,5 +186,5 @@ def write_report(report: Report, html_path: str | Path) -> RenderedReport:
         "closed rainflow cycles, 'incl. residue' adds the open cycles as half cycles.</p>"
         "</body></html>\n"
     )
-    html_path.write_text(page, encoding="utf-8")
+    atomic_write_text(html_path, page)
     return RenderedReport(html_path, pngs)

@@ -411,7 +411,11 @@ class RerunSink:
         self.flush(final=True)
         self._closed = True
         if self._own:
-            self.rec.flush()
+            try:
+                self.rec.flush()
+            except RuntimeError as exc:  # its file writer failed (a full disk): an I/O
+                # error, which the command line reports in one line
+                raise OSError(f"Rerun recording not written whole: {exc}") from None
             self.rec.disconnect()
 
     # ---- internals --------------------------------------------------------------------------
