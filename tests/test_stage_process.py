@@ -445,7 +445,7 @@ def test_a_log_cut_short_replays_in_two_processes_by_its_size_on_disk(tmp_path, 
     cut.write_bytes(data[:len(data) * 9 // 10])
     assert inflated_size([cut]) is None
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    monkeypatch.setattr(stage_process, "idle_cpus", lambda: 2.0)
+    monkeypatch.setattr(stage_process, "idle_cpus", lambda **_: 2.0)
     monkeypatch.setattr(stage_process, "CHILD_MIN_BYTES", cut.stat().st_size + 1)
     assert stage_process.one_process_reason([cut]) == (
         f"the logs have no summary (cut short or damaged) and their files hold less than "
