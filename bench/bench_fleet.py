@@ -19,7 +19,12 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Measured 2026-11-25, ``--buoys 4 --days 15``, main 7e8ba84 / this round's build, one run each
+Latest, 2026-11-26 01:40-01:42 UTC, quiet 2-core machine, ``--buoys 4 --days 15``, main after
+this round's tick-stage and reading cuts, two runs: serial 20.9 / 17.3 CPU-s = 127 / 105 CPU-s
+per buoy-year (the machine's speed drifts 10-20 % between identical runs); 2 workers 10.9 /
+9.8 s wall. Target under 60: NOT reached.
+
+Earlier: Measured 2026-11-25, ``--buoys 4 --days 15``, main 7e8ba84 / this round's build, one run each
 at load 1.0-1.4 (20:11-20:13 UTC): serial 39.1 / 22.8 s wall, 45.3 / 27.8 CPU-s = 276 / 169
 CPU-s per buoy-year; 2 workers 21.6 / 14.4 s wall; reading alone 7.1 / 6.3 CPU-s. An earlier
 pair (19:43-19:48 UTC, main at load 2.3, this build at 0.6-1.1): 287 / 142 CPU-s per

@@ -17,7 +17,23 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-2026-11-26 00:38-00:40 UTC, the same machine and 30-day log, loaded (other sessions' test
+Latest, 2026-11-26 01:39-01:43 UTC on the 2-core development machine, quiet (no other job;
+load 0.9-1.0 from these runs), main 22397eb+ (this round's tick-stage and reading cuts, the
+shared-memory two-process replay by default, the late-copies and learner-state fixes), the
+same 30-day log, reports identical to the previous main's (state: + ``late_copies``). The
+machine's speed drifts by ~10 % between identical runs, so every figure below is a range:
+
+* one core (one process, pinned): 8.12-10.03 CPU-s in seven runs; the two complete runs of
+  this script: 9.36 s wall with a 0.557 M/s baseline = 9.7 x, and 8.55 s wall with a
+  0.592 M/s baseline = **10.2 x** (target 10 x: met in the second run, not the first);
+* 2 cores (``buoymon replay``'s default: two processes): 5.28, 5.53, 5.92 and 7.14 s wall =
+  **9.8**, 9.4, 8.8 and 7.3 M tension samples/s (target 10 M/s, 5.18 s: NOT reached; the
+  best run 2 % short); the two processes' CPU 4.68 + 4.49 s in the best run, plus ~0.6 s
+  of kernel loading before the fork;
+* peak RSS 1 / 30 days: one process 219 / 230-231 MB (+5.1-5.6 %), two processes
+  210 + 141 / 216 + 145 MB (+2.9 %, +2.5-2.8 %).
+
+Earlier, 2026-11-26 00:38-00:40 UTC, the same machine and 30-day log, loaded (other sessions' test
 suites, load 2.2-3.1: walls measure them too), this round's hand-over (shared-memory slots,
 bench/bench_threads.py): one core 12.94 s wall, 9.18 CPU-s, 4.01 M/s (no alert rules 9.05
 CPU-s); the "2 cores" line ran in one process (fewer than 1.5 CPUs idle as it started:
