@@ -98,11 +98,14 @@ def run(args: argparse.Namespace) -> int:
                   "process (--workers N of them at once)", file=sys.stderr)
         return cmd_fleet.run(args, config)
     speed = 1.0 if args.realtime else args.speed
+    existed = bool(args.rrd) and Path(args.rrd).exists()
     try:
         sinks = build_sinks(args, config)
-    except (ValueError, RuntimeError) as exc:
-        print(f"replay: --rrd {args.rrd}: {exc}", file=sys.stderr)
-        return 2
+    except (ValueError, RuntimeError, OSError) as exc:  # the disk's (full, read-only): exit 1
+        print(f"replay: --rrd {args.rrd}: cannot write the recording: {exc}", file=sys.stderr)
+        if not existed:
+            Path(args.rrd).unlink(missing_ok=True)  # no empty recording left to be taken for one
+        return 1
     try:
         result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks, speed=speed,
                              show_progress=False if args.no_progress else None,

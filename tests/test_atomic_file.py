@@ -71,5 +71,20 @@ def test_buoymon_replay_on_a_full_disk_names_the_report_it_could_not_write(tmp_p
         rrd = full / "r.rrd"
         assert main(["replay", str(log), "--no-progress", "--rrd", str(rrd)]) == 1
         assert "buoymon replay: Rerun recording not written whole: " in capsys.readouterr().err
+        # a disk full to the last byte: Rerun cannot even open the recording (was exit 2, a
+        # "bad option", and an empty r.rrd left behind)
+        rrd.unlink(missing_ok=True)
+        try:
+            with open(full / "last", "wb") as f:
+                while True:
+                    f.write(b"\0" * 512)
+                    f.flush()
+        except OSError:  # full
+            pass
+        code = main(["replay", str(log), "--no-progress", "--rrd", str(rrd)])
+        err = capsys.readouterr().err
+        assert code == 1, err
+        assert f"replay: --rrd {rrd}: cannot write the recording: " in err
+        assert not rrd.exists()
     finally:
         subprocess.run(["umount", str(full)], check=True)
