@@ -31,7 +31,7 @@ import functools
 import json
 import math
 from pathlib import Path
-from typing import Any, Iterable, Mapping, NamedTuple, Protocol, Sequence
+from typing import Any, Callable, Iterable, Mapping, NamedTuple, Protocol, Sequence, TypeVar
 
 import numpy as np
 
@@ -59,6 +59,7 @@ _SEA_STATE_FIELDS = {"waves": ("hs_m", "tp_s"), "motion": ("heave_m",), "imu": (
 
 STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
+_T = TypeVar("_T")
 _NEVER = np.iinfo(np.int64).min
 _EMPTY_SPAN_S = 3600.0  # at least this much of a gap without samples is evaluated tick by tick
 # slabs of fewer ticks (live ingest: one or two) are evaluated tick by tick: the alert batch
@@ -737,20 +738,21 @@ class Pipeline:
         """Each component's stress under the load ``v``; a component counting as an earlier
         one (the default conductor and its termination) has the same function of the load,
         so the same array, computed once."""
-        stresses: dict[str, np.ndarray] = {}
-        for name, c in self.components.items():
-            lead = self._counts_as.get(name)
-            stresses[name] = stresses[lead] if lead is not None else c.stress(v, record=False)
-        return stresses
+        return self._per_counting(lambda name, c: c.stress(v, record=False))
 
     def peaks(self, stresses: Mapping[str, np.ndarray]) -> dict[str, tuple[float, int]]:
         """Each component's :meth:`Component.peak` of its ``stresses``; a component counting
         as an earlier one has its stress and yield stress: its peak, computed once."""
-        peaks: dict[str, tuple[float, int]] = {}
+        return self._per_counting(lambda name, c: c.peak(stresses[name]))
+
+    def _per_counting(self, f: Callable[[str, Component], _T]) -> dict[str, _T]:
+        """``f(name, component)`` per component, once per counting group: a component
+        counting as an earlier one (:meth:`Component.count_with`) takes that one's result."""
+        out: dict[str, _T] = {}
         for name, c in self.components.items():
             lead = self._counts_as.get(name)
-            peaks[name] = peaks[lead] if lead is not None else c.peak(stresses[name])
-        return peaks
+            out[name] = out[lead] if lead is not None else f(name, c)
+        return out
 
     def feed_learner(self, streams: Mapping[str, _StreamSlab], t: np.ndarray,
                      stresses: Mapping[str, np.ndarray]) -> Any:
@@ -844,11 +846,8 @@ class Pipeline:
             self.next_tick_ns = ticks.next_tick
             self.tick_counts = {}
         self._keep_open_tick(t, v, src, stresses, streams, ticks, closed)
-        out: dict[str, list[np.ndarray]] = {}
-        for name, cycles in closed.items():
-            lead = self._counts_as.get(name)  # (the same cycles)
-            out[name] = out[lead] if lead is not None else [_joined(p) for p in zip(*cycles)]
-        return out
+        # (a component counting as an earlier one closed the same cycles)
+        return self._per_counting(lambda name, c: [_joined(p) for p in zip(*closed[name])])
 
     def _due_ticks(self, t: np.ndarray, v: np.ndarray, src: np.ndarray,
                    stresses: Mapping[str, np.ndarray], streams: Mapping[str, "_StreamSlab"],
@@ -885,12 +884,9 @@ class Pipeline:
         """Rainflow and Miner over the slab's whole ticks, each committed at its end; returns
         every component's run, with its figures at every tick end when the ticks are
         evaluated."""
-        runs: dict[str, TickRun] = {}
-        for name, comp in self.components.items():
-            lead = self._counts_as.get(name)
-            run = runs[lead] if lead is not None else comp.run_ticks(
-                stresses[name], ticks.cuts[:ticks.n], ticks.ends, ticks.evaluate)
-            runs[name] = run
+        runs = self._per_counting(lambda name, c: c.run_ticks(
+            stresses[name], ticks.cuts[:ticks.n], ticks.ends, ticks.evaluate))
+        for name, run in runs.items():
             closed[name].append(run.cycles)
         return runs
 
@@ -1074,11 +1070,9 @@ class Pipeline:
         start = ticks.cuts[ticks.n - 1] if ticks.n else 0
         stop = ticks.cuts[ticks.n]
         if stop > start:
-            fed: dict[str, tuple[np.ndarray, ...]] = {}
-            for name, comp in self.components.items():
-                lead = self._counts_as.get(name)
-                fed[name] = fed[lead] if lead is not None else comp.feed(stresses[name][start:stop])
-                closed[name].append(fed[name])
+            fed = self._per_counting(lambda name, c: c.feed(stresses[name][start:stop]))
+            for name, cycles in fed.items():
+                closed[name].append(cycles)
             o_t, o_v, o_src = self.open_tick
             self.open_tick = (np.concatenate([o_t, t[start:]]), np.concatenate([o_v, v[start:]]),
                               np.concatenate([o_src, src[start:]]))
