@@ -438,7 +438,7 @@ class Daemon:
     def _handle(self, item: tuple) -> None:
         kind = item[0]
         if kind == "data":
-            self._on_data(item[1], item[2], item[3], item[4])
+            self._on_data(item[1], item[2], item[3], item[4], item[5])
         elif kind == "forecast":
             self._on_forecast(item[1], item[2], item[3])
         elif kind == "publisher":
@@ -452,7 +452,7 @@ class Daemon:
         return self.streams.setdefault(sensor, StreamHealth())
 
     def _on_data(self, key: str, payload: bytes, recv_ns: int,
-                 origin: zenoh_io.Origin | None) -> None:
+                 origin: zenoh_io.Origin | None, recv_mono: float) -> None:
         block = self._decode(key, payload, recv_ns)
         if block is None:
             return
@@ -460,9 +460,9 @@ class Daemon:
                                                      origin.sn) is not None:
             self._catch_up()  # takes this message too, as long as its publisher's cache has it
         # timed at delivery (the Zenoh callback), not now: a backlog worked off late is no
-        # older than when it came (status() judges ages as of the oldest still waiting)
-        self._take(key, payload, block, recv_ns, origin,
-                   time.monotonic() - max(0, time.time_ns() - recv_ns) / 1e9)
+        # older than when it came (status() judges ages as of the oldest still waiting);
+        # on the monotonic clock, which a wall-clock step while it waited does not move
+        self._take(key, payload, block, recv_ns, origin, recv_mono)
 
     def _decode(self, key: str, payload: bytes, recv_ns: int) -> SampleBlock | None:
         block = zenoh_io.decode_counted(self.codec, key, payload, recv_ns, self.counters, log,

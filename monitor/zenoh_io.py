@@ -6,7 +6,7 @@ thread-safe queue and return (never block, never call zenoh). The single consume
 
 Queue items are tuples whose first element says what they are:
 
-* ``("data", key, payload_bytes, recv_ns, origin)``: a sample on ``buoy/<id>/sensor/**`` (or
+* ``("data", key, payload_bytes, recv_ns, origin, recv_mono)``: a sample on ``buoy/<id>/sensor/**`` (or
   any key the subscriber was declared on); ``origin`` is an :class:`Origin` for messages of
   advanced publishers (sensor streams), None for others;
 * ``("forecast", key, payload_bytes, recv_ns)``: a sea-state forecast on
@@ -91,7 +91,9 @@ def monitor_token_key(buoy_id: str) -> str:
 def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
                                  q: "queue.SimpleQueue[tuple]") -> Any:
     """Subscribe to ``key`` with Zenoh's advanced subscriber; every sample is put on ``q`` as
-    ``("data", key, bytes, recv_ns, Origin | None)``.
+    ``("data", key, bytes, recv_ns, Origin | None, recv_mono)``: received at wall time
+    ``recv_ns`` and at monotonic ``recv_mono`` (ages of waiting messages are judged on the
+    monotonic clock, which a clock step while they wait does not move).
 
     Recovery: a message lost in transit is fetched again from its publisher's cache
     (heartbeat-driven), and delivery stays in order per publisher. No history: what a
@@ -105,7 +107,8 @@ def declare_enqueuing_subscriber(session: zenoh.Session, key: str,
         origin = None if info is None else Origin(
             f"{info.source_id.zid}/{info.source_id.eid}", info.source_sn,
             None if ts is None else ts.get_time_as_ntp64().as_nanos())
-        q.put(("data", str(sample.key_expr), sample.payload.to_bytes(), time.time_ns(), origin))
+        q.put(("data", str(sample.key_expr), sample.payload.to_bytes(), time.time_ns(), origin,
+               time.monotonic()))
 
     return zenoh.ext.declare_advanced_subscriber(
         session, key, on_sample,

@@ -19,7 +19,7 @@ pytestmark = pytest.mark.integration  # processes, servers or whole records: not
 REPO = Path(__file__).resolve().parents[1]
 
 _DAEMON_PATH = r"""
-import json, sys
+import json, sys, time
 from pathlib import Path
 sys.path.insert(0, {repo!r})
 from monitor import cmd_run
@@ -44,7 +44,7 @@ for k in range(25):  # 25 s of sensor time: alert rules run every 10 s
         vals = {{f: np.full(hz, 3000.0 if f == "tension_N" else 0.1) for f in fields}}
         block = SampleBlock("vaps", sensor, t, vals)
         key = f"buoy/vaps/sensor/{{sensor}}"
-        daemon._on_data(key, codec.encode(block), 0, None)
+        daemon._on_data(key, codec.encode(block), 0, None, time.monotonic())
 json.dumps(daemon.full_state())
 print(json.dumps({{"counters": daemon.counters,
                   "scipy": sorted(m for m, v in sys.modules.items()
