@@ -32,6 +32,9 @@ _FETCH_TIMEOUT_S = 5.0  # longest wait for a sensor publisher's cache
 # publishers appearing within this of each other have their caches recorded together, in
 # time order across streams (liveliness tokens arrive one by one)
 _SETTLE_S = 0.5
+# ...but for no longer than this after the first of them: a publisher that keeps reappearing
+# (a flapping link) must not hold the live messages back from the recording indefinitely
+_SETTLE_MAX_S = 2.0
 
 
 def register(sub: "argparse._SubParsersAction[argparse.ArgumentParser]") -> None:
@@ -63,8 +66,8 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
     (at start too) their whole caches are recorded, and a gap in the numbers is filled from
     the cache first, so a recorder restarted within the cache window loses nothing (what it
     recorded before is recorded again; a replay rejects the duplicate samples). The caches
-    of publishers appearing within ``_SETTLE_S`` of each other are recorded together in
-    sensor-time order, the messages arriving meanwhile after them: one stream's hour after
+    of publishers appearing within ``_SETTLE_S`` of each other (for at most ``_SETTLE_MAX_S``)
+    are recorded together in sensor-time order, the messages arriving meanwhile after them: one stream's hour after
     another's was out of order by up to the cache's length, beyond a replay's reorder
     window (``late`` messages; as the daemon's catch-up, :mod:`monitor.daemon`)."""
     q: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
@@ -77,18 +80,22 @@ def record(buoy_id: str, zc: ZenohConfig, recorder: McapRecorder,
 
         appeared: dict[tuple[str, str], None] = {}  # publishers whose caches are due
         held: list[tuple] = []  # what arrived while they were due
-        due = 0.0  # monotonic time: _SETTLE_S after the last of them appeared
+        due = 0.0  # monotonic time: _SETTLE_S after the last of them appeared (capped)
+        settle_ends = 0.0  # _SETTLE_MAX_S after the first of them appeared
 
         def take(item: tuple) -> None:
-            nonlocal due
+            nonlocal due, settle_ends
             if item[0] == "publisher":
+                now = time.monotonic()
+                if not appeared:
+                    settle_ends = now + _SETTLE_MAX_S
                 appeared[(item[1], item[2])] = None
-                due = time.monotonic() + _SETTLE_S
+                due = min(now + _SETTLE_S, settle_ends)
                 return
             if appeared:
                 held.append(item)
                 return
-            _, key, payload, recv_ns, origin = item
+            _, key, payload, recv_ns, origin, _ = item
             if origin is not None:
                 _, sensor = parse_sensor_topic(key)
                 if seqs.gap(sensor, origin.source, origin.sn) is not None:

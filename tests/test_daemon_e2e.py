@@ -30,7 +30,9 @@ from monitor.blocks import SampleBlock  # noqa: E402
 from monitor.cmd_record import recorder_token_key  # noqa: E402
 from monitor.daemon_config import ZenohConfig  # noqa: E402
 from monitor.publisher import publish_blocks, publisher_config  # noqa: E402
-from monitor.sensors import PublisherOptions, SensorPublisher  # noqa: E402
+from monitor.sensors import (  # noqa: E402
+    PublisherOptions, SensorPublisher, declare_sensor_publisher,
+)
 from monitor.checkpoint import CheckpointStore  # noqa: E402
 from monitor.config import load_config  # noqa: E402
 from monitor.pipeline import Pipeline  # noqa: E402
@@ -569,6 +571,45 @@ def test_record_command_killed_and_restarted_keeps_every_sample(tmp_path):
     clean = replayed_figures(config, [log])
     assert recorded["samples"]["tension"]["accepted"] == 120 * 20
     assert committed(recorded) == committed(clean)
+
+
+def test_record_command_keeps_recording_while_a_publisher_keeps_reappearing(tmp_path):
+    """A sensor publisher reappearing every 0.3 s (a flapping link) must not hold the live
+    messages back: the caches of publishers appearing together are fetched at most 2 s after
+    the first of them appeared. Was: every appearance put the fetch 0.5 s further away, and
+    nothing was written while the flapping went on (the held messages piled up in memory)."""
+    port = free_port()
+    blocks = synthetic_blocks(60)
+    log = write_log(tmp_path / "sim.mcap", blocks)
+    cfg = write_config(tmp_path, port, load_source="measured", record=True)
+    d = start_daemon(cfg, tmp_path)
+    out_dir = tmp_path / "recorded"
+    rec = subprocess.Popen([sys.executable, "-m", "monitor.cli", "record", "--config", str(cfg),
+                            "-o", str(out_dir)], env=ENV, stderr=subprocess.PIPE, text=True)
+    with client_session(port) as session:
+        deadline = time.monotonic() + 60
+        while not list(session.liveliness().get(recorder_token_key(BUOY), timeout=1)):
+            assert time.monotonic() < deadline and rec.poll() is None, "recorder not up"
+            time.sleep(0.1)
+    flapping_until = time.monotonic() + 40
+    with zenoh_io.open_session(publisher_config([f"tcp/127.0.0.1:{port}"])) as session:
+        flapper = declare_sensor_publisher(session, f"buoy/{BUOY}/sensor/spare",
+                                           PublisherOptions())
+        time.sleep(0.3)
+        sensor = publish(log, port, speed=30.0)  # 2 s of publishing
+        recorded = False
+        while time.monotonic() < flapping_until and not recorded:
+            flapper.undeclare()  # a new publisher (new entity id) appears each time
+            flapper = declare_sensor_publisher(session, f"buoy/{BUOY}/sensor/spare",
+                                               PublisherOptions())
+            time.sleep(0.3)
+            recorded = _recorded_up_to(out_dir, blocks[-1].t_last_ns)
+        flapper.undeclare()
+    assert sensor.wait(timeout=60) == 0
+    rec.terminate()
+    assert rec.wait(30) == 0, rec.stderr.read()
+    assert d.terminate() == 0
+    assert recorded, "nothing recorded while the publisher kept reappearing"
 
 
 def _recorded_up_to(directory: Path, t_ns: int) -> bool:

@@ -46,7 +46,7 @@ def test_simulate_publish_delivers_every_block_paced(tmp_path, capsys):
     assert "published 144 blocks" in out  # 36 s x (tension, imu, motion, gnss)
     assert elapsed > 35 / 20 * 0.9  # paced by sensor time
     codec = zenoh_io.default_codec()
-    blocks = [codec.decode(key, payload, recv) for _, key, payload, recv, _ in got]
+    blocks = [codec.decode(key, payload, recv) for _, key, payload, recv, _, _ in got]
     assert len(blocks) == 144
     sent = [b for b in blocks if b.sensor == "tension"]
     logged = [b for b in LogReader([log], coalesce=False) if b.sensor == "tension"]
