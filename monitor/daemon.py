@@ -20,6 +20,7 @@ already queued, publish a last status, checkpoint, close the recorder and the se
 
 from __future__ import annotations
 
+import heapq
 import json
 import logging
 import queue
@@ -41,7 +42,7 @@ from monitor.listening import IntakeQueue, ListeningClock
 from monitor.memory import release_compiler_pages
 from monitor.recorder import JSON_OBJECT, McapRecorder
 from monitor.sdnotify import SdNotifier
-from monitor.time_ahead import DEFAULT_MAX_AHEAD_S
+from monitor.time_ahead import DEFAULT_MAX_AHEAD_S, is_ahead
 from monitor.sequence import SequenceTracker
 from monitor import zenoh_io
 
@@ -480,7 +481,6 @@ class Daemon:
         restarting daemon missed). All publishers are asked at once and the messages taken in
         sensor-time order across streams, as a replay would see them (one stream's backlog
         taken alone would push the others' behind the ordering horizon)."""
-        fetched = []
         try:
             publishers = self._publishers_to_catch_up()
             caches = []
@@ -495,15 +495,26 @@ class Daemon:
             self._faults.warning("catch-up", "could not ask the sensor publishers' caches; "
                                  "a gap will count as missed", error=repr(exc))
             return
+        # taken in sensor-time order across publishers (one stream's backlog alone would
+        # push the others' behind the ordering horizon), each publisher's in its own number
+        # order: a block taken before one numbered earlier (a clock that went back) made that
+        # one a "redelivery", dropped uncounted. A block far ahead of its publication (a
+        # wrong clock) goes after its predecessor: by its time it was taken last, leaving
+        # clock_skew active until the stream's next live block.
+        streams = []
         for key, replies in caches:
+            stream, at = [], 0
             for payload, origin in replies:
                 block = self._decode(key, payload, time.time_ns())
                 if block is not None:
-                    fetched.append((block, key, payload, origin))
-        fetched.sort(key=lambda f: f[0].t_last_ns)  # stable: a stream's own order is kept
+                    if not is_ahead(block.t_last_ns, origin.sent_ns or block.recv_ns,
+                                    self.clocks.max_ahead_ns):
+                        at = block.t_last_ns
+                    stream.append((at, block, key, payload, origin))
+            streams.append(stream)
         taken: dict[str, int] = {}
         turn_ends = time.monotonic() + _MAX_TURN_S
-        for block, key, payload, origin in fetched:
+        for _, block, key, payload, origin in heapq.merge(*streams, key=lambda f: f[0]):
             if time.monotonic() > turn_ends:  # an hour's backlog: keep status and watchdog going
                 self._duties()
                 turn_ends = time.monotonic() + _MAX_TURN_S

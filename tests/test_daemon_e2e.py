@@ -885,6 +885,43 @@ def test_a_re_published_log_with_a_block_a_year_ahead_ends_without_a_clock_skew(
     assert st["accepted"] == 29 * 20 and st["time_restarts"] == 0
 
 
+def test_a_daemon_started_after_a_far_ahead_block_was_cached_ends_without_a_clock_skew(tmp_path):
+    """The same recording (a tension block a year ahead among 30 right ones) published
+    before the daemon starts: the daemon takes it all from the publisher's cache. The
+    far-ahead block is taken where it was published, so the stream ends on its last right
+    block with no skew. Was: the catch-up ordered the cache by sensor time, took that block
+    last and left clock_skew active until the stream's next live block."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, load_source="measured")
+    now = time.time_ns() // 10**9 * 10**9
+    year = 365 * 86400 * 10**9
+    blocks = []
+    for k in range(30):
+        t = now + (k - 40) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        blocks.append(SampleBlock(BUOY, "tension", t + (year if k == 10 else 0),
+                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)},
+                                  int(t[-1]) + 10**6))
+    log = write_log(tmp_path / "recorded.mcap", blocks)
+    # the publisher sends at once into its cache and connects once the daemon listens
+    pub = subprocess.Popen([sys.executable, "-m", "replay.publish", str(log), "--connect",
+                            f"tcp/127.0.0.1:{port}", "--linger-s", "60"], env=ENV,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(4.0)  # all sent (unpaced), kept in the cache
+        d = start_daemon(cfg, tmp_path)
+        try:
+            st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 30,
+                                  buoy=BUOY)["status"]["streams"]["tension"]
+        finally:
+            assert d.terminate() == 0
+    finally:
+        pub.kill()
+        pub.wait(30)
+    assert st["clock_skewed_blocks"] == 1 and st["rejected"]["time_ahead"] == 20
+    assert st["clock_skew_s"] < 0.0  # the last block taken: right, behind its fetch
+    assert st["accepted"] == 29 * 20 and st["time_restarts"] == 0
+
+
 def test_a_recorder_started_after_the_publishers_records_their_caches_in_time_order(tmp_path):
     """`buoymon record` started once a publisher process has sent 2 minutes of tension and
     IMU into its caches records both caches; written one stream's after the other's, the
