@@ -246,28 +246,31 @@ def _stub_qc() -> None:
 
 def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> None:
     """Run in a child process: replay, print figures as JSON (with this process's peak RSS,
-    and a stage process's CPU and peak RSS). As ``buoymon replay`` runs (its malloc setting,
-    its choice of processes and reader): on 2 CPUs the reading and stream stage in a child
-    process when it pays (replay.stage_process); ``one_core`` pins the process to one CPU
-    (one process, the reader then starts no read-ahead thread)."""
+    and a stage process's CPU and peak RSS). As ``buoymon replay`` runs: the CLI's numba
+    set-up (its CPU target loaded without scipy, monitor.numba_setup), then
+    ``replay.runner.replay_logs`` (its malloc setting, its choice of processes and reader,
+    the stream stage's kernels loaded while the idle CPUs are measured, the report): on 2
+    CPUs the reading and stream stage in a child process when it pays
+    (replay.stage_process); ``one_core`` pins the process to one CPU (one process, the
+    reader then starts no read-ahead thread)."""
     if one_core:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     if not qc:
         _stub_qc()
     from monitor.config import config_with, default_config
-    from replay.runner import keep_freed_memory, replay_reader, run_blocks, use_child
+    from monitor.numba_setup import prepare_numba
+    from replay.runner import replay_logs
 
+    prepare_numba()  # as monitor.cli.main, before anything imports numba
     config = default_config()
     if not rules:
         config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
                                              if k != "rule"})
-    keep_freed_memory()
     start, cpu = time.perf_counter(), time.process_time()
-    child = use_child([Path(path)])
-    pipeline, result = run_blocks(config, replay_reader([Path(path)], None, child), child=child)
+    result = replay_logs(config, [path], show_progress=False)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    rep = pipeline.report()
+    rep = result.report
     print(json.dumps({
         "wall_s": wall,
         "cpu_s": cpu,
@@ -276,7 +279,8 @@ def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> Non
         "damage_committed": rep["components"]["conductor"]["damage_committed"],
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "child_cpu_s": kids.ru_utime + kids.ru_stime,
-        "two_processes": child,
+        # the stage process is the only child a replay starts
+        "two_processes": kids.ru_utime + kids.ru_stime > 0,
         "child_peak_rss_mb": kids.ru_maxrss / 1024,
     }))
 
