@@ -18,7 +18,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence, TextIO
+from typing import Any, Iterable, Sequence, TextIO
 
 from models._jit import uncompiled
 from monitor.blocks import SampleBlock
@@ -28,7 +28,7 @@ from monitor.pipeline import Pipeline
 from monitor.time_ahead import DEFAULT_MAX_AHEAD_S, pace_ns
 from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
-from replay.spans import spans
+from replay.spans import of_buoy, spans
 from replay.stages import ingest_ahead
 
 log = logging.getLogger(__name__)
@@ -231,15 +231,9 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         return pipeline, ReplayResult({}, 0, 0, time.perf_counter() - start, ignored)
     _add_forecasts(pipeline, forecasts)
 
-    def own() -> Iterator[SampleBlock]:  # the pipeline's buoy's blocks (others counted)
-        for block in itertools.chain([first], source):
-            if block.buoy_id == pipeline.buoy_id:
-                yield block
-            else:
-                ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
-
+    own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
     if threads and speed is None:
-        for intake in ingest_ahead(pipeline, own()):
+        for intake in ingest_ahead(pipeline, own):
             pipeline.advance(intake)
             if intake.block is not None:
                 n_blocks += 1
@@ -250,7 +244,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     else:
         origin: list[float] = []
         # unpaced and with no sink to see the steps: one slab per stretch (replay.spans)
-        for run in spans(own(), join=speed is None and not sinks):
+        for run in spans(own, join=speed is None and not sinks):
             if speed is not None:
                 _pace(run[0], speed, origin)
             pipeline.advance(pipeline.ingest(*run))

@@ -1,4 +1,4 @@
-"""A replay's blocks taken in spans: one slab for the blocks of the streams covering one
+"""A replay's blocks: those of its buoy (:func:`of_buoy`), taken in spans: one slab for the blocks of the streams covering one
 stretch of the log, instead of one slab per block.
 
 The reader gives, for each stretch of a log (a release, replay.reader), one coalesced block
@@ -19,6 +19,16 @@ from __future__ import annotations
 from typing import Iterable, Iterator
 
 from monitor.blocks import SampleBlock
+
+
+def of_buoy(blocks: Iterable[SampleBlock], buoy_id: str, ignored: dict[str, int]
+            ) -> Iterator[SampleBlock]:
+    """The blocks of ``buoy_id``; the others counted per buoy in ``ignored``."""
+    for block in blocks:
+        if block.buoy_id == buoy_id:
+            yield block
+        else:
+            ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
 
 
 def spans(blocks: Iterable[SampleBlock], join: bool = True) -> Iterator[list[SampleBlock]]:

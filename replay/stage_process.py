@@ -62,13 +62,13 @@ import time
 import traceback
 import types
 from pathlib import Path
-from typing import Any, Callable, Generator, Iterable, Iterator, Sequence
+from typing import Any, Callable, Generator, Iterable, Sequence
 
 import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab, _Totals
-from replay.spans import spans
+from replay.spans import of_buoy, spans
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
 # what the second core saves at about a day of the default streams (20.8 MB; measured with
@@ -551,15 +551,8 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
             # no stresses, no peaks (the intake's are empty): the parent computes the
             # stresses for the tick stage anyway, and the peaks of them (intake_of)
             pipeline.components = {}
-
-            def own() -> Iterator[SampleBlock]:  # the pipeline's buoy's (others counted)
-                for block in itertools.chain([first], source):
-                    if block.buoy_id == pipeline.buoy_id:
-                        yield block
-                    else:
-                        ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
-
-            for run in spans(own(), join_spans):
+            own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
+            for run in spans(own, join_spans):
                 done = (len(run), sum(len(b) for b in run), run[-1].t_last_ns)
                 slots.send("slab", (pipeline.ingest(*run), done), pickler)
             slots.send("slab", (pipeline.ingest_end(), None), pickler)
