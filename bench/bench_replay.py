@@ -17,7 +17,35 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, 2026-11-26 01:39-01:43 UTC on the 2-core development machine, quiet (no other job;
+Latest, 2026-11-26 03:13-03:23 UTC on the 2-core development machine, NOT quiet (other
+sessions' test suites: load average 4-8 through every run, so walls measure them and CPU
+times are inflated; the quiet-machine figures are the lead's to take), branch twocore
+(one slab per stretch of the log, replay.spans: half the slabs; this script now replays
+through ``replay_logs`` after the CLI's numba set-up, as ``buoymon replay`` does) against
+main 0762eca (an exported copy with its own kernel and bytecode caches), this script for
+both, interleaved, the same 30-day log:
+
+* this script, one full run each (03:21-03:23, load 7.3-8.0): one core 8.75 -> 8.30 CPU-s
+  (no alert rules 8.24 -> 7.81); the "2 cores" line ran in one process both times (fewer
+  than 1.5 CPUs idle); naive baseline 0.576 / 0.559 M/s; peak RSS 1 / 30 days 208 / 224 MB
+  (+7.5 %) -> 208 / 221 MB (+6.4 %);
+* ``buoymon replay``'s path with two processes forced (the idle check off), three
+  interleaved rounds (03:13-03:17, load 4.7-7.9): the two processes' CPU, best round, main
+  5.09 + 4.98 s -> 4.71 + 4.56 s (the other rounds 5.59 + 5.42 -> 4.73 + 4.60 and
+  4.98 + 4.71);
+* the slab joining alone, in one process alternating (the same code otherwise): one core
+  8.66 / 8.97 -> 7.87 / 7.96 CPU-s (load 4.3-4.9); two processes (load 8.3-8.7), parent +
+  child CPU 5.66 + 5.99, 5.11 + 5.60, 5.41 + 5.83 -> 4.65 + 5.24, 4.80 + 5.30, 4.32 + 4.89.
+
+Timing notes: the figures below this section were taken while this script imported all of
+scipy.linalg with numba's target (~0.23 s before the fork; ``buoymon replay`` hides scipy
+then, monitor.numba_setup) and slept its idle check's 0.05 s. With PYTHONDONTWRITEBYTECODE
+set (as in these sessions' shells), a checkout whose ``__pycache__`` lacks a module's
+bytecode compiles it from source at every run (measured: the stage process's first slab
+0.27 s after the fork without, 0.09 s with): run ``python -m compileall monitor models
+replay`` on a fresh or edited checkout before timing it.
+
+Before, 2026-11-26 01:39-01:43 UTC on the 2-core development machine, quiet (no other job;
 load 0.9-1.0 from these runs), main 22397eb+ (this round's tick-stage and reading cuts, the
 shared-memory two-process replay by default, the late-copies and learner-state fixes), the
 same 30-day log, reports identical to the previous main's (state: + ``late_copies``). The
