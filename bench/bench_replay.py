@@ -17,7 +17,7 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, 2026-11-26 03:13-03:23 UTC on the 2-core development machine, NOT quiet (other
+Latest, 2026-11-26 03:13-03:35 UTC on the 2-core development machine, NOT quiet (other
 sessions' test suites: load average 4-8 through every run, so walls measure them and CPU
 times are inflated; the quiet-machine figures are the lead's to take), branch twocore
 (one slab per stretch of the log, replay.spans: half the slabs; this script now replays
@@ -32,7 +32,9 @@ both, interleaved, the same 30-day log:
 * ``buoymon replay``'s path with two processes forced (the idle check off), three
   interleaved rounds (03:13-03:17, load 4.7-7.9): the two processes' CPU, best round, main
   5.09 + 4.98 s -> 4.71 + 4.56 s (the other rounds 5.59 + 5.42 -> 4.73 + 4.60 and
-  4.98 + 4.71);
+  4.98 + 4.71); again with this branch's last commit (03:31-03:35, load 4.4-6.2): main
+  5.30-5.68 + 5.14-5.35 s -> 4.55-5.07 + 4.63-4.94 s; one core (pinned) 8.56 / 9.50 /
+  9.82 -> 8.47 / 8.15 / 8.46 CPU-s;
 * the slab joining alone, in one process alternating (the same code otherwise): one core
   8.66 / 8.97 -> 7.87 / 7.96 CPU-s (load 4.3-4.9); two processes (load 8.3-8.7), parent +
   child CPU 5.66 + 5.99, 5.11 + 5.60, 5.41 + 5.83 -> 4.65 + 5.24, 4.80 + 5.30, 4.32 + 4.89.
