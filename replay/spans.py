@@ -1,5 +1,6 @@
-"""A replay's blocks: those of its buoy (:func:`of_buoy`), taken in spans: one slab for the blocks of the streams covering one
-stretch of the log, instead of one slab per block.
+"""A replay's blocks: those of its buoy (:func:`of_buoy`), taken in spans (:func:`spans`):
+one slab for the blocks of the streams covering one stretch of the log, instead of one slab
+per block.
 
 The reader gives, for each stretch of a log (a release, replay.reader), one coalesced block
 per stream, all covering about the same time. Given to ``Pipeline.ingest`` one by one, each
