@@ -17,7 +17,37 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, 2026-11-26 01:39-01:43 UTC on the 2-core development machine, quiet (no other job;
+Latest, 2026-11-26 03:13-03:35 UTC on the 2-core development machine, NOT quiet (other
+sessions' test suites: load average 4-8 through every run, so walls measure them and CPU
+times are inflated; the quiet-machine figures are the lead's to take), branch twocore
+(one slab per stretch of the log, replay.spans: half the slabs; this script now replays
+through ``replay_logs`` after the CLI's numba set-up, as ``buoymon replay`` does) against
+main 0762eca (an exported copy with its own kernel and bytecode caches), this script for
+both, interleaved, the same 30-day log:
+
+* this script, one full run each (03:21-03:23, load 7.3-8.0): one core 8.75 -> 8.30 CPU-s
+  (no alert rules 8.24 -> 7.81); the "2 cores" line ran in one process both times (fewer
+  than 1.5 CPUs idle); naive baseline 0.576 / 0.559 M/s; peak RSS 1 / 30 days 208 / 224 MB
+  (+7.5 %) -> 208 / 221 MB (+6.4 %);
+* ``buoymon replay``'s path with two processes forced (the idle check off), three
+  interleaved rounds (03:13-03:17, load 4.7-7.9): the two processes' CPU, best round, main
+  5.09 + 4.98 s -> 4.71 + 4.56 s (the other rounds 5.59 + 5.42 -> 4.73 + 4.60 and
+  4.98 + 4.71); again with this branch's last commit (03:31-03:35, load 4.4-6.2): main
+  5.30-5.68 + 5.14-5.35 s -> 4.55-5.07 + 4.63-4.94 s; one core (pinned) 8.56 / 9.50 /
+  9.82 -> 8.47 / 8.15 / 8.46 CPU-s;
+* the slab joining alone, in one process alternating (the same code otherwise): one core
+  8.66 / 8.97 -> 7.87 / 7.96 CPU-s (load 4.3-4.9); two processes (load 8.3-8.7), parent +
+  child CPU 5.66 + 5.99, 5.11 + 5.60, 5.41 + 5.83 -> 4.65 + 5.24, 4.80 + 5.30, 4.32 + 4.89.
+
+Timing notes: the figures below this section were taken while this script imported all of
+scipy.linalg with numba's target (~0.23 s before the fork; ``buoymon replay`` hides scipy
+then, monitor.numba_setup) and slept its idle check's 0.05 s. With PYTHONDONTWRITEBYTECODE
+set (as in these sessions' shells), a checkout whose ``__pycache__`` lacks a module's
+bytecode compiles it from source at every run (measured: the stage process's first slab
+0.27 s after the fork without, 0.09 s with): run ``python -m compileall monitor models
+replay`` on a fresh or edited checkout before timing it.
+
+Before, 2026-11-26 01:39-01:43 UTC on the 2-core development machine, quiet (no other job;
 load 0.9-1.0 from these runs), main 22397eb+ (this round's tick-stage and reading cuts, the
 shared-memory two-process replay by default, the late-copies and learner-state fixes), the
 same 30-day log, reports identical to the previous main's (state: + ``late_copies``). The
@@ -246,28 +276,31 @@ def _stub_qc() -> None:
 
 def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> None:
     """Run in a child process: replay, print figures as JSON (with this process's peak RSS,
-    and a stage process's CPU and peak RSS). As ``buoymon replay`` runs (its malloc setting,
-    its choice of processes and reader): on 2 CPUs the reading and stream stage in a child
-    process when it pays (replay.stage_process); ``one_core`` pins the process to one CPU
-    (one process, the reader then starts no read-ahead thread)."""
+    and a stage process's CPU and peak RSS). As ``buoymon replay`` runs: the CLI's numba
+    set-up (its CPU target loaded without scipy, monitor.numba_setup), then
+    ``replay.runner.replay_logs`` (its malloc setting, its choice of processes and reader,
+    the stream stage's kernels loaded while the idle CPUs are measured, the report): on 2
+    CPUs the reading and stream stage in a child process when it pays
+    (replay.stage_process); ``one_core`` pins the process to one CPU (one process, the
+    reader then starts no read-ahead thread)."""
     if one_core:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     if not qc:
         _stub_qc()
     from monitor.config import config_with, default_config
-    from replay.runner import keep_freed_memory, replay_reader, run_blocks, use_child
+    from monitor.numba_setup import prepare_numba
+    from replay.runner import replay_logs
 
+    prepare_numba()  # as monitor.cli.main, before anything imports numba
     config = default_config()
     if not rules:
         config = config_with(config, alerts={k: v for k, v in config.raw["alerts"].items()
                                              if k != "rule"})
-    keep_freed_memory()
     start, cpu = time.perf_counter(), time.process_time()
-    child = use_child([Path(path)])
-    pipeline, result = run_blocks(config, replay_reader([Path(path)], None, child), child=child)
+    result = replay_logs(config, [path], show_progress=False)
     wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    rep = pipeline.report()
+    rep = result.report
     print(json.dumps({
         "wall_s": wall,
         "cpu_s": cpu,
@@ -276,7 +309,8 @@ def child_replay(path: str, rules: bool, one_core: bool, qc: bool = True) -> Non
         "damage_committed": rep["components"]["conductor"]["damage_committed"],
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "child_cpu_s": kids.ru_utime + kids.ru_stime,
-        "two_processes": child,
+        # the stage process is the only child a replay starts
+        "two_processes": kids.ru_utime + kids.ru_stime > 0,
         "child_peak_rss_mb": kids.ru_maxrss / 1024,
     }))
 

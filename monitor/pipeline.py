@@ -655,22 +655,32 @@ class Pipeline:
     # stage's state, and the tick stage reads the stream stage's only in the hand-over, so
     # the stream stage of the next slab may run while the tick stage runs (replay.stages);
     # the results are the same to the bit.
-    def ingest(self, block: SampleBlock) -> SlabIntake:
+    def ingest(self, block: SampleBlock, *more: SampleBlock) -> SlabIntake:
         """Stream stage of :meth:`process`: buffer the block and take the slab the ordering
-        watermark allows through the per-stream work."""
-        if block.buoy_id != self.buoy_id:
-            raise ValueError(f"block of buoy {block.buoy_id!r} given to the pipeline of buoy "
-                             f"{self.buoy_id!r}")
-        block, ahead = drop_ahead(block, self._max_ahead_ns)
-        if ahead:  # counted before the slab's checks, so its ticks' totals include them
-            self.validators[block.sensor].rejected["time_ahead"] += ahead
-        if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
-                and self.config.load.source != "measured" and len(block)):
-            self._choose_motion(block.sensor)
-        self.reorder.push(block)
+        watermark allows through the per-stream work. ``more``: blocks buffered after it,
+        before the slab is taken (a replay's blocks of one span of the log, replay.spans):
+        one slab for them all, the same results (the ordering's rule); the slab's block is
+        the last (ValueError with block hooks, which would miss the others)."""
+        blocks = (block, *more)
+        for b in blocks:
+            if b.buoy_id != self.buoy_id:
+                raise ValueError(f"block of buoy {b.buoy_id!r} given to the pipeline of buoy "
+                                 f"{self.buoy_id!r}")
+        if more and self._block_hooks:
+            raise ValueError("blocks given together to a pipeline with block hooks")
+        total_ahead = 0
+        for b in blocks:
+            block, ahead = drop_ahead(b, self._max_ahead_ns)
+            if ahead:  # counted before the slab's checks, so its ticks' totals include them
+                self.validators[block.sensor].rejected["time_ahead"] += ahead
+                total_ahead += ahead
+            if (self.motion_sensor is None and block.sensor in MOTION_SENSORS
+                    and self.config.load.source != "measured" and len(block)):
+                self._choose_motion(block.sensor)
+            self.reorder.push(block)
         upto = self.reorder.watermark()
         intake = self._ingest_slab(block, block.sensor, upto, upto)
-        intake.rejected["time_ahead"] += ahead
+        intake.rejected["time_ahead"] += total_ahead
         return intake
 
     def ingest_end(self) -> SlabIntake:

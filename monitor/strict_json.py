@@ -12,22 +12,35 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Literal, Mapping
+from collections.abc import Mapping
+from typing import Any, Literal
 
 import numpy as np
 
 
 def json_ready(obj: Any, nonfinite: Literal["null", "text"] = "null") -> Any:
     """JSON-ready copy of ``obj`` (see the module docstring)."""
-    if isinstance(obj, Mapping):
+    # the plain types first, by their exact type: a report's ~100,000 numbers and strings
+    # went through the Mapping check (an abstract class's, ~3 us each: 0.1-0.2 s at the
+    # end of a 30-day replay)
+    kind = type(obj)
+    if kind is float:
+        return _number(obj, nonfinite)
+    if kind is int or kind is str or kind is bool or obj is None:
+        return obj
+    if kind is dict or isinstance(obj, Mapping):
         return {str(k): json_ready(v, nonfinite) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, np.ndarray)):
         return [json_ready(v, nonfinite) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
     if isinstance(obj, np.generic):
         obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return str(obj) if nonfinite == "text" else None
-    return obj
+    return _number(obj, nonfinite) if isinstance(obj, float) else obj
+
+
+def _number(x: float, nonfinite: Literal["null", "text"]) -> Any:
+    if math.isfinite(x):
+        return x
+    return str(x) if nonfinite == "text" else None
 
 
 def to_json_bytes(doc: Any) -> bytes:

@@ -26,9 +26,9 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
-from monitor.blocks import SampleBlock, parse_sensor_topic
+from monitor.blocks import parse_sensor_topic
 from monitor.config import Config, parse_config
 from monitor.viz.human import remaining_life_text
 
@@ -138,15 +138,6 @@ def make_jobs(archives: Sequence[BuoyArchive], config: Config) -> list[BuoyJob]:
             for a in archives]
 
 
-def _only_buoy(blocks: Iterable[SampleBlock], buoy_id: str, ignored: dict[str, int]
-               ) -> Iterator[SampleBlock]:
-    for block in blocks:
-        if block.buoy_id == buoy_id:
-            yield block
-        else:
-            ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
-
-
 def replay_buoy(job: BuoyJob) -> dict[str, Any]:
     """Replay one buoy's files in order through one pipeline; return its replay report.
 
@@ -155,12 +146,13 @@ def replay_buoy(job: BuoyJob) -> dict[str, Any]:
     from replay.reader import LogReader
     from replay.report import build_report
     from replay.runner import read_summary, run_blocks
+    from replay.spans import of_buoy
 
     config = parse_config(job.config_raw, source=job.config_source)
     reader = LogReader(list(job.files), read_ahead=job.read_ahead,
                        max_ahead_s=config.ordering.max_ahead_s)
     ignored: dict[str, int] = {}
-    pipeline, _ = run_blocks(config, _only_buoy(reader, job.buoy_id, ignored))
+    pipeline, _ = run_blocks(config, of_buoy(reader, job.buoy_id, ignored))
     report = build_report(pipeline.config, pipeline.report(), list(job.files),
                           read_summary(reader.stats))
     if ignored:

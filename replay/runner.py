@@ -18,7 +18,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Sequence, TextIO
+from typing import Any, Iterable, Sequence, TextIO
 
 from models._jit import uncompiled
 from monitor.blocks import SampleBlock
@@ -28,6 +28,7 @@ from monitor.pipeline import Pipeline
 from monitor.time_ahead import DEFAULT_MAX_AHEAD_S, pace_ns
 from monitor.atomic_file import atomic_write_text
 from replay.report import build_report
+from replay.spans import of_buoy, spans
 from replay.stages import ingest_ahead
 
 log = logging.getLogger(__name__)
@@ -230,15 +231,9 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         return pipeline, ReplayResult({}, 0, 0, time.perf_counter() - start, ignored)
     _add_forecasts(pipeline, forecasts)
 
-    def own() -> Iterator[SampleBlock]:  # the pipeline's buoy's blocks (others counted)
-        for block in itertools.chain([first], source):
-            if block.buoy_id == pipeline.buoy_id:
-                yield block
-            else:
-                ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
-
+    own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
     if threads and speed is None:
-        for intake in ingest_ahead(pipeline, own()):
+        for intake in ingest_ahead(pipeline, own):
             pipeline.advance(intake)
             if intake.block is not None:
                 n_blocks += 1
@@ -248,14 +243,15 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
                     progress.update(intake.block.t_last_ns, n_samples)
     else:
         origin: list[float] = []
-        for block in own():
+        # unpaced and with no sink to see the steps: one slab per stretch (replay.spans)
+        for run in spans(own, join=speed is None and not sinks):
             if speed is not None:
-                _pace(block, speed, origin)
-            pipeline.process(block)
-            n_blocks += 1
-            n_samples += len(block)
+                _pace(run[0], speed, origin)
+            pipeline.advance(pipeline.ingest(*run))
+            n_blocks += len(run)
+            n_samples += sum(len(b) for b in run)
             if progress is not None:
-                progress.update(block.t_last_ns, n_samples)
+                progress.update(run[-1].t_last_ns, n_samples)
         pipeline.flush()
     _close_progress(progress, pipeline, n_samples)
     result = ReplayResult({}, n_blocks, n_samples, time.perf_counter() - start, ignored)
@@ -303,7 +299,8 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
     child_pipeline(config.buoy.id).warm_up_stream()
     n_blocks = n_samples = 0
     messages = run_in_child(blocks, child_pipeline,
-                            send_blocks=any(hasattr(s, "on_block") for s in sinks))
+                            send_blocks=any(hasattr(s, "on_block") for s in sinks),
+                            join_spans=not sinks)
     with contextlib.closing(messages):
         _, buoy_id = next(messages)
         if buoy_id is not None:
@@ -321,10 +318,10 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
             # no reference of our own left: the slab's shared memory goes back to the child
             del message, fields
             if done is not None:
-                n_blocks += 1
-                n_samples += done[0]
+                n_blocks += done[0]
+                n_samples += done[1]
                 if progress is not None:
-                    progress.update(done[1], n_samples)
+                    progress.update(done[2], n_samples)
     if stream_state is None:  # an empty log
         pipeline.flush()
     else:

@@ -68,6 +68,7 @@ import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.pipeline import _SEA_STATE_FIELDS, Pipeline, SlabIntake, _StreamSlab, _Totals
+from replay.spans import of_buoy, spans
 
 # Logs inflating to less than this replay in one process: the fork and the hand-over cost
 # what the second core saves at about a day of the default streams (20.8 MB; measured with
@@ -528,7 +529,7 @@ def _name_process(name: str) -> None:
 
 def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mmap.mmap],
            blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool,
-           reader: Any) -> None:
+           join_spans: bool, reader: Any) -> None:
     """The child: read, send the first block's buoy id, run the stream stage, send the
     hand-overs, then the stream stage's state, the blocks of other buoys and the reader's
     statistics."""
@@ -550,12 +551,10 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
             # no stresses, no peaks (the intake's are empty): the parent computes the
             # stresses for the tick stage anyway, and the peaks of them (intake_of)
             pipeline.components = {}
-            for block in itertools.chain([first], source):
-                if block.buoy_id != pipeline.buoy_id:
-                    ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
-                    continue
-                slots.send("slab", (pipeline.ingest(block), (len(block), block.t_last_ns)),
-                           pickler)
+            own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
+            for run in spans(own, join_spans):
+                done = (len(run), sum(len(b) for b in run), run[-1].t_last_ns)
+                slots.send("slab", (pipeline.ingest(*run), done), pickler)
             slots.send("slab", (pipeline.ingest_end(), None), pickler)
             slots.flush()
             streams = {a: getattr(pipeline, a) for a in _STREAM_ATTRS}
@@ -590,15 +589,16 @@ def _how_ended(exitcode: int | None) -> str:
     return f"exit code {exitcode}"
 
 
-def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool
-                 ) -> Generator[tuple[str, Any], None, None]:
+def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks: bool,
+                 join_spans: bool = False) -> Generator[tuple[str, Any], None, None]:
     """Read ``blocks`` and run the stream stage in a forked child; yields, in order,
     ``("first", buoy id or None)``, then ``("slab", (the intake's fields (:func:`intake_of`),
-    (samples, last time) or None for the flush))`` per slab and ``("end", (stream state or
-    None, ignored blocks, reader statistics))``. ``make_pipeline(buoy_id)`` builds the
-    child's pipeline (as the caller builds its own); ``send_blocks``: the intakes carry
-    their blocks. The child's exception is raised here; :class:`ChildDied` if it ends
-    without a word. Closing the generator stops the child."""
+    (blocks, samples, last time) or None for the flush))`` per slab and ``("end", (stream
+    state or None, ignored blocks, reader statistics))``. ``make_pipeline(buoy_id)`` builds
+    the child's pipeline (as the caller builds its own); ``send_blocks``: the intakes carry
+    their blocks; ``join_spans``: one slab per stretch of the log (replay.spans; for a
+    pipeline without sinks). The child's exception is raised here; :class:`ChildDied` if
+    it ends without a word. Closing the generator stops the child."""
     read_fd, write_fd = os.pipe()
     try:
         fcntl.fcntl(write_fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
@@ -609,7 +609,7 @@ def run_in_child(blocks: Iterable[SampleBlock], make_pipeline: Any, send_blocks:
     ctx = multiprocessing.get_context("fork")
     child = ctx.Process(target=_child, name=CHILD_NAME,
                         args=(write_fd, (read_fd, answers_write), answers_read, maps, blocks,
-                              make_pipeline, send_blocks,
+                              make_pipeline, send_blocks, join_spans,
                               blocks if hasattr(blocks, "stats") else None), daemon=True)
     # (multiprocessing flushes the standard streams before it forks: nothing this process
     # buffered is written twice.) The child's garbage collections then skip the objects it

@@ -255,10 +255,10 @@ def test_buoymon_replay_says_so_when_the_child_dies_and_keeps_the_state(tmp_path
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     parent, ingest = os.getpid(), Pipeline.ingest
 
-    def dying(self, block):  # in the child only: as if the kernel's OOM killer struck
+    def dying(self, *blocks):  # in the child only: as if the kernel's OOM killer struck
         if os.getpid() != parent:
             os.kill(os.getpid(), signal.SIGKILL)
-        return ingest(self, block)
+        return ingest(self, *blocks)
 
     monkeypatch.setattr(Pipeline, "ingest", dying)
     capsys.readouterr()

@@ -1,0 +1,90 @@
+"""A replay without sinks takes one slab per stretch of the log (replay.spans,
+``Pipeline.ingest(*blocks)``): the same report and state to the last bit as block by block,
+on the faulty feed of test_stages (copies, swapped blocks, a clock a day ahead, a stream an
+hour back, silent streams), in one process and with the stream stage in a child; with a
+sink, one slab per block as before."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.pipeline import Pipeline
+from replay.runner import replay_pipeline, run_blocks
+from replay.spans import spans
+from test_stages import CONFIG, Recorder, faulty_blocks
+
+S = 1_000_000_000
+
+
+@pytest.fixture(scope="module")
+def feed():
+    return faulty_blocks()[0]
+
+
+def _bits(pipeline: Pipeline) -> bytes:
+    return json.dumps([pipeline.report(), pipeline.state()], allow_nan=True).encode()
+
+
+def _block(sensor: str, t0_s: float, t1_s: float) -> SampleBlock:
+    t = np.arange(int(t0_s * S), int(t1_s * S) + 1, S, dtype=np.int64)
+    return SampleBlock("b", sensor, t, {f: t * 0.0 for f in SENSOR_FIELDS[sensor]})
+
+
+def test_runs_hold_one_block_per_stream_of_overlapping_spans():
+    blocks = [_block("tension", 0, 10), _block("imu", 0, 10),  # one stretch
+              _block("tension", 10, 20), _block("imu", 10, 20), _block("gnss", 15, 20),
+              _block("gnss", 25, 30),  # starts after the run's end
+              _block("imu", 30, 40),  # from the run's end: joins it
+              _block("imu", 40, 50)]  # the same stream twice
+    runs = [[(b.sensor, b.t_first_ns // S) for b in run] for run in spans(blocks)]
+    assert runs == [[("tension", 0), ("imu", 0)],
+                    [("tension", 10), ("imu", 10), ("gnss", 15)],
+                    [("gnss", 25), ("imu", 30)], [("imu", 40)]]
+    assert [len(run) for run in spans(blocks, join=False)] == [1] * len(blocks)
+
+
+@pytest.mark.parametrize("child", [False, True], ids=["one-process", "child"])
+def test_a_replay_without_sinks_takes_fewer_slabs_and_gives_the_same_bits(feed, child,
+                                                                          monkeypatch):
+    one_by_one = replay_pipeline(CONFIG)
+    for block in feed:
+        one_by_one.process(block)
+    one_by_one.flush()
+
+    slabs = []
+    advance = Pipeline.advance
+
+    def counted(self, intake):
+        slabs.append(intake.block)
+        return advance(self, intake)
+
+    monkeypatch.setattr(Pipeline, "advance", counted)
+    pipeline, result = run_blocks(CONFIG, iter(feed), child=child)
+    assert _bits(pipeline) == _bits(one_by_one)
+    assert (result.blocks, result.samples) == (len(feed), sum(len(b) for b in feed))
+    # tension, IMU and GNSS blocks of 5 s: a stretch's three in one slab, less where the
+    # feed's faults (copies, swaps, silent streams) cut a run short
+    assert len(feed) / 3 < len(slabs) - 1 < len(feed) / 2
+
+
+def test_a_replay_with_a_sink_keeps_one_slab_per_block(feed, monkeypatch):
+    slabs = []
+    advance = Pipeline.advance
+
+    def counted(self, intake):
+        slabs.append(intake.block)
+        return advance(self, intake)
+
+    monkeypatch.setattr(Pipeline, "advance", counted)
+    run_blocks(CONFIG, iter(feed), sinks=[Recorder()])
+    assert len(slabs) == len(feed) + 1  # and the flush
+
+
+def test_blocks_given_together_to_a_pipeline_with_block_hooks_are_refused(feed):
+    pipeline = replay_pipeline(CONFIG, [Recorder()])
+    with pytest.raises(ValueError, match="block hooks"):
+        pipeline.ingest(feed[0], feed[1])
