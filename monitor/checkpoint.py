@@ -2,9 +2,9 @@
 
 One SQLite database in WAL mode with ``synchronous=FULL``: a checkpoint is one transaction
 that replaces the single state row (deflated JSON), so after a power cut or ``kill -9`` at any
-moment the database holds either the previous checkpoint or the new one, never a mixture. Together with
-the pipeline's per-stream last-timestamp check (samples at or before the checkpoint are
-skipped when delivered again), no closed cycle is lost or counted twice.
+moment the database holds either the previous checkpoint or the new one, never a mixture.
+Together with the pipeline's per-stream last-timestamp check (samples at or before the
+checkpoint are skipped when delivered again), no closed cycle is lost or counted twice.
 
 The state is any nesting of dicts (string keys), lists, tuples, str, int, float, bool, None,
 bytes and numpy arrays/scalars. It is stored as JSON in which numpy arrays keep their dtype,

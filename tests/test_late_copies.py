@@ -200,7 +200,8 @@ def _saved_and_restored(tmp_path, damage=None) -> Pipeline:
     store.close()
     if damage is not None:
         db = sqlite3.connect(tmp_path / "state.sqlite")
-        saved = json.loads(zlib.decompress(db.execute("SELECT state FROM checkpoint").fetchone()[0]))
+        row = db.execute("SELECT state FROM checkpoint").fetchone()[0]
+        saved = json.loads(zlib.decompress(row))
         damage(db, saved["pipeline"]["late_copies"]["tension"])
         db.commit()
         db.close()
