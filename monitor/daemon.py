@@ -161,18 +161,22 @@ class StreamHealth:
 
 @dataclass
 class CheckpointHealth:
-    """How checkpointing goes: the last good save (wall clock) and failures in this life."""
+    """How checkpointing goes: the last good save (wall clock) and failures in this life,
+    and per stream the minutes of late copies the restored checkpoint held but could not give
+    back (missing or damaged: :attr:`monitor.late_copies.LateCopies.lost`)."""
 
     seq: int
     saved_ns: int | None
     failures: int = 0
     failing: bool = False
     last_error: str | None = None
+    late_copies_lost: Mapping[str, int] = field(default_factory=dict)
 
     def to_dict(self, wall_ns: int) -> dict[str, Any]:
         age = None if self.saved_ns is None else (wall_ns - self.saved_ns) / 1e9
         return {"seq": self.seq, "age_s": age, "failures": self.failures,
-                "failing": self.failing, "last_error": self.last_error}
+                "failing": self.failing, "last_error": self.last_error,
+                "late_copies_lost_minutes": dict(self.late_copies_lost)}
 
 
 class _RateLimitedLog:
@@ -279,6 +283,8 @@ class Daemon:
         sinks: list[Sink] = [_RecordAlertsSink(self.recorder)] if self.recorder is not None else []
         sinks.append(self._alert_channels)
         self.pipeline = make_pipeline(saved.get("pipeline"), sinks)
+        self._ckpt.late_copies_lost = getattr(getattr(self.pipeline, "late_copies", None),
+                                              "lost", {})
         self._attach = attach
         self._extensions: Sequence[Extension] = ()
         self._checkpointer = PeriodicCheckpointer(self._store, self.checkpoint_state,

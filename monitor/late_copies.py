@@ -18,14 +18,21 @@ of 20 Hz tension. A copy is recognised if its original is among them when the co
 judged. They are part of the pipeline state (``late_copies``), so a restored pipeline judges
 as one that never stopped: per whole minute of sensor time, deflated (0.29 MB an hour of
 20 Hz tension), each minute packed once when the next has begun (a daemon checkpoints every
-few seconds), independent of how the slabs were cut. The arrays of the received samples are
-kept as the pipeline made them (no copy per slab when none was rejected), a minute's joined
-once it is over.
+few seconds), independent of how the slabs were cut. A closed minute is a
+:class:`~monitor.state_part.Part`, which the daemon's checkpoint store writes once rather than
+with every checkpoint. The arrays of the received samples are kept as the pipeline made them
+(no copy per slab when none was rejected), a minute's joined once it is over.
+
+A saved minute that cannot be read (missing from the store, damaged, or not of its stream's
+shape) is left out of what is restored, logged, and counted per stream in :attr:`LateCopies.lost`
+(the daemon's status and metrics): late copies of that minute are then ``time_backwards``, as
+they would be with no late copies kept; the rest of the state is restored.
 """
 
 from __future__ import annotations
 
 import base64
+import logging
 import zlib
 from typing import Any, Mapping
 
@@ -33,7 +40,10 @@ import numpy as np
 
 from monitor.blocks import SENSOR_FIELDS
 from monitor.ordering import same_values
+from monitor.state_part import Part
 from monitor.validate import REASONS
+
+log = logging.getLogger(__name__)
 
 _DUP, _BACK = REASONS.index("duplicate") + 1, REASONS.index("time_backwards") + 1
 _MINUTE_NS = 60 * 10**9
@@ -46,6 +56,15 @@ def _pack(a: np.ndarray) -> str:
 
 def _unpack(text: str, dtype: str) -> np.ndarray:
     return np.frombuffer(zlib.decompress(base64.b64decode(text)), dtype)
+
+
+def _restored(steps: str, vals: str, nf: int) -> tuple[np.ndarray, np.ndarray]:
+    """A saved minute's times and values (``nf`` fields); ValueError/TypeError/zlib.error if
+    it is not one (None, not base64, not deflated, not of that shape, times not increasing)."""
+    t = np.cumsum(_unpack(steps, "<i8"), dtype=np.int64)
+    if not t.shape[0] or np.any(np.diff(t) <= 0):
+        raise ValueError("no samples, or times not increasing")
+    return t, _unpack(vals, "<f8").reshape(nf, t.shape[0]).copy()
 
 
 def _cut(newest_ns: int, span_ns: int) -> int:
@@ -99,10 +118,12 @@ class _Accepted:
         steps, vals, packed = [], [], {}
         for a, b in zip(bounds[:-1], bounds[1:]):
             m = int(minute[a])
+            closed = b < t.shape[0]  # a later minute has begun: this one never changes
+            kind = Part if closed else str
             pair = self.packed.get(m) or (
-                _pack(np.diff(t[a:b], prepend=np.int64(0)).astype("<i8")),
-                _pack(values[:, a:b].astype("<f8")))
-            if b < t.shape[0]:  # complete: a later minute has begun
+                kind(_pack(np.diff(t[a:b], prepend=np.int64(0)).astype("<i8"))),
+                kind(_pack(values[:, a:b].astype("<f8"))))
+            if closed:
                 packed[m] = pair
             steps.append(pair[0])
             vals.append(pair[1])
@@ -116,15 +137,36 @@ class LateCopies:
     def __init__(self, span_s: float, state: Mapping[str, Any] | None = None) -> None:
         self.span_ns = int(round(span_s * 1e9))
         self._streams: dict[str, _Accepted] = {}
+        self.lost: dict[str, int] = {}  # per stream, the saved minutes that could not be read
+        errors = []
         for sensor, saved in (state or {}).items():
-            self._streams[sensor] = acc = _Accepted()
-            nf = len(SENSOR_FIELDS[sensor])
-            for steps, vals in zip(saved["t"], saved["v"]):
-                t = np.cumsum(_unpack(steps, "<i8"), dtype=np.int64)
-                acc.parts.append((t, _unpack(vals, "<f8").reshape(nf, t.shape[0]).copy()))
-            # restored per minute: the minutes before the newest are over (joined they would
-            # be one part, dropped only once its newest sample left the span)
-            acc._tail = max(0, len(acc.parts) - 1)
+            acc = _Accepted()
+            try:
+                minutes = list(zip(saved["t"], saved["v"], strict=True))
+                nf = len(SENSOR_FIELDS[sensor])
+            except (KeyError, TypeError, ValueError) as exc:
+                self.lost[sensor] = 1  # how many it held is unknown
+                errors.append(f"{sensor}: {exc!r}")
+                continue
+            for steps, vals in minutes:
+                try:
+                    part = _restored(steps, vals, nf)
+                    if acc.parts and part[0][0] <= acc.parts[-1][0][-1]:
+                        raise ValueError("times not after the minute before")
+                except (TypeError, ValueError, zlib.error) as exc:  # a None: missing or damaged
+                    self.lost[sensor] = self.lost.get(sensor, 0) + 1
+                    errors.append(f"{sensor}: {exc!r}")
+                    continue
+                acc.parts.append(part)
+            if acc.parts:
+                self._streams[sensor] = acc
+                # restored per minute: the minutes before the newest are over (joined they
+                # would be one part, dropped only once its newest sample left the span)
+                acc._tail = len(acc.parts) - 1
+        if self.lost:
+            log.error("late copies not restored: saved minutes missing or damaged; late exact "
+                      "copies of their samples count as time_backwards", extra={"fields": {
+                          "minutes_lost": self.lost, "first_error": errors[0][:300]}})
 
     def judge(self, sensor: str, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
               rejected: dict[str, int]) -> None:

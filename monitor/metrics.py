@@ -159,6 +159,10 @@ def _daemon_metrics(buoy: str, doc: Mapping[str, Any]) -> Iterator[Metric]:
                             "(this daemon life)", labels=["buoy"])
     c.add_metric([buoy], _f(ckpt.get("failures", 0)))
     yield c
+    g = _gauge("buoymon_checkpoint_late_copies_lost_minutes", "Minutes of late copies the "
+               "restored checkpoint held but could not give back (missing or damaged)", ["buoy"])
+    g.add_metric([buoy], float(sum((ckpt.get("late_copies_lost_minutes") or {}).values())))
+    yield g
     health = doc.get("health") or {}
     g = _gauge("buoymon_healthy", "1 when /healthz answers 200", ["buoy"])
     g.add_metric([buoy], 1.0 if health.get("ok", True) else 0.0)

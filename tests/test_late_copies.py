@@ -6,6 +6,7 @@ re-sending publisher: tests/test_daemon_late_copies.py)."""
 from __future__ import annotations
 
 import json
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -170,3 +171,112 @@ def test_a_restored_stream_keeps_no_more_than_one_that_never_stopped():
     assert held[1] == held[0] <= 20 * (90 + 60)
     assert all(np.array_equal(a, b) for a, b in zip(never._streams["tension"].within(never.span_ns),
                                                    restored._streams["tension"].within(never.span_ns)))
+
+
+def _span_150():
+    return config_with(_config(), ordering={"copy_span_s": 150.0})
+
+
+def _late_copies_of(p: Pipeline, seconds) -> dict[str, int]:
+    """``rejected`` after re-sending ``seconds`` exactly, then 20 s of new data."""
+    before = p.validators["tension"].rejected.copy()
+    after = p.validators["tension"]
+    feed(p, [block(k) for k in seconds] + [block(k) for k in range(200, 220)])
+    return {r: n - before[r] for r, n in after.rejected.items() if n - before[r]}
+
+
+def _saved_and_restored(tmp_path, damage=None) -> Pipeline:
+    """200 s of tension (minutes from 20, 80 and 140 s kept for the 150-s span: the first two
+    closed) checkpointed by the daemon's store, ``damage(db, keys)`` done to the file, and the
+    pipeline restored from it."""
+    import sqlite3  # noqa: PLC0415
+
+    from monitor.checkpoint import CheckpointStore  # noqa: PLC0415
+
+    first = Pipeline(_span_150(), horizon_s=10.0)
+    feed(first, (block(k) for k in range(200)))
+    store = CheckpointStore(tmp_path / "state.sqlite")
+    store.save({"pipeline": first.state()})
+    store.close()
+    if damage is not None:
+        db = sqlite3.connect(tmp_path / "state.sqlite")
+        row = db.execute("SELECT state FROM checkpoint").fetchone()[0]
+        saved = json.loads(zlib.decompress(row))
+        damage(db, saved["pipeline"]["late_copies"]["tension"])
+        db.commit()
+        db.close()
+    store = CheckpointStore(tmp_path / "state.sqlite")
+    restored = Pipeline(_span_150(), state=store.load().state["pipeline"], horizon_s=10.0)
+    store.close()
+    return restored
+
+
+def test_restored_from_the_daemon_store_judges_as_one_that_never_stopped(tmp_path):
+    """Saved with its closed minutes as write-once parts and restored from them: the same
+    state as a pipeline that never stopped, and the same verdicts on late copies."""
+    never = Pipeline(_span_150(), horizon_s=10.0)
+    feed(never, (block(k) for k in range(200)))
+    restored = _saved_and_restored(tmp_path)
+    assert restored.late_copies.lost == {}
+    assert json.dumps(never.state(), sort_keys=True) == json.dumps(restored.state(),
+                                                                 sort_keys=True)
+    seconds = [*range(30, 40), *range(90, 100), *range(150, 160)]
+    assert _late_copies_of(never, seconds) == _late_copies_of(restored, seconds) == {
+        "duplicate": 600}
+    assert json.dumps(never.state(), sort_keys=True) == json.dumps(restored.state(),
+                                                                 sort_keys=True)
+
+
+def test_a_missing_or_damaged_saved_minute_loses_only_its_late_copies(tmp_path, caplog):
+    """A closed minute's part gone from the checkpoint file, or another's damaged: was a
+    KeyError / zlib.error at start-up. Now the pipeline starts, logs it, counts it per stream
+    (``late_copies.lost``: the daemon's status and metrics), and only late copies of those
+    minutes are time_backwards (as with no late copies kept); the other minutes' are
+    duplicates, as in a pipeline that never stopped."""
+    def gone(db, saved):  # the values of the minute from 80 s missing
+        db.execute("DELETE FROM parts WHERE key = ?", (saved["v"][1]["k"],))
+
+    with caplog.at_level("ERROR", logger="monitor.late_copies"):
+        p = _saved_and_restored(tmp_path / "a", gone)
+    assert p.late_copies.lost == {"tension": 1}
+    [rec] = caplog.records
+    assert rec.getMessage().startswith("late copies not restored")
+    assert rec.fields["minutes_lost"] == {"tension": 1}
+    assert _late_copies_of(p, [*range(30, 40), *range(90, 100), *range(150, 160)]) == {
+        "duplicate": 400, "time_backwards": 200}
+
+    def damaged(db, saved):  # the minute from 20 s: times rewritten, the hash no longer fits
+        db.execute("UPDATE parts SET data = 'AAAA' || substr(data, 5) WHERE key = ?",
+                   (saved["t"][0]["k"],))
+
+    p = _saved_and_restored(tmp_path / "b", damaged)
+    assert p.late_copies.lost == {"tension": 1}
+    assert _late_copies_of(p, [*range(30, 40), *range(90, 100), *range(150, 160)]) == {
+        "duplicate": 400, "time_backwards": 200}
+
+
+def test_a_saved_state_with_unreadable_late_copies_restores_the_rest():
+    """The same faults inline (a replay's state file, edited or cut): not base64, not
+    deflated, the wrong shape, lists of unequal length or no "v" list, a stream unknown: each
+    loses its minutes (or its stream), nothing else; was a KeyError / binascii / zlib /
+    reshape error."""
+    from monitor.late_copies import _pack  # noqa: PLC0415
+
+    first = Pipeline(_span_150(), horizon_s=10.0)
+    feed(first, (block(k) for k in range(200)))
+    saved = json.loads(json.dumps(first.state()))
+    good = saved["late_copies"]["tension"]
+    cases = [({"t": ["%%%", *good["t"][1:]], "v": good["v"]}, 1, 400),
+             ({"t": good["t"], "v": [good["v"][0], "AAAA", good["v"][2]]}, 1, 400),
+             ({"t": good["t"], "v": [_pack(np.zeros(7)), *good["v"][1:]]}, 1, 400),
+             ({"t": good["t"], "v": good["v"][:-1]}, 1, 0),
+             ({"t": good["t"]}, 1, 0)]
+    for late, lost, duplicates in cases:
+        p = Pipeline(_span_150(), state={**saved, "late_copies": {"tension": late, "radar": 1}},
+                     horizon_s=10.0)
+        assert p.late_copies.lost == {"tension": lost, "radar": 1}
+        got = _late_copies_of(p, [*range(30, 40), *range(90, 100), *range(150, 160)])
+        assert got.get("duplicate", 0) == duplicates
+        assert got.get("duplicate", 0) + got.get("time_backwards", 0) == 600
+        # the rest of the state restored: the counts before the re-send are the saved ones
+        assert p.validators["tension"].accepted == 220 * 20

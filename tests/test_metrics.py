@@ -28,7 +28,8 @@ def test_units_and_counters_follow_prometheus_conventions():
                                "data_age_timeout_s": 5.0, "samples_missed": 3}},
            "components": {"lay": {"damage": 0.25, "damage_committed": 0.2,
                                   "damage_rate_per_day": 0.864, "remaining_life_days": 2.0}},
-           "counters": {"messages": 4}, "checkpoint": {"age_s": 1.5, "failures": 0},
+           "counters": {"messages": 4}, "checkpoint": {
+               "age_s": 1.5, "failures": 0, "late_copies_lost_minutes": {"imu": 2, "tension": 1}},
            "delivery": {"channels": {"webhook": {"pending": 2, "dropped_total": 1}}}}
     text = generate_latest(make_registry(lambda: doc)).decode()
     got = {(s.name, tuple(sorted(s.labels.items()))): s.value
@@ -47,6 +48,7 @@ def test_units_and_counters_follow_prometheus_conventions():
     assert got[("buoymon_outbox_pending_messages", (("buoy", "b1"), ("channel", "webhook")))] == 2
     assert got[("buoymon_outbox_dropped_total", (("buoy", "b1"), ("channel", "webhook")))] == 1
     assert got[("buoymon_checkpoint_age_seconds", (("buoy", "b1"),))] == 1.5
+    assert got[("buoymon_checkpoint_late_copies_lost_minutes", (("buoy", "b1"),))] == 3
     assert any(name.startswith("process_") for name, _ in got)
 
 
