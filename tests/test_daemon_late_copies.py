@@ -6,7 +6,9 @@ that re-sends 40 s of it, 50 to 90 s behind the processed time. Was: 800 `time_b
 
 from __future__ import annotations
 
+import json
 import queue
+import re
 import time
 
 import numpy as np
@@ -73,3 +75,50 @@ def test_a_re_sent_history_is_counted_as_duplicates_not_alerted_and_replays_the_
     assert {r: n for r, n in flushed["rejected"].items() if n} == {"duplicate": 800}
     replayed = replayed_figures(config, sorted((tmp_path / "rec").glob("*.mcap")))
     assert replayed["samples"]["tension"] == flushed
+
+
+def test_data_rejected_on_a_re_send_alone_says_duplicates_not_rejections(tmp_path):
+    """A publisher that sends only copies of old data for longer than the data-age timeout:
+    no new measurement is accepted, so `data_rejected` fires (kept on purpose); its summary
+    counts the copies as duplicates and 0 as rejected (was: "rejected so far: duplicate=N").
+    `buoymon run` and a separate `replay.publish` process re-sending 40 s at 8x."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, load_source="measured")
+    cfg.write_text(cfg.read_text() + "[health]\ndata_age_timeout_s = { tension = 2.0 }\n")
+    d = start_daemon(cfg, tmp_path)
+    codec = zenoh_io.ProtobufCodec()
+    alerts: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+    t0 = time.time_ns() // 10**9 * 10**9 - 300 * 10**9
+
+    def tension(k: int) -> SampleBlock:
+        t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        return SampleBlock(BUOY, "tension", t, {
+            "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0) + 0.1 * k)}, int(t[-1]))
+
+    history = write_log(tmp_path / "history.mcap", [tension(k) for k in range(100, 140)])
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/data_rejected/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+            for k in range(200):
+                pub.put(codec.encode(tension(k)))
+            wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 200,
+                             buoy=BUOY)
+            again = publish(history, port, speed=8.0)
+            fired = json.loads(alerts.get(timeout=60)[2])
+            out, err = again.communicate(timeout=60)
+            assert again.returncode == 0 and out.strip() == "40", err
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0
+    assert fired["labels"]["component"] == "tension" and fired["state"] == "firing", fired
+    found = re.fullmatch(
+        r"stream tension: data arrives but none was accepted for \d+ s: since then (\d+) "
+        r"duplicate\(s\) \(data already received, sent again\) and 0 rejected \(so far: "
+        r"(\d+) duplicate\(s\); rejected none\)", fired["summary"])
+    assert found, fired["summary"]
+    since, so_far = int(found[1]), int(found[2])
+    # whole 1-s blocks of 20 samples, at most the 40 s re-sent
+    assert since % 20 == 0 and 0 < since <= so_far <= 800
