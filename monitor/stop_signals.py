@@ -11,9 +11,10 @@ from typing import Iterator, Sequence
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 
 
-class Stopped(Exception):
-    """A stop signal arrived (raised from the signal handler). Pickles (a forked child hands
-    it to its parent) as its signal number."""
+class Stopped(BaseException):
+    """A stop signal arrived (raised from the signal handler). A BaseException, as
+    KeyboardInterrupt is: code that turns an Exception into a warning (Rerun's logging calls
+    do) must not swallow it. Pickles (a forked child hands it to its parent) as its number."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signum)

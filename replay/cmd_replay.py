@@ -98,21 +98,7 @@ def write_html(path: str, report: dict) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    # SIGTERM and SIGHUP end the replay as Ctrl-C's KeyboardInterrupt does: reports and state
-    # are written only at the end (none half-written), a partial recording is named
-    with stop_signals_raise((signal.SIGTERM, signal.SIGHUP)):
-        try:
-            return _run(args)
-        except Stopped as stop:
-            print(f"buoymon: stopped ({stop})", file=sys.stderr)
-            return stop.exit_status
-
-
-def _run(args: argparse.Namespace) -> int:
-    from replay.report import summary_text, write_report
     from replay.log_files import expand_paths
-    from replay.runner import replay_logs
-    from replay.stage_process import ChildDied
 
     try:
         config = load_config(args.config) if args.config else default_config()
@@ -141,6 +127,23 @@ def _run(args: argparse.Namespace) -> int:
             print("replay: --two-processes not used: a fleet replay runs each buoy in one "
                   "process (--workers N of them at once)", file=sys.stderr)
         return cmd_fleet.run(args, config)
+    # SIGTERM and SIGHUP end a buoy's replay as Ctrl-C's KeyboardInterrupt does: reports and
+    # state are written only at the end (none half-written), a partial recording is named.
+    # (Not a fleet's: its pool would finish every buoy before it let the exception out.)
+    with stop_signals_raise((signal.SIGTERM, signal.SIGHUP)):
+        try:
+            return _replay_one(args, config)
+        except Stopped as stop:
+            print(f"buoymon: stopped ({stop})", file=sys.stderr)
+            return stop.exit_status
+
+
+def _replay_one(args: argparse.Namespace, config: Any) -> int:
+    """One buoy's replay of ``args.logs`` (expanded), with ``config``: the exit status."""
+    from replay.report import summary_text, write_report
+    from replay.runner import replay_logs
+    from replay.stage_process import ChildDied
+
     speed = 1.0 if args.realtime else args.speed
     existed = bool(args.rrd) and partial_path(args.rrd).exists()
     try:

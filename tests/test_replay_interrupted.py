@@ -64,7 +64,12 @@ def test_a_stopped_replay_keeps_its_recording_as_partial_and_says_so(log, short_
     try:
         wait_until(lambda: partial.exists() and partial.stat().st_size > 20_000, timeout=60,
                    what="the partial recording to grow")
-        time.sleep(0.5)
+        # the recording's first flush (fatigue figures included) done: it stopped growing
+        # (the next comes 30 s later); a stop inside a flush loses what that flush held
+        sizes = [0, partial.stat().st_size]
+        while sizes[-1] != sizes[-2]:
+            time.sleep(1.0)
+            sizes.append(partial.stat().st_size)
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=60)
     finally:
