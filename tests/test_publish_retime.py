@@ -19,7 +19,7 @@ pytest.importorskip("monitor.pipeline")
 
 from monitor.blocks import SampleBlock  # noqa: E402
 from daemon_harness import ENV, free_port, wait_until_state  # noqa: E402
-from replay.publish import retime_target, retimed  # noqa: E402
+from replay.publish import ClockCheck, retime_target, retimed  # noqa: E402
 from replay.reader import iter_blocks  # noqa: E402
 from test_daemon_e2e import BUOY, start_daemon, write_config  # noqa: E402
 
@@ -62,6 +62,43 @@ def test_retimed_moves_every_sample_by_one_whole_second_count(sim):
     (moved,) = retimed([block], retime_target("2026-01-01T00:00:00Z"))
     assert moved.t_first_ns == retime_target("2026-01-01T00:00:00.3Z")
     assert moved.recv_ns - block.recv_ns == moved.t_first_ns - block.t_first_ns
+
+
+def test_the_clock_check_says_how_far_off_which_way_and_what_to_do():
+    """Each block is compared with the clock right after it went out (when the next is asked
+    for): 600 s off is allowed, 600 s and a nanosecond is not; said once, counted always."""
+    now = 1_764_126_000 * NS
+    sent = []
+
+    def block(t_last_ns: int) -> SampleBlock:
+        t = t_last_ns - 50_000_000 * np.arange(19, -1, -1, dtype=np.int64)
+        return SampleBlock(BUOY, "tension", t, {"tension_N": np.ones(20)}, t_last_ns)
+
+    cases = [(False, [now - 600 * NS, now - 3 * 3600 * NS - 1, now - 600 * NS - 1],
+              "3 h behind this machine's clock: a daemon raises clock_skew for blocks more "
+              "than 600 s off; re-time it with --retime now"),
+             (False, [now + 900 * NS], "15 min ahead of this machine's clock: a daemon raises "
+              "clock_skew for blocks more than 600 s off; samples more than 600 s ahead are "
+              "rejected as time_ahead; re-time it with --retime now, and publish at real time "
+              "(--speed 1)"),
+             (True, [now + 600 * NS, now + 601 * NS], "10 min ahead of this machine's clock: a "
+              "daemon raises clock_skew for blocks more than 600 s off; samples more than 600 s "
+              "ahead are rejected as time_ahead; publish at real time (--speed 1) to keep a "
+              "re-timed log on the clock")]
+    for was_retimed, times, said in cases:
+        sent.clear()
+        check = ClockCheck([block(t) for t in times], sent.append, was_retimed,
+                           clock=lambda: now)
+        assert [b.t_last_ns for b in check] == times
+        (first,) = sent
+        assert first.startswith("the log's sensor time (") and first.endswith(said), first
+        off = sum(abs(t - now) > 600 * NS for t in times)
+        assert check.off == off and check.blocks == len(times)
+        assert check.summary() == (f"{off} of {len(times)} blocks were published more than "
+                                   "600 s off this machine's clock")
+    quiet = ClockCheck([block(now - 600 * NS), block(now + 600 * NS)], sent.append, False,
+                       clock=lambda: now)
+    assert len(list(quiet)) == 2 and quiet.summary() is None
 
 
 def test_a_log_of_another_time_is_re_timed_for_a_live_daemon_or_said_far_off(sim, tmp_path):
