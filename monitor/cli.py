@@ -30,6 +30,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "lab-test": ("replay.cmd_lab_test",
                  "seed 004's lab fatigue test through the monitor: predicted vs observed"),
     "forecast": ("replay.cmd_forecast", "projected fatigue damage over a sea-state forecast"),
+    "publish": ("replay.publish", "play MCAP logs over Zenoh to a daemon as a live buoy "
+                "(--retime now: moved to the current time)"),
     "run": ("monitor.cmd_run", "run the live monitoring daemon (Zenoh in, status out)"),
     "bridge": ("monitor.cmd_bridge", "read instruments (serial, TCP, UDP, files, stdin) and "
                "publish their samples to the monitor"),
@@ -44,7 +46,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 # commands that run the compiled models: the first run after an install says it compiles
-COMPUTING = {"simulate", "import", "replay", "demo", "design", "forecast", "run"}
+COMPUTING = {"simulate", "import", "replay", "demo", "design", "forecast", "run", "publish"}
 
 
 class _Subcommands(argparse._SubParsersAction):

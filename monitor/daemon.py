@@ -268,8 +268,8 @@ class Daemon:
         fed = saved_daemon.get("fatigue_fed")
         self._load_t_ns: Any = fed[0] if fed else None
         self._load_listen = listen_of(fed[1]) if fed else now_listen
-        # stream -> (accepted, rejected, when accepted last moved)
-        self._accepted: dict[str, tuple[int, int, float]] = {}
+        # stream -> (accepted, rejected, duplicates among them, when accepted last moved)
+        self._accepted: dict[str, tuple[int, int, int, float]] = {}
         self.metrics = None
         if config.metrics.enabled:  # bound now: a port in use fails before anything starts
             from monitor.metrics import MetricsServer  # noqa: PLC0415 (only when enabled)
@@ -690,12 +690,15 @@ class Daemon:
             s.update(self.sequences.fields(name))
             # wall-clock age of the last accepted sample: blocks that keep arriving but are
             # all rejected (a clock that went back) look alive by data age alone
+            # (duplicates, copies of data already received, are among the rejected counts)
             accepted, rejected = s.get("accepted", 0), sum((s.get("rejected") or {}).values())
+            duplicates = (s.get("rejected") or {}).get("duplicate", 0)
             seen = self._accepted.get(name)
             if seen is None or seen[0] != accepted:
-                seen = self._accepted[name] = (accepted, rejected, listen)
-            s["accepted_age_s"] = listen - seen[2]
+                seen = self._accepted[name] = (accepted, rejected, duplicates, listen)
+            s["accepted_age_s"] = listen - seen[3]
             s["rejected_since_accepted"] = rejected - seen[1]
+            s["duplicates_since_accepted"] = duplicates - seen[2]
         load_t = doc.get("load_t_ns")
         if load_t is not None and load_t != self._load_t_ns:
             self._load_t_ns, self._load_listen = load_t, listen

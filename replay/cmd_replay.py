@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import signal
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator, Sequence
 
 from monitor.cli_paths import check_output
 from monitor.config import ConfigError, default_config, load_config
 from monitor.events import Sink
+from monitor.stop_signals import Stopped, stop_signals_raise
 from replay import cmd_fleet
 
 
@@ -29,7 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     pace.add_argument("--speed", type=float, metavar="X", help="pace at X times real time")
     p.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
     p.add_argument("--rrd", metavar="FILE.rrd",
-                   help="also write a Rerun recording (open it with `buoymon view FILE.rrd`)")
+                   help="also write a Rerun recording (open it with `buoymon view FILE.rrd`); "
+                        "written as FILE.partial.rrd and renamed when the replay ends well, so "
+                        "an interrupted replay leaves only the .partial.rrd")
     p.add_argument("--html", metavar="FILE.html",
                    help="also write the HTML fatigue report (and its plots as PNG beside it); "
                         "the --report JSON then carries the plot fields too")
@@ -46,13 +52,40 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def partial_path(rrd: str | Path) -> Path:
+    """Where ``--rrd FILE.rrd`` is written until the replay has ended well: FILE.partial.rrd."""
+    p = Path(rrd)
+    return p.with_name(f"{p.stem}.partial{p.suffix}" if p.suffix else f"{p.name}.partial")
+
+
 def build_sinks(args: argparse.Namespace, config: Any) -> list[Sink]:
-    """Output sinks for this replay: the Rerun recording of ``--rrd`` (bulk preset)."""
+    """Output sinks for this replay: the Rerun recording of ``--rrd`` (bulk preset), written
+    to its :func:`partial_path` (see :func:`recording_kept_whole`)."""
     if not getattr(args, "rrd", None):
         return []
     from monitor.viz.pipeline_sinks import open_rerun
 
-    return [open_rerun(config, rrd=args.rrd, replay=True)]
+    return [open_rerun(config, rrd=partial_path(args.rrd), replay=True)]
+
+
+@contextlib.contextmanager
+def recording_kept_whole(rrd: str | None, sinks: Sequence[Sink]) -> Iterator[None]:
+    """The ``--rrd`` recording takes its name only when the block ends well (the replay closed
+    it whole); otherwise (Ctrl-C, SIGTERM, an error) what was recorded is flushed and left as
+    its :func:`partial_path`, named on stderr: no partial recording under the full name."""
+    try:
+        yield
+    except BaseException:
+        partial = partial_path(rrd) if rrd else None
+        if partial is not None and partial.exists():
+            for sink in sinks:
+                with contextlib.suppress(Exception):  # what it holds is what is kept
+                    sink.close()
+            print(f"replay: the Rerun recording is partial, kept as {partial} (the replay did "
+                  f"not finish; {rrd} not written)", file=sys.stderr)
+        raise
+    if rrd:
+        os.replace(partial_path(rrd), rrd)
 
 
 def write_html(path: str, report: dict) -> list[str]:
@@ -65,10 +98,7 @@ def write_html(path: str, report: dict) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from replay.report import summary_text, write_report
     from replay.log_files import expand_paths
-    from replay.runner import replay_logs
-    from replay.stage_process import ChildDied
 
     try:
         config = load_config(args.config) if args.config else default_config()
@@ -97,19 +127,37 @@ def run(args: argparse.Namespace) -> int:
             print("replay: --two-processes not used: a fleet replay runs each buoy in one "
                   "process (--workers N of them at once)", file=sys.stderr)
         return cmd_fleet.run(args, config)
+    # SIGTERM and SIGHUP end a buoy's replay as Ctrl-C's KeyboardInterrupt does: reports and
+    # state are written only at the end (none half-written), a partial recording is named.
+    # (Not a fleet's: its pool would finish every buoy before it let the exception out.)
+    with stop_signals_raise((signal.SIGTERM, signal.SIGHUP)):
+        try:
+            return _replay_one(args, config)
+        except Stopped as stop:
+            print(f"buoymon: stopped ({stop})", file=sys.stderr)
+            return stop.exit_status
+
+
+def _replay_one(args: argparse.Namespace, config: Any) -> int:
+    """One buoy's replay of ``args.logs`` (expanded), with ``config``: the exit status."""
+    from replay.report import summary_text, write_report
+    from replay.runner import replay_logs
+    from replay.stage_process import ChildDied
+
     speed = 1.0 if args.realtime else args.speed
-    existed = bool(args.rrd) and Path(args.rrd).exists()
+    existed = bool(args.rrd) and partial_path(args.rrd).exists()
     try:
         sinks = build_sinks(args, config)
     except (ValueError, RuntimeError, OSError) as exc:  # the disk's (full, read-only): exit 1
         print(f"replay: --rrd {args.rrd}: cannot write the recording: {exc}", file=sys.stderr)
-        if not existed:
-            Path(args.rrd).unlink(missing_ok=True)  # no empty recording left to be taken for one
+        if not existed:  # no empty recording left to be taken for one
+            partial_path(args.rrd).unlink(missing_ok=True)
         return 1
     try:
-        result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks, speed=speed,
-                             show_progress=False if args.no_progress else None,
-                             plot_fields=bool(args.html), two_processes=args.two_processes)
+        with recording_kept_whole(args.rrd, sinks):
+            result = replay_logs(config, args.logs, state_path=args.state, sinks=sinks,
+                                 speed=speed, show_progress=False if args.no_progress else None,
+                                 plot_fields=bool(args.html), two_processes=args.two_processes)
     except ConfigError as exc:  # found when the pipeline is built (rules, cable, S-N curves)
         print(exc, file=sys.stderr)
         return 2

@@ -23,11 +23,14 @@ from replay.cmd_replay import MIN_SPEED
 from replay.simulate import LOAD_MODELS, SimConfig, sea_state_warnings, simulate
 
 
-def default_start(publish: str | None) -> str:
-    """``--start`` when not given: the current second when publishing live, else 2000-01-01."""
-    if publish is None:
+def start_time(start: str | None, publish: str | None) -> str:
+    """The log's start from ``--start``: ``now`` is the current second; when not given, the
+    current second when publishing live, else 2000-01-01 (reproducible files)."""
+    if start is None and publish is None:
         return "2000-01-01T00:00:00Z"
-    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    if start is None or start.strip().lower() == "now":
+        return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    return start
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -45,9 +48,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, required=True, help="random seed (integer >= 0)")
     p.add_argument("--buoy-id", default="vaps", help="buoy id for the topics (default vaps)")
     p.add_argument("--start", default=None,
-                   help="sensor time of the first sample, ISO 8601 (default: now with --publish, "
-                        "so a live daemon sees no clock skew at real-time speed; "
-                        "2000-01-01T00:00:00Z otherwise, for reproducible files)")
+                   help="sensor time of the first sample, ISO 8601 or 'now' (the current "
+                        "second: a log to publish to a daemon later, see `buoymon publish "
+                        "--retime`) (default: now with --publish, so a live daemon sees no "
+                        "clock skew at real-time speed; 2000-01-01T00:00:00Z otherwise, for "
+                        "reproducible files)")
     p.add_argument("--mean-span", type=float, default=31.0,
                    help="mean horizontal anchor -> buoy distance in m, the steady drift "
                         "(default 31; the 40 m line in 23 m of water is straight at 32.7)")
@@ -106,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         if args.speed is not None and not args.speed >= MIN_SPEED:
             raise ValueError(f"--speed {args.speed}: must be >= {MIN_SPEED:g}")
         cfg = SimConfig(hours=args.hours, hs_m=args.hs, tp_s=args.tp, seed=args.seed,
-                        buoy_id=args.buoy_id, start=args.start or default_start(args.publish),
+                        buoy_id=args.buoy_id, start=start_time(args.start, args.publish),
                         dropouts=args.dropouts,
                         spikes=args.spikes, nans=args.nans, mean_span_m=args.mean_span,
                         load_model=args.load_model, quanta=parse_quanta(args.quantum))
@@ -139,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
 
             # on the wire with the log's quanta: its samples are on that grid already
             sent = publish_logs([str(path)], publisher_config([args.publish]), args.speed,
-                                codec=ProtobufCodec(cfg.quanta))
+                                codec=ProtobufCodec(cfg.quanta),
+                                warn=lambda text: print(f"buoymon simulate: warning: {text}",
+                                                        file=sys.stderr, flush=True))
             print(f"published {sent:,} blocks on buoy/{cfg.buoy_id}/sensor/*")
     return 0

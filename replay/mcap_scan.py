@@ -141,6 +141,29 @@ def find_chunk(f: BinaryIO, start: int, size: int) -> int | None:
     return None
 
 
+def end_of_log(f: BinaryIO, pos: int, size: int) -> int:
+    """Where the log ends: the byte after its closing magic, found by walking the records
+    from ``pos`` (the first after the data section's end: the summary, its offsets, then the
+    footer), or the first thing there that cannot be a record. What lies beyond (a second
+    file appended, bytes of a broken copy) is no part of the log. A file cut inside a record
+    or the magic after the data section ends at its size: cut short, nothing follows."""
+    while pos + 9 <= size:
+        f.seek(pos)
+        op, ln = struct.unpack("<BQ", f.read(9))
+        if op == 0 or 0x10 <= op < 0x80:
+            return pos
+        if ln > size - pos - 9:
+            return size
+        pos += 9 + ln
+        if op == OP_FOOTER:
+            f.seek(pos)
+            tail = f.read(8)
+            if tail == MAGIC:
+                return pos + 8
+            return size if pos + len(tail) == size and MAGIC.startswith(tail) else pos
+    return size
+
+
 def str_at(b: bytes | memoryview, p: int) -> tuple[str, int]:
     (n,) = struct.unpack_from("<I", b, p)
     return bytes(b[p + 4:p + 4 + n]).decode("utf-8", "replace"), p + 4 + n

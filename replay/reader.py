@@ -31,7 +31,10 @@ Salvage (what is recovered, what is reported lost, see :class:`replay.salvage.Fi
 * a corrupt record header (impossible opcode or length) is reported and reading resumes at
   the next chunk found by its signature (a chunk whose length field alone is corrupt is
   still read whole when its CRC verifies);
-* a payload that is not a valid block is dropped and counted in ``bad_payloads``.
+* a payload that is not a valid block is dropped and counted in ``bad_payloads``;
+* bytes after the log's end (its closing magic) are not read and counted in
+  ``trailing_bytes``; a second log appended there (it starts with the magic) is also reported
+  lost, count unknown.
 Nothing raises on a damaged file; a file where nothing could be read has ``error`` set and
 ``messages == 0``; :attr:`LogReader.ok` is False when no file delivered any message.
 

@@ -232,6 +232,9 @@ def summary_text(report: Mapping[str, Any]) -> str:
         parts.append(f"{len(cut)} file(s) without footer")
     errors = {f["path"]: f.get("error") for f in read.get("files", [])}
     parts += [f"unreadable {f} ({errors.get(f) or 'no data'})" for f in unreadable]
+    parts += [f"{f['trailing_bytes']:,d} bytes after the end of the log in {f['path']} "
+              "(not read)"
+              for f in read.get("files", []) if f.get("trailing_bytes")]
     if parts:
         lines.append("  damaged input: " + "; ".join(parts))
     return "\n".join(lines)

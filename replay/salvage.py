@@ -21,7 +21,9 @@ from monitor.mcap_file import (
     OP_SCHEMA,
 )
 from replay.chunks import Inflated, ReadAhead, inflate
-from replay.mcap_scan import MAX_CUT_CHUNK, Digest, digest, find_chunk, str_at, summary_records
+from replay.mcap_scan import (
+    MAX_CUT_CHUNK, Digest, digest, end_of_log, find_chunk, str_at, summary_records,
+)
 
 
 @dataclass(frozen=True)
@@ -58,13 +60,17 @@ class FileStats:
     last_ns: int | None = None
     lost: list[LostRange] = field(default_factory=list)
     error: str | None = None
+    # bytes after the log's end (its closing magic): no part of it, not read; no data lost
+    trailing_bytes: int = 0
 
     @property
     def readable(self) -> bool:
         return self.messages > 0
 
     def as_dict(self) -> dict:
-        d = {k: v for k, v in self.__dict__.items() if k != "lost"}
+        # trailing_bytes only when there are some: the report of a sound file is unchanged
+        d = {k: v for k, v in self.__dict__.items()
+             if k != "lost" and (k != "trailing_bytes" or v)}
         d["lost"] = [r.__dict__ for r in self.lost]
         return d
 
@@ -238,6 +244,8 @@ class FileSalvage:
                 st.lost[awaiting[1]] = awaiting[0]
             elif op in (OP_DATA_END, OP_FOOTER):
                 st.complete = True
+                self._trailing(f, end_of_log(f, pos + 9 + ln if op == OP_DATA_END else pos,
+                                             size), size, st)
                 break
             else:
                 f.seek(ln, 1)
@@ -247,6 +255,17 @@ class FileSalvage:
             yield
         if st.messages == 0 and st.error is None:
             st.error = "no sensor messages could be read"
+
+    @staticmethod
+    def _trailing(f: BinaryIO, end: int, size: int, st: FileStats) -> None:
+        """Count the bytes after the log's ``end``; when they start as an MCAP file does (two
+        logs joined by ``cat``), that log's messages are not read: a loss of unknown size."""
+        st.trailing_bytes = size - end
+        f.seek(end)
+        if st.trailing_bytes >= len(MAGIC) and f.read(len(MAGIC)) == MAGIC:
+            st.lost.append(LostRange(
+                f"another MCAP log ({st.trailing_bytes:,d} bytes) after the end of this one "
+                f"at byte {end}: not read (split it off to replay it)", end))
 
     def _deliver(self, d: Digest, ctx: FileContext, st: FileStats) -> int:
         """Apply a run of records' channel definitions, then hand its messages to the sink;

@@ -70,10 +70,15 @@ def test_buoymon_replay_on_a_full_disk_names_the_report_it_could_not_write(tmp_p
         # the Rerun recording: a traceback from Rerun's flush at the end
         rrd = full / "r.rrd"
         assert main(["replay", str(log), "--no-progress", "--rrd", str(rrd)]) == 1
-        assert "buoymon replay: Rerun recording not written whole: " in capsys.readouterr().err
+        err = capsys.readouterr().err
+        assert "buoymon replay: Rerun recording not written whole: " in err
+        # what the full disk took is kept under a name that says so, never as r.rrd
+        partial = full / "r.partial.rrd"
+        assert f"replay: the Rerun recording is partial, kept as {partial} " in err
+        assert partial.exists() and not rrd.exists()
         # a disk full to the last byte: Rerun cannot even open the recording (was exit 2, a
         # "bad option", and an empty r.rrd left behind)
-        rrd.unlink(missing_ok=True)
+        partial.unlink()
         try:
             with open(full / "last", "wb") as f:
                 while True:
@@ -85,6 +90,6 @@ def test_buoymon_replay_on_a_full_disk_names_the_report_it_could_not_write(tmp_p
         err = capsys.readouterr().err
         assert code == 1, err
         assert f"replay: --rrd {rrd}: cannot write the recording: " in err
-        assert not rrd.exists()
+        assert not rrd.exists() and not (full / "r.partial.rrd").exists()
     finally:
         subprocess.run(["umount", str(full)], check=True)

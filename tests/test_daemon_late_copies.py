@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import json
 import queue
+import re
 import time
+from collections.abc import Iterable
 
 import numpy as np
 import pytest
@@ -26,36 +28,41 @@ from test_daemon_e2e import (  # noqa: E402
 )
 
 pytestmark = pytest.mark.integration  # processes on loopback: not in `make test-fast`
+CODEC = zenoh_io.ProtobufCodec()
+
+
+def _tension(t0: int, k: int) -> SampleBlock:
+    """The ``k``-th second of 20 Hz tension from ``t0``."""
+    t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+    return SampleBlock(BUOY, "tension", t, {
+        "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0) + 0.1 * k)}, int(t[-1]))
+
+
+def _put_live(pub, t0: int, seconds: Iterable[int]) -> None:
+    """Put those seconds of tension through a plain Zenoh publisher (no cache, no numbers)."""
+    for k in seconds:
+        pub.put(CODEC.encode(_tension(t0, k)))
 
 
 def test_a_re_sent_history_is_counted_as_duplicates_not_alerted_and_replays_the_same(tmp_path):
     port = free_port()
     cfg = write_config(tmp_path, port, record=True, load_source="measured")
     d = start_daemon(cfg, tmp_path)
-    codec = zenoh_io.ProtobufCodec()
     alerts: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
     t0 = time.time_ns() // 10**9 * 10**9 - 300 * 10**9
-
-    def tension(k: int) -> SampleBlock:
-        t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
-        return SampleBlock(BUOY, "tension", t, {
-            "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0) + 0.1 * k)}, int(t[-1]))
-
-    history = write_log(tmp_path / "history.mcap", [tension(k) for k in range(100, 140)])
+    history = write_log(tmp_path / "history.mcap", [_tension(t0, k) for k in range(100, 140)])
     try:
         with client_session(port) as session:
             sub = zenoh_io.declare_enqueuing_subscriber(
                 session, f"buoy/{BUOY}/monitor/alert/rejected_rate/**", alerts)
             pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
-            for k in range(200):
-                pub.put(codec.encode(tension(k)))
+            _put_live(pub, t0, range(200))
             wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 200,
                              buoy=BUOY)
             again = publish(history, port)
             out, err = again.communicate(timeout=60)
             assert again.returncode == 0 and out.strip() == "40", err
-            for k in range(200, 220):  # tension goes on: the ticks that judge the re-send
-                pub.put(codec.encode(tension(k)))
+            _put_live(pub, t0, range(200, 220))  # tension goes on: the ticks that judge it
             st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 260
                                   and s["status"]["now_ns"] >= t0 + 209 * 10**9,
                                   buoy=BUOY)["status"]
@@ -91,19 +98,12 @@ def test_a_restarted_daemon_with_saved_minutes_lost_starts_says_so_and_judges_th
 
     port = free_port()
     cfg = write_config(tmp_path, port, load_source="measured")
-    codec = zenoh_io.ProtobufCodec()
     t0 = time.time_ns() // 10**9 * 10**9 - 400 * 10**9
-
-    def tension(k: int) -> SampleBlock:
-        t = t0 + k * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
-        return SampleBlock(BUOY, "tension", t, {
-            "tension_N": 3000.0 + 100.0 * np.sin(np.arange(20.0) + 0.1 * k)}, int(t[-1]))
 
     def send(ks, messages: int) -> dict:
         with client_session(port) as session:
             pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
-            for k in ks:
-                pub.put(codec.encode(tension(k)))
+            _put_live(pub, t0, ks)
             st = wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == messages,
                                   buoy=BUOY)["status"]
             pub.undeclare()
@@ -146,3 +146,42 @@ def test_a_restarted_daemon_with_saved_minutes_lost_starts_says_so_and_judges_th
     log = [json.loads(line) for line in d.stderr_path.read_text().splitlines()
            if "late copies not restored" in line]
     assert [x["minutes_lost"] for x in log] == [{"tension": 2}]
+
+
+def test_data_rejected_on_a_re_send_alone_says_duplicates_not_rejections(tmp_path):
+    """A publisher that sends only copies of old data for longer than the data-age timeout:
+    no new measurement is accepted, so `data_rejected` fires (kept on purpose); its summary
+    counts the copies as duplicates and 0 as rejected (was: "rejected so far: duplicate=N").
+    `buoymon run` and a separate `replay.publish` process re-sending 40 s at 8x."""
+    port = free_port()
+    cfg = write_config(tmp_path, port, load_source="measured")
+    cfg.write_text(cfg.read_text() + "[health]\ndata_age_timeout_s = { tension = 2.0 }\n")
+    d = start_daemon(cfg, tmp_path)
+    alerts: "queue.SimpleQueue[tuple]" = queue.SimpleQueue()
+    t0 = time.time_ns() // 10**9 * 10**9 - 300 * 10**9
+    history = write_log(tmp_path / "history.mcap", [_tension(t0, k) for k in range(100, 140)])
+    try:
+        with client_session(port) as session:
+            sub = zenoh_io.declare_enqueuing_subscriber(
+                session, f"buoy/{BUOY}/monitor/alert/data_rejected/**", alerts)
+            pub = zenoh_io.declare_data_publisher(session, f"buoy/{BUOY}/sensor/tension")
+            _put_live(pub, t0, range(200))
+            wait_until_state(port, lambda s: s["status"]["counters"]["messages"] == 200,
+                             buoy=BUOY)
+            again = publish(history, port, speed=8.0)
+            fired = json.loads(alerts.get(timeout=60)[2])
+            out, err = again.communicate(timeout=60)
+            assert again.returncode == 0 and out.strip() == "40", err
+            sub.undeclare()
+            pub.undeclare()
+    finally:
+        assert d.terminate() == 0
+    assert fired["labels"]["component"] == "tension" and fired["state"] == "firing", fired
+    found = re.fullmatch(
+        r"stream tension: data arrives but none was accepted for \d+ s: since then (\d+) "
+        r"duplicate\(s\) \(data already received, sent again\) and 0 rejected \(so far: "
+        r"(\d+) duplicate\(s\); rejected none\)", fired["summary"])
+    assert found, fired["summary"]
+    since, so_far = int(found[1]), int(found[2])
+    # whole 1-s blocks of 20 samples, at most the 40 s re-sent
+    assert since % 20 == 0 and 0 < since <= so_far <= 800

@@ -68,8 +68,17 @@ def test_data_that_arrives_but_is_all_rejected_is_alerted():
     assert live.evaluate(doc(**held, accepted_age_s=8.0), NS) == []
     recs = live.evaluate(doc(**flowing, accepted_age_s=6.0), 2 * NS)
     assert fired(recs) == {("data_rejected", "tension", "fire")}
-    assert recs[0].summary == ("stream tension: data arrives but none was accepted for 6 s "
-                               "(rejected so far: time_backwards=40)")
+    assert recs[0].summary == ("stream tension: data arrives but none was accepted for 6 s: "
+                               "since then 0 duplicate(s) (data already received, sent again) "
+                               "and 40 rejected (so far: 0 duplicate(s); rejected "
+                               "time_backwards=40)")
+    # copies of old data (a publisher re-sending) are told apart from rejections
+    mixed = dict(age=0.5, accepted=100, rejected={"duplicate": 700, "time_backwards": 40},
+                 rejected_since_accepted=540, duplicates_since_accepted=500)
+    again = LiveAlerts("b1", LiveConfig()).evaluate(doc(**mixed, accepted_age_s=6.0), 2 * NS)
+    assert again[0].summary.endswith(": since then 500 duplicate(s) (data already received, "
+                                     "sent again) and 40 rejected (so far: 700 duplicate(s); "
+                                     "rejected time_backwards=40)")
     assert not live.health()["ok"]
     # data that stopped altogether is data_age's, not this rule's
     recs = live.evaluate(doc(age=9.0, accepted=100, accepted_age_s=9.0), 3 * NS)

@@ -430,3 +430,71 @@ def test_read_ahead_pays_when_the_cpus_outnumber_the_replaying_processes():
     assert not read_ahead_pays(2, cpus=2)  # a 2-worker pool on 2 cores: every core busy
     assert read_ahead_pays(2, cpus=4)
     assert not read_ahead_pays(8, cpus=4)
+
+
+@pytest.mark.parametrize("writer", ["buoymon", "mcap"])
+def test_bytes_after_the_log_s_end_are_counted_not_silently_ignored(log, tmp_path, writer):
+    """A sound log (ours, or mcap's own writer with its summary and offsets) with bytes after
+    its closing magic: every sample read as before, the bytes counted; the log alone: none."""
+    path = log[0] if writer == "buoymon" else tmp_path / "lib.mcap"
+    if writer == "mcap":
+        _mcap_library_log(path)
+    data = path.read_bytes()
+    assert data.endswith(b"\x89MCAP0\r\n")
+    assert _read(path)[1].trailing_bytes == 0 and "trailing_bytes" not in _read(path)[1].as_dict()
+    for junk in (b"\x00" * 4096, b"x", os.urandom(333), b"\x05" + b"\xff" * 20):
+        spoilt = tmp_path / "junk.mcap"
+        spoilt.write_bytes(data + junk)
+        _, st, values = _read(spoilt)
+        assert np.array_equal(values, np.arange(N_SECONDS * 20.0))
+        assert st.complete and not st.lost and st.trailing_bytes == len(junk)
+        assert st.as_dict()["trailing_bytes"] == len(junk)
+
+
+def test_a_log_cut_inside_its_closing_magic_has_no_trailing_bytes(log, tmp_path):
+    cut = tmp_path / "cutmagic.mcap"
+    cut.write_bytes(log[1][:-3])
+    _, st, values = _read(cut)
+    assert np.array_equal(values, np.arange(N_SECONDS * 20.0))
+    assert st.trailing_bytes == 0 and not st.lost
+
+
+def test_a_second_log_appended_is_reported_as_not_read(log, tmp_path):
+    """`cat a.mcap b.mcap > c.mcap`: the first log is read, the second is a loss of unknown
+    size at its offset (its messages are not read), not silence."""
+    data = log[1]
+    joined = tmp_path / "joined.mcap"
+    joined.write_bytes(data + data)
+    _, st, values = _read(joined)
+    assert np.array_equal(values, np.arange(N_SECONDS * 20.0))
+    assert st.trailing_bytes == len(data)
+    (lost,) = st.lost
+    assert lost.offset == len(data) and lost.messages is None
+    assert lost.reason.startswith(f"another MCAP log ({len(data):,d} bytes) after the end")
+
+
+def test_replay_command_reports_the_bytes_after_a_log_s_end(log, tmp_path):
+    """The real command line on a real log with 1000 bytes appended: same figures as the
+    sound log, and the bytes counted on stdout and in the report."""
+    import json
+    import subprocess
+    import sys
+
+    path, data, _ = log
+    spoilt = tmp_path / "spoilt.mcap"
+    spoilt.write_bytes(data + os.urandom(1000))
+    env = {**os.environ, "PYTHONPATH": str(os.path.dirname(os.path.dirname(__file__)))}
+    outs = {}
+    for p in (path, spoilt):
+        run = subprocess.run([sys.executable, "-m", "monitor.cli", "replay", str(p), "--report",
+                              str(tmp_path / f"{p.stem}.json"), "--no-progress"],
+                             env=env, capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        outs[p.stem] = run.stdout, json.loads((tmp_path / f"{p.stem}.json").read_text())
+    good, bad = outs["good"], outs["spoilt"]
+    assert "damaged input" not in good[0]
+    assert f"  damaged input: 1,000 bytes after the end of the log in {spoilt} (not read)" \
+        in bad[0].splitlines()
+    (f,) = bad[1]["inputs"]["read"]["files"]
+    assert f["trailing_bytes"] == 1000 and f["complete"] and f["lost"] == []
+    assert bad[1]["samples"] == good[1]["samples"] and bad[1]["components"] == good[1]["components"]

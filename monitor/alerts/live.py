@@ -15,7 +15,9 @@ data_age (stream)        warning      no block arrived for longer than ``[health
 data_rejected (stream)   warning      blocks keep arriving but none of their samples was
                                       accepted for longer than ``data_age_timeout_s`` (e.g. a
                                       sensor restarted with an older clock while the daemon
-                                      was down: all ``time_backwards``)
+                                      was down: all ``time_backwards``; or a publisher that
+                                      sends only copies of old data: all ``duplicate``; the
+                                      summary counts duplicates and rejected apart)
 fatigue_blind (fatigue)  critical     neither measured tension nor a motion estimate fed the
                                       fatigue components for ``fatigue_blind_timeout_s``
 clock_skew (stream)      warning      the last block's sensor time is off the logger clock by
@@ -96,6 +98,19 @@ def _seen(s: Mapping[str, Any]) -> bool:
     return bool(s.get("accepted") or s.get("last_t_ns") or any(rejected.values()))
 
 
+def _rejected_text(s: Mapping[str, Any]) -> str:
+    """What a stream's samples were since its last accepted one, duplicates (copies of data
+    already received: a publisher re-sending its cache) apart from the rejected, with the
+    counts by reason so far (the status fields of monitor.daemon.Daemon.status)."""
+    since = int(s.get("rejected_since_accepted") or 0)
+    dup = int(s.get("duplicates_since_accepted") or 0)
+    counts = s.get("rejected") or {}
+    reasons = " ".join(f"{k}={v}" for k, v in sorted(counts.items()) if v and k != "duplicate")
+    return (f": since then {dup} duplicate(s) (data already received, sent again) and "
+            f"{since - dup} rejected (so far: {counts.get('duplicate', 0)} duplicate(s); "
+            f"rejected {reasons or 'none'})")
+
+
 class LiveAlerts:
     """Evaluates the live rules on status documents and tracks their firing state."""
 
@@ -141,13 +156,11 @@ class LiveAlerts:
                 # flowing, and rejected (not merely held by the ordering layer)
                 flowing = (_num(s["data_age_s"]) <= timeout
                            and (s.get("rejected_since_accepted") or 0) > 0)
-                rejected = " ".join(f"{k}={v}" for k, v in sorted((s.get("rejected") or {}).items())
-                                    if v)
                 out.append(Condition(
                     "data_rejected", name, "warning", flowing and acc_age > timeout,
                     _num(acc_age), timeout, "s",
-                    f"stream {name}: data arrives but none was accepted for {acc_age:.0f} s "
-                    f"(rejected so far: {rejected or 'none'})"))
+                    f"stream {name}: data arrives but none was accepted for {acc_age:.0f} s"
+                    + _rejected_text(s)))
             skew = s.get("clock_skew_s")
             if skew is not None:
                 way = "ahead of" if skew > 0 else "behind"

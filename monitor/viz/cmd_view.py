@@ -9,35 +9,11 @@ session, so nothing else would); ports held by another process are refused, nami
 from __future__ import annotations
 
 import argparse
-import contextlib
-import signal
 import subprocess
 import sys
 from pathlib import Path
-from typing import Iterator
 
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
-
-
-class Stopped(Exception):
-    """A stop signal arrived (raised from the signal handler, so ``finally`` blocks run)."""
-
-
-@contextlib.contextmanager
-def stop_signals_raise() -> Iterator[None]:
-    """Within the block, SIGTERM / SIGINT / SIGHUP raise :class:`Stopped`."""
-
-    def handler(signum: int, frame: object) -> None:
-        for s in STOP_SIGNALS:  # a second signal must not cut the viewer's shutdown short
-            signal.signal(s, signal.SIG_IGN)
-        raise Stopped(signal.Signals(signum).name)
-
-    previous = {s: signal.signal(s, handler) for s in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
+from monitor.stop_signals import Stopped, stop_signals_raise
 
 
 def register(sub: argparse._SubParsersAction) -> None:
