@@ -19,7 +19,19 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Latest, 2026-11-26 01:40-01:42 UTC, quiet 2-core machine, ``--buoys 4 --days 15``, main after
+Latest, 2026-11-26 03:53-03:56 UTC, the 2-core machine shared (load average 1.4-2.7),
+``--buoys 4 --days 15``, branch fleetcut (the regular decoder's times exactly sized, the S-N
+damage in one compiled call) then main 868e7c2, one run each: serial 17.0 / 18.4 CPU-s = 103 /
+112 CPU-s per buoy-year; 2 workers 24.2 / 26.7 s wall (the machine's load), worker CPU-s
+10.0 + 9.8 / 10.7 + 10.6; reading alone 3.4 / 3.8 CPU-s. In-process replays of 4 days of one
+buoy, best of 7, alternated three times: 1.010 / 1.066, 0.993 / 1.075, 0.870 / 0.953 CPU-s
+(-5 to -9 %). Target under 60: NOT reached. Where the CPU of those 4 days goes (main
+0762eca, one core): a fixed ~0.6 ms per slab was ~30 % (main now takes one slab per stretch
+of the log, replay/spans.py, which halves the slabs), the sea-state learner's window closes
+13 %, decoding 12 %, validation and QC 12 %, the motion estimator's loop 11 %, the tick pass
+10 %, zstd 7 %.
+
+Earlier, 2026-11-26 01:40-01:42 UTC, quiet 2-core machine, ``--buoys 4 --days 15``, main after
 this round's tick-stage and reading cuts, two runs: serial 20.9 / 17.3 CPU-s = 127 / 105 CPU-s
 per buoy-year (the machine's speed drifts 10-20 % between identical runs); 2 workers 10.9 /
 9.8 s wall. Target under 60: NOT reached.

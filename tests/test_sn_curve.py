@@ -159,3 +159,28 @@ def test_bad_input():
         SNCurve.basquin(3.0, 12.0, low_stress="maybe", endurance_MPa=10.0)
     with pytest.raises(ValueError, match="increase"):
         SNCurve.tabulated([10.0, 20.0], [1e6, 1e7])
+
+
+def test_damage_per_cycle_one_call_path_is_the_scaled_loop_and_refuses_bad_ranges():
+    """Without mean correction damage_per_cycle checks, scales and evaluates in one compiled
+    call: the bits of effective_range_MPa then damage_loop (the committed Miner sum's), for
+    scalar and per-cycle counts; a NaN, infinite or negative range is a ValueError."""
+    from models.fatigue._loops import damage_loop
+
+    curve = SNCurve.vaps_copper().with_factors(scf=1.37)
+    rng = np.random.default_rng(7)
+    ranges = rng.uniform(0.0, 120.0, 5000) * MPA
+    ranges[:3] = [0.0, -0.0, 1e-300]
+    counts = rng.uniform(0.5, 2.0, 5000)
+    s = curve.effective_range_MPa(ranges)
+    for c in (counts, np.ones(5000)):
+        want = damage_loop(np.ascontiguousarray(s), np.ascontiguousarray(c), curve._mpa_params)
+        got = curve.damage_per_cycle(ranges, counts=c if c is counts else 1.0)
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    one = curve.damage_per_cycle(ranges[7])  # a scalar in, a scalar out: the same bits
+    assert np.shape(one) == () and one == got[7]
+    for bad in (np.nan, np.inf, -np.inf, -1.0):
+        with pytest.raises(ValueError, match="finite and >= 0"):
+            curve.damage_per_cycle(np.array([10e6, bad]))
+        with pytest.raises(ValueError, match="finite and >= 0"):
+            curve.damage_per_cycle(np.array([10e6, bad]), counts=np.ones(2))

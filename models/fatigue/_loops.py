@@ -301,9 +301,9 @@ def _cycle_damage(ranges, counts, params, ln_s, d):
         d[i] = select(ranges[i] * scale >= cutoff, counts[i] * exp_det(d[i]), 0.0)
 
 
-def damage_loop(ranges, counts, params):
-    """Damage of each cycle (``_cycle_damage``, chunk by chunk): the one S-N evaluation
-    behind ``SNCurve.damage_per_cycle`` as behind the committing loops, hence their bits."""
+@jitable
+def _damage_chunks(ranges, counts, params):
+    """Damage of each cycle (``_cycle_damage``, chunk by chunk)."""
     n = ranges.shape[0]
     d = np.empty(n)
     ln_s = np.empty(min(CHUNK, n))
@@ -311,6 +311,28 @@ def damage_loop(ranges, counts, params):
         end = min(i + CHUNK, n)
         _cycle_damage(ranges[i:end], counts[i:end], params, ln_s, d[i:end])
     return d
+
+
+def damage_loop(ranges, counts, params):
+    """Damage of each cycle (``_cycle_damage``, chunk by chunk): the one S-N evaluation
+    behind ``SNCurve.damage_per_cycle`` as behind the committing loops, hence their bits."""
+    return _damage_chunks(ranges, counts, params)
+
+
+def scaled_damage_loop(ranges, counts, scale, params):
+    """``damage_loop`` of ``ranges * scale`` (one product each: ``SNCurve.effective_range_MPa``
+    without mean correction) in one call, once every range is checked finite and >= 0;
+    returns (ok, damage), ok False (nothing computed) otherwise."""
+    n = ranges.shape[0]
+    ok = True
+    for i in range(n):  # NaN fails both comparisons; the AND vectorises
+        ok &= (ranges[i] >= 0.0) & (ranges[i] < np.inf)
+    if not ok:
+        return False, np.empty(0)
+    s = np.empty(n)
+    for i in range(n):
+        s[i] = ranges[i] * scale
+    return True, _damage_chunks(s, counts, params)
 
 
 @jitable
@@ -639,6 +661,7 @@ _LOOPS: dict[str, Callable] = {"axial_compiled": axial_loop, "feed_compiled": fe
                                "commit_compiled": commit_loop,
                                "commit_damage_compiled": _commit_damage,
                                "damage_compiled": damage_loop, "residue_compiled": residue_loop,
+                               "scaled_damage_compiled": scaled_damage_loop,
                                "residue_cycles_compiled": residue_cycles_loop,
                                "ticks_compiled": ticks_loop, "date_compiled": date_loop}
 

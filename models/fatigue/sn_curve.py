@@ -295,6 +295,18 @@ class SNCurve:
         Evaluated by the compiled loops' own per-cycle function (``_loops.damage_loop``,
         exp(m ln S + ln(dff / a)) with their log and exp), so a cycle's damage has the same
         bits here as in the committed Miner sum."""
+        if self.mean_correction == "none":  # the check, the scaling and the loop in one call
+            r = np.asarray(range_Pa, dtype=np.float64)
+            n = np.asarray(counts, dtype=np.float64)
+            if n.shape == r.shape or n.ndim == 0:
+                n = n if n.shape == r.shape else np.full(r.shape, float(n))
+                scaled = _loops.scaled_damage_compiled or _loops.scaled_damage_loop
+                ok, d = scaled(np.ascontiguousarray(r).reshape(-1),
+                               np.ascontiguousarray(n).reshape(-1), self.kernel_params[0],
+                               self._mpa_params)
+                if not ok:
+                    raise ValueError("stress ranges must be finite and >= 0")
+                return d.reshape(r.shape)[()]
         s = self.effective_range_MPa(range_Pa, mean_Pa)
         n = np.asarray(counts, dtype=np.float64)
         if n.shape != s.shape:
