@@ -204,7 +204,8 @@ def record(n: int, seed: int):
     for k in rng.integers(0, n - 30, n // 400):
         x[k:k + 25] += np.linspace(0, rng.uniform(-8, 8), 25)
     # lone spikes of 7-12 m: faster than sqrt(g d) (6 m in 0.4 s), held and left out
-    x[rng.integers(1, n - 1, n // 300)] += rng.choice((-1.0, 1.0)) * rng.uniform(7, 12)
+    k = rng.integers(1, n - 1, n // 300)
+    x[k] += rng.choice((-1.0, 1.0), k.size) * rng.uniform(7, 12, k.size)
     z[rng.integers(0, n, n // 200)] = np.nan
     return t, z, x, y
 
