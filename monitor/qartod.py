@@ -393,9 +393,10 @@ class StreamQC:
         """``check_factor``: (depth m, longest wave period s, gap s) of a motion stream's
         (heave, surge, sway) check-factor test (:class:`CheckFactor`), None = off."""
         self.fields = fields
-        self._cf = None if check_factor is None else CheckFactor(
-            *check_factor, state=None if state is None else state.get("check_factor"))
         self._p = _params(fields)
+        self._cf = None if check_factor is None else CheckFactor(
+            *check_factor, max_rate_per_s=tuple(self._p[:, 7]),
+            state=None if state is None else state.get("check_factor"))
         self._loc = float(location_range_max_m)
         # the flat-line test needs the samples of its longest window; others two samples
         windows = [max(f.flat_suspect_s if np.isfinite(f.flat_suspect_s) else 0.0,

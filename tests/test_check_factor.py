@@ -17,6 +17,8 @@ from monitor.validate import StreamValidator
 
 S = 1_000_000_000
 G = 9.80665
+RATE = (math.sqrt(G * 23.0),) * 3  # the shipped motion fields' max_rate_per_s in 23 m
+RATE = (math.sqrt(G * 23.0),) * 3  # the shipped motion fields' max_rate_per_s in 23 m
 
 
 def coth2(period: float, depth: float) -> float:
@@ -26,13 +28,13 @@ def coth2(period: float, depth: float) -> float:
     return 1 / math.tanh(k * depth) ** 2
 
 
-def flags_of(t_s, z, x, y, cuts=(), restore=False, depth=23.0, gap=5.0):
+def flags_of(t_s, z, x, y, cuts=(), restore=False, depth=23.0, gap=5.0, rate=RATE):
     t = np.rint(np.asarray(t_s) * S).astype(np.int64)
-    cf = CheckFactor(depth, 25.0, gap)
+    cf = CheckFactor(depth, 25.0, gap, rate)
     out = []
     for a, b in zip([0, *cuts], [*cuts, t.shape[0]]):
-        if restore:
-            cf = CheckFactor(depth, 25.0, gap, state=cf.state())
+        if restore:  # as a saved state file has it
+            cf = CheckFactor(depth, 25.0, gap, rate, state=json.loads(json.dumps(cf.state())))
         out.append(cf.check(t[a:b], z[a:b], x[a:b], y[a:b]))
     return np.concatenate(out)
 
@@ -80,6 +82,108 @@ def test_a_horizontal_excursion_fails_at_once_and_for_a_window_after():
     assert (f[first:last + 1] == 4).all()
 
 
+def sea_10hz(seconds: float):
+    """One 8-s linear wave (heave 0.5 m, surge coth(kd) times it) at 10 Hz in 23 m."""
+    t = np.arange(0, seconds, 0.1)
+    w = 2 * math.pi / 8.0
+    return t, 0.5 * np.sin(w * t), 0.5 * math.sqrt(coth2(8.0, 23.0)) * np.cos(w * t), 0 * t
+
+
+def test_a_lone_spike_is_left_out_of_the_window():
+    # an 8 m surge spike in one sample (80 m/s: no water particle moves faster than its
+    # wave, sqrt(g d) = 15 m/s here), and a heave one with a NaN before the sea comes back.
+    # The surge spike's own window violates, so it fails; the heave spike only adds vertical
+    # motion (pass; the validator rejects both as spikes). Every other sample is judged as
+    # if they were not there; without holding, the surge spike failed 100 s of sea around it
+    t, z, x, y = sea_10hz(400)
+    x[2000] += 8.0
+    z[3000] -= 8.0
+    x[3001] = np.nan
+    f = flags_of(t, z, x, y)
+    assert f[2000] == 4 and f[3000] == 1 and f[3001] == 9
+    keep = np.ones(t.shape[0], bool)
+    keep[[2000, 3000, 3001]] = False
+    np.testing.assert_array_equal(f[keep], flags_of(t[keep], z[keep], x[keep], y[keep]))
+    assert (f[keep][250:] == 1).all() and (f[:250] == 2).all()
+    unheld = flags_of(t, z, x, y, rate=(math.inf,) * 3)
+    assert (unheld == 4).sum() == 1000 and (unheld[2000:3000] == 4).all()
+
+
+def test_a_fast_move_that_is_not_lone_is_taken_as_it_came():
+    # a 6 m sway jump in one sample that stays 3 s, a surge spike of two samples, and a lone
+    # one followed by a 10 s gap (the next sample cannot say): each is a real move here,
+    # flagged exactly as by a test that holds nothing, and fails at once for 50 s and more
+    t, z, x, y = sea_10hz(700)
+    y[1000:1030] += 6.0
+    x[3000:3002] += 8.0
+    x[5000] += 8.0
+    keep = (t < 500.05) | (t > 510.05)  # samples 5001 .. 5100 lost
+    t, z, x, y = t[keep], z[keep], x[keep], y[keep]
+    f = flags_of(t, z, x, y)
+    np.testing.assert_array_equal(f, flags_of(t, z, x, y, rate=(math.inf,) * 3))
+    for first in (1000, 3000, 5000):
+        assert (f[first - 10:first] == 1).all() and (f[first:first + 500] == 4).all()
+
+
+@pytest.mark.parametrize("restore", [False, True])
+def test_a_held_sample_survives_a_block_end_and_a_restart(restore):
+    t, z, x, y = sea_10hz(400)
+    x[2000] += 8.0  # lone
+    y[2500:2502] += 8.0  # not lone
+    whole = flags_of(t, z, x, y)
+    for cut in (2000, 2001, 2002, 2501, 2502, 2503):
+        np.testing.assert_array_equal(flags_of(t, z, x, y, [cut], restore), whole)
+    # the state holds the sample (time, heave, surge, sway) only while one is held
+    cf = CheckFactor(23.0, 25.0, 5.0, RATE)
+    tn = np.rint(t * S).astype(np.int64)
+    cf.check(tn[:2001], z[:2001], x[:2001], y[:2001])
+    assert cf.state()["held"] == [int(tn[2000]), z[2000], x[2000], y[2000]]
+    cf.check(tn[2001:2002], z[2001:2002], x[2001:2002], y[2001:2002])
+    assert "held" not in cf.state() and len(cf.state()["ints"]) == 7
+
+
+def test_simulated_storm_motion_is_linear_waves_far_inside_the_bound(tmp_path):
+    # the simulator's buoy in storm seas (buoymon simulate: 30 min each, 23 m): NDBC's
+    # spectral check factor R(f) = (Sxx + Syy) / Szz tanh^2(k d) is 1 over the energetic
+    # band (NDBC 96-01), and the windowed velocity ratio the test uses is the JONSWAP sea's
+    # (differenced at 10 Hz, 2 cm of noise per channel: 1.326 / 1.514, computed here), far
+    # inside C^2 = 7.10: no fail. (Steep-sea extras stay small: a 6 m, 12 s wave's Stokes
+    # drift, 0.27 m/s at most, adds 0.07 m^2/s^2 to the 1.66 of the horizontal velocity.)
+    from scipy import signal
+
+    from models.waves import jonswap
+    from replay.reader import LogReader
+    from replay.simulate import SimConfig, simulate
+
+    for hs, tp, want in ((4.0, 10.0, 1.326), (6.0, 12.0, 1.514)):
+        log = tmp_path / f"hs{hs:g}.mcap"
+        simulate(SimConfig(hours=0.5, hs_m=hs, tp_s=tp, seed=7), log)
+        blocks = [b for b in LogReader(log) if b.sensor == "motion"]
+        t = np.concatenate([b.t_ns for b in blocks]) * 1e-9
+        z, x, y = (np.concatenate([b.fields[k] for b in blocks])
+                   for k in ("heave_m", "surge_m", "sway_m"))
+        f, szz = signal.welch(z, fs=10.0, nperseg=2560)
+        sh = signal.welch(x, fs=10.0, nperseg=2560)[1] + signal.welch(y, fs=10.0, nperseg=2560)[1]
+        band = (f > 0.6 / tp) & (f < 2.0 / tp)
+        r = np.array([sh[i] / szz[i] / coth2(1 / f[i], 23.0) for i in np.flatnonzero(band)])
+        weighted = float((r * szz[band]).sum() / szz[band].sum())
+        assert abs(weighted - 1.0) < 0.01 and 0.9 < r.min() and r.max() < 1.05, (hs, weighted)
+        # the theory: sum over the spectrum of |2 sin(pi f dt) / dt|^2 S(f) (coth^2 for the
+        # horizontal) plus the noise's 2 sigma^2 / dt^2 per channel
+        ff = np.linspace(0.01, 5.0, 5_000)
+        d2 = (2 * np.sin(np.pi * ff * 0.1) / 0.1) ** 2 * jonswap(ff, hs, tp)
+        c2 = np.array([coth2(1 / v, 23.0) if v < 1.0 else 1.0 for v in ff])  # deep above 1 Hz
+        noise = 2 * 0.02 ** 2 / 0.01
+        theory = ((np.trapezoid(d2 * c2, ff) + 2 * noise) / (np.trapezoid(d2, ff) + noise))
+        assert theory == pytest.approx(want, abs=5e-4)
+        vz2, vh2 = np.diff(z) ** 2, np.diff(x) ** 2 + np.diff(y) ** 2
+        ratio = [vh2[i:i + 500].sum() / vz2[i:i + 500].sum() for i in range(0, vz2.size - 500, 50)]
+        assert np.median(ratio) == pytest.approx(want, rel=0.03)
+        assert max(ratio) < 2.1 < bound(23.0, 25.0) / 3
+        flags = flags_of(t, z, x, y)
+        assert (flags[:250] == 2).all() and (flags[250:] == 1).all()
+
+
 def test_missing_samples_and_gaps():
     t = np.arange(0, 300, 0.4)
     z = 0.5 * np.sin(2 * math.pi * t / 8)
@@ -99,6 +203,9 @@ def record(n: int, seed: int):
     y = rng.normal(0, 0.02, n)
     for k in rng.integers(0, n - 30, n // 400):
         x[k:k + 25] += np.linspace(0, rng.uniform(-8, 8), 25)
+    # lone spikes of 7-12 m: faster than sqrt(g d) (6 m in 0.4 s), held and left out
+    k = rng.integers(1, n - 1, n // 300)
+    x[k] += rng.choice((-1.0, 1.0), k.size) * rng.uniform(7, 12, k.size)
     z[rng.integers(0, n, n // 200)] = np.nan
     return t, z, x, y
 
@@ -113,6 +220,8 @@ def test_streaming_equals_batch_for_any_block_split(seed, cuts, restore):
     split = flags_of(t, z, x, y, sorted(set(cuts)), restore)
     np.testing.assert_array_equal(whole, split)
     assert (whole == 4).any() and (whole == 1).any() and (whole == 9).any()
+    # the lone spikes were held (a test holding nothing flags otherwise)
+    assert not np.array_equal(whole, flags_of(t, z, x, y, rate=(math.inf,) * 3))
 
 
 def test_the_shipped_motion_stream_rejects_and_counts_it_by_name():
