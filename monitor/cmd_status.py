@@ -236,8 +236,16 @@ def render(source: str, doc: Mapping[str, Any]) -> str:
                   if ck.get("failing") else ""))
     channels = (doc.get("delivery") or {}).get("channels") or {}
     out.append("outbox: " + (", ".join(
-        f"{ch} {c.get('pending', '?')} pending" + (f", {c['dead_letters']} dead letters"
-                                                   if c.get("dead_letters") else "")
+        f"{ch} {c.get('pending', '?')} pending" + _stuck(c)
+        + (f", {c['dead_letters']} dead letters" if c.get("dead_letters") else "")
         for ch, c in sorted(channels.items())) or "no webhook/e-mail channel"))
     out.append(f"queue depth {doc.get('queue_depth', '-')}")
     return "\n".join(out)
+
+
+def _stuck(channel: dict) -> str:
+    """How long the oldest waiting message has waited (a receiver down shows as more than
+    "N pending": every attempt failing since then)."""
+    age = channel.get("oldest_pending_age_s")
+    return ("" if not channel.get("pending") or age is None else
+            f" (oldest {age:.0f} s, {channel.get('failures_total', 0)} failed attempts)")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import heapq
 import json
 import logging
+import math
 import queue
 import sqlite3
 import threading
@@ -251,6 +252,11 @@ class Daemon:
             s: dict(d) for s, d in saved.get("daemon", {}).get("recorded", {}).items()}
         self._flushes_seen = 0
         self._first_catch_up = True
+        # with publishers in the checkpoint, the live rules wait for the first catch-up (or
+        # for as long as it may take to come): judged before it, every stream is as old as
+        # the daemon's downtime, and a restart beside a bridge whose cache holds it all sent
+        # data_age fire + clear to Alertmanager
+        self._live_from_mono = math.inf
         self.restored_seq = restored.seq if restored is not None else 0
         hc = config.health
         # the pipeline's [ordering] max_ahead_s: a block it rejects as time_ahead is no restart
@@ -340,6 +346,9 @@ class Daemon:
             if self.metrics is not None:
                 self.metrics.start()
             self.notifier.ready(f"monitoring buoy {self.buoy_id}")
+            self._live_from_mono = time.monotonic() + (
+                _RECONNECT_WAIT_S + _RECOVERY_TIMEOUT_S if self.sequences.latest_sources()
+                else 0.0)
             self._serve()
             self.notifier.stopping()
             for ext in self._extensions:
@@ -769,7 +778,8 @@ class Daemon:
     def _publish_status(self) -> None:
         doc = self.status()
         now = time.monotonic()
-        if now - self._last_live_mono >= self.config.zenoh.status_interval_s:
+        if now - self._last_live_mono >= self.config.zenoh.status_interval_s and (
+                not self._first_catch_up or now >= self._live_from_mono):
             self._last_live_mono = now
             records = self.live.evaluate(doc, doc["wall_time_ns"])
             if records:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import queue
+import re
 import shutil
 import sqlite3
 import subprocess
@@ -254,6 +255,12 @@ def test_an_alertmanager_outage_delays_but_loses_nothing(tmp_path, am):
         # several failed attempts against the stopped Alertmanager (the outbox counts them)
         wait_until(lambda: _attempts(tmp_path / "outbox.sqlite", "alertmanager") >= 3,
                    what="3 failed attempts", interval=0.2)
+        # `buoymon status` says how long the alert has waited, not only that it waits
+        shown = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config",
+                                str(cfg)], env=ENV, capture_output=True, text=True, timeout=60)
+        m = re.search(r"outbox: alertmanager 1 pending \(oldest (\d+) s, (\d+) failed "
+                      r"attempts\)", shown.stdout)
+        assert m and int(m[2]) >= 3, shown.stdout
         manager.start()
         wait_until(lambda: manager.active("data_age"), what="data_age active after the outage", interval=0.2)
         feeder = threading.Thread(target=_feed, args=(c, stop, now_s + 1), daemon=True)

@@ -104,6 +104,7 @@ class SourceState:
     time_source: str | None = None
     last_t_ns: int | None = None
     last_recv_ns: int = 0  # the receive time of the read that gave ``last_t_ns``
+    last_read_ns: int | None = None  # the receive time of the link's previous read
     last_sample_mono: float | None = None
     last_line_mono: float | None = None
     # when ``connected`` last changed (or the bridge started): what a state's age counts from
@@ -160,6 +161,20 @@ def _leaps_ahead(src: SourceState, t_ns: int, recv_ns: int) -> bool:
     the logger's clock, and got there by a leap of as much beyond the clock's own advance."""
     return (is_ahead(t_ns, recv_ns, _MAX_AHEAD_NS) and src.last_t_ns is not None
             and is_ahead(t_ns - src.last_t_ns, recv_ns - src.last_recv_ns, _MAX_AHEAD_NS))
+
+
+def _read_times(src: SourceState, n: int, recv_ns: int) -> list[int]:
+    """Each line's receive time for a read of ``n`` lines. A source timed on receipt gets
+    its lines spread evenly over the time since the link's previous read (at most
+    ``block_s``), the last at ``recv_ns``: they all arrived in that span (a USB serial
+    adapter or an instrument sends several lines at once), and one time for all would
+    drop every line but the first as ``time_backwards``. Others: ``recv_ns`` for all."""
+    prev = src.last_read_ns
+    src.last_read_ns = recv_ns
+    if n == 1 or src.cfg.time_column is not None or src.cfg.format != "delimited":
+        return [recv_ns] * n
+    span = src.block_ns if prev is None else min(recv_ns - prev, src.block_ns)
+    return [recv_ns - span * (n - 1 - k) // n for k in range(n)]
 
 
 def _age(now_mono: float, then: float | None) -> float | None:
@@ -315,6 +330,7 @@ class Bridge:
             if src.connected != bool(data):
                 src.connected = bool(data)
                 src.link_mono = time.monotonic()
+                src.last_read_ns = None
                 self._recheck = True
             return
         if kind == "event":
@@ -334,8 +350,9 @@ class Bridge:
                 and not _leaps_ahead(src, many.t_ns[-1], recv_ns):
             self._samples(src, many, recv_ns, now)
             return
-        for line in data:  # one by one: each rejection counted by its reason
-            self._line(src, line, recv_ns, now)
+        times = _read_times(src, len(data), recv_ns)
+        for line, t_ns in zip(data, times):  # one by one: each rejection counted by its reason
+            self._line(src, line, t_ns, now)
         if src.last_t_ns is not None:
             src.lag_s = min(src.lag_s, now - src.last_t_ns * 1e-9)
 
