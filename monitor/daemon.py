@@ -263,7 +263,8 @@ class Daemon:
         self.clocks = ClockFaults(hc.clock_skew_max_s, hc.time_restart_min_s, max_ahead_s)
         self.live = LiveAlerts(buoy_id, LiveConfig(
             hc.live_rules, hc.required_streams, hc.fatigue_blind_timeout_s,
-            hc.clock_skew_max_s, hc.hold_s), saved.get("daemon", {}).get("live"))
+            hc.clock_skew_max_s, hc.hold_s, hc.delivery_stall_s),
+            saved.get("daemon", {}).get("live"))
         self._faults = _RateLimitedLog()
         # checkpoint health: wall time of the last good save, failures in this life
         self._ckpt = CheckpointHealth(self.restored_seq,

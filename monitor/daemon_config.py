@@ -186,6 +186,7 @@ class HealthConfig(msgspec.Struct, frozen=True):
     clock_skew_max_s: Positive = 600.0         # |sensor time - logger clock| allowed per block
     time_restart_min_s: Positive = 1.0         # a stream going back by more is a time restart
     hold_s: Positive = 600.0                   # counter-increase alerts stay on this long
+    delivery_stall_s: Positive = 30.0          # an alert undelivered this long is alerted
 
     def check(self, where: str, raw: Mapping[str, Any]) -> "HealthConfig":
         if any(s not in SENSOR_FIELDS for s in self.required_streams):

@@ -198,7 +198,7 @@ def free_port() -> int:
 
 
 def write_config(path: Path, port: int, state: Path, extra: str = "", record: Path | None = None,
-                 checkpoint_s: float = 0.5, tension_age_s: float = 1.0) -> Path:
+                 checkpoint_s: float = 0.5, tension_age_s: float = 1.0, health: str = "") -> Path:
     rec = f'[record]\ndir = "{record}"\nflush_interval_s = 0.5\n' if record else ""
     if "[metrics]" not in extra:  # a port of its own: tests run beside other daemons
         extra += f"[metrics]\nport = {free_port()}\n"
@@ -206,7 +206,8 @@ def write_config(path: Path, port: int, state: Path, extra: str = "", record: Pa
         f'[buoy]\nid = "{BUOY}"\n'
         f'[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\nstatus_interval_s = 0.5\n'
         f'[state]\npath = "{state}"\ncheckpoint_interval_s = {checkpoint_s}\n'
-        f'[health]\ndata_age_timeout_s = {{ tension = {tension_age_s} }}\n' + rec + extra)
+        f'[health]\ndata_age_timeout_s = {{ tension = {tension_age_s} }}\n' + health + rec
+        + extra)
     return path
 
 

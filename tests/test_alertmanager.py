@@ -28,7 +28,7 @@ from typing import Callable
 import pytest
 
 from daemon_harness import BUOY, ENV, DaemonProcess, free_port, write_config
-from test_daemon_live import HARNESS, Client, _block
+from test_daemon_live import HARNESS, Client, _block, http_get
 from waiting import wait_until
 
 AM_BIN = shutil.which("prometheus-alertmanager") or shutil.which("alertmanager")
@@ -241,6 +241,7 @@ def test_an_alertmanager_outage_delays_but_loses_nothing(tmp_path, am):
     port = free_port()
     cfg = write_config(
         tmp_path / "cfg.toml", port, tmp_path / "state.sqlite", tension_age_s=1.0,
+        health="delivery_stall_s = 3.0\n",
         extra=f'[alerts.alertmanager]\nurl = "{manager.url}"\nresend_interval_s = 1.0\n'
               f'[alerts.outbox]\npath = "{tmp_path / "outbox.sqlite"}"\nretry_base_s = 0.2\n'
               'retry_max_s = 1.0\n')
@@ -258,10 +259,18 @@ def test_an_alertmanager_outage_delays_but_loses_nothing(tmp_path, am):
         # `buoymon status` says how long the alert has waited, not only that it waits
         shown = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config",
                                 str(cfg)], env=ENV, capture_output=True, text=True, timeout=60)
-        m = re.search(r"outbox: alertmanager 1 pending \(oldest (\d+) s, (\d+) failed "
+        m = re.search(r"outbox: alertmanager (\d+) pending \(oldest (\d+) s, (\d+) failed "
                       r"attempts\)", shown.stdout)
-        assert m and int(m[2]) >= 3, shown.stdout
+        assert m and int(m[1]) >= 1 and int(m[3]) >= 3, shown.stdout
+        # undelivered for over delivery_stall_s: alerted where it can be (Zenoh, /healthz)
+        stalled, _ = c.wait_alert("alert_delivery_stalled", "put")
+        assert stalled["labels"]["component"] == "alertmanager", stalled
+        assert stalled["value"] > 3.0 and "undelivered" in stalled["summary"], stalled
+        mport = int(cfg.read_text().split("[metrics]\nport = ")[1].split()[0])
+        code, body = http_get(mport, "/healthz")
+        assert code == 503 and "alert_delivery_stalled alertmanager" in body, body
         manager.start()
+        c.wait_alert("alert_delivery_stalled", "delete")  # delivered: it clears
         wait_until(lambda: manager.active("data_age"), what="data_age active after the outage", interval=0.2)
         feeder = threading.Thread(target=_feed, args=(c, stop, now_s + 1), daemon=True)
         feeder.start()

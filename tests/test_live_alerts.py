@@ -114,6 +114,24 @@ def test_counter_increases_fire_for_hold_s_and_old_counts_do_not_alert():
                            ("alert_outbox_dropped", "webhook", "clear")}
 
 
+def test_an_alert_undelivered_longer_than_delivery_stall_s_is_alerted_and_fails_health():
+    live = LiveAlerts("b1", LiveConfig(delivery_stall_s=30.0))
+    waiting = {"alertmanager": {"pending": 2, "dead_letters": 0, "oldest_pending_age_s": 29.5},
+               "webhook": {"pending": 0, "dead_letters": 0, "oldest_pending_age_s": None}}
+    assert live.evaluate(doc(age=1.0, accepted=1, channels=waiting), NS) == []
+    waiting["alertmanager"]["oldest_pending_age_s"] = 30.5
+    recs = live.evaluate(doc(age=1.0, accepted=1, channels=waiting), 2 * NS)
+    assert fired(recs) == {("alert_delivery_stalled", "alertmanager", "fire")}
+    assert (recs[0].severity, recs[0].value, recs[0].threshold) == ("critical", 30.5, 30.0)
+    assert recs[0].summary == ("alert channel alertmanager: 2 notifications undelivered, the "
+                               "oldest for 30 s (receiver unreachable or failing; retried)")
+    assert live.health()["ok"] is False
+    delivered = {"alertmanager": {"pending": 0, "dead_letters": 0, "oldest_pending_age_s": None}}
+    recs = live.evaluate(doc(age=1.0, accepted=1, channels=delivered), 3 * NS)
+    assert fired(recs) == {("alert_delivery_stalled", "alertmanager", "clear")}
+    assert live.health()["ok"] is True
+
+
 def test_state_survives_a_restart_and_clears_what_no_longer_holds_after_hold_s():
     live = LiveAlerts("b1", LiveConfig())
     live.evaluate(doc(age=9.0, accepted=1, missed=1), NS)

@@ -26,6 +26,11 @@ time_restart (stream)    warning      the stream's time went back (monitor.clock
 samples_missed (stream)  warning      ``samples_missed`` rose within the last ``hold_s``
 alert_delivery_refused   critical     an alert channel holds dead letters
 (channel)
+alert_delivery_stalled   critical     an alert channel's oldest undelivered notification has
+(channel)                             waited longer than ``delivery_stall_s`` (its receiver
+                                      unreachable or failing: retried, not lost, but nobody
+                                      is told; also fails ``/healthz``, the way an outside
+                                      probe learns of it when every channel is down)
 alert_outbox_dropped     critical     an alert channel's ``dropped_total`` rose within the last
 (channel)                             ``hold_s``
 checkpoint_failed        critical     the last checkpoint attempt failed
@@ -54,11 +59,12 @@ from typing import Any, Iterable, Mapping
 from monitor.alerts.records import AlertRecord
 
 LIVE_RULES = ("data_age", "data_rejected", "fatigue_blind", "clock_skew", "time_restart", "samples_missed",
-              "alert_delivery_refused", "alert_outbox_dropped", "checkpoint_failed",
-              "bridge_source")
+              "alert_delivery_refused", "alert_delivery_stalled", "alert_outbox_dropped",
+              "checkpoint_failed", "bridge_source")
 log = logging.getLogger(__name__)
 # rules whose firing makes /healthz fail: the daemon cannot do its job
-HEALTH_RULES = ("data_age", "data_rejected", "fatigue_blind", "checkpoint_failed")
+HEALTH_RULES = ("data_age", "data_rejected", "fatigue_blind", "checkpoint_failed",
+                "alert_delivery_stalled")
 # counters that start from 0 in every daemon life (monitor.clock_faults): not saved
 _LIFE_COUNTERS = ("time_restart",)
 NS = 1_000_000_000
@@ -73,6 +79,7 @@ class LiveConfig:
     fatigue_blind_timeout_s: float = 60.0
     clock_skew_max_s: float = 600.0
     hold_s: float = 600.0
+    delivery_stall_s: float = 30.0
 
 
 @dataclass(frozen=True)
@@ -196,6 +203,14 @@ class LiveAlerts:
             out.append(Condition("alert_delivery_refused", ch, "critical", dead > 0, dead, 0.0,
                                  "", f"alert channel {ch}: {dead} notifications refused "
                                  "(dead letters)"))
+            waited = c.get("oldest_pending_age_s")
+            out.append(Condition(
+                "alert_delivery_stalled", ch, "critical",
+                waited is not None and waited > cfg.delivery_stall_s, _num(waited or 0.0),
+                cfg.delivery_stall_s, "s",
+                f"alert channel {ch}: {int(c.get('pending') or 0)} notifications undelivered, "
+                f"the oldest for {_num(waited or 0.0):.0f} s (receiver unreachable or failing; "
+                "retried)"))
             if "dropped_total" in c:
                 out.append(self._increase("alert_outbox_dropped", ch, "critical",
                                           int(c["dropped_total"]), wall_ns,
@@ -271,7 +286,8 @@ class LiveAlerts:
         return [self._firing[k] for k in sorted(self._firing)] if self.cfg.enabled else []
 
     def health(self) -> dict[str, Any]:
-        """``/healthz``: failing while data is stale, fatigue is blind or checkpoints fail."""
+        """``/healthz``: failing while data is stale, fatigue is blind, checkpoints fail or
+        alerts cannot be delivered."""
         reasons = [f"{r.rule} {r.component}: {r.summary}"
                    for _, r in sorted(self._firing.items()) if r.rule in HEALTH_RULES]
         return {"ok": not reasons, "reasons": reasons}
