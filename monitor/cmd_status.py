@@ -42,9 +42,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         target = load_target(args.config)
         if args.buoy:
-            target = DaemonTarget(args.buoy, target.connect, target.state_path)
+            target = DaemonTarget(args.buoy, target.connect, target.state_path, target.origin)
         if args.connect:
-            target = DaemonTarget(target.buoy_id, tuple(args.connect), target.state_path)
+            target = DaemonTarget(target.buoy_id, tuple(args.connect), target.state_path,
+                                  "--connect")
         if not 0 < args.timeout < math.inf:
             raise ValueError(f"--timeout {args.timeout}: must be a number of seconds > 0")
         while True:
@@ -76,11 +77,15 @@ def fetch(target: DaemonTarget, timeout: float) -> tuple[str, dict[str, Any]]:
     doc = query_daemon(target, timeout)
     if doc is not None:
         return "daemon", doc
+    asked = f"no daemon answered at {', '.join(target.connect)} ({target.origin}) within " \
+            f"{timeout:g} s"
+    if target.state_path is None:
+        raise ValueError(f"{asked}; a bridge configuration names no state file: pass the "
+                         "daemon's configuration for its last checkpoint")
     try:
         return "state file", read_state_file(target.state_path)
     except ValueError as exc:  # say first that the daemon did not answer (busy, or stopped)
-        raise ValueError(f"no daemon answered at {', '.join(target.connect)} within "
-                         f"{timeout:g} s, and {exc}") from None
+        raise ValueError(f"{asked}, and {exc}") from None
 
 
 def query_daemon(target: DaemonTarget, timeout: float) -> dict[str, Any] | None:

@@ -1,7 +1,9 @@
 """Where a command finds the daemon of a configuration: buoy id, endpoints, state file.
 
 Read straight from the TOML (``[buoy] id``, ``[zenoh]``, ``[state] path``) without building
-the pipeline, so ``buoymon status`` and ``buoymon alerts`` start fast.
+the pipeline, so ``buoymon status`` and ``buoymon alerts`` start fast. A separate bridge's own
+file (``[[source]]`` tables, no ``[[component]]``: docs/SENSORS.md) names the daemon it
+publishes to in ``[bridge] connect``: that is where the daemon is asked; it names no state file.
 """
 
 from __future__ import annotations
@@ -11,8 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from monitor.blocks import validate_buoy_id
+from monitor.bridge.config import BridgeSection
 from monitor.daemon_config import parse_daemon_sections
-from monitor.schema import read_toml
+from monitor.schema import parse_struct, read_toml
 
 DEFAULT_CONFIG = "/etc/buoymon/buoymon.toml"  # the path of packaging/systemd/buoymon.service
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
@@ -34,7 +37,8 @@ def endpoint_arg(value: str) -> str:
 class DaemonTarget:
     buoy_id: str
     connect: tuple[str, ...]  # endpoints a client reaches the daemon on
-    state_path: str
+    state_path: str | None  # None: a bridge's file names no daemon state file
+    origin: str = "[zenoh] listen/connect"  # where ``connect`` came from, for the messages
 
 
 def _reachable(endpoint: str) -> str:
@@ -56,6 +60,10 @@ def load_target(path: str) -> DaemonTarget:
     buoy = raw.get("buoy", {}).get("id") if isinstance(raw.get("buoy"), dict) else None
     if not isinstance(buoy, str):
         raise ValueError(f"config error: {path}: buoy.id = {buoy!r}: must be a string")
+    if "source" in raw and "component" not in raw:  # a bridge's file, as check-config tells
+        bridge = parse_struct(BridgeSection, raw.get("bridge"), "bridge")
+        return DaemonTarget(validate_buoy_id(buoy), bridge.connect, None,
+                            f"[bridge] connect of the bridge configuration {path}")
     daemon = parse_daemon_sections(raw)
     connect = tuple(_reachable(e) for e in daemon.zenoh.listen) + daemon.zenoh.connect
     return DaemonTarget(validate_buoy_id(buoy), connect or (DEFAULT_CONNECT,), daemon.state.path)

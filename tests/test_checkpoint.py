@@ -189,7 +189,8 @@ def test_status_without_an_answer_says_so_before_the_state_file(tmp_path, capsys
                    f'[state]\npath = "{path}"\n')
     assert main(["status", "--config", str(cfg), "--timeout", "0.5"]) == 1
     assert capsys.readouterr().err == (
-        f"buoymon status: no daemon answered at tcp/127.0.0.1:{port} within 0.5 s, and "
+        f"buoymon status: no daemon answered at tcp/127.0.0.1:{port} ([zenoh] listen/connect) "
+        f"within 0.5 s, and "
         f"{path}: the checkpoint is empty (the daemon never saved)\n")
     path.unlink()
     assert main(["status", "--config", str(cfg), "--timeout", "0.5"]) == 1

@@ -193,7 +193,7 @@ def _run(args: argparse.Namespace) -> dict[str, Any]:
         if buoy is None:  # the buoy (and endpoints) of the daemon's configuration
             target = load_target(args.config or DEFAULT_CONFIG)
             buoy, connect = target.buoy_id, list(target.connect)
-            state_path = Path(target.state_path)
+            state_path = Path(target.state_path) if target.state_path else None
         try:
             result = _on_daemon(buoy, args.connect or connect, args.timeout, _command(args))
         except TimeoutError as exc:
