@@ -74,9 +74,11 @@ def run(args: argparse.Namespace) -> int:
         _check_forecast(config)
         _check_alert_rules(config, cable)
     except ValueError as exc:  # ConfigError, or a model rejecting a configured value
-        from monitor.schema import ConfigError  # noqa: PLC0415
+        from monitor.schema import ConfigError, ConfigErrors  # noqa: PLC0415
 
         print(exc if isinstance(exc, ConfigError) else f"config error: {exc}", file=sys.stderr)
+        if isinstance(exc, ConfigErrors):  # all of them, found in one run
+            print(f"{args.config}: {len(exc.errors)} errors", file=sys.stderr)
         return 2
     comps = ", ".join(
         f"{c.name} ({c.kind}{', ' + c.lay + ' lay' if c.lay else ''}, {c.sn_curve.preset or 'table'})"

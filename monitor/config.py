@@ -22,7 +22,7 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal, Mapping
+from typing import Annotated, Any, Callable, Literal, Mapping
 
 import msgspec
 from msgspec import Meta
@@ -32,8 +32,8 @@ from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.bridge.config import BridgeConfig, parse_bridge_config
 from monitor.daemon_config import DaemonConfig, parse_daemon_sections
 from monitor.forecast_config import ForecastConfig
-from monitor.schema import (MAX_DURATION_S, ConfigError, SectionReader, error, parse_struct,
-                            read_toml, unknown)
+from monitor.schema import (MAX_DURATION_S, ConfigError, Errors, SectionReader, error,
+                            parse_struct, read_toml, unknown)
 from monitor.time_ahead import DEFAULT_MAX_AHEAD_S
 from monitor.viz.rerun_options import RerunOptions
 
@@ -486,43 +486,61 @@ def _parse_validate(r: SectionReader, load: LoadConfig,
     return out
 
 
-def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
-    """Validate a parsed TOML document and return the typed configuration."""
-    top = SectionReader(data, "")
-    for name in data:
-        if name not in CORE_SECTIONS + SERVICE_SECTIONS:
-            raise unknown("", name, data[name], CORE_SECTIONS + SERVICE_SECTIONS, "section")
-    load = parse_struct(LoadConfig, data.get("load"), "load")
+def _read(parse: Callable[..., Any], table: Any, path: str, *args: Any) -> Any:
+    """``parse(SectionReader(table, path), *args)``: a table that is no table is its error."""
+    return parse(SectionReader(table, path), *args)
+
+
+def _parse_components(top: SectionReader) -> tuple[ComponentConfig, ...]:
+    """The ``[[component]]`` tables, each one's errors gathered; names unique."""
     tables = top.table_list("component")
     if not tables:
         raise ConfigError("config error: component: at least one [[component]] is required")
-    components = tuple(
-        _parse_component(SectionReader(t, f"component[{i}]")) for i, t in enumerate(tables)
-    )
+    errors = Errors()
+    parsed = [errors.parse(_read, _parse_component, t, f"component[{i}]")
+              for i, t in enumerate(tables)]
+    errors.raise_any()
+    components = tuple(c for c in parsed if c is not None)
     names = [c.name for c in components]
     for i, name in enumerate(names):
         if names.index(name) != i:
             raise ConfigError(f"config error: component[{i}].name = {name!r}: duplicate name")
-    mooring = _parse_mooring(SectionReader(top.raw("mooring", {"preset": "vaps_seed004"}),
-                                           "mooring"))
-    return Config(
-        buoy=parse_struct(BuoyConfig, data.get("buoy"), "buoy"),
+    return components
+
+
+def parse_config(data: Mapping[str, Any], source: str = "<dict>") -> Config:
+    """Validate a parsed TOML document and return the typed configuration.
+
+    Each section is parsed on its own and their errors gathered, so one run names every
+    mistake (:class:`monitor.schema.ConfigErrors` when there are several); ``[validate]``,
+    whose defaults derive from ``[load]`` and ``[mooring]``, is checked once those are valid.
+    """
+    errors = Errors()
+    top = SectionReader(data, "")
+    for name in data:
+        if name not in CORE_SECTIONS + SERVICE_SECTIONS:
+            errors.add(unknown("", name, data[name], CORE_SECTIONS + SERVICE_SECTIONS, "section"))
+    load = errors.parse(parse_struct, LoadConfig, data.get("load"), "load")
+    mooring = errors.parse(_read, _parse_mooring, top.raw("mooring", {"preset": "vaps_seed004"}),
+                           "mooring")
+    sections: dict[str, Any] = dict(
+        buoy=errors.parse(parse_struct, BuoyConfig, data.get("buoy"), "buoy"),
         mooring=mooring,
-        cable=_parse_cable(SectionReader(top.raw("cable", {}), "cable")),
-        components=components,
-        fatigue=parse_struct(FatigueConfig, data.get("fatigue"), "fatigue"),
+        cable=errors.parse(_read, _parse_cable, top.raw("cable", {}), "cable"),
+        components=errors.parse(_parse_components, top),
+        fatigue=errors.parse(parse_struct, FatigueConfig, data.get("fatigue"), "fatigue"),
         load=load,
-        validate=_parse_validate(SectionReader(top.raw("validate", {}), "validate"), load,
-                                 mooring),
-        ordering=parse_struct(OrderingConfig, data.get("ordering"), "ordering"),
-        alerts=AlertsConfig.from_dict(data.get("alerts")),
-        forecast=parse_struct(ForecastConfig, data.get("forecast"), "forecast"),
-        daemon=parse_daemon_sections(data),
-        rerun=parse_struct(RerunOptions, data.get("rerun"), "rerun"),
-        bridge=parse_bridge_config(data) if "source" in data else None,
-        raw=data,
-        source=source,
+        validate=None if load is None or mooring is None else errors.parse(
+            _read, _parse_validate, top.raw("validate", {}), "validate", load, mooring),
+        ordering=errors.parse(parse_struct, OrderingConfig, data.get("ordering"), "ordering"),
+        alerts=errors.parse(AlertsConfig.from_dict, data.get("alerts")),
+        forecast=errors.parse(parse_struct, ForecastConfig, data.get("forecast"), "forecast"),
+        daemon=errors.parse(parse_daemon_sections, data),
+        rerun=errors.parse(parse_struct, RerunOptions, data.get("rerun"), "rerun"),
+        bridge=errors.parse(parse_bridge_config, data) if "source" in data else None,
     )
+    errors.raise_any()
+    return Config(**sections, raw=data, source=source)
 
 
 def load_config(path: str | Path) -> Config:

@@ -56,7 +56,7 @@ import msgspec
 from msgspec import Meta
 
 from monitor.blocks import SENSOR_FIELDS
-from monitor.schema import error, parse_struct
+from monitor.schema import Errors, error, parse_struct
 
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
 # the port of an IP endpoint (before zenoh's optional "#" metadata)
@@ -216,7 +216,11 @@ class DaemonConfig(msgspec.Struct, frozen=True):
 
 
 def parse_daemon_sections(raw: Mapping[str, Any]) -> DaemonConfig:
-    """Parse the daemon's sections out of a whole TOML document (absent ones get defaults)."""
-    return DaemonConfig(**{name: parse_struct(field.type, raw.get(name), name)
-                           for name, field in ((f.name, f) for f in
-                                               msgspec.structs.fields(DaemonConfig))})
+    """Parse the daemon's sections out of a whole TOML document (absent ones get defaults);
+    the errors of every section at once."""
+    errors = Errors()
+    sections: dict[str, Any] = {
+        f.name: errors.parse(parse_struct, f.type, raw.get(f.name), f.name)
+        for f in msgspec.structs.fields(DaemonConfig)}
+    errors.raise_any()
+    return DaemonConfig(**sections)

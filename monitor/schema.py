@@ -9,6 +9,11 @@ error names the file's key path and the bad value::
     config error: zenoh.mode = 'router': must be one of ['client', 'peer']
     config error: zenoh.listn = [...]: unknown key (did you mean 'listen'?); expected one of [...]
 
+Every error one pass can find is reported at once: :func:`parse_struct` gathers the errors of
+all the keys of a table (unknown ones included), and :class:`Errors` those of sections parsed
+one by one (``monitor.config.parse_config``); several come as one :class:`ConfigErrors`, a line
+each. A check across keys runs once the keys it reads are valid.
+
 A struct's ``check(self, where, raw)`` (optional) does what types cannot: checks across keys
 and defaults that depend on other keys; it returns the struct, replaced where needed.
 Sections whose defaults derive from other sections (``monitor.config``) read their tables with
@@ -27,8 +32,8 @@ import math
 import tomllib
 from pathlib import Path
 from types import UnionType
-from typing import (Annotated, Any, Iterable, Literal, Mapping, Sequence, TypeVar, Union, get_args,
-                    get_origin)
+from typing import (Annotated, Any, Callable, Iterable, Literal, Mapping, Sequence, TypeVar, Union,
+                    get_args, get_origin)
 
 import msgspec
 
@@ -39,6 +44,50 @@ MAX_DURATION_S = 1e9
 
 class ConfigError(ValueError):
     """A configuration value is missing, of the wrong type or out of range."""
+
+
+class ConfigErrors(ConfigError):
+    """Several errors of one document; the message holds one ``config error: ...`` line each."""
+
+    def __init__(self, errors: Sequence[ConfigError]) -> None:
+        self.errors = tuple(errors)
+        super().__init__("\n".join(str(e) for e in self.errors))
+
+
+T = TypeVar("T")
+
+
+class Errors:
+    """The errors of parts of a document parsed independently, so one run names them all::
+
+        errors = Errors()
+        load = errors.parse(parse_struct, LoadConfig, data.get("load"), "load")  # None if bad
+        errors.raise_any()
+    """
+
+    def __init__(self) -> None:
+        self.found: list[ConfigError] = []
+
+    def add(self, exc: ConfigError) -> None:
+        for e in exc.errors if isinstance(exc, ConfigErrors) else (exc,):
+            # two sections reading one key (the bridge's and the core's buoy.id) say it once
+            if str(e) not in map(str, self.found):
+                self.found.append(e)
+
+    def parse(self, fn: Callable[..., T], *args: Any) -> T | None:
+        """``fn(*args)``, or None with its errors kept."""
+        try:
+            return fn(*args)
+        except ConfigError as exc:
+            self.add(exc)
+            return None
+
+    def raise_any(self) -> None:
+        """Raise what was found: the one error itself, or all as :class:`ConfigErrors`."""
+        if len(self.found) == 1:
+            raise self.found[0]
+        if self.found:
+            raise ConfigErrors(self.found)
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
@@ -162,18 +211,27 @@ def parse_struct(cls: type[S], raw: Any, where: str) -> S:
     parsed the same way under ``where.key``. Then ``cls.check(obj, where, raw)`` if it exists.
     """
     fields = {f.encode_name: f for f in msgspec.structs.fields(cls)}  # the TOML key names
-    table = check_keys(where, {} if raw is None else raw, fields)
+    table = {} if raw is None else raw
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"config error: {where} = {_show(table)}: must be a table")
+    errors = Errors()  # every key's error, then check() once they all hold
     values: dict[str, Any] = {}
     for key, value in table.items():
+        if key not in fields:
+            errors.add(unknown(where, key, value, fields))
+            continue
         tp = fields[key].type
         nested = _struct_type(tp)
-        if nested is not None and isinstance(value, Mapping):
-            values[fields[key].name] = parse_struct(nested, value, f"{where}.{key}")
-        else:
-            values[fields[key].name] = convert(where, key, value, tp)
+        try:
+            values[fields[key].name] = (parse_struct(nested, value, f"{where}.{key}")
+                                        if nested is not None and isinstance(value, Mapping)
+                                        else convert(where, key, value, tp))
+        except ConfigError as exc:
+            errors.add(exc)
     for key, f in fields.items():
-        if f.required and f.name not in values:
-            raise ConfigError(f"config error: {where}.{key} is missing")
+        if f.required and key not in table:
+            errors.add(ConfigError(f"config error: {where}.{key} is missing"))
+    errors.raise_any()
     obj = cls(**values)
     check = getattr(obj, "check", None)
     return check(where, table) if check is not None else obj
@@ -254,7 +312,9 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
         return value
 
     def done(self) -> None:
-        """Raise on the first key nobody read, naming the nearest one that is read."""
+        """Raise on the keys nobody read, each naming the nearest one that is read."""
+        errors = Errors()
         for key in self.table:
             if key not in self._seen:
-                raise unknown(self.path, key, self.table[key], self._seen | self._known)
+                errors.add(unknown(self.path, key, self.table[key], self._seen | self._known))
+        errors.raise_any()

@@ -43,8 +43,8 @@ from msgspec import Meta
 from monitor.alerts.alertmanager import (AUTH_KEYS, AlertmanagerConfig, HttpAuth, check_url,
                                          parse_auth)
 from monitor.alerts.records import SEVERITIES
-from monitor.schema import (MAX_DURATION_S, ConfigError, check_keys, convert, did_you_mean,
-                            error, parse_struct)
+from monitor.schema import (MAX_DURATION_S, ConfigError, Errors, check_keys, convert,
+                            did_you_mean, error, parse_struct)
 
 # A whole-cable load rule (tension, slack/snap, residual) is labelled with this component.
 CABLE_COMPONENT = "cable"
@@ -207,7 +207,10 @@ class AlertsConfig:
         raw_rules = d.get("rule", [])
         if not isinstance(raw_rules, list):
             raise _err(f"{where}.rule", raw_rules, "must be an array of tables ([[alerts.rule]])")
-        rules = tuple(_rule(f"{where}.rule[{i}]", r) for i, r in enumerate(raw_rules))
+        errors = Errors()  # every rule's error at once
+        found = [errors.parse(_rule, f"{where}.rule[{i}]", r) for i, r in enumerate(raw_rules)]
+        errors.raise_any()
+        rules = tuple(r for r in found if r is not None)
         seen: dict[tuple[str, str | None], str] = {}
         for r in rules:
             key = (r.name, r.component)

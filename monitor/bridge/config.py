@@ -17,7 +17,7 @@ from msgspec import Meta
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.daemon_config import check_endpoints
 from monitor.quanta import quanta as sensor_quanta
-from monitor.schema import error, parse_struct, read_toml
+from monitor.schema import Errors, error, parse_struct, read_toml
 
 Positive = Annotated[float, Meta(gt=0)]
 NonEmpty = Annotated[str, Meta(min_length=1)]
@@ -132,7 +132,11 @@ def parse_sources(sources: Any) -> tuple[SourceConfig, ...]:
     """The ``[[source]]`` tables (at least one; unique names)."""
     if not isinstance(sources, list) or not sources:
         raise error("", "source", sources, "at least one [[source]] is required")
-    parsed = tuple(parse_struct(SourceConfig, s, f"source[{i}]") for i, s in enumerate(sources))
+    errors = Errors()  # every source's errors at once
+    found = [errors.parse(parse_struct, SourceConfig, s, f"source[{i}]")
+             for i, s in enumerate(sources)]
+    errors.raise_any()
+    parsed = tuple(s for s in found if s is not None)
     names = [s.name for s in parsed]
     for n in names:
         if names.count(n) > 1:
@@ -143,16 +147,23 @@ def parse_sources(sources: Any) -> tuple[SourceConfig, ...]:
 def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
     """The bridge's sections of a parsed TOML document: ``[buoy] id``, ``[bridge]``,
     ``[[source]]`` (the same in a bridge's own file and in the daemon's)."""
-    buoy = raw.get("buoy", {})
+    errors = Errors()  # the errors of [buoy], [bridge] and every [[source]] at once
+    buoy_id = errors.parse(_buoy_id, raw.get("buoy", {}))
+    b = errors.parse(parse_struct, BridgeSection, raw.get("bridge"), "bridge")
+    sources = errors.parse(parse_sources, raw.get("source", []))
+    errors.raise_any()
+    assert buoy_id is not None and b is not None and sources is not None  # else raised
+    return BridgeConfig(buoy_id, b.connect, sources, b.status_interval_s, b.cache_blocks,
+                        b.quanta)
+
+
+def _buoy_id(buoy: Any) -> str:
     if not isinstance(buoy, Mapping) or "id" not in buoy:
         raise error("", "buoy.id", None, "is required")
     try:
-        buoy_id = validate_buoy_id(buoy["id"])
+        return validate_buoy_id(buoy["id"])
     except ValueError as exc:
         raise error("", "buoy.id", buoy["id"], str(exc)) from None
-    b = parse_struct(BridgeSection, raw.get("bridge"), "bridge")
-    return BridgeConfig(buoy_id, b.connect, parse_sources(raw.get("source", [])),
-                        b.status_interval_s, b.cache_blocks, b.quanta)
 
 
 def load_bridge_config(path: str | Path) -> BridgeConfig:
