@@ -155,3 +155,14 @@ def test_a_bridge_file_names_every_source_mistake(tmp_path):
         "config error: source[1].sensor = 'wind': must be one of "
         "['tension', 'motion', 'imu', 'gnss', 'waves']",
         f"{bridge}: 3 errors"]
+
+
+def test_a_key_two_sections_read_is_named_once():
+    """[buoy] id is read by the core and by the bridge inside the daemon: one line, not two."""
+    doc = {"component": [{"name": "c", "lay": "left"}],
+           "source": [{"name": "a", "sensor": "tension", "transport": "stdin",
+                       "columns": {"tension_N": 0}}]}
+    with pytest.raises(ConfigError) as exc:
+        parse_config(doc)
+    assert not isinstance(exc.value, ConfigErrors)
+    assert str(exc.value) == "config error: buoy.id is missing"

@@ -17,7 +17,7 @@ from msgspec import Meta
 from monitor.blocks import SENSOR_FIELDS, validate_buoy_id
 from monitor.daemon_config import check_endpoints
 from monitor.quanta import quanta as sensor_quanta
-from monitor.schema import Errors, error, parse_struct, read_toml
+from monitor.schema import ConfigError, Errors, error, parse_struct, read_toml
 
 Positive = Annotated[float, Meta(gt=0)]
 NonEmpty = Annotated[str, Meta(min_length=1)]
@@ -159,7 +159,8 @@ def parse_bridge_config(raw: Mapping[str, Any]) -> BridgeConfig:
 
 def _buoy_id(buoy: Any) -> str:
     if not isinstance(buoy, Mapping) or "id" not in buoy:
-        raise error("", "buoy.id", None, "is required")
+        # worded as [buoy]'s own parse says it, so a daemon's file with sources says it once
+        raise ConfigError("config error: buoy.id is missing")
     try:
         return validate_buoy_id(buoy["id"])
     except ValueError as exc:
