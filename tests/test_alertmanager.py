@@ -256,12 +256,18 @@ def test_an_alertmanager_outage_delays_but_loses_nothing(tmp_path, am):
         # several failed attempts against the stopped Alertmanager (the outbox counts them)
         wait_until(lambda: _attempts(tmp_path / "outbox.sqlite", "alertmanager") >= 3,
                    what="3 failed attempts", interval=0.2)
-        # `buoymon status` says how long the alert has waited, not only that it waits
-        shown = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config",
-                                str(cfg)], env=ENV, capture_output=True, text=True, timeout=60)
-        m = re.search(r"outbox: alertmanager (\d+) pending \(oldest (\d+) s, (\d+) failed "
-                      r"attempts\)", shown.stdout)
-        assert m and int(m[1]) >= 1 and int(m[3]) >= 3, shown.stdout
+        # `buoymon status` says how long the alert has waited, not only that it waits (it
+        # shows the daemon's last status, published every 0.5 s: asked until that status
+        # has the attempts counted above)
+        def shown() -> re.Match | None:
+            out = subprocess.run([sys.executable, "-m", "monitor.cli", "status", "--config",
+                                  str(cfg)], env=ENV, capture_output=True, text=True,
+                                 timeout=60).stdout
+            m = re.search(r"outbox: alertmanager (\d+) pending \(oldest (\d+) s, (\d+) "
+                          r"failed attempts\)", out)
+            return m if m and int(m[1]) >= 1 and int(m[3]) >= 3 else None
+
+        wait_until(shown, what="status showing 3 failed attempts", interval=0.2)
         # undelivered for over delivery_stall_s: alerted where it can be (Zenoh, /healthz)
         stalled, _ = c.wait_alert("alert_delivery_stalled", "put")
         assert stalled["labels"]["component"] == "alertmanager", stalled
