@@ -9,11 +9,18 @@ seen within the first horizon of live data no longer gates."""
 
 from __future__ import annotations
 
+import math
+import os
+import sys
+import time
+import tty
 from pathlib import Path
 
 import numpy as np
 
+from daemon_harness import DaemonProcess, free_port, wait_until_state
 from monitor.blocks import SampleBlock
+from monitor.checkpoint import CheckpointStore
 from monitor.config import load_config
 from monitor.pipeline import Pipeline
 
@@ -65,3 +72,68 @@ def test_a_motion_stream_arriving_with_the_load_cell_still_gates():
                                              "accel_z_mps2": 9.81 + a}, int(t[-1])))
     assert p.validators["imu"].accepted == 20
     assert not any(p.validators["imu"].rejected.values())
+
+
+def _stale_on(status: dict) -> list[int]:
+    """``since_ns`` of the active sensor-time ``stale`` alert of tension ([] when none)."""
+    return [a["since_ns"] for a in status["status"]["alerts"]["active"]
+            if a["rule"] == "stale" and a["component"] == "tension"]
+
+
+def _until_second(mod: int) -> None:
+    """Sleep to the next wall-clock second ``mod`` of the 10 s alert grid (sensor time here is
+    the bridge's receive time)."""
+    now = time.time()
+    time.sleep((mod - now) % 10.0)
+
+
+def test_replugged_load_cell_stale_clears_while_it_talks_in_the_daemon(tmp_path):
+    """Real processes: `buoymon run` with the bridge inside reading a load cell on a pty
+    (plain numbers, stamped on receipt), the shipped config. It talks, is silent 14 s across a
+    grid second (stale fires there), talks 7 s across the next grid second, stops: the stale
+    clear of that tick is out within seconds (before the fix it waited for the next data)."""
+    port, mport = free_port(), free_port()
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    cfg = tmp_path / "buoymon.toml"
+    cfg.write_text(
+        SHIPPED.read_text()
+        + f'\n[zenoh]\nlisten = ["tcp/127.0.0.1:{port}"]\nstatus_interval_s = 0.5\n'
+        f'[state]\npath = "{tmp_path / "st.sqlite"}"\n[metrics]\nport = {mport}\n'
+        '[[source]]\nname = "loadcell"\nsensor = "tension"\ntransport = "serial"\n'
+        f'device = "{os.ttyname(slave)}"\nbaud = 115200\ncolumns = {{ tension_N = 0 }}\n')
+    d = DaemonProcess([sys.executable, "-m", "monitor.cli", "--log-level", "warning", "run",
+                       "--config", str(cfg)], tmp_path)
+
+    def talk(until_mod: int) -> None:
+        k = 0
+        end = time.time() + (until_mod - time.time()) % 10.0
+        while time.time() < end:
+            os.write(master, f"{20000 + 3000 * math.sin(k / 20):.1f}\r\n".encode())
+            k += 1
+            time.sleep(0.05)
+
+    try:
+        d.wait_for("READY=1", timeout=120)
+        wait_until_state(port, lambda s: s["status"].get("bridge", {}).get("sources", {})
+                         .get("loadcell", {}).get("connected"), buoy="vaps")
+        _until_second(8)
+        talk(3)          # across grid second G (:x0)
+        time.sleep(5.0)
+        _until_second(7)  # silent 14 s: tick G+10 sees tension 7 s old
+        talk(4)          # 7 s across grid second G+20: its tick sees fresh data
+        time.sleep(3.0)  # silent again, < 5 s: no tick is due, the G+20 one must be out
+        after = wait_until_state(port, lambda s: True, buoy="vaps")
+    finally:
+        rc = d.terminate()
+        os.close(master)
+        os.close(slave)
+    assert rc == 0
+    assert not _stale_on(after), after["status"]["alerts"]["active"]
+    store = CheckpointStore(tmp_path / "st.sqlite")
+    history = store.load().state["pipeline"]["alerts"]["history"]
+    store.close()
+    stale = [(h["event"], h["at_ns"] % (10 * 10**9)) for h in history
+             if h.get("rule") == "stale"]  # the shipped config: on tension only
+    # each on the grid (G+10 fire, G+20 clear; the start-up tick may add a first fire/clear)
+    assert stale[-2:] == [("fire", 0), ("clear", 0)], stale
