@@ -24,12 +24,7 @@ always gate, even before their first sample. Other streams (gnss, waves, ...) ga
 (``gate_all``: the log holds them all, coalesced per channel, with ``[ordering]
 replay_horizon_s``). Live (``[ordering] horizon_s``), they gate only while active (newest
 sample within the horizon), so a low-rate or absent stream never delays the fatigue chain;
-their health figures then reflect what had arrived when a tick was evaluated. Live, a load
-stream not seen within the first horizon of data (``motion_sensor = "auto"`` on a buoy with a
-load cell and no motion stream) stops gating, as does one never seen before a restart: gating
-for ever at ``newest - horizon``, it held the last horizon of sensor time whenever the data
-stopped, so a tick's alerts (a ``stale`` clear) waited for the next data and went out with the
-next stop's (a clear and a fire in the same step).
+their health figures then reflect what had arrived when a tick was evaluated.
 """
 
 from __future__ import annotations
@@ -94,9 +89,6 @@ class ReorderBuffer:
         self._pending: dict[str, list[_Part]] = {s: [] for s in SENSOR_ORDER}
         self.received_max: dict[str, int] = {}
         self._in_order = dict.fromkeys(SENSOR_ORDER, True)
-        # live: never-seen load streams gate while newest <= this (set by the first block;
-        # a restored buffer that had data is past its start). Not saved: replay gates all.
-        self._start_gate_until: int | None = None
         if state is not None:
             self.received_max = {k: int(v) for k, v in state["received_max"].items()}
             for sensor, (t, values) in state["pending"].items():
@@ -105,8 +97,6 @@ class ReorderBuffer:
                 self._pending[sensor].append(
                     (t, tuple(values.reshape(len(SENSOR_FIELDS[sensor]), -1))))
                 self._in_order[sensor] = not bool(np.any(t[1:] < t[:-1]))
-            if self.received_max:
-                self._start_gate_until = _NEVER
 
     def push(self, block: SampleBlock) -> None:
         if len(block) == 0:
@@ -121,8 +111,6 @@ class ReorderBuffer:
                 self._in_order[block.sensor] = False
         parts.append((t, tuple(block.fields[f] for f in SENSOR_FIELDS[block.sensor])))
         newest = int(t[-1] if sorted_block else t.max())
-        if self._start_gate_until is None:
-            self._start_gate_until = int(t.min()) + self.horizon_ns
         self.received_max[block.sensor] = max(self.received_max.get(block.sensor, _NEVER), newest)
 
     @property
@@ -136,10 +124,9 @@ class ReorderBuffer:
             return None
         floor = newest - self.horizon_ns
         marks = [newest]
-        starting = self._start_gate_until is not None and newest <= self._start_gate_until
         for s in SENSOR_ORDER:
             received = self.received_max.get(s)
-            if self.gate_all or (s in self.load_streams and (received is not None or starting)):
+            if s in self.load_streams or self.gate_all:
                 marks.append(max(_NEVER if received is None else received, floor))
             elif received is not None and received >= floor:
                 marks.append(received)
