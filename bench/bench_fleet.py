@@ -19,7 +19,11 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Latest, 2026-11-26 03:53-03:56 UTC, the 2-core machine shared (load average 1.4-2.7),
+Latest, quiet, 2026-11-26 04:33-04:34 UTC (load 1.1, no other job), main 8077ae8,
+``--buoys 4 --days 15``: serial 17.8 s wall, 17.1 CPU-s = 104 CPU-s per buoy-year; 2 workers
+9.4 s wall (1.88 x); reading alone 3.5 CPU-s (20 %). Target under 60: NOT reached.
+
+Earlier, 2026-11-26 03:53-03:56 UTC, the 2-core machine shared (load average 1.4-2.7),
 ``--buoys 4 --days 15``, branch fleetcut (the regular decoder's times exactly sized, the S-N
 damage in one compiled call) then main 868e7c2, one run each: serial 17.0 / 18.4 CPU-s = 103 /
 112 CPU-s per buoy-year; 2 workers 24.2 / 26.7 s wall (the machine's load), worker CPU-s

@@ -17,7 +17,17 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, 2026-11-26 03:13-03:35 UTC on the 2-core development machine, NOT quiet (other
+Latest, quiet: 2026-11-26 04:32-04:33 UTC, the 2-core development machine with no other job
+(load average 0.8-1.1), main 8077ae8 (this round's slab joining, strict_json and decoder
+cuts; bytecode compiled first), two full runs of this script on the 30-day log: one core
+8.04 / 7.69 CPU-s = 6.45 / 6.74 M tension samples/s, **11.6 / 11.7 x** the naive baseline
+of the same run (0.554 / 0.576 M/s; target 10 x); 2 cores (``buoymon replay``'s default
+two processes) **4.96 / 5.15 s wall = 10.45 / 10.07 M tension samples/s** (target 10 M/s),
+4.50 + 4.34 / 4.63 + 4.42 CPU-s; peak RSS one process 1 / 30 days 207 / 220 and 206 / 221 MB
+(+6.1 / +7.2 %), two processes 196 + 132 / 203 + 135 MB (+3.4 %, +2.3 %). Both targets met
+in both runs (the 2-core one by 0.7-4.5 %; the machine drifts ~10 % between runs).
+
+Earlier, 2026-11-26 03:13-03:35 UTC on the 2-core development machine, NOT quiet (other
 sessions' test suites: load average 4-8 through every run, so walls measure them and CPU
 times are inflated; the quiet-machine figures are the lead's to take), branch twocore
 (one slab per stretch of the log, replay.spans: half the slabs; this script now replays
