@@ -265,7 +265,7 @@ def _parse_mooring(r: SectionReader) -> MooringConfig:
         raise r.error("preset", preset, "give either a preset or [[mooring.segment]], not both")
     segments: list[SegmentConfig] = []
     if preset is not None:
-        if preset not in MOORING_PRESETS:
+        if not isinstance(preset, str) or preset not in MOORING_PRESETS:
             raise r.error("preset", preset, f"must be one of {sorted(MOORING_PRESETS)}")
         p = MOORING_PRESETS[preset]
         length = p["length_m"]

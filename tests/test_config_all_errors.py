@@ -166,3 +166,16 @@ def test_a_key_two_sections_read_is_named_once():
         parse_config(doc)
     assert not isinstance(exc.value, ConfigErrors)
     assert str(exc.value) == "config error: buoy.id is missing"
+
+
+@pytest.mark.parametrize("preset", [[], {}])
+def test_a_mooring_preset_that_is_no_name_is_a_config_error_beside_the_others(preset):
+    """`preset = []` crashed parsing (TypeError: unhashable type) and took the file's other
+    errors with it: check-config printed a traceback, no config error."""
+    doc = {"buoy": {"id": "b1"}, "component": [{"name": "c", "lay": "up"}],
+           "mooring": {"preset": preset}}
+    with pytest.raises(ConfigErrors) as exc:
+        parse_config(doc)
+    assert str(exc.value).splitlines() == [
+        f"config error: mooring.preset = {preset!r}: must be one of ['vaps_seed004']",
+        "config error: component[0].lay = 'up': must be one of ['left', 'right']"]
