@@ -179,3 +179,15 @@ def test_a_mooring_preset_that_is_no_name_is_a_config_error_beside_the_others(pr
     assert str(exc.value).splitlines() == [
         f"config error: mooring.preset = {preset!r}: must be one of ['vaps_seed004']",
         "config error: component[0].lay = 'up': must be one of ['left', 'right']"]
+
+
+def test_an_alert_rule_kind_that_is_no_name_is_a_config_error_beside_the_others():
+    """`kind = []` crashed parsing (TypeError: unhashable type) and took the other rules'
+    errors with it."""
+    doc = {"buoy": {"id": "b1"}, "component": [{"name": "c", "lay": "left"}],
+           "alerts": {"rule": [{"name": "x", "kind": []}, {"name": "y", "kind": "nope"}]}}
+    with pytest.raises(ConfigErrors) as exc:
+        parse_config(doc)
+    lines = str(exc.value).splitlines()
+    assert [line.split(": unknown rule kind")[0] for line in lines] == [
+        "config error: alerts.rule[0].kind = []", "config error: alerts.rule[1].kind = 'nope'"]

@@ -262,7 +262,7 @@ def _rule(where: str, r: Any) -> RuleConfig:
         raise ConfigError(f"config error: {where}.kind: missing; expected one of "
                           f"{sorted(KIND_PARAMS)}")
     kind = r["kind"]
-    if kind not in KIND_PARAMS:
+    if not isinstance(kind, str) or kind not in KIND_PARAMS:
         raise _err(f"{where}.kind", kind, f"unknown rule kind{did_you_mean(str(kind), KIND_PARAMS)}; "
                    f"expected one of {sorted(KIND_PARAMS)}")
     _, specs = KIND_PARAMS[kind]
