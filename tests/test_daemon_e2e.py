@@ -852,6 +852,20 @@ def test_a_block_from_a_publisher_s_cache_is_judged_ahead_by_its_receive_time_as
     assert tension["accepted"] == 300 and not any(tension["rejected"].values())
 
 
+def _recording_with_a_block_a_year_ahead(tmp_path: Path) -> Path:
+    """30 one-second tension blocks ending 10 s ago, each received 1 ms after its last
+    sample; the 11th dated a year ahead of its receive time (a wrong clock)."""
+    now = time.time_ns() // 10**9 * 10**9
+    year = 365 * 86400 * 10**9
+    blocks = []
+    for k in range(30):
+        t = now + (k - 40) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
+        blocks.append(SampleBlock(BUOY, "tension", t + (year if k == 10 else 0),
+                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)},
+                                  int(t[-1]) + 10**6))
+    return write_log(tmp_path / "recorded.mcap", blocks)
+
+
 def test_a_re_published_log_with_a_block_a_year_ahead_ends_without_a_clock_skew(tmp_path):
     """A recording holds a tension block dated a year ahead of its receive time (a wrong
     clock: time_ahead) among 30 right ones. ``replay.publish`` (a real process) plays it to
@@ -861,16 +875,7 @@ def test_a_re_published_log_with_a_block_a_year_ahead_ends_without_a_clock_skew(
     daemon ended with clock_skew active."""
     port = free_port()
     cfg = write_config(tmp_path, port, load_source="measured")
-    now = time.time_ns() // 10**9 * 10**9
-    year = 365 * 86400 * 10**9
-    blocks = []
-    for k in range(30):
-        t = now + (k - 40) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
-        recv = int(t[-1]) + 10**6
-        blocks.append(SampleBlock(BUOY, "tension", t + (year if k == 10 else 0),
-                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)},
-                                  recv))
-    log = write_log(tmp_path / "recorded.mcap", blocks)
+    log = _recording_with_a_block_a_year_ahead(tmp_path)
     d = start_daemon(cfg, tmp_path)
     try:
         pub = publish(log, port)
@@ -893,15 +898,7 @@ def test_a_daemon_started_after_a_far_ahead_block_was_cached_ends_without_a_cloc
     last and left clock_skew active until the stream's next live block."""
     port = free_port()
     cfg = write_config(tmp_path, port, load_source="measured")
-    now = time.time_ns() // 10**9 * 10**9
-    year = 365 * 86400 * 10**9
-    blocks = []
-    for k in range(30):
-        t = now + (k - 40) * 10**9 + 50_000_000 * np.arange(20, dtype=np.int64)
-        blocks.append(SampleBlock(BUOY, "tension", t + (year if k == 10 else 0),
-                                  {"tension_N": 3000.0 + 100.0 * np.sin(np.arange(20) + k)},
-                                  int(t[-1]) + 10**6))
-    log = write_log(tmp_path / "recorded.mcap", blocks)
+    log = _recording_with_a_block_a_year_ahead(tmp_path)
     # the publisher sends at once into its cache and connects once the daemon listens
     pub = subprocess.Popen([sys.executable, "-m", "replay.publish", str(log), "--connect",
                             f"tcp/127.0.0.1:{port}", "--linger-s", "60"], env=ENV,
