@@ -47,6 +47,26 @@ def test_runs_hold_one_block_per_stream_of_overlapping_spans():
     assert [len(run) for run in spans(blocks, join=False)] == [1] * len(blocks)
 
 
+def test_stretches_after_all_before_them_join_while_within_the_horizon():
+    blocks = [_block("tension", 0, 10), _block("imu", 0, 10),
+              _block("tension", 11, 20), _block("imu", 11, 20),  # after all before: joins
+              _block("tension", 21, 30), _block("imu", 21, 30),  # the run would span 30 s
+              _block("imu", 31, 40), _block("tension", 30, 40),  # not after all before
+              _block("gnss", 41, 45), _block("gnss", 46, 50),  # 30 to 50 s: join
+              _block("gnss", 51, 59)]
+    runs = [[(b.sensor, b.t_first_ns // S) for b in run] for run in spans(blocks, True, 20 * S)]
+    assert runs == [[("tension", 0), ("imu", 0), ("tension", 11), ("imu", 11)],
+                    [("tension", 21), ("imu", 21)],
+                    [("imu", 31), ("tension", 30), ("gnss", 41), ("gnss", 46)], [("gnss", 51)]]
+    # a run up to exactly the span joins; empty blocks join whatever run is open
+    empty = SampleBlock("b", "gnss", np.zeros(0, np.int64),
+                        {f: np.zeros(0) for f in SENSOR_FIELDS["gnss"]})
+    runs = [[(b.sensor, len(b)) for b in run]
+            for run in spans([_block("imu", 0, 9), empty, _block("imu", 10, 19)], True, 19 * S)]
+    assert runs == [[("imu", 10), ("gnss", 0), ("imu", 10)]]
+    assert len(list(spans(blocks))) == 7  # (no span given: stretches alone)
+
+
 @pytest.mark.parametrize("child", [False, True], ids=["one-process", "child"])
 def test_a_replay_without_sinks_takes_fewer_slabs_and_gives_the_same_bits(feed, child,
                                                                           monkeypatch):
@@ -67,8 +87,11 @@ def test_a_replay_without_sinks_takes_fewer_slabs_and_gives_the_same_bits(feed, 
     assert _bits(pipeline) == _bits(one_by_one)
     assert (result.blocks, result.samples) == (len(feed), sum(len(b) for b in feed))
     # tension, IMU and GNSS blocks of 5 s: a stretch's three in one slab, less where the
-    # feed's faults (copies, swaps, silent streams) cut a run short
-    assert len(feed) / 3 < len(slabs) - 1 < len(feed) / 2
+    # feed's faults (copies, swaps, silent streams) cut a run short; stretches after all
+    # before them in one slab while within the 10-s horizon (two, where nothing cuts them)
+    stretches = len(list(spans(feed)))
+    assert len(feed) / 3 < stretches < len(feed) / 2
+    assert len(slabs) - 1 == len(list(spans(feed, True, 10 * S))) < 0.6 * stretches
 
 
 def test_a_replay_with_a_sink_keeps_one_slab_per_block(feed, monkeypatch):
