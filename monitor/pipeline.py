@@ -127,8 +127,8 @@ class _TickLoad:
     def __init__(self, v: np.ndarray, src: np.ndarray, stresses: Mapping[str, np.ndarray],
                  starts: np.ndarray, stops: np.ndarray) -> None:
         n = stops - starts
-        full = np.flatnonzero(n > 0)
-        every = full.shape[0] == n.shape[0]  # (the usual slab: no tick without samples)
+        every = bool(n.all())  # (the usual slab: no tick without samples)
+        full = None if every else np.flatnonzero(n)
 
         def per_tick(values: np.ndarray, empty: float = math.nan) -> np.ndarray:
             """The non-empty ticks' values over all ticks."""
@@ -139,7 +139,8 @@ class _TickLoad:
             return out
 
         # the non-empty ticks are back to back: reduce over their span in one call each
-        at, span = starts[full], slice(0, int(stops[full[-1]]) if full.shape[0] else 0)
+        at, count = (starts, n) if full is None else (starts[full], n[full])
+        span = slice(0, int(stops[-1] if full is None else stops[full[-1]]) if at.shape[0] else 0)
         self.vmax = per_tick(np.maximum.reduceat(v[span], at))
         self.vmin = per_tick(np.minimum.reduceat(v[span], at))
         peaks: dict[int, np.ndarray] = {}  # per stress array (components may share one)
@@ -149,7 +150,6 @@ class _TickLoad:
                 peaks[id(s)] = per_tick(np.maximum.reduceat(s[span], at))
             self.smax[name] = peaks[id(s)]
         measured = src[span] == MEASURED
-        count = n[full]
         mean = np.add.reduceat(v[span], at) / count
         self.n = n  # samples, and of them measured (n_meas)
         if measured.all():  # one source, the load cell (the usual case)
@@ -161,7 +161,8 @@ class _TickLoad:
         # a tick of one source (the usual case): the mean of its samples is that source's
         self.meas = per_tick(np.where(n_meas == count, mean, math.nan))
         self.est = per_tick(np.where(n_meas == 0, mean, math.nan))
-        for i in full[(n_meas != count) & (n_meas != 0)].tolist():
+        mixed = np.flatnonzero((n_meas != count) & (n_meas != 0))
+        for i in (mixed if full is None else full[mixed]).tolist():
             a, b = int(starts[i]), int(stops[i])
             self.meas[i] = _seq_mean(v[a:b][measured[a:b]])
             self.est[i] = _seq_mean(v[a:b][~measured[a:b]])
@@ -262,6 +263,7 @@ class _StreamSlab:
     # streams a rule looks at are): arrays (tick_arrays), and lists for tick() (the batch
     # path evaluates few ticks the ordinary way)
     _arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None
+    has_all: bool  # (with _arrays) a sample accepted by every tick end: has is all True
     _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None] | None
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
@@ -299,14 +301,19 @@ class _StreamSlab:
             ends = self._ends
             cut = np.searchsorted(self.rx_t, ends, side="right")
             if self.rej_t.shape[0]:
-                rej_cut = np.searchsorted(self.rej_t, ends, side="right")
+                rejected = _counts(np.searchsorted(self.rej_t, ends, side="right"))
                 k = np.searchsorted(self.acc_t, ends, side="right")
             else:  # the usual case: every sample accepted (and so rx_t is t)
-                rej_cut, k = np.zeros(ends.shape[0], np.int64), cut
-            has = (k > 0) | self._before[2]
-            last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0]
-                            else 0, self._before[3])
-            self._arrays = (_counts(cut), _counts(rej_cut), has, last)
+                rejected, k = np.zeros(ends.shape[0], np.int64), cut
+            # (k rises: the usual slab has accepted samples by its first tick end)
+            self.has_all = bool(k[0] > 0) if k.shape[0] else True
+            if self.has_all:
+                has, last = np.ones(k.shape[0], bool), self.acc_t[k - 1]
+            else:
+                has = (k > 0) | self._before[2]
+                last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0]
+                                else 0, self._before[3])
+            self._arrays = (_counts(cut), rejected, has, last)
             self._accepted_upto = k
         return self._arrays
 
@@ -354,15 +361,12 @@ class _SlabTicks:
 
     ends: np.ndarray
     ends_l: list[int]
+    n: int  # how many (len(ends_l))
     cuts: list[int]
     next_tick: int | None
     evaluate: bool
     load: _TickLoad | None
     est_means: list[float] | None
-
-    @property
-    def n(self) -> int:
-        return len(self.ends_l)
 
 
 class _LazyStreams(Mapping[str, StreamObs]):
@@ -875,18 +879,24 @@ class Pipeline:
             k = (tick_limit - next_tick) // self.tick_ns
             ends = self._tick_ends(next_tick, k, [t, *(x.t for x in streams.values())])
             next_tick += (k + 1) * self.tick_ns
-        cuts = np.append(np.searchsorted(t, ends, side="right"), t.shape[0])
+        cuts = np.empty(ends.shape[0] + 1, np.int64)
+        cuts[:-1] = np.searchsorted(t, ends, side="right")
+        cuts[-1] = t.shape[0]
         evaluate = (self._has_rules or bool(self._tick_hooks) or self.sea_states is not None
                     ) and ends.shape[0] > 0
         load, est_means = None, None
         if evaluate:
             for info in streams.values():
                 info.prepare(ends)
-            load = _TickLoad(v, src, stresses, np.append(0, cuts[:-2]), cuts[:-1])
+            starts = np.empty(ends.shape[0], np.int64)  # (np.append costs three times more)
+            starts[0] = 0
+            starts[1:] = cuts[:-2]
+            load = _TickLoad(v, src, stresses, starts, cuts[:-1])
             if estimate is not None:
                 est_means = self._estimate_means(*estimate, ends)
         # python ints for the per-tick loop
-        return _SlabTicks(ends, ends.tolist(), cuts.tolist(), next_tick, evaluate, load,
+        ends_l = ends.tolist()
+        return _SlabTicks(ends, ends_l, len(ends_l), cuts.tolist(), next_tick, evaluate, load,
                           est_means)
 
     def _commit_ticks(self, stresses: Mapping[str, np.ndarray], ticks: _SlabTicks,
@@ -1025,11 +1035,14 @@ class Pipeline:
                 last, stale = np.zeros(n, np.int64), np.ones(n, bool)
         else:
             received, rejected, has, last = info.tick_arrays
-            received, rejected = received.copy(), rejected.copy()  # the first tick adds below
-            # (a stream never seen is stale whatever its age, even where ends - last wraps)
-            stale = ~has | (ends - last > self._stale_ns[s])
-            last = np.where(has, last, 0)
+            if info.has_all:  # (the usual slab)
+                stale = ends - last > self._stale_ns[s]
+            else:  # (a stream never seen is stale whatever its age, even where ends - last wraps)
+                stale = ~has | (ends - last > self._stale_ns[s])
+                last = np.where(has, last, 0)
         if s in self.tick_counts:
+            if info is not None:  # the slab's own arrays: not to be written to
+                received, rejected = received.copy(), rejected.copy()
             received[0] += self.tick_counts[s][0]
             rejected[0] += self.tick_counts[s][1]
         return StreamTicks(last, stale, received, rejected)
