@@ -101,17 +101,18 @@ class ReorderBuffer:
     def push(self, block: SampleBlock) -> None:
         if len(block) == 0:
             return
-        t = block.t_ns
-        parts = self._pending[block.sensor]
+        t, sensor = block.t_ns, block.sensor
+        parts = self._pending[sensor]
         # the usual case: sorted blocks arriving in order; then take() never re-sorts
         sorted_block = False
-        if self._in_order[block.sensor]:
-            sorted_block = not bool(np.any(t[1:] < t[:-1]))
+        if self._in_order[sensor]:
+            sorted_block = not (t[1:] < t[:-1]).any()
             if not sorted_block or (parts and t[0] < parts[-1][0][-1]):
-                self._in_order[block.sensor] = False
-        parts.append((t, tuple(block.fields[f] for f in SENSOR_FIELDS[block.sensor])))
+                self._in_order[sensor] = False
+        fields = block.fields
+        parts.append((t, tuple(fields[f] for f in SENSOR_FIELDS[sensor])))
         newest = int(t[-1] if sorted_block else t.max())
-        self.received_max[block.sensor] = max(self.received_max.get(block.sensor, _NEVER), newest)
+        self.received_max[sensor] = max(self.received_max.get(sensor, _NEVER), newest)
 
     @property
     def newest_ns(self) -> int | None:

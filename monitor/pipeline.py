@@ -267,9 +267,11 @@ class _StreamSlab:
     _ticks: tuple[list[int], list[int], list[int], list[bool], list[int], list[list[int]] | None] | None
 
     def __init__(self, t: np.ndarray, values: np.ndarray, codes: np.ndarray,
-                 validator_before: tuple[int, dict[str, int], bool, int]) -> None:
+                 validator_before: tuple[int, dict[str, int], bool, int],
+                 verdicts: bool) -> None:
+        """``verdicts``: ``codes.any()`` (some sample not accepted)."""
         self.t, self.codes = t, codes
-        if codes.any():
+        if verdicts:
             ok = codes == 0
             # a copy (a duplicate verdict) is no measurement: neither received nor rejected
             # in a tick's counts (the rejected_rate rule), only in the duplicate total
@@ -286,8 +288,9 @@ class _StreamSlab:
 
     def counts_after(self, lo: int) -> tuple[int, int]:
         """Samples received (copies aside) and rejected with time after ``lo``."""
-        return (self.rx_t.shape[0] - int(np.searchsorted(self.rx_t, lo, side="right")),
-                self.rej_t.shape[0] - int(np.searchsorted(self.rej_t, lo, side="right")))
+        rx, rej = self.rx_t, self.rej_t
+        return (rx.shape[0] - int(np.searchsorted(rx, lo, side="right")),
+                rej.shape[0] - int(np.searchsorted(rej, lo, side="right")) if rej.shape[0] else 0)
 
     def prepare(self, ends: np.ndarray) -> None:
         """Health at every tick end of this slab (counts and last time) from now on."""
@@ -702,10 +705,11 @@ class Pipeline:
             validator = self.validators[s]
             before = _StreamSlab.before(validator)
             codes = validator.check(t, values, max(self.processed_ns, self.taken_upto.get(s, _NEVER)))
-            if codes.any():
+            verdicts = bool(codes.any())  # (usually none: every sample accepted)
+            if verdicts:
                 self.late_copies.judge(s, t, values, codes, validator.rejected)
             self.taken_upto[s] = max(self.taken_upto.get(s, _NEVER), int(t[-1]))
-            streams[s] = info = _StreamSlab(t, values, codes, before)
+            streams[s] = info = _StreamSlab(t, values, codes, before, verdicts)
             self.late_copies.received(s, t, values, codes)
             n_acc += info.acc_t.shape[0]
             for reason, n in before[1].items():  # the validator counted them
