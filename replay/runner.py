@@ -234,7 +234,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
     if threads and speed is None:
         for intake in ingest_ahead(pipeline, own):
-            pipeline.advance(intake)
+            pipeline.advance_unread(intake)
             if intake.block is not None:
                 n_blocks += 1
                 # the block as read: its time_ahead samples (dropped from intake.block) too
@@ -248,7 +248,7 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
         for run in spans(own, speed is None and not sinks, pipeline.reorder.horizon_ns):
             if speed is not None:
                 _pace(run[0], speed, origin)
-            pipeline.advance(pipeline.ingest(*run))
+            pipeline.advance_unread(pipeline.ingest(*run))
             n_blocks += len(run)
             n_samples += sum(len(b) for b in run)
             if progress is not None:
@@ -315,7 +315,7 @@ def _run_with_child(config: Config, blocks: Iterable[SampleBlock], state: dict |
                 stream_state, ignored, stats = message
                 break
             fields, done = message
-            pipeline.advance(intake_of(fields, pipeline))
+            pipeline.advance_unread(intake_of(fields, pipeline))
             # no reference of our own left: the slab's shared memory goes back to the child
             del message, fields
             if done is not None:

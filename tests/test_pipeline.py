@@ -526,3 +526,18 @@ def test_joined_cycles_share_a_lone_array_and_concatenate_several():
     assert _joined([a, b]).tolist() == [1.0, 2.0, 3.0]
     assert _joined([b, empty, a]).tolist() == [3.0, 1.0, 2.0]
     assert _joined([empty, empty]).shape == (0,)
+
+
+def test_advance_unread_makes_no_step_and_leaves_the_same_bits():
+    """The replay driver's tick stage without a StepResult (no sink): None, and the same
+    report and state as the steps made; sea-state windows closed meanwhile are not kept for
+    a later step."""
+    config = config_with(default_config(), forecast={"window_s": 300.0})
+    blocks = blocks_interleaved(sea(1500, seed=5), 30)
+    stepped, unread = Pipeline(config), Pipeline(config)
+    steps = [stepped.process(b) for b in blocks]
+    assert all(unread.advance_unread(unread.ingest(b)) is None for b in blocks)
+    assert sum(len(s.windows) for s in steps) >= 3  # (the windows a step hands over)
+    assert json.dumps([stepped.report(), stepped.state()]) == json.dumps(
+        [unread.report(), unread.state()])
+    assert unread.sea_states.take_windows() == []

@@ -76,13 +76,13 @@ def test_a_replay_without_sinks_takes_fewer_slabs_and_gives_the_same_bits(feed, 
     one_by_one.flush()
 
     slabs = []
-    advance = Pipeline.advance
+    advance = Pipeline._advance
 
-    def counted(self, intake):
+    def counted(self, intake, result):
         slabs.append(intake.block)
-        return advance(self, intake)
+        return advance(self, intake, result)
 
-    monkeypatch.setattr(Pipeline, "advance", counted)
+    monkeypatch.setattr(Pipeline, "_advance", counted)
     pipeline, result = run_blocks(CONFIG, iter(feed), child=child)
     assert _bits(pipeline) == _bits(one_by_one)
     assert (result.blocks, result.samples) == (len(feed), sum(len(b) for b in feed))
@@ -96,13 +96,13 @@ def test_a_replay_without_sinks_takes_fewer_slabs_and_gives_the_same_bits(feed, 
 
 def test_a_replay_with_a_sink_keeps_one_slab_per_block(feed, monkeypatch):
     slabs = []
-    advance = Pipeline.advance
+    advance = Pipeline._advance
 
-    def counted(self, intake):
+    def counted(self, intake, result):
         slabs.append(intake.block)
-        return advance(self, intake)
+        return advance(self, intake, result)
 
-    monkeypatch.setattr(Pipeline, "advance", counted)
+    monkeypatch.setattr(Pipeline, "_advance", counted)
     run_blocks(CONFIG, iter(feed), sinks=[Recorder()])
     assert len(slabs) == len(feed) + 1  # and the flush
 
