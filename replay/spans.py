@@ -18,10 +18,10 @@ Stretches in turn: a reader's release of a chunk (~73 min of the default streams
 stretches of at most 30 min (replay.merge.COALESCE_S: 30, 30 and 13 min), and each slab
 costs about a millisecond whatever its length (the fleet benchmark's buoy: 297 slabs in 5
 days). A stretch starting after every sample before it joins the run before it while the run
-spans at most the ordering's horizon: the pushes are those of the stretches one by one, so a
-slab at the run's end releases what their slabs would have released together (no sample of
-the later stretch can be at or before a watermark taken before it), and the ordering holds
-no more than its horizon allows anyway (149 slabs in those 5 days).
+spans at most the ordering's horizon (and an hour): the pushes are those of the stretches
+one by one, so a slab at the run's end releases what their slabs would have released
+together (no sample of the later stretch can be at or before a watermark taken before it),
+and the ordering holds no more than its horizon allows anyway (149 slabs in those 5 days).
 """
 
 from __future__ import annotations
@@ -41,6 +41,12 @@ def of_buoy(blocks: Iterable[SampleBlock], buoy_id: str, ignored: dict[str, int]
             ignored[block.buoy_id] = ignored.get(block.buoy_id, 0) + 1
 
 
+# The longest run of stretches: an hour of the default streams is a hand-over of ~1.9 MB
+# to the tick stage's process (replay.stage_process: within its 4 MB slots), and a horizon
+# set far longer must not make a slab of the whole log.
+LONGEST_RUN_NS = 3600 * 1_000_000_000
+
+
 def spans(blocks: Iterable[SampleBlock], join: bool = True, within_ns: int = 0
           ) -> Iterator[list[SampleBlock]]:
     """``blocks`` in runs of consecutive blocks, in order, each block alone unless ``join``:
@@ -48,7 +54,9 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, within_ns: int = 0
     block of its stream and the block starts at or before the run's latest end (so it holds
     at most one block per stream, of overlapping spans: what the ordering buffers anyway);
     a stretch whose samples all come after every sample before it joins the run before it
-    while the run's samples span at most ``within_ns`` (the ordering's horizon)."""
+    while the run's samples span at most ``within_ns`` (the ordering's horizon; at most
+    :data:`LONGEST_RUN_NS`)."""
+    within_ns = min(within_ns, LONGEST_RUN_NS)
     if not join:
         for block in blocks:
             yield [block]

@@ -65,6 +65,8 @@ def test_stretches_after_all_before_them_join_while_within_the_horizon():
             for run in spans([_block("imu", 0, 9), empty, _block("imu", 10, 19)], True, 19 * S)]
     assert runs == [[("imu", 10), ("gnss", 0), ("imu", 10)]]
     assert len(list(spans(blocks))) == 7  # (no span given: stretches alone)
+    hours = [_block("tension", 3600 * h, 3600 * h + 1799) for h in range(4)]
+    assert [len(run) for run in spans(hours, True, 10**6 * S)] == [1, 1, 1, 1]  # (an hour)
 
 
 @pytest.mark.parametrize("child", [False, True], ids=["one-process", "child"])
