@@ -25,6 +25,14 @@ always gate, even before their first sample. Other streams (gnss, waves, ...) ga
 replay_horizon_s``). Live (``[ordering] horizon_s``), they gate only while active (newest
 sample within the horizon), so a low-rate or absent stream never delays the fatigue chain;
 their health figures then reflect what had arrived when a tick was evaluated.
+
+Live, a load stream never seen (``motion_sensor = "auto"`` on a buoy with a load cell and no
+motion stream) gates at ``newest - horizon``: the grace that lets a stream stamped just behind
+the load data (waves at a window's end) arrive in time. When the data stops, it holds the last
+horizon of sensor time until the next data, so a tick's alerts (a ``stale`` clear) would go
+out with the next stop's. :meth:`ReorderBuffer.silence`: after a WALL-CLOCK silence of all data
+longer than the horizon (the daemon's idle loop), the never-seen load streams stop gating
+until they are seen; replay (``gate_all``) never calls it.
 """
 
 from __future__ import annotations
@@ -89,6 +97,9 @@ class ReorderBuffer:
         self._pending: dict[str, list[_Part]] = {s: [] for s in SENSOR_ORDER}
         self.received_max: dict[str, int] = {}
         self._in_order = dict.fromkeys(SENSOR_ORDER, True)
+        # live: never-seen load streams gate until a wall-clock silence (silence()); not in
+        # the state: after a restart they gate again until the next silence
+        self._unseen_gate = True
         if state is not None:
             self.received_max = {k: int(v) for k, v in state["received_max"].items()}
             for sensor, (t, values) in state["pending"].items():
@@ -126,11 +137,22 @@ class ReorderBuffer:
         marks = [newest]
         for s in SENSOR_ORDER:
             received = self.received_max.get(s)
-            if s in self.load_streams or self.gate_all:
+            if self.gate_all or (s in self.load_streams
+                                 and (received is not None or self._unseen_gate)):
                 marks.append(max(_NEVER if received is None else received, floor))
             elif received is not None and received >= floor:
                 marks.append(received)
         return min(marks)
+
+    def silence(self, silent_ns: int) -> bool:
+        """Live: no data arrived for ``silent_ns`` of wall-clock time. Longer than the horizon,
+        a load stream never seen is taken as absent: it stops gating until it is seen. True
+        if that may move the watermark (a load stream unseen, data buffered)."""
+        if self.gate_all or not self._unseen_gate or silent_ns <= self.horizon_ns \
+                or not self.received_max:
+            return False
+        self._unseen_gate = False
+        return any(s not in self.received_max for s in self.load_streams)
 
     def end_of_data(self) -> int | None:
         """Newest time of the slowest load stream that has delivered data (for a final flush)."""

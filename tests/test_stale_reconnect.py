@@ -5,13 +5,14 @@ for ~10 s, stopped again). The never-seen motion streams gated the ordering for 
 ``newest - 10 s``, so when the data stopped its last 10 s of sensor time waited for the next
 data: the ``stale`` clear of the 10 s of data went out together with the next stop's fire, in
 one step (a clear and a fire in the same millisecond). Every transition is right in sensor
-time (fire at the silence's tick, clear at the data's tick); only WHEN they go out is wrong.
+time (fire at the silence's tick, clear at the data's tick); only WHEN they go out was wrong.
 
-XFAIL: letting an unseen load stream stop gating after the first horizon (tried in 192a884,
-reverted) fixes these, but the phantom 10 s gate is also what lets a low-rate stream stamped
-just behind the load data (waves at a window's end, tests/test_forecast_pipeline.py: 3 tests)
-arrive in time live; without it those samples are time_backwards. A fix must keep that grace
-for the other streams, e.g. release the held horizon by wall-clock silence in the daemon."""
+The fix (monitor.ordering, ``ReorderBuffer.silence``; the daemon's idle loop calls
+``Pipeline.silence``): after a wall-clock silence of all data longer than the horizon, the
+never-seen load streams stop gating until they are seen. Until then they keep the 10 s grace
+that lets a low-rate stream stamped just behind the load data (waves at a window's end,
+tests/test_forecast_pipeline.py) arrive in time live; letting them stop gating after the
+first horizon of SENSOR time (192a884, reverted) lost that grace for every buoy."""
 
 from __future__ import annotations
 
@@ -23,17 +24,12 @@ import tty
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from daemon_harness import DaemonProcess, free_port, wait_until_state
 from monitor.blocks import SampleBlock
 from monitor.checkpoint import CheckpointStore
 from monitor.config import load_config
 from monitor.pipeline import Pipeline
-
-XFAIL = pytest.mark.xfail(strict=True, reason=(
-    "live ordering: never-seen motion streams (motion_sensor auto) gate at newest - horizon, "
-    "so sensor-time ticks lag the data by [ordering] horizon_s and a stop holds them"))
 
 SHIPPED = Path(__file__).resolve().parents[1] / "monitor" / "vaps_seed004.toml"
 T0_NS = 1_750_000_000 * 10**9  # on the 10 s tick grid
@@ -50,27 +46,60 @@ def second(s: float) -> SampleBlock:
 SECONDS = [*range(0, 53), *np.arange(69.0, 79.4, 1.0), *range(146, 160)]
 
 
-def stale_steps(p: Pipeline) -> list[tuple[float, list[tuple[str, float]]]]:
-    """Per block with stale transitions: the block's start (s) and (event, tick end s)."""
+def stale_steps(p: Pipeline, silent_s: float) -> list[tuple[float, list[tuple[str, float]]]]:
+    """Per step with stale transitions: the block's start (s), or the second a stop began
+    (s) after which the daemon told of ``silent_s`` s of wall-clock silence (one sensor second
+    a wall-clock one: a load cell stamped on receipt), and (event, tick end s)."""
     out = []
-    for s in SECONDS:
-        ev = [(a.event, (a.at_ns - T0_NS) / 1e9) for a in p.process(second(s)).alerts
-              if a.rule == "stale"]
-        if ev:
-            out.append((float(s), ev))
+    for s, following in zip(SECONDS, [*SECONDS[1:], None]):
+        steps = [(s, p.process(second(s)))]
+        if following is None or following - s > 1.0:
+            steps.append((s + 1.0, p.silence(silent_s)))
+        for at, step in steps:
+            ev = [(a.event, (a.at_ns - T0_NS) / 1e9) for a in step.alerts
+                  if a.rule == "stale"] if step is not None else []
+            if ev:
+                out.append((float(at), ev))
     return out
 
 
-@XFAIL
 def test_stale_clear_goes_out_with_the_data_not_with_the_next_stop():
     p = Pipeline(load_config(SHIPPED), horizon_s=10.0)
+    # the first stop, 10.5 s of wall clock later: the 10 s held are processed (tick 50,
+    # fresh data) and the unseen motion streams no longer gate
     # tick 60: last sample 52.95 s, 7.05 s > stale_after_s 5 s (fired once data resumes,
     # the first sensor time past 60 s); tick 70: sample at 70.0 s, clear, by the block that
-    # carries it (today: with the next stop's fire, by the block at 146 s: xfail); tick 80:
+    # carries it (before the fix: with the next stop's fire, by the block at 146 s); tick 80:
     # age 0.05 s; tick 90: last sample 79.95 s, 10.05 s: fire, with the data at 146 s.
-    assert stale_steps(p) == [(69.0, [("fire", 60.0)]), (70.0, [("clear", 70.0)]),
-                              (146.0, [("fire", 90.0)]), (150.0, [("clear", 150.0)])]
+    assert stale_steps(p, 10.5) == [(69.0, [("fire", 60.0)]), (70.0, [("clear", 70.0)]),
+                                    (146.0, [("fire", 90.0)]), (150.0, [("clear", 150.0)])]
     assert p.reorder.load_streams == ("tension", "imu", "motion")  # still "auto", unseen
+
+
+def test_a_silence_within_the_horizon_releases_nothing():
+    """Stops shorter than the horizon (10 s) by the wall clock: the unseen motion streams
+    still gate, the ticks wait for the next data (the clear at 70 s, the fire at 90 s: with
+    the data at 146 s, the fire at 60 s with the block at 70 s, newest 70.95 s)."""
+    p = Pipeline(load_config(SHIPPED), horizon_s=10.0)
+    assert stale_steps(p, 10.0) == [(70.0, [("fire", 60.0)]),
+                                    (146.0, [("clear", 70.0), ("fire", 90.0)])]
+
+
+def test_the_released_horizon_is_processed_at_the_silence():
+    """The silence step itself: sensor time reaches the newest sample (52.95 s), tick 50 is
+    evaluated, and a second silence changes nothing; a replay's ordering (gate_all) never
+    releases."""
+    p = Pipeline(load_config(SHIPPED), horizon_s=10.0)
+    for s in range(53):
+        p.process(second(s))
+    assert p.last["now_ns"] == T0_NS + 42_950_000_000  # newest - 10 s
+    step = p.silence(10.5)
+    assert step is not None and step.now_ns == T0_NS + 52_950_000_000
+    assert p.next_tick_ns == T0_NS + 60 * 10**9
+    assert p.silence(60.0) is None
+    replay = Pipeline(load_config(SHIPPED), horizon_s=10.0, gate_all=True)
+    replay.process(second(0))
+    assert replay.silence(60.0) is None
 
 
 def test_a_motion_stream_arriving_with_the_load_cell_still_gates():
@@ -99,12 +128,11 @@ def _until_second(mod: int) -> None:
     time.sleep((mod - now) % 10.0)
 
 
-@XFAIL
 def test_replugged_load_cell_stale_clears_while_it_talks_in_the_daemon(tmp_path):
     """Real processes: `buoymon run` with the bridge inside reading a load cell on a pty
     (plain numbers, stamped on receipt), the shipped config. It talks, is silent 14 s across a
     grid second (stale fires there), talks 7 s across the next grid second, stops: the stale
-    clear of that tick is out within seconds (today it waits for the next data: xfail)."""
+    clear of that tick is out within seconds (before the fix it waited for the next data)."""
     port, mport = free_port(), free_port()
     master, slave = os.openpty()
     tty.setraw(slave)
