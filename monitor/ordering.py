@@ -147,7 +147,7 @@ class ReorderBuffer:
     def silence(self, silent_ns: int) -> bool:
         """Live: no data arrived for ``silent_ns`` of wall-clock time. Longer than the horizon,
         a load stream never seen is taken as absent: it stops gating until it is seen. True
-        if that may move the watermark (a load stream unseen, data buffered)."""
+        if that may move the watermark (a load stream was unseen)."""
         if self.gate_all or not self._unseen_gate or silent_ns <= self.horizon_ns \
                 or not self.received_max:
             return False
