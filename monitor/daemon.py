@@ -423,10 +423,10 @@ class Daemon:
     def _silence(self) -> None:
         """Tell the pipeline how long no samples have arrived (monotonic time, as of the
         oldest message still waiting): past the ordering horizon it stops waiting for load
-        streams never seen (monitor.ordering), so the last horizon of sensor time, and its
-        ticks' alerts, go out now, not with the next data. Not in listening time: a loaded
-        machine's late beats, left out as stalls, would hold the release back, and a real
-        stall taken for silence costs at most the grace of a stream not seen yet."""
+        streams never seen or dead (monitor.ordering), so the last horizon of sensor time,
+        and its ticks' alerts, go out now, not with the next data. Not in listening time: a
+        loaded machine's late beats, left out as stalls, would hold the release back, and a
+        real stall taken for silence costs at most the grace of a stream not seen (or dead)."""
         silence = getattr(self.pipeline, "silence", None)
         if silence is None or self._last_data_mono is None:
             return

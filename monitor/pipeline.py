@@ -643,9 +643,9 @@ class Pipeline:
 
     def silence(self, silent_s: float) -> StepResult | None:
         """Live (the daemon's idle loop): no data arrived for ``silent_s`` s of wall-clock
-        time. Past the ordering horizon, the load streams never seen stop holding back the
-        newest horizon of sensor time (:meth:`ReorderBuffer.silence`): what they held is
-        processed now, its ticks' alerts sent (None: nothing changed)."""
+        time. Past the ordering horizon, the load streams never seen (or dead) stop holding
+        back the newest horizon of sensor time (:meth:`ReorderBuffer.silence`): what they
+        held is processed now, its ticks' alerts sent (None: nothing changed)."""
         if not self.reorder.silence(int(silent_s * 1e9)):
             return None
         upto = self.reorder.watermark()
