@@ -303,6 +303,7 @@ class Daemon:
         self._next_release_mono = 0.0
         self._dirty_status = False
         self._last_watchdog = 0.0
+        self._last_data_mono: float | None = None  # the newest samples' delivery, this life
 
     # ---- lifecycle -------------------------------------------------------------------------
 
@@ -400,9 +401,10 @@ class Daemon:
             self._duties()
 
     def _duties(self) -> None:
-        """Status, extensions, checkpoint, recorder flush, compiler pages, watchdog: each
-        when due (called between slices of work, never inside a block)."""
+        """Silence, status, extensions, checkpoint, recorder flush, compiler pages, watchdog:
+        each when due (called between slices of work, never inside a block)."""
         zc = self.config.zenoh
+        self._silence()  # before the status, which then shows what it released
         now = time.monotonic()
         if (now - self._last_status_mono >= zc.status_interval_s
                 or (self._dirty_status and now - self._last_status_mono >= _MIN_STATUS_GAP_S)):
@@ -417,6 +419,21 @@ class Daemon:
             release_compiler_pages()        # never runs the compiler (monitor.memory)
             self._next_release_mono = now + _RELEASE_EVERY_S
         self._pet_watchdog(now)
+
+    def _silence(self) -> None:
+        """Tell the pipeline how long no samples have arrived (monotonic time, as of the
+        oldest message still waiting): past the ordering horizon it stops waiting for load
+        streams never seen or dead (monitor.ordering), so the last horizon of sensor time,
+        and its ticks' alerts, go out now, not with the next data. Not in listening time: a
+        loaded machine's late beats, left out as stalls, would hold the release back, and a
+        real stall taken for silence costs at most the grace of a stream not seen (or dead)."""
+        silence = getattr(self.pipeline, "silence", None)
+        if silence is None or self._last_data_mono is None:
+            return
+        waiting = self._q.oldest_put()
+        now = time.monotonic() if waiting is None else waiting
+        if silence(now - self._last_data_mono) is not None:
+            self._dirty_status = True
 
     def _checkpoint(self, save: Callable[[], Any]) -> None:
         """Save via ``save``; a failure (disk full, database gone) is counted, logged, shown
@@ -585,6 +602,7 @@ class Daemon:
         at_mono = time.monotonic() if delivered_mono is None else delivered_mono
         self._stream(block.sensor).arrived(self.listening.at(at_mono), at_mono, len(block))
         if len(block):
+            self._last_data_mono = max(at_mono, self._last_data_mono or at_mono)
             # ahead of the block's receive time, as the pipeline judges time_ahead; behind its
             # publication (a message from a publisher's cache arrives late by design)
             sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else None

@@ -25,6 +25,17 @@ always gate, even before their first sample. Other streams (gnss, waves, ...) ga
 replay_horizon_s``). Live (``[ordering] horizon_s``), they gate only while active (newest
 sample within the horizon), so a low-rate or absent stream never delays the fatigue chain;
 their health figures then reflect what had arrived when a tick was evaluated.
+
+Live, a load stream never seen (``motion_sensor = "auto"`` on a buoy with a load cell and no
+motion stream), or seen and then dead, gates at ``newest - horizon``: the grace that lets a
+stream stamped just behind the load data (waves at a window's end) arrive in time. When the
+data stops, it holds the last horizon of sensor time until the next data, so a tick's alerts
+(a ``stale`` clear) would go out with the next stop's. :meth:`ReorderBuffer.silence`: after a
+WALL-CLOCK silence of all data longer than the horizon (the daemon's idle loop), such a stream
+(none, or nothing within the horizon, received) is taken as known up to the newest data: its
+mark never falls behind that again, and from the next data on it gates at ``newest -
+horizon`` again (the grace back). A load stream still talking when the data stopped is not
+released. Replay (``gate_all``) never releases.
 """
 
 from __future__ import annotations
@@ -89,6 +100,10 @@ class ReorderBuffer:
         self._pending: dict[str, list[_Part]] = {s: [] for s in SENSOR_ORDER}
         self.received_max: dict[str, int] = {}
         self._in_order = dict.fromkeys(SENSOR_ORDER, True)
+        # live: per released load stream, the newest time at the wall-clock silence that
+        # released it (silence()); not in the state: after a restart processed_ns (the
+        # pipeline's) keeps what was processed from being processed again
+        self._released: dict[str, int] = {}
         if state is not None:
             self.received_max = {k: int(v) for k, v in state["received_max"].items()}
             for sensor, (t, values) in state["pending"].items():
@@ -128,10 +143,27 @@ class ReorderBuffer:
         for s in SENSOR_ORDER:
             received = self.received_max.get(s)
             if s in self.load_streams or self.gate_all:
-                marks.append(max(_NEVER if received is None else received, floor))
+                mark = max(_NEVER if received is None else received, floor)
+                marks.append(max(mark, self._released[s]) if s in self._released else mark)
             elif received is not None and received >= floor:
                 marks.append(received)
         return min(marks)
+
+    def silence(self, silent_ns: int) -> bool:
+        """Live: no data arrived for ``silent_ns`` of wall-clock time. Longer than the horizon,
+        a load stream with nothing received within the horizon of the newest data (never
+        seen, or dead) is taken as known up to the newest data. True if that may move the
+        watermark (such a stream was not released up to the newest data yet)."""
+        newest = self.newest_ns
+        if self.gate_all or newest is None or silent_ns <= self.horizon_ns:
+            return False
+        moved = False
+        for s in self.load_streams:
+            if (self.received_max.get(s, _NEVER) < newest - self.horizon_ns
+                    and self._released.get(s, _NEVER) < newest):
+                self._released[s] = newest
+                moved = True
+        return moved
 
     def end_of_data(self) -> int | None:
         """Newest time of the slowest load stream that has delivered data (for a final flush)."""

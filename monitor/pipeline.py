@@ -648,6 +648,16 @@ class Pipeline:
         """End of input: process every buffered sample; evaluate ticks the data completes."""
         return self.advance(self.ingest_end())
 
+    def silence(self, silent_s: float) -> StepResult | None:
+        """Live (the daemon's idle loop): no data arrived for ``silent_s`` s of wall-clock
+        time. Past the ordering horizon, the load streams never seen (or dead) stop holding
+        back the newest horizon of sensor time (:meth:`ReorderBuffer.silence`): what they
+        held is processed now, its ticks' alerts sent (None: nothing changed)."""
+        if not self.reorder.silence(int(silent_s * 1e9)):
+            return None
+        upto = self.reorder.watermark()
+        return self.advance(self._ingest_slab(None, "flush", upto, upto))
+
     def close(self) -> None:
         for sink in self.sinks:
             sink.close()

@@ -189,6 +189,44 @@ def test_pending_by_channel_counts_undelivered_messages_of_every_channel(tmp_pat
     box.close()
 
 
+def test_pending_age_is_monotonic_within_a_process_across_a_wall_clock_step(tmp_path):
+    """alert_delivery_stalled's age (oldest_pending_age_s): a logger's RTC stepped an hour
+    forward (GNSS/NTP at boot) does not age the messages of this process; one from before
+    it is as old as its wall-clock age at the outbox's opening plus the monotonic time since."""
+    wall, mono = [1_000.0], [50.0]
+
+    def down(payload, key):
+        raise ConnectionError("receiver down")
+
+    def open_box() -> Outbox:
+        return Outbox(str(tmp_path / "o.sqlite"), {"webhook": down, "email": lambda p, k: None},
+                      clock=lambda: wall[0], monotonic=lambda: mono[0])
+
+    box = open_box()
+    box.enqueue("webhook", "a", b"A")
+    box.enqueue("email", "a", b"A")
+    wall[0] += 3600.0  # the step
+    mono[0] += 12.0
+    box.enqueue("webhook", "b", b"B")
+    mono[0] += 8.0
+    ages = {ch: c["oldest_pending_age_s"] for ch, c in box.stats().items()}
+    assert ages == {"webhook": 20.0, "email": 20.0}  # with the wall clock: 3620 s
+    box.run_once()  # e-mail delivered, the webhook's head retried later
+    stats = box.stats()
+    assert stats["email"]["oldest_pending_age_s"] is None
+    assert stats["webhook"]["oldest_pending_age_s"] == 20.0
+    box.close()
+    # a new process (its monotonic clock from elsewhere), 100 s of wall clock later: the
+    # messages of the last one are as old as the wall clock says at opening (only it spans
+    # processes: the step counts now), then monotonic
+    wall[0] += 100.0
+    mono[0] = 7.0
+    box = open_box()
+    mono[0] += 5.0
+    assert box.stats()["webhook"]["oldest_pending_age_s"] == 3600.0 + 100.0 + 5.0
+    box.close()
+
+
 def test_outbox_rejects_unknown_channel(tmp_path):
     box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": lambda p, k: None})
     with pytest.raises(ValueError, match="channel 'email': no sender"):
@@ -337,6 +375,8 @@ def test_full_outbox_drops_the_oldest_and_counts_them(tmp_path):
             box.enqueue("webhook", f"k{i}", b"x")
         assert [m["dedup_key"] for m in box.messages()] == ["k2", "k3", "k4"]
         assert box.stats()["webhook"]["dropped_total"] == 2
+        # the dropped ones' enqueue times are forgotten with them (memory stays bounded)
+        assert sorted(box._enqueued) == [m["id"] for m in box.messages()]
     finally:
         box.close()
 

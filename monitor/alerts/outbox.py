@@ -21,7 +21,11 @@ can use the ``dedup_key`` (sent as the webhook's ``Idempotency-Key`` header) to 
 repeat.
 
 Retry timing is the only place in the alert path that uses the wall clock: sensor time does
-not advance while a receiver is down.
+not advance while a receiver is down. A pending message's age (``oldest_pending_age_s``, the
+live rule ``alert_delivery_stalled``) is on the monotonic clock for the messages enqueued by
+this process: a wall-clock step (a logger's RTC set from GNSS/NTP at boot) would age them by
+the step. A message from before it is as old as its wall-clock age when the outbox was opened,
+plus the monotonic time since.
 """
 
 from __future__ import annotations
@@ -83,12 +87,14 @@ class Outbox:
         max_pending: undelivered messages kept per channel; the oldest beyond are dropped.
         clock: wall-clock seconds (injectable for tests).
         rng: the jitter's random source (injectable for tests).
+        monotonic: monotonic seconds, for the pending messages' ages (injectable for tests).
     """
 
     def __init__(self, path: str, senders: Mapping[str, Sender], retry_base_s: float = 5.0,
                  retry_max_s: float = 600.0, max_pending: int = 10000,
                  clock: Callable[[], float] = time.time,
-                 rng: random.Random | None = None) -> None:
+                 rng: random.Random | None = None,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
         if not retry_base_s > 0 or not retry_max_s >= retry_base_s:
             raise ValueError(f"outbox retry_base_s = {retry_base_s!r}, retry_max_s = "
                              f"{retry_max_s!r}: need 0 < retry_base_s <= retry_max_s")
@@ -101,6 +107,11 @@ class Outbox:
         self.retry_base_s = float(retry_base_s)
         self.retry_max_s = float(retry_max_s)
         self.clock = clock
+        self.monotonic = monotonic
+        self._opened = (clock(), monotonic())  # (wall, monotonic): the ages of older messages
+        # row id -> monotonic time of its enqueue, for the messages of this process still
+        # pending (under the lock; delivered, dead and dropped ones are removed)
+        self._enqueued: dict[int, float] = {}
         # one connection shared by the enqueuing thread and the sender thread, serialised by
         # a lock; the lock is never held while a sender talks to the network
         os.makedirs(os.path.dirname(os.path.abspath(self.path)), exist_ok=True)  # as the state
@@ -127,7 +138,7 @@ class Outbox:
         """Store a message durably; False if ``(channel, dedup_key)`` was already stored."""
         if channel not in self.senders:
             raise ValueError(f"outbox channel {channel!r}: no sender; have {sorted(self.senders)}")
-        now = self.clock()
+        now, mono = self.clock(), self.monotonic()
         with self._lock:
             cur = self._db.execute(
                 "INSERT OR IGNORE INTO outbox (channel, dedup_key, payload, created_s, "
@@ -135,10 +146,16 @@ class Outbox:
                 (channel, dedup_key, bytes(payload), now, now),
             )
             added = cur.rowcount == 1
-            dropped = self._db.execute(
-                f"DELETE FROM outbox WHERE id IN (SELECT id FROM outbox WHERE channel = ? AND "
-                f"{_PENDING} ORDER BY id DESC LIMIT -1 OFFSET ?)",
-                (channel, self.max_pending)).rowcount if added else 0
+            dropped = 0
+            if added:
+                if cur.lastrowid is not None:  # the row inserted (always, with rowcount 1)
+                    self._enqueued[cur.lastrowid] = mono
+                for (row_id,) in self._db.execute(
+                        f"DELETE FROM outbox WHERE id IN (SELECT id FROM outbox WHERE channel = ? "
+                        f"AND {_PENDING} ORDER BY id DESC LIMIT -1 OFFSET ?) RETURNING id",
+                        (channel, self.max_pending)).fetchall():
+                    self._enqueued.pop(row_id, None)
+                    dropped += 1
             if dropped:
                 self._count(channel, "dropped_total", dropped)
         if dropped:
@@ -185,6 +202,7 @@ class Outbox:
                             "UPDATE outbox SET attempts = ?, dead_s = ?, last_error = ? "
                             "WHERE id = ?", (attempts + 1, now, str(exc)[:2000], msg_id))
                         self._count(channel, "dead_total")
+                        self._enqueued.pop(msg_id, None)
                     log.error("alert delivery refused; kept as a dead letter "
                               "(buoymon alerts outbox)",
                               extra={"fields": {"channel": channel, "key": key,
@@ -209,6 +227,7 @@ class Outbox:
                             "UPDATE outbox SET delivered_s = ?, attempts = ? WHERE id = ? "
                             "AND delivered_s IS NULL", (self.clock(), attempts + 1, msg_id))
                         self._count(channel, "delivered_total")
+                        self._enqueued.pop(msg_id, None)
                 with self._lock:
                     row = self._db.execute(
                         "SELECT id, dedup_key, payload, attempts, next_attempt_s FROM outbox "
@@ -263,11 +282,16 @@ class Outbox:
     def stats(self) -> dict[str, dict[str, Any]]:
         """Per channel: ``pending``, ``dead_letters`` (held now), ``oldest_pending_age_s``
         and the persistent counters of :data:`COUNTERS` (status["delivery"]["channels"])."""
-        now = self.clock()
         with self._lock:
+            # the oldest pending message: the first enqueued (ids increase)
             pend = self._db.execute(
-                f"SELECT channel, COUNT(*), MIN(created_s) FROM outbox WHERE {_PENDING} "
-                "GROUP BY channel").fetchall()
+                f"SELECT o.channel, h.n, o.id, o.created_s FROM outbox o JOIN (SELECT "
+                f"channel, COUNT(*) AS n, MIN(id) AS id FROM outbox WHERE {_PENDING} GROUP BY "
+                "channel) h ON o.id = h.id").fetchall()
+            mono = self.monotonic()
+            ages = {ch: mono - self._enqueued[i] if i in self._enqueued else
+                    self._opened[0] - created + mono - self._opened[1]
+                    for ch, _, i, created in pend}
             dead = dict(self._db.execute(
                 "SELECT channel, COUNT(*) FROM outbox WHERE dead_s IS NOT NULL "
                 "GROUP BY channel").fetchall())
@@ -277,9 +301,9 @@ class Outbox:
                           | {r[0] for r in counts})
         out = {ch: {"pending": 0, "dead_letters": dead.get(ch, 0), "oldest_pending_age_s": None,
                     **dict.fromkeys(COUNTERS, 0)} for ch in channels}
-        for ch, n, oldest in pend:
+        for ch, n, _, _ in pend:
             out[ch]["pending"] = n
-            out[ch]["oldest_pending_age_s"] = max(0.0, now - oldest)
+            out[ch]["oldest_pending_age_s"] = max(0.0, ages[ch])
         for ch, name, value in counts:
             if ch in out and name in out[ch]:
                 out[ch][name] = value
