@@ -216,10 +216,27 @@ def damage_rate(curve: DamageCurve, mom: SpectralMoments,
     ``curve.damage_per_cycle`` (Pa ranges, e.g. ``models.fatigue.SNCurve``) is integrated
     against the method's range density; ``nu * integral p(S) / N(S) dS``.
     """
+    if _check_method(method) == "dirlik":
+        return _dirlik_damage_rate(curve, mom)
     z, w, parts = _quadrature(60.0 * max(1.0, _scale(mom, method)))
     dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
     density = _density(method)(z, mom, parts)
     return cycle_rate_hz(mom, method) * loops.weighted_sum(w, density, dpc)
+
+
+def _dirlik_damage_rate(curve: DamageCurve, mom: SpectralMoments) -> float:
+    """:func:`damage_rate` of Dirlik's density: its coefficients once, both exponentials in
+    one ``np.exp``, the density and the weighted sum in one pass (the same operations on the
+    same doubles as :func:`_dirlik_density` then ``weighted_sum``: the same bits)."""
+    d1, d2, d3, q, r = dirlik_coefficients(mom)
+    z, w, (neg_z2, rayleigh) = _quadrature(60.0 * max(1.0, max(abs(q), abs(r))))
+    dpc = np.asarray(curve.damage_per_cycle(2.0 * mom.sigma * z), dtype=float)
+    e = np.empty((2, z.shape[0]))
+    loops.dirlik_exponents(z, neg_z2, q, 2.0 * r**2, e[0], e[1])
+    np.exp(e, out=e)
+    total = loops.dirlik_damage_sum(w, z, rayleigh, d1 / q, d2, r**2, d3, e[0], e[1],
+                                    np.ascontiguousarray(dpc).reshape(-1))
+    return mom.nup_hz * total
 
 
 # a pure function of z_max, memoised: a stream of spectra (the learner's windows) is
@@ -316,30 +333,39 @@ class Periodograms:
         return psd
 
     def add(self, segments: NDArray[np.float64], first: int, last: int, fs_hz: float,
-            sums: NDArray[np.float64]) -> None:
+            sums: NDArray[np.float64], windowed: bool = False) -> None:
         """Add the PSD of each segment ``segments[c, first:last]`` (``c`` a signal; at most
         ``max_rows`` segments in all) to ``sums[c]``, one segment after another in order:
-        the bits of :meth:`compute` on those rows followed by ``sums[c] += psd`` per row."""
+        the bits of :meth:`compute` on those rows followed by ``sums[c] += psd`` per row.
+        ``windowed``: the segments already had their mean removed and :attr:`window`
+        applied (``_spectral_loops.window_segments``, the bits of :meth:`compute`'s first
+        steps), so they are transformed as they are."""
         m = segments.shape[0] * (last - first)
         if not 1 <= m <= self.max_rows:
             raise ValueError(f"Periodograms.add: {m} segments: need 1 <= m <= max_rows = "
                              f"{self.max_rows}")
-        mags = self._magnitudes(segments, first, last, fs_hz)
+        mags = self._magnitudes(segments, first, last, fs_hz, windowed)
         # doubled bins 1 .. top - 1: an even segment's last (Nyquist) bin is not doubled
         top = mags.shape[1] - 1 if self.n % 2 == 0 else mags.shape[1]
         loops.add_power(sums, mags, fs_hz * self.window_power, last - first, top)
 
     def _magnitudes(self, segments: NDArray[np.float64], first: int, last: int,
-                    fs_hz: float) -> NDArray[np.float64]:
+                    fs_hz: float, windowed: bool = False) -> NDArray[np.float64]:
         """``|rfft|`` of each segment ``segments[c, first:last]`` (signal by signal), its
-        mean removed and the window applied (numpy's transform and complex ``abs``, in the
-        buffers)."""
+        mean removed and the window applied (here unless ``windowed``; numpy's transform
+        and complex ``abs``, in the buffers; one transform per row either way)."""
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ValueError(f"Periodograms: fs = {fs_hz!r}: must be finite and > 0")
         m = segments.shape[0] * (last - first)
         x = self.rows(m)
-        loops.detrend_window(segments, first, last, self.window, x)
-        return np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
+        spectrum = self._spectrum[:m]
+        if windowed:
+            shape = (segments.shape[0], last - first, spectrum.shape[1])
+            np.fft.rfft(segments[:, first:last], axis=-1, out=spectrum.reshape(shape))
+        else:
+            loops.detrend_window(segments, first, last, self.window, x)
+            np.fft.rfft(x, axis=1, out=spectrum)
+        return np.abs(spectrum, out=self._psd[:m])
 
 
 def segment_psds(segments: ArrayLike, fs_hz: float
