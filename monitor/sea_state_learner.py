@@ -32,7 +32,6 @@ be feeding the next slab while the ticks close windows.
 
 from __future__ import annotations
 
-import copy
 import functools
 import math
 from typing import Any, Callable, Mapping, Sequence
@@ -204,8 +203,11 @@ class _Spectra:
     def snapshot(self) -> "_Spectra":
         """A copy that later feeding leaves as it is: feed replaces the open segment's
         arrays and writes kept segments past the copy's, and :meth:`summed` replaces the
-        sums, so the copy shares every array."""
-        return copy.copy(self)
+        sums, so the copy shares every array (a shallow copy, made directly: copy.copy's
+        generic path cost more than the rest of a slab's hand-over)."""
+        out = _Spectra.__new__(_Spectra)
+        out.__dict__.update(self.__dict__)
+        return out
 
     def state(self) -> dict[str, Any]:
         return {"index": self.index, "fs": self.fs, "segments": self.segments,
@@ -323,12 +325,17 @@ class _WindowSpectra:
             self.done[index] = spectra
 
     def take(self, k: int) -> _Spectra | None:
-        """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""
+        """Window ``k``'s spectra (None if it had no samples), its periodograms not yet
+        added (:meth:`summed`: only if it is used); older windows are dropped."""
         out = self.done.pop(k, None)
         if out is None and self._open.index == k:
             out = self._open
         self.drop_before(k)
-        return None if out is None else out.summed(self.work)
+        return out
+
+    def summed(self, spectra: _Spectra) -> _Spectra:
+        """A taken window's spectra with its periodograms added (in :attr:`work`)."""
+        return spectra.summed(self.work)
 
     def drop_before(self, k: int) -> None:
         """Forget the finished windows before window ``k`` (closed, or never to be): one
@@ -505,8 +512,10 @@ class SeaStateLearner:
         before = [(t, v) for t, v in zip(self.waves_t, self.waves_v) if t <= start]
         if before and (end - before[-1][0]) / 1e9 <= self.cfg.waves_max_age_s:
             return before[-1][1], "waves"
-        for spectra, name, source in ((heave, "heave", "motion"), (accel, "accel", "imu")):
-            sea = None if spectra is None else spectra.sea_state(name, name == "accel")
+        for taken, spectra, name, source in ((heave, self.heave, "heave", "motion"),
+                                             (accel, self.accel, "accel", "imu")):
+            sea = (None if taken is None
+                   else spectra.summed(taken).sea_state(name, name == "accel"))
             if sea is not None:
                 return sea, source
         return None, None
@@ -514,6 +523,8 @@ class SeaStateLearner:
     def _close(self, end: int, committed: Mapping[str, float]) -> None:
         start = end - self.window_ns
         spectra = self.stress.take(end // self.window_ns)
+        if spectra is not None:
+            spectra = self.stress.summed(spectra)
         rainflow = {n: committed[n] - self.start_damage.get(n, committed[n]) for n in self.names}
         rates: dict[tuple[int, int], float] = {}  # per (spectrum, curve): equal ones once
         for i, n in enumerate(self.names):
