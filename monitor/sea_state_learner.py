@@ -39,8 +39,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
-from models.fatigue._spectral_loops import steady_segments, window_segments
-from models.fatigue.spectral import Periodograms, damage_rate_from_psd, hann
+from models.fatigue._spectral_loops import steady_segments
+from models.fatigue.spectral import Periodograms, damage_rate_from_psd
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
 
@@ -55,8 +55,7 @@ _BATCH_ROWS = 128  # segments transformed per batch (buffers of about 2.6 MB per
 class _Spectra:
     """Welch PSD sums of one window's stress, per component, segment by segment.
 
-    Feeding keeps each whole segment (``rows``: signal x segment x sample), its mean removed
-    and the Hann ``window`` applied as it is copied in (while its samples are in cache); the
+    Feeding keeps each whole segment (``rows``: signal x segment x sample); the
     periodograms are added to the sums (``acc``) when the window's spectrum is asked for
     (:meth:`summed`), all the kept segments in a few large batches rather than a small one
     per slab; the additions are the same, one segment after another in time order.
@@ -66,11 +65,10 @@ class _Spectra:
     are) keep and transform their segments once: same inputs, same operations, same bits.
     """
 
-    def __init__(self, names: Sequence[str], window: np.ndarray,
-                 state: Mapping[str, Any] | None = None, room: int = 0) -> None:
+    def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None,
+                 room: int = 0) -> None:
         st = state or {}
         self.names = tuple(names)
-        self.window = window  # Periodograms(SEGMENT).window, read only
         self.index: int | None = st.get("index")
         self.fs: float | None = st.get("fs")
         self.segments = int(st.get("segments", 0))
@@ -113,8 +111,7 @@ class _Spectra:
             rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
                 if self.same[i] == i:
-                    window_segments(rows[i], taken, self.x[n],
-                                    np.ascontiguousarray(stresses[n], float), self.window)
+                    _segments(rows[i], taken, self.x[n], stresses[n])
             self.filled += taken.shape[0]
         self.segments += taken.shape[0]
         self.t = t[full - nc:].astype(np.int64)
@@ -156,7 +153,7 @@ class _Spectra:
             for a in range(self.added, self.filled, per):
                 b = min(a + per, self.filled)
                 work.add(self.rows[lo:hi], a, b, self.fs,  # type: ignore[arg-type]
-                         self.acc[lo:hi], windowed=True)
+                         self.acc[lo:hi])
         for i, j in enumerate(self.same):
             self.acc[i] = self.acc[j]
         self.added = self.filled
@@ -224,14 +221,6 @@ def _frequencies(fs: float) -> np.ndarray:
     return f
 
 
-@functools.lru_cache(maxsize=1)
-def _hann() -> np.ndarray:
-    """The segments' window, :class:`models.fatigue.spectral.Periodograms`' (read-only)."""
-    w = hann(SEGMENT)
-    w.flags.writeable = False
-    return w
-
-
 @functools.lru_cache(maxsize=8)
 def _omega4(fs: float) -> np.ndarray:
     """``(2 pi f)^4`` of :func:`_frequencies` (read-only)."""
@@ -261,6 +250,25 @@ def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
     return out
 
 
+def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray) -> None:
+    """Segments ``js`` (increasing) of the open samples ``open_x`` followed by ``x`` into
+    the rows of ``out``: segment j is samples [j S, (j + 1) S), only the first can start
+    among the open ones."""
+    nc = open_x.shape[0]
+    if nc and js[0] == 0:
+        out[0, :nc] = open_x
+        out[0, nc:] = x[:SEGMENT - nc]
+        out, js = out[1:], js[1:]
+    if not js.shape[0]:
+        return
+    first = js[0] * SEGMENT - nc  # in x
+    if js[-1] - js[0] + 1 == js.shape[0]:  # consecutive: the usual case
+        out[:] = x[first:first + js.shape[0] * SEGMENT].reshape(-1, SEGMENT)
+    else:
+        body = x[first:(js[-1] + 1) * SEGMENT - nc].reshape(-1, SEGMENT)
+        out[:] = body[js - js[0]]
+
+
 class _WindowSpectra:
     """:class:`_Spectra` of each learning window for one set of signals fed together.
 
@@ -273,15 +281,14 @@ class _WindowSpectra:
                  state: Mapping[str, Any] | None = None) -> None:
         st = state or {}
         self.names, self.window_ns = tuple(names), window_ns
+        self.current = _Spectra(self.names, st.get("current"))
         # room for a batch of at least one segment of every signal
         self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
-        self.window = _hann()
-        self.current = _Spectra(self.names, self.window, st.get("current"))
         self._room = 0  # segments a window kept at most so far: a new one's first buffer
         self._finished: list[tuple[int, _Spectra]] = []
         self._copy: _Spectra | None = None  # the open window as last handed over
         self.done: dict[int, _Spectra] = {
-            int(k): _Spectra(self.names, self.window, v) for k, v in st.get("done", {}).items()}
+            int(k): _Spectra(self.names, v) for k, v in st.get("done", {}).items()}
         self._open = self.current
 
     def feed(self, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
@@ -306,7 +313,7 @@ class _WindowSpectra:
             if self.current.index is not None:
                 self._finished.append((self.current.index, self.current))
                 self._room = max(self._room, self.current.filled)
-            self.current = _Spectra(self.names, self.window, room=self._room)
+            self.current = _Spectra(self.names, room=self._room)
             self.current.index = k
         self.current.feed(t_ns, values)
 
@@ -411,7 +418,7 @@ class SeaStateLearner:
         periodograms and the Dirlik damage of its spectrum."""
         t = np.arange(SEGMENT, dtype=np.int64) * 50_000_000  # 20 Hz
         x = np.sin(np.arange(SEGMENT) * 0.3)
-        spectra = _Spectra(self.names, _hann())
+        spectra = _Spectra(self.names)
         spectra.feed(t, {n: x for n in self.names})
         spectra.summed(Periodograms(SEGMENT, max(2, len(self.names))))
         for n in self.names:

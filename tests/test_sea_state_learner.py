@@ -224,17 +224,17 @@ def test_the_sums_of_more_signals_than_a_batch_holds():
     """A saved state sums the kept segments of every signal: with more components than a
     batch of periodograms holds (_BATCH_ROWS) it did range(..., 0) and failed; the sums are
     the bits of the same signals summed a few at a time."""
-    from monitor.sea_state_learner import _BATCH_ROWS, _Spectra, _hann
+    from monitor.sea_state_learner import _BATCH_ROWS, _Spectra
 
     names = [f"c{i}" for i in range(_BATCH_ROWS + 1)]
     t = np.arange(3 * SEGMENT, dtype=np.int64) * 50_000_000  # 20 Hz
     x = np.sin(np.arange(3 * SEGMENT) * 0.3)
     signals = {n: x * (i + 1) for i, n in enumerate(names)}
-    many = _Spectra(names, _hann())
+    many = _Spectra(names)
     many.feed(t, signals)
     sums = many.sums()
     assert sorted(sums) == sorted(names) and many.segments == 3
-    few = _Spectra(names[-2:], _hann())
+    few = _Spectra(names[-2:])
     few.feed(t, {n: signals[n] for n in names[-2:]})
     for n, want in few.sums().items():
         assert np.array_equal(sums[n], want) and want.max() > 0

@@ -223,29 +223,3 @@ def test_sea_state_from_psd_is_its_numpy_steps(plain):
                 assert bits(ss.tp) == bits(1.0 / want[2])
             assert ss.hs == 4.0 * np.sqrt(want[0]) and ss.tz == np.sqrt(want[0] / want[1])
 
-
-@MODES
-@pytest.mark.parametrize("n_open", [0, 1, 300])
-def test_window_segments_are_the_segments_detrended_and_their_periodograms_the_same(plain,
-                                                                                     n_open):
-    """Segments cut from open samples followed by new ones (every segment, and a gap: 0, 2,
-    3 of 4), windowed as they are copied: the bits of detrend_window on the segments laid
-    out, and Periodograms.add of them (windowed=True) the sums of add() of the raw ones."""
-    rng = np.random.default_rng(10)
-    n = 1024 if not plain else 32
-    n_open = min(n_open, n - 5)  # fewer than a segment are open
-    open_x = wide(rng, n_open) + 1e3
-    x = wide(rng, 4 * n - n_open + 7) + 1e3
-    laid = np.concatenate([open_x, x])[:4 * n].reshape(1, 4, n)
-    window = hann(n)
-    for js in (np.arange(4), np.array([0, 2, 3])):
-        want = np.empty((js.size, n))
-        got = np.empty((1, 4, n))
-        with mode(plain):
-            loops.detrend_window(laid[:, js], 0, js.size, window, want)
-            loops.window_segments(got[0, :js.size], js.astype(np.int64), open_x, x, window)
-            assert np.array_equal(bits(got[0, :js.size]), bits(want)), js
-            raw, windowed = np.zeros((1, n // 2 + 1)), np.zeros((1, n // 2 + 1))
-            Periodograms(n, 4).add(laid[:, js], 0, js.size, 9.9, raw)
-            Periodograms(n, 4).add(got, 0, js.size, 9.9, windowed, windowed=True)
-        assert np.array_equal(bits(windowed), bits(raw)) and raw.max() > 0

@@ -102,45 +102,20 @@ def pairwise_sum(a):
     return 0.0 + _pairwise(a, 0, a.shape[0])
 
 
-@jitable
-def _detrend_row(row, window):
-    """``row = (row - row.mean()) * window``, in place (one array: a second one that might
-    be the same would cost compiled code an alias check per element)."""
-    n = window.shape[0]
-    mean = pairwise_sum(row) / n
-    for i in range(n):
-        row[i] = (row[i] - mean) * window[i]
-
-
 @compile_loop
 def detrend_window(src, first, last, window, out):
     """``out`` rows = ``(x - x.mean()) * window`` of the rows ``src[c, first:last]`` of each
     signal ``c`` in turn (signal by signal, segment by segment): numpy's
     ``np.subtract(x, x.mean(axis=1, keepdims=True)); np.multiply(x, window)``."""
+    n = window.shape[0]
     k = 0
     for c in range(src.shape[0]):
         for j in range(first, last):
-            out[k] = src[c, j]
-            _detrend_row(out[k], window)
+            row = src[c, j]
+            mean = pairwise_sum(row) / n
+            for i in range(n):
+                out[k, i] = (row[i] - mean) * window[i]
             k += 1
-
-
-@compile_loop
-def window_segments(out, js, open_x, x, window):
-    """Segments ``js`` (increasing) of the samples ``open_x`` followed by ``x`` into the rows
-    of ``out``, as :func:`detrend_window` leaves them: segment ``j`` is samples
-    ``[j n, (j + 1) n)`` (``n`` the window's length; only the first can start among the
-    open ones), copied, then its mean removed and the window applied in place."""
-    n = window.shape[0]
-    nc = open_x.shape[0]
-    for r in range(js.shape[0]):
-        row = out[r]
-        start = js[r] * n - nc  # the segment's first sample in x (< 0: in open_x)
-        head = min(max(-start, 0), n)
-        if head:  # slice copies: numba's element loops here do not vectorise
-            row[:head] = open_x[nc + start:nc + start + head]
-        row[head:] = x[start + head:start + n]
-        _detrend_row(row, window)
 
 
 @compile_loop

@@ -333,39 +333,30 @@ class Periodograms:
         return psd
 
     def add(self, segments: NDArray[np.float64], first: int, last: int, fs_hz: float,
-            sums: NDArray[np.float64], windowed: bool = False) -> None:
+            sums: NDArray[np.float64]) -> None:
         """Add the PSD of each segment ``segments[c, first:last]`` (``c`` a signal; at most
         ``max_rows`` segments in all) to ``sums[c]``, one segment after another in order:
-        the bits of :meth:`compute` on those rows followed by ``sums[c] += psd`` per row.
-        ``windowed``: the segments already had their mean removed and :attr:`window`
-        applied (``_spectral_loops.window_segments``, the bits of :meth:`compute`'s first
-        steps), so they are transformed as they are."""
+        the bits of :meth:`compute` on those rows followed by ``sums[c] += psd`` per row."""
         m = segments.shape[0] * (last - first)
         if not 1 <= m <= self.max_rows:
             raise ValueError(f"Periodograms.add: {m} segments: need 1 <= m <= max_rows = "
                              f"{self.max_rows}")
-        mags = self._magnitudes(segments, first, last, fs_hz, windowed)
+        mags = self._magnitudes(segments, first, last, fs_hz)
         # doubled bins 1 .. top - 1: an even segment's last (Nyquist) bin is not doubled
         top = mags.shape[1] - 1 if self.n % 2 == 0 else mags.shape[1]
         loops.add_power(sums, mags, fs_hz * self.window_power, last - first, top)
 
     def _magnitudes(self, segments: NDArray[np.float64], first: int, last: int,
-                    fs_hz: float, windowed: bool = False) -> NDArray[np.float64]:
+                    fs_hz: float) -> NDArray[np.float64]:
         """``|rfft|`` of each segment ``segments[c, first:last]`` (signal by signal), its
-        mean removed and the window applied (here unless ``windowed``; numpy's transform
-        and complex ``abs``, in the buffers; one transform per row either way)."""
+        mean removed and the window applied (numpy's transform and complex ``abs``, in the
+        buffers)."""
         if not (math.isfinite(fs_hz) and fs_hz > 0):
             raise ValueError(f"Periodograms: fs = {fs_hz!r}: must be finite and > 0")
         m = segments.shape[0] * (last - first)
         x = self.rows(m)
-        spectrum = self._spectrum[:m]
-        if windowed:
-            shape = (segments.shape[0], last - first, spectrum.shape[1])
-            np.fft.rfft(segments[:, first:last], axis=-1, out=spectrum.reshape(shape))
-        else:
-            loops.detrend_window(segments, first, last, self.window, x)
-            np.fft.rfft(x, axis=1, out=spectrum)
-        return np.abs(spectrum, out=self._psd[:m])
+        loops.detrend_window(segments, first, last, self.window, x)
+        return np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
 
 
 def segment_psds(segments: ArrayLike, fs_hz: float
