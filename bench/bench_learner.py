@@ -49,6 +49,22 @@ numpy's exp, FFT and complex abs kept); the frequency terms of the moments are c
 grid; components whose stresses are equal to the bit (the default conductor and its
 termination) are transformed and integrated once.
 
+Part 5 (2026-11-26 06:26-06:27 UTC, load average 6.5-7.0: best-of-N CPU only), on a day of
+the fleet archive (``--log /tmp/perf_fleet/buoy002/day_0001.mcap``: 48 windows), main
+452691c and this build interleaved, best of 9, three pairs: learner alone main 0.0431 /
+0.0403 / 0.0408 CPU-s, this build 0.0303 / 0.0324 / 0.0329 (-20 to -30 %); ticks 30.0-30.8
+-> 23.0-23.3 ms, hand-over 0.9-1.0 -> 0.3 ms, the feeds unchanged (load 5.5-5.8 -> 5.0-5.2,
+IMU 3.7-3.8 -> 3.2-3.5 ms). What changed: the IMU/heave sea state in one compiled pass
+(``models.waves.sea_state_from_psd`` over ``_spectral_loops.band_moments``: 38 -> 9 us a
+window, hot), Dirlik's damage rate with its coefficients once, one ``np.exp`` call and the
+density fused into the weighted sum (68 -> 61 us), the table's update with scalar bins
+(23 -> 10 us), the heave/IMU periodograms only when the sea state needs them, the
+hand-over's snapshot a direct shallow copy. What is left is mostly numpy's FFT and complex
+``abs`` (about half of ``ticks``: with them moved to the feed, ``ticks`` halved and the
+feeds grew by as much), the S-N curve's log and exp per quadrature node (~20 us a window)
+and numpy's exp (~8 us), all with bits that must stay numpy's or the curve's; the 50 % cut
+asked of this slice is not reached.
+
 Run: ``python bench/bench_learner.py [--repeat N] [--log PATH]``.
 """
 

@@ -20,6 +20,7 @@ every bin alike).
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
@@ -118,13 +119,17 @@ class DamageRateTable:
     def learn(self, hs_m: float, tp_s: float, hours: float, damage: Sequence[float]) -> None:
         """Add one window of data: its sea state, duration and damage per component."""
         d = np.asarray(damage, dtype=float)
-        if d.shape != (len(self.components),) or not np.all(np.isfinite(d)) or np.any(d < 0):
+        # scalar checks and bins (bin_of's, by bisection): the learner calls this once a
+        # window, where numpy's per-call overhead on a few values was most of the cost
+        if d.shape != (len(self.components),) or not all(
+                math.isfinite(v) and v >= 0 for v in d.tolist()):
             raise ValueError("damage: one finite value >= 0 per component")
         if not (math.isfinite(hs_m) and math.isfinite(tp_s) and hs_m >= 0 and tp_s > 0):
             raise ValueError(f"sea state Hs = {hs_m!r} m, Tp = {tp_s!r} s: need Hs >= 0, Tp > 0")
         if not (math.isfinite(hours) and hours > 0):
             raise ValueError(f"hours = {hours!r}: must be > 0")
-        i, j = (int(k) for k in self.bin_of(hs_m, tp_s))
+        i = min(max(bisect.bisect_right(self.hs_edges.tolist(), hs_m) - 1, 0), self.shape[0] - 1)
+        j = min(max(bisect.bisect_right(self.tp_edges.tolist(), tp_s) - 1, 0), self.shape[1] - 1)
         self.hours[i, j] += hours
         self.windows[i, j] += 1
         self.damage[:, i, j] += d

@@ -308,30 +308,30 @@ def sea_state_from_heave(
 def sea_state_from_psd(f_hz: ArrayLike, psd: ArrayLike, f_min: float = 0.04,
                        f_max: float = 0.5) -> SeaState:
     """Hs, Tp, Tz of a one-sided heave PSD (m^2/Hz at evenly spaced ``f_hz``), its moments
-    integrated over [f_min, f_max] Hz; Tp refined by a parabola through the spectral peak
-    and its neighbours. ValueError if the band holds fewer than 3 bins or no energy."""
+    integrated over [f_min, f_max] Hz (trapezoidal rule, as :func:`spectral_moments`); Tp
+    refined by a parabola through the spectral peak and its neighbours. ValueError if the
+    band holds fewer than 3 bins or no energy. One compiled pass
+    (``models.fatigue._spectral_loops.band_moments``: the bits of the numpy steps)."""
+    # imported when used: the loops live in the fatigue package (beside the pairwise sum they
+    # share), whose import costs the many users of this module that never call this ~5 ms
+    from models.fatigue._spectral_loops import band_moments  # noqa: PLC0415
+
     f = np.asarray(f_hz, dtype=float)
     s = np.asarray(psd, dtype=float)
-    band = (f >= f_min) & (f <= f_max)
-    if band.sum() < 3:
+    if f.shape != s.shape:
+        raise ValueError(f"f_hz {f.shape} and psd {s.shape} must have the same shape")
+    out = np.empty(3)
+    bad = band_moments(np.ascontiguousarray(f).reshape(-1), np.ascontiguousarray(s).reshape(-1),
+                       float(f_min), float(f_max), out)
+    if bad == 1:
         raise ValueError("record too short for the requested frequency band")
-    m = spectral_moments(f[band], s[band], (0, 2))
-    if not m[0] > 0.0:
+    if bad == 2:
+        raise ValueError("f and s must be finite")
+    if bad == 3:
         raise ValueError("heave record has no energy in the wave band")
-    fb, sb = f[band], s[band]
-    i = int(np.argmax(sb))
-    fp = fb[i]
-    if 0 < i < sb.size - 1:
-        den = sb[i - 1] - 2.0 * sb[i] + sb[i + 1]
-        if den < 0.0:
-            fp = fb[i] + 0.5 * (sb[i - 1] - sb[i + 1]) / den * (fb[1] - fb[0])
-    return SeaState(
-        hs=4.0 * math.sqrt(m[0]),
-        tp=1.0 / fp,
-        tz=math.sqrt(m[0] / m[2]),
-        m0=m[0],
-        m2=m[2],
-    )
+    m0, m2 = float(out[0]), float(out[1])
+    # fp a numpy float, as it was: a peak at 0 Hz gives Tp = inf (and numpy's warning)
+    return SeaState(hs=4.0 * math.sqrt(m0), tp=1.0 / out[2], tz=math.sqrt(m0 / m2), m0=m0, m2=m2)
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,6 @@ be feeding the next slab while the ticks close windows.
 
 from __future__ import annotations
 
-import copy
 import functools
 import math
 from typing import Any, Callable, Mapping, Sequence
@@ -184,14 +183,14 @@ class _Spectra:
 
     def sea_state(self, name: str, accel: bool) -> tuple[float, float] | None:
         """(Hs, Tp) of the window from a heave PSD, or an acceleration PSD divided by
-        (2 pi f)^4 (:func:`models.waves.sea_state_from_psd`); None without one."""
+        (2 pi f)^4 (0 at f = 0) (:func:`models.waves.sea_state_from_psd`); None without one."""
         spec = self.mean_psd(name)
         if spec is None:
             return None
         f, psd = spec
-        if accel:
-            with np.errstate(divide="ignore"):
-                psd = np.where(f > 0, psd / _omega4(self.fs), 0.0)  # type: ignore[arg-type]
+        if accel:  # in place: psd is the new array of the mean
+            np.divide(psd[1:], _omega4(self.fs)[1:], out=psd[1:])  # type: ignore[arg-type]
+            psd[0] = 0.0
         try:
             ss = sea_state_from_psd(f, psd, f_max=min(_WAVE_F_MAX_HZ, float(f[-1])))
         except ValueError:  # too short a segment for the band, or no wave energy
@@ -201,8 +200,11 @@ class _Spectra:
     def snapshot(self) -> "_Spectra":
         """A copy that later feeding leaves as it is: feed replaces the open segment's
         arrays and writes kept segments past the copy's, and :meth:`summed` replaces the
-        sums, so the copy shares every array."""
-        return copy.copy(self)
+        sums, so the copy shares every array (a shallow copy, made directly: copy.copy's
+        generic path cost more than the rest of a slab's hand-over)."""
+        out = _Spectra.__new__(_Spectra)
+        out.__dict__.update(self.__dict__)
+        return out
 
     def state(self) -> dict[str, Any]:
         return {"index": self.index, "fs": self.fs, "segments": self.segments,
@@ -330,12 +332,17 @@ class _WindowSpectra:
             self.done[index] = spectra
 
     def take(self, k: int) -> _Spectra | None:
-        """Window ``k``'s spectra (None if it had no samples); older windows are dropped."""
+        """Window ``k``'s spectra (None if it had no samples), its periodograms not yet
+        added (:meth:`summed`: only if it is used); older windows are dropped."""
         out = self.done.pop(k, None)
         if out is None and self._open.index == k:
             out = self._open
         self.drop_before(k)
-        return None if out is None else out.summed(self.work)
+        return out
+
+    def summed(self, spectra: _Spectra) -> _Spectra:
+        """A taken window's spectra with its periodograms added (in :attr:`work`)."""
+        return spectra.summed(self.work)
 
     def drop_before(self, k: int) -> None:
         """Forget the finished windows before window ``k`` (closed, or never to be): one
@@ -512,8 +519,10 @@ class SeaStateLearner:
         before = [(t, v) for t, v in zip(self.waves_t, self.waves_v) if t <= start]
         if before and (end - before[-1][0]) / 1e9 <= self.cfg.waves_max_age_s:
             return before[-1][1], "waves"
-        for spectra, name, source in ((heave, "heave", "motion"), (accel, "accel", "imu")):
-            sea = None if spectra is None else spectra.sea_state(name, name == "accel")
+        for taken, spectra, name, source in ((heave, self.heave, "heave", "motion"),
+                                             (accel, self.accel, "accel", "imu")):
+            sea = (None if taken is None
+                   else spectra.summed(taken).sea_state(name, name == "accel"))
             if sea is not None:
                 return sea, source
         return None, None
@@ -521,6 +530,8 @@ class SeaStateLearner:
     def _close(self, end: int, committed: Mapping[str, float]) -> None:
         start = end - self.window_ns
         spectra = self.stress.take(end // self.window_ns)
+        if spectra is not None:
+            spectra = self.stress.summed(spectra)
         rainflow = {n: committed[n] - self.start_damage.get(n, committed[n]) for n in self.names}
         rates: dict[tuple[int, int], float] = {}  # per (spectrum, curve): equal ones once
         for i, n in enumerate(self.names):

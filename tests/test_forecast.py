@@ -39,6 +39,23 @@ def test_learned_bins_give_their_mean_and_standard_error():
     assert r.hours_in_bin.tolist() == [2.0]
 
 
+def test_a_learned_window_goes_to_the_bin_of_its_sea_state():
+    """learn's own scalar bins are bin_of's: on the edges, between, beyond both ends; and a
+    bad damage is refused before anything is learned."""
+    for hs in (0.0, 0.5, 1.0, 1.0 - 1e-16, 1.5, 2.0, 7.0):
+        for tp in (0.5, 2.0, 5.999999, 6.0, 10.0, 30.0):
+            t = _table()
+            t.learn(hs, tp, 0.5, [1e-3, 0.0])
+            i, j = t.bin_of(hs, tp)
+            assert np.argwhere(t.windows).tolist() == [[int(i), int(j)]], (hs, tp)
+            assert t.damage[:, i, j].tolist() == [1e-3, 0.0]
+    t = _table()
+    for bad in ([1.0, math.nan], [1.0, -1e-30], [1.0], [math.inf, 0.0]):
+        with pytest.raises(ValueError, match="damage"):
+            t.learn(1.5, 5.0, 1.0, bad)
+    assert t.windows.sum() == 0
+
+
 def test_model_fills_empty_bins_with_its_band_and_unrated_bins_say_so():
     t = _table()
     rates = np.full((2, 2, 2), np.nan)

@@ -150,3 +150,76 @@ def test_dirlik_density_and_weighted_sum_are_numpys(plain):
             got2 = _dirlik_density(zz, mom, _gauss_parts(zz))
         assert got2.shape == (3, 4)
         assert np.array_equal(bits(got2.ravel()), bits(want[:12]))
+
+
+@MODES
+def test_dirlik_damage_sum_is_density_then_weighted_sum(plain):
+    """The fused pass gives the bits of dirlik_combine followed by weighted_sum."""
+    rng = np.random.default_rng(8)
+    z, w, (neg_z2, rayleigh) = _quadrature(60.0 if not plain else 1e-4)
+    mom = SpectralMoments(3e12, 2e12, 4e12, 9e12)
+    d1, d2, d3, q, r = dirlik_coefficients(mom)
+    e1, e2 = np.exp(-z / q), np.exp(neg_z2 / (2.0 * r**2))
+    dpc = np.abs(wide(rng, z.size))
+    with mode(plain):
+        density = np.empty_like(z)
+        loops.dirlik_combine(z, rayleigh, d1 / q, d2, r**2, d3, e1, e2, density)
+        want = loops.weighted_sum(w, density, dpc)
+        got = loops.dirlik_damage_sum(w, z, rayleigh, d1 / q, d2, r**2, d3, e1, e2, dpc)
+    assert bits(got) == bits(want) == bits(np.sum(w * density * dpc))
+
+
+def _numpy_sea_state(f, s, f_min=0.04, f_max=0.5):
+    """models.waves.sea_state_from_psd as it was written in numpy (main 452691c): (m0, m2,
+    fp), or the ValueError's message."""
+    band = (f >= f_min) & (f <= f_max)
+    if band.sum() < 3:
+        return "too short"
+    fb, sb = f[band], s[band]
+    if not (np.all(np.isfinite(fb)) and np.all(np.isfinite(sb))):
+        return "finite"
+    m = {n: float(np.trapezoid(fb**n * sb, fb)) for n in (0, 2)}
+    if not m[0] > 0.0:
+        return "no energy"
+    i = int(np.argmax(sb))
+    fp = fb[i]
+    if 0 < i < sb.size - 1:
+        den = sb[i - 1] - 2.0 * sb[i] + sb[i + 1]
+        if den < 0.0:
+            fp = fb[i] + 0.5 * (sb[i - 1] - sb[i + 1]) / den * (fb[1] - fb[0])
+    return m[0], m[2], fp
+
+
+@MODES
+def test_sea_state_from_psd_is_its_numpy_steps(plain):
+    """Hs, Tp, Tz of wide random spectra, a peak at the band's first bin, a flat top
+    (argmax: the first), a peak at 0 Hz (Tp = inf), and each error, compiled and plain."""
+    from models.waves import sea_state_from_psd
+    rng = np.random.default_rng(9)
+    f = np.fft.rfftfreq(1024, 1.0 / 9.97)
+    cases = [np.abs(wide(rng, f.size)) for _ in range(6)]
+    edge = np.abs(wide(rng, f.size))
+    edge[np.argmax(f >= 0.04)] = 1e9
+    flat = np.ones(f.size)
+    flat[10:13] = 5.0
+    dc = np.ones(f.size)
+    dc[0] = 4.0
+    nan = np.ones(f.size)
+    nan[20] = np.nan
+    for s in (*cases, edge, flat, dc, nan, np.zeros(f.size), np.ones(f.size)):
+        for lo, hi in ((0.04, 0.5), (0.04, float(f[-1])), (0.0, 0.02), (0.3, 0.32)):
+            want = _numpy_sea_state(f, s, lo, hi)
+            with mode(plain), np.errstate(divide="ignore"):
+                try:
+                    ss = sea_state_from_psd(f, s, lo, hi)
+                    got = ss.m0, ss.m2, 1.0 / ss.tp
+                except ValueError as e:
+                    got = str(e)
+            if isinstance(want, str):
+                assert isinstance(got, str) and want in got, (want, got)
+                continue
+            assert bits(got[:2]).tolist() == bits(want[:2]).tolist()
+            with np.errstate(divide="ignore"):
+                assert bits(ss.tp) == bits(1.0 / want[2])
+            assert ss.hs == 4.0 * np.sqrt(want[0]) and ss.tz == np.sqrt(want[0] / want[1])
+

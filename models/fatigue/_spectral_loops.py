@@ -169,13 +169,30 @@ def dirlik_exponents(z, neg_z2, q, two_r2, e1, e2):
         e2[k] = neg_z2[k] / two_r2
 
 
+@jitable
+def _dirlik_at(z, rayleigh, d1_q, d2, r2, d3, e1, e2):
+    """Dirlik's density at one node from its exponentials: ``d1 / q * e1 + d2 * z / r**2 *
+    e2 + d3 * z * rayleigh``, left to right as numpy evaluates it (``d1_q = d1 / q``,
+    ``r2 = r**2`` are the caller's scalars)."""
+    return (d1_q * e1 + d2 * z / r2 * e2) + d3 * z * rayleigh
+
+
 @compile_loop
 def dirlik_combine(z, rayleigh, d1_q, d2, r2, d3, e1, e2, out):
-    """Dirlik's density from the exponentials: ``d1 / q * e1 + d2 * z / r**2 * e2
-    + d3 * z * rayleigh``, left to right as numpy evaluates it (``d1_q = d1 / q``,
-    ``r2 = r**2`` are the caller's scalars)."""
+    """Dirlik's density (:func:`_dirlik_at`) at every node."""
     for k in range(z.shape[0]):
-        out[k] = (d1_q * e1[k] + d2 * z[k] / r2 * e2[k]) + d3 * z[k] * rayleigh[k]
+        out[k] = _dirlik_at(z[k], rayleigh[k], d1_q, d2, r2, d3, e1[k], e2[k])
+
+
+@compile_loop
+def dirlik_damage_sum(w, z, rayleigh, d1_q, d2, r2, d3, e1, e2, dpc):
+    """``np.sum(w * density * dpc)`` with Dirlik's density of :func:`dirlik_combine` computed
+    in the same pass (each node's density the same double: the same bits)."""
+    n = w.shape[0]
+    terms = np.empty(n)
+    for k in range(n):
+        terms[k] = w[k] * _dirlik_at(z[k], rayleigh[k], d1_q, d2, r2, d3, e1[k], e2[k]) * dpc[k]
+    return pairwise_sum(terms)
 
 
 @compile_loop
@@ -186,6 +203,55 @@ def weighted_sum(w, density, dpc):
     for k in range(n):
         terms[k] = w[k] * density[k] * dpc[k]
     return pairwise_sum(terms)
+
+
+@compile_loop
+def band_moments(f, s, f_min, f_max, out):
+    """``models.waves.sea_state_from_psd``'s numbers over the band ``f_min <= f <= f_max``
+    (its bins in order: ``fb = f[band]``, ``sb = s[band]``): ``out = [m0, m2, fp]`` with
+    ``m0 = np.trapezoid(fb**0 * sb, fb)``, ``m2 = np.trapezoid(fb**2 * sb, fb)`` (the rows of
+    :func:`psd_moments`; ``fb**0`` is 1.0, ``fb**2`` numpy's square ``fb * fb``) and ``fp``
+    the peak's frequency refined by a parabola through the peak (``np.argmax``: the first
+    maximum) and its neighbours when it opens downwards. Returns 0, or 1 if the band holds
+    fewer than 3 bins, 2 if a value of ``sb`` is not finite, 3 if ``m0`` is not > 0 (checked
+    in that order; ``out`` is then incomplete)."""
+    band = np.empty(f.shape[0], np.int64)
+    nb = 0
+    for k in range(f.shape[0]):
+        if f[k] >= f_min and f[k] <= f_max:
+            band[nb] = k
+            nb += 1
+    if nb < 3:
+        return 1
+    for j in range(nb):
+        if not math.isfinite(s[band[j]]):
+            return 2
+    t0 = np.empty(nb - 1)
+    t2 = np.empty(nb - 1)
+    a = band[0]
+    for j in range(nb - 1):
+        b = band[j + 1]
+        d = f[b] - f[a]
+        t0[j] = d * (s[b] + s[a]) / 2.0
+        t2[j] = d * (f[b] * f[b] * s[b] + f[a] * f[a] * s[a]) / 2.0
+        a = b
+    m0 = pairwise_sum(t0)
+    out[0] = m0
+    out[1] = pairwise_sum(t2)
+    if not m0 > 0.0:
+        return 3
+    i = 0
+    for j in range(1, nb):
+        if s[band[j]] > s[band[i]]:
+            i = j
+    fp = f[band[i]]
+    if 0 < i < nb - 1:
+        lo, mid, hi = s[band[i - 1]], s[band[i]], s[band[i + 1]]
+        den = lo - 2.0 * mid + hi
+        if den < 0.0:
+            fp = fp + 0.5 * (lo - hi) / den * (f[band[1]] - f[band[0]])
+    out[2] = fp
+    return 0
 
 
 @compile_loop
