@@ -61,7 +61,9 @@ class TickInputs:
     figure ``i`` of the per-tick ComponentObs (0 damage, 1 committed, 2 rate per day,
     3 remaining life days, 4 peak stress); it, ``stream(name)`` and ``load()`` (load samples
     ``t, v`` and each tick's ``starts, stops`` in them) are asked only for what the rules
-    need."""
+    need. ``receives(name)`` (optional) is False when the stream can have received no
+    sample in these ticks: a rejected-rate rule with an empty window then has no value
+    without asking ``stream``."""
 
     buoy_id: str
     ends: np.ndarray  # int64
@@ -71,6 +73,7 @@ class TickInputs:
     component: Callable[[str, int], np.ndarray]
     stream: Callable[[str], StreamTicks]
     load: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    receives: Callable[[str], bool] | None = None
 
 
 @kernel(inline="always")
@@ -296,11 +299,12 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray, seen: set[int]) -> _Row
 
 def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray,
                    seen: set[int]) -> _Row:
-    s = x.stream(rule.target)
     held = rule.window()
-    if not held.shape[0] and not s.received.any():
+    if not held.shape[0] and (x.receives is not None and not x.receives(rule.target)
+                              or not x.stream(rule.target).received.any()):
         # an empty window staying empty (an idle stream): no rate at any tick
         return _Row(np.full(x.ends.shape[0], math.nan))
+    s = x.stream(rule.target)
     values, entries, lo, hi, n_rej, n_rec = rejected_rate_ticks(
         held, x.ends, s.received, s.rejected, rule.window_ns)
 
