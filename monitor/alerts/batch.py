@@ -357,6 +357,7 @@ class BatchPlan:
         self.firing_state = attrgetter("firing", "pending_since_ns", "clear_since_ns",
                                        "last_sent_ns", "reset_pending", "acked_by")
         self.index = np.arange(len(rules))
+        self.flagged = [i for i, r in enumerate(rules) if isinstance(r, Stale)]  # (_stale's)
 
 
 class TickBatch:
@@ -372,12 +373,10 @@ class TickBatch:
         seen: set[int] = set()
         self.rows = rows = [build(r, inputs, self.stop, seen)
                             for build, r in zip(plan.builders, plan.rules)]
-        self.values = np.empty((len(rows), n))
+        self.values = np.array([row.values for row in rows], np.float64).reshape(len(rows), n)
         self.flags = np.zeros((len(rows), n), np.uint8)
-        for i, row in enumerate(rows):
-            self.values[i] = row.values
-            if row.flags is not None:
-                self.flags[i] = row.flags
+        for i in plan.flagged:
+            self.flags[i] = rows[i].flags
         self.level = plan.level.copy()  # (the baselines are the rules')
         self.sent = np.empty((len(rows) * n, 3), np.int64)  # at most one per rule and tick
         self.reload()
