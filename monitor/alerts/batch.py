@@ -376,7 +376,9 @@ class TickBatch:
         self.values = np.array([row.values for row in rows], np.float64).reshape(len(rows), n)
         self.flags = np.zeros((len(rows), n), np.uint8)
         for i in plan.flagged:
-            self.flags[i] = rows[i].flags
+            flags = rows[i].flags
+            assert flags is not None  # (a stale rule's row has them)
+            self.flags[i] = flags
         self.level = plan.level.copy()  # (the baselines are the rules')
         self.sent = np.empty((len(rows) * n, 3), np.int64)  # at most one per rule and tick
         self.reload()
