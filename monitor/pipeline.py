@@ -1012,7 +1012,8 @@ class Pipeline:
         batch = tick_batch(TickInputs(
             buoy_id=self.buoy_id, ends=ticks.ends, tension_max=tension_max,
             measured=meas, estimated=est, component=component, stream=stream,
-            load=lambda: self._load_by_tick(t, v, ticks)))
+            load=lambda: self._load_by_tick(t, v, ticks),
+            receives=lambda s: s in streams or s in self.tick_counts))
         if batch is None:
             return None
         learner, forecasts = self.sea_states, self.forecasts

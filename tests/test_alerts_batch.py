@@ -8,6 +8,7 @@ data; and a pipeline replaying a log both ways."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 
@@ -191,6 +192,44 @@ def test_replacement_on_a_tick_without_damage_releases_at_the_next_with_data() -
     assert json.dumps(eng.state()) == json.dumps(ref.state())
     released = [r for r in ref_out if r.component == "right" and r.event == "reset"]
     assert [r.at_ns for r in released] == [int(ticks.ends[33])] * 2  # both damage rules
+
+
+def test_an_idle_stream_with_an_empty_window_is_not_asked_for_and_a_full_one_expires() -> None:
+    """``TickInputs.receives``: a rejected-rate rule whose window is empty, on a stream
+    that receives nothing in the slab's ticks, gets no value without asking ``stream``;
+    while its window still holds ticks from the slab before, it is asked and the window
+    expires tick by tick (rates until the last entry leaves). Records and state equal the
+    per-tick path's."""
+    n = 200
+    ticks = Ticks(n, 8)
+    imu = ticks.streams["imu"]
+    imu.received[50:120] = 0  # idle from tick 50 (the window, 60 s, empties by tick 56)
+    imu.rejected[50:120] = 0
+    imu.received[40:50] = 100
+    imu.rejected[40:50] = 30  # a 30 % rate: fires, then the window empties
+    rules = {"rule": [{"kind": "rejected_rate", "component": "imu", "threshold": 0.05,
+                       "window_s": 60}]}
+    ref = AlertEngine.from_config(rules, "b1", COMPONENTS)
+    eng = AlertEngine.from_config(rules, "b1", COMPONENTS)
+    ref_out = [r for k in range(n) for r in ref.evaluate(ticks.obs(k))]
+    out: list = []
+    asked: list[tuple[int, str]] = []
+    for a, b in ((0, 50), (50, 60), (60, 80), (80, 130), (130, n)):
+        x = ticks.inputs(a, b)
+
+        def stream(s: str, a: int = a, x: TickInputs = x) -> StreamTicks:
+            asked.append((a, s))
+            return x.stream(s)
+        x = dataclasses.replace(x, stream=stream,
+                                receives=lambda s, a=a, b=b: bool(
+                                    ticks.streams[s].received[a:b].any()))
+        eng.tick_batch(x).run(lambda j, a=a: out.extend(eng.evaluate(ticks.obs(a + j))),
+                              out.extend)
+    assert dump(out) == dump(ref_out)
+    assert json.dumps(eng.state()) == json.dumps(ref.state())
+    assert (50, "imu") in asked and (60, "imu") not in asked  # expiring, then idle and empty
+    assert [r.event for r in ref_out if r.event != "resend"][:2] == ["fire", "clear"]
+    assert ref._rules[0].received > 0  # active again at the end
 
 
 def test_forecast_due_ticks_are_evaluated_the_ordinary_way() -> None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from operator import attrgetter
 from typing import TYPE_CHECKING, Callable, Literal, Mapping
 
 import numpy as np
@@ -60,7 +61,9 @@ class TickInputs:
     figure ``i`` of the per-tick ComponentObs (0 damage, 1 committed, 2 rate per day,
     3 remaining life days, 4 peak stress); it, ``stream(name)`` and ``load()`` (load samples
     ``t, v`` and each tick's ``starts, stops`` in them) are asked only for what the rules
-    need."""
+    need. ``receives(name)`` (optional) is False when the stream can have received no
+    sample in these ticks: a rejected-rate rule with an empty window then has no value
+    without asking ``stream``."""
 
     buoy_id: str
     ends: np.ndarray  # int64
@@ -70,6 +73,7 @@ class TickInputs:
     component: Callable[[str, int], np.ndarray]
     stream: Callable[[str], StreamTicks]
     load: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    receives: Callable[[str], bool] | None = None
 
 
 @kernel(inline="always")
@@ -88,20 +92,27 @@ def _holds(mode, v, on, off, firing, baseline, flag):
     return flag != 0
 
 
+# columns of scan_ticks's per-rule arrays: ``kind`` (int64) and ``level`` (float64) hold
+# what a rule is, ``state`` (int64) its firing state (a batch reloads it after each tick
+# evaluated the ordinary way); one array each, since every argument of a compiled call costs
+_MODE, _ON_DELAY, _OFF_DELAY, _LATCHING = range(4)
+_ON, _OFF, _BASELINE = range(3)
+_FIRING, _PENDING, _CLEAR, _LAST_SENT, _RESET_PENDING, _ACKED, _LAST_DATA = range(7)
+
+
 @kernel()
-def scan_ticks(ends, values, flags, mode, on, off, on_delay, off_delay, latching, resend_ns,
-               stop, due_ns, j0, firing, pending, clear, last_sent, reset_pending, acked,
-               baseline, last_data, sent):
-    """Run :meth:`Rule.step` and the engine's re-send test for every rule (row) from tick
-    ``j0`` on; return the first tick where one would return an event (or ``stop`` is set, or
-    the tick ends at or after ``due_ns``), the tick count when none, and how many re-sends
-    the ticks before it made. Those ticks are applied: ``pending``/``clear`` move as in
-    ``step``, ``last_data`` is the last tick with a value per rule, and each re-send due is
-    a row (tick, rule, the rule's ``last_data`` then) of ``sent`` with ``last_sent`` moved
-    to its tick, in the engine's order (tick by tick, rule by rule); nothing else can
-    change on them."""
+def scan_ticks(ends, values, flags, kind, level, resend_ns, stop, due_ns, j0, state, sent):
+    """Run :meth:`Rule.step` and the engine's re-send test for every rule (row of ``kind``,
+    ``level``, ``state``, ``values``, ``flags``) from tick ``j0`` on; return the first tick
+    where one would return an event (or ``stop`` is set, or the tick ends at or after
+    ``due_ns``), the tick count when none, and how many re-sends the ticks before it made.
+    Those ticks are applied: the pending and clearing times in ``state`` move as in
+    ``step``, its ``_LAST_DATA`` column is the last tick with a value per rule, and each
+    re-send due is a row (tick, rule, the rule's last data tick then) of ``sent`` with the
+    last-sent time moved to its tick, in the engine's order (tick by tick, rule by rule);
+    nothing else can change on them."""
     n = ends.shape[0]
-    rules = mode.shape[0]
+    rules = kind.shape[0]
     m = 0
     for j in range(j0, n):
         t = ends[j]
@@ -110,36 +121,41 @@ def scan_ticks(ends, values, flags, mode, on, off, on_delay, off_delay, latching
         for r in range(rules):  # a transition at this tick? (changes nothing)
             v = values[r, j]
             if v == v:
-                if reset_pending[r]:
+                if state[r, _RESET_PENDING]:
                     return j, m
-                if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
-                    if not firing[r]:
-                        p = pending[r] if pending[r] >= 0 else t
-                        if t - p >= on_delay[r]:
+                firing = state[r, _FIRING]
+                if _holds(kind[r, _MODE], v, level[r, _ON], level[r, _OFF], firing,
+                          level[r, _BASELINE], flags[r, j]):
+                    if not firing:
+                        p = state[r, _PENDING] if state[r, _PENDING] >= 0 else t
+                        if t - p >= kind[r, _ON_DELAY]:
                             return j, m
-                elif firing[r] and not latching[r]:
-                    c = clear[r] if clear[r] >= 0 else t
-                    if t - c >= off_delay[r]:
+                elif firing and not kind[r, _LATCHING]:
+                    c = state[r, _CLEAR] if state[r, _CLEAR] >= 0 else t
+                    if t - c >= kind[r, _OFF_DELAY]:
                         return j, m
         for r in range(rules):  # none: the pending and clearing times move, re-sends go
             v = values[r, j]
+            firing = state[r, _FIRING]
             if v == v:
-                last_data[r] = j
-                if _holds(mode[r], v, on[r], off[r], firing[r], baseline[r], flags[r, j]):
-                    if firing[r]:
-                        clear[r] = -1
-                    elif pending[r] < 0:
-                        pending[r] = t
-                elif not firing[r]:
-                    pending[r] = -1
-                elif not latching[r] and clear[r] < 0:
-                    clear[r] = t
-            if resend_ns and firing[r] and not acked[r] and t - last_sent[r] >= resend_ns:
+                state[r, _LAST_DATA] = j
+                if _holds(kind[r, _MODE], v, level[r, _ON], level[r, _OFF], firing,
+                          level[r, _BASELINE], flags[r, j]):
+                    if firing:
+                        state[r, _CLEAR] = -1
+                    elif state[r, _PENDING] < 0:
+                        state[r, _PENDING] = t
+                elif not firing:
+                    state[r, _PENDING] = -1
+                elif not kind[r, _LATCHING] and state[r, _CLEAR] < 0:
+                    state[r, _CLEAR] = t
+            if (resend_ns and firing and not state[r, _ACKED]
+                    and t - state[r, _LAST_SENT] >= resend_ns):
                 sent[m, 0] = j
                 sent[m, 1] = r
-                sent[m, 2] = last_data[r]
+                sent[m, 2] = state[r, _LAST_DATA]
                 m += 1
-                last_sent[r] = t
+                state[r, _LAST_SENT] = t
     return n, m
 
 
@@ -211,29 +227,35 @@ def rejected_rate_ticks(held, ends, received, rejected, window_ns):
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) the kernels now, on empty input."""
-    f, i, u = np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.uint8)
+    f, i = np.zeros(0), np.zeros(0, np.int64)
     slack_snap_ticks(i, f, i, i, 0.0, 0.0, 0, -1)
     rejected_rate_ticks(np.zeros((0, 3), np.int64), i, i, i, 0)
-    scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), i, f, f, i, i, u, 0,
-               np.zeros(0, bool), NO_DUE, 0, i, i, i, i, i, i, f, i, np.zeros((0, 3), np.int64))
+    scan_ticks(i, np.zeros((0, 0)), np.zeros((0, 0), np.uint8), np.zeros((0, 4), np.int64),
+               np.zeros((0, 3)), 0, np.zeros(0, bool), NO_DUE, 0, np.zeros((0, 7), np.int64),
+               np.zeros((0, 3), np.int64))
 
 
 class _Row:
     """One rule instance over a slab: its values and flags per tick, and how to bring the
-    rule object to the end of tick ``j`` (``side``; its value through ``value_at``)."""
+    rule object to the end of tick ``j`` (``side``; its value through ``value_at``, else
+    the row's value there)."""
+
+    __slots__ = ("values", "flags", "side", "value_at")
 
     def __init__(self, values: np.ndarray, flags: np.ndarray | None = None,
                  side: Callable[[int], None] | None = None,
                  value_at: Callable[[int], float] | None = None) -> None:
-        self.values, self.flags, self.side = values, flags, side
-        self.value_at = value_at or (lambda j: float(values[j]))
+        self.values, self.flags, self.side, self.value_at = values, flags, side, value_at
 
 
-def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray) -> _Row:
+def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray,
+                     seen: set[int]) -> _Row:
     committed = x.component(rule.target, 1)
     # the accumulator restarted (committed damage went down): replacement, a reset tick
     stop[0] |= committed[0] < rule.last_committed
-    stop[1:] |= committed[1:] < committed[:-1]
+    if id(committed) not in seen:  # (components counting together share the column)
+        seen.add(id(committed))
+        stop[1:] |= committed[1:] < committed[:-1]
 
     def side(j: int) -> None:
         rule.last_committed = float(committed[j])
@@ -241,20 +263,21 @@ def _damage_fraction(rule: DamageFraction, x: TickInputs, stop: np.ndarray) -> _
 
 
 def _component_figure(column: int) -> Callable[..., _Row]:
-    def build(rule: Rule, x: TickInputs, stop: np.ndarray) -> _Row:
+    def build(rule: Rule, x: TickInputs, stop: np.ndarray, seen: set[int]) -> _Row:
         return _Row(x.component(rule.target, column))
     return build
 
 
-def _tension_high(rule: TensionHigh, x: TickInputs, stop: np.ndarray) -> _Row:
+def _tension_high(rule: TensionHigh, x: TickInputs, stop: np.ndarray, seen: set[int]) -> _Row:
     return _Row(x.tension_max)
 
 
-def _model_residual(rule: ModelResidual, x: TickInputs, stop: np.ndarray) -> _Row:
+def _model_residual(rule: ModelResidual, x: TickInputs, stop: np.ndarray,
+                    seen: set[int]) -> _Row:
     return _Row(np.abs(x.measured - x.estimated))
 
 
-def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray) -> _Row:
+def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray, seen: set[int]) -> _Row:
     t, v, starts, stops = x.load()
     values, after = slack_snap_ticks(t, v, starts, stops, float(rule.floor),
                                      float(rule.snap_level), rule.window_ns, rule.last_slack_ns)
@@ -264,7 +287,7 @@ def _slack_snap(rule: SlackSnap, x: TickInputs, stop: np.ndarray) -> _Row:
     return _Row(values, side=side)
 
 
-def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
+def _stale(rule: Stale, x: TickInputs, stop: np.ndarray, seen: set[int]) -> _Row:
     s = x.stream(rule.target)
     ends = x.ends
 
@@ -274,12 +297,14 @@ def _stale(rule: Stale, x: TickInputs, stop: np.ndarray) -> _Row:
     return _Row(np.zeros(ends.shape[0]), s.stale, value_at=value_at)
 
 
-def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray) -> _Row:
-    s = x.stream(rule.target)
+def _rejected_rate(rule: RejectedRate, x: TickInputs, stop: np.ndarray,
+                   seen: set[int]) -> _Row:
     held = rule.window()
-    if not held.shape[0] and not s.received.any():
+    if not held.shape[0] and (x.receives is not None and not x.receives(rule.target)
+                              or not x.stream(rule.target).received.any()):
         # an empty window staying empty (an idle stream): no rate at any tick
         return _Row(np.full(x.ends.shape[0], math.nan))
+    s = x.stream(rule.target)
     values, entries, lo, hi, n_rej, n_rec = rejected_rate_ticks(
         held, x.ends, s.received, s.rejected, rule.window_ns)
 
@@ -310,7 +335,8 @@ _KINDS: Mapping[type, tuple[Callable[[Rule], tuple], Callable[..., _Row]]] = {
 
 class BatchPlan:
     """What does not change from slab to slab for an engine's rules: their condition codes,
-    levels, delays and whether they latch."""
+    levels, delays and whether they latch (``kind``, ``level``: scan_ticks's arrays, the
+    baselines aside), and the getter of their firing state."""
 
     @classmethod
     def of(cls, engine: "AlertEngine", rules: list[Rule]) -> "BatchPlan | Literal[False]":
@@ -322,12 +348,16 @@ class BatchPlan:
         self.engine, self.rules = engine, rules
         self.builders = [_KINDS[type(r)][1] for r in rules]
         levels = [_KINDS[type(r)][0](r) for r in rules]
-        self.mode = np.array([x[0] for x in levels], np.int64)
-        self.on = np.array([x[1] for x in levels], np.float64)
-        self.off = np.array([x[2] for x in levels], np.float64)
-        self.on_delay = np.array([r.on_delay_ns for r in rules], np.int64)
-        self.off_delay = np.array([r.off_delay_ns for r in rules], np.int64)
-        self.latching = np.array([r.latching for r in rules], np.uint8)
+        self.kind = np.array([(x[0], r.on_delay_ns, r.off_delay_ns, r.latching)
+                              for x, r in zip(levels, rules)], np.int64).reshape(len(rules), 4)
+        self.level = np.array([(x[1], x[2], 0.0) for x in levels],
+                              np.float64).reshape(len(rules), 3)
+        # the rules with a baseline (damage fraction): it moves on a reset
+        self.with_baseline = [i for i, r in enumerate(rules) if isinstance(r, DamageFraction)]
+        self.firing_state = attrgetter("firing", "pending_since_ns", "clear_since_ns",
+                                       "last_sent_ns", "reset_pending", "acked_by")
+        self.index = np.arange(len(rules))
+        self.flagged = [i for i, r in enumerate(rules) if isinstance(r, Stale)]  # (_stale's)
 
 
 class TickBatch:
@@ -340,14 +370,17 @@ class TickBatch:
                              f"evaluation ({engine.last_t_ns}); alert ticks must advance")
         self.plan, self.engine, self.rules, self.ends = plan, engine, plan.rules, inputs.ends
         self.stop = np.zeros(n, bool)
-        self.rows = [build(r, inputs, self.stop) for build, r in zip(plan.builders, plan.rules)]
-        self.values = np.empty((len(self.rows), n))
-        self.flags = np.zeros((len(self.rows), n), np.uint8)
-        for i, row in enumerate(self.rows):
-            self.values[i] = row.values
-            if row.flags is not None:
-                self.flags[i] = row.flags
-        self.sent = np.empty((len(self.rows) * n, 3), np.int64)  # at most one per rule and tick
+        seen: set[int] = set()
+        self.rows = rows = [build(r, inputs, self.stop, seen)
+                            for build, r in zip(plan.builders, plan.rules)]
+        self.values = np.array([row.values for row in rows], np.float64).reshape(len(rows), n)
+        self.flags = np.zeros((len(rows), n), np.uint8)
+        for i in plan.flagged:
+            flags = rows[i].flags
+            assert flags is not None  # (a stale rule's row has them)
+            self.flags[i] = flags
+        self.level = plan.level.copy()  # (the baselines are the rules')
+        self.sent = np.empty((len(rows) * n, 3), np.int64)  # at most one per rule and tick
         self.reload()
 
     def run(self, tick: Callable[[int], None], sent: Callable[[list[AlertRecord]], None],
@@ -378,13 +411,15 @@ class TickBatch:
     def scan(self, j0: int, due_ns: int) -> tuple[int, int]:
         """Apply the quiet ticks from ``j0`` on; return the first that is not (or the count)
         and how many re-sends they made (rows of ``self.sent``)."""
-        p = self.plan
-        stop, m = scan_ticks(self.ends, self.values, self.flags, p.mode, p.on, p.off,
-                             p.on_delay, p.off_delay, p.latching,
-                             self.engine._resend_ns, self.stop, due_ns, j0, self.firing,
-                             self.pending, self.clear, self.last_sent, self.reset_pending,
-                             self.acked, self.baseline, self.last_data, self.sent)
+        stop, m = scan_ticks(self.ends, self.values, self.flags, self.plan.kind, self.level,
+                             self.engine._resend_ns, self.stop, due_ns, j0, self.state,
+                             self.sent)
         return int(stop), int(m)
+
+    def _value(self, r: int, j: int) -> float:
+        """Rule ``r``'s value at tick ``j`` (its row's, or as its ``value_at`` says)."""
+        row = self.rows[r]
+        return float(self.values[r, j]) if row.value_at is None else row.value_at(j)
 
     def _resends(self, m: int) -> list[AlertRecord]:
         """The records of the first ``m`` re-sends of the last scan, each with its rule's
@@ -394,7 +429,7 @@ class TickBatch:
         for j, r, d in self.sent[:m].tolist():
             rule = self.rules[r]
             if d >= 0:  # else the value before the scan: the rule's own
-                rule.value = self.rows[r].value_at(d)
+                rule.value = self._value(r, d)
             out.append(self.engine._record(rule, "resend", int(self.ends[j])))
         return out
 
@@ -402,23 +437,26 @@ class TickBatch:
         """Bring the rule objects and the engine to the end of tick ``j - 1``."""
         if j == 0:
             return
-        pending, clear, last_sent, last_data = (
-            a.tolist() for a in (self.pending, self.clear, self.last_sent, self.last_data))
-        for i, (rule, row) in enumerate(zip(self.rules, self.rows)):
-            rule.pending_since_ns, rule.clear_since_ns = pending[i], clear[i]
-            rule.last_sent_ns = last_sent[i]
-            if last_data[i] >= 0:
-                rule.value = row.value_at(last_data[i])
+        state = self.state
+        last_data = state[:, _LAST_DATA]
+        # every rule's row value at its last data tick, in one step (-1: none, unused)
+        at = self.values[self.plan.index, last_data].tolist()
+        for rule, row, (_, pending, clear, last_sent, _, _, d), v in zip(
+                self.rules, self.rows, state.tolist(), at):
+            rule.pending_since_ns, rule.clear_since_ns = pending, clear
+            rule.last_sent_ns = last_sent
+            if d >= 0:
+                rule.value = v if row.value_at is None else row.value_at(d)
             if row.side is not None:
                 row.side(j - 1)
         self.engine.last_t_ns = int(self.ends[j - 1])
 
     def reload(self) -> None:
         """Take the rules' firing state from the rule objects (after an ordinary tick)."""
+        self.state = np.array(
+            [(f, p, c, s, reset, acked != "", -1)
+             for f, p, c, s, reset, acked in map(self.plan.firing_state, self.rules)],
+            np.int64).reshape(len(self.rules), 7)
         rules = self.rules
-        # one array, a row per field (contiguous: the scan writes into the rows)
-        (self.firing, self.pending, self.clear, self.last_sent, self.reset_pending, self.acked,
-         self.last_data) = np.array(
-            [(r.firing, r.pending_since_ns, r.clear_since_ns, r.last_sent_ns, r.reset_pending,
-              r.acked_by != "", -1) for r in rules], np.int64).reshape(len(rules), 7).T.copy()
-        self.baseline = np.array([getattr(r, "baseline", 0.0) for r in rules], np.float64)
+        for i in self.plan.with_baseline:
+            self.level[i, _BASELINE] = rules[i].baseline  # type: ignore[attr-defined]
