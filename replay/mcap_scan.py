@@ -88,28 +88,35 @@ def distinct(ids: np.ndarray) -> list[int]:
 @dataclass(slots=True)
 class Digest:
     """A run of records located by :func:`scan_records`, its messages grouped by channel
-    (indices in record order) and the payloads of the channels already known decoded."""
+    (indices in record order) and the payloads of the channels already known decoded
+    (with ``fronts[channel]`` unset samples first, see :func:`digest`)."""
 
     buf: np.ndarray
     scan: tuple
     groups: dict[int, np.ndarray]
     decoded: dict[int, tuple]
+    fronts: dict[int, int]
 
 
-def digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str]) -> Digest:
-    """Scan ``raw`` and decode the messages of the sensor channels in ``channels``. A pure
-    function of its inputs, so the read-ahead thread can run it (channel definitions never
-    change once read, so a copy of them taken earlier decodes the same)."""
+def digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str],
+           fronts: Mapping[int, int] | None = None) -> Digest:
+    """Scan ``raw`` and decode the messages of the sensor channels in ``channels``, leaving
+    room for ``fronts[stream]`` samples before those of each stream (for the samples the
+    merge still holds of it: :meth:`replay.merge.StreamMerge.fronts`). A pure function of its
+    inputs, so the read-ahead thread can run it (channel definitions never change once read,
+    so a copy of them taken earlier decodes the same)."""
     buf = np.frombuffer(raw, np.uint8)
     scan = scan_records(buf)
     ch, doff, dlen = scan[0], scan[3], scan[4]
     groups = {c: np.flatnonzero(ch == c) for c in distinct(ch)}
     decoded = {}
+    used = {}
     for c, sel in groups.items():
         target = channels.get(c)
         if isinstance(target, tuple):
-            decoded[c] = codec.decode_many(buf, doff[sel], dlen[sel], target[1])
-    return Digest(buf, scan, groups, decoded)
+            used[c] = fronts.get(target[0], 0) if fronts else 0
+            decoded[c] = codec.decode_many(buf, doff[sel], dlen[sel], target[1], used[c])
+    return Digest(buf, scan, groups, decoded, used)
 
 
 MAX_CUT_CHUNK = 64 << 20  # bytes read for a chunk whose length runs past the end of file

@@ -28,16 +28,27 @@ class _Stream:
         self.nf = len(SENSOR_FIELDS[sensor])
         self.parts: list[tuple[np.ndarray, np.ndarray]] = []
         self.bounds = [0]  # start index of each part, then the end of the last one
+        self.held = 0  # samples held back by the latest release
 
     @property
     def length(self) -> int:
         return self.bounds[-1]
 
-    def add(self, t: np.ndarray, v: np.ndarray) -> int:
-        """Append samples; return their start index in the stream's pending samples."""
+    def add(self, t: np.ndarray, v: np.ndarray, front: int = 0) -> int:
+        """Append the samples of ``t[front:]``, ``v[:, front:]``; return their start index in
+        the stream's pending samples. When the samples pending so far fit in the ``front``
+        unset ones, they are copied there: the stream is then one part, so the release's
+        first block of it is a view too, not a join of the two parts (it spans the latest
+        reorder window of the previous release and most of a new run of records)."""
         start = self.length
-        self.parts.append((t, v))
-        self.bounds.append(start + t.shape[0])
+        if 0 < start <= front:
+            a = front - start
+            t[a:front], v[:, a:front] = self._span(0, start)
+            self.parts = [(t[a:], v[:, a:])]
+            self.bounds = [0, start + t.shape[0] - front]
+            return start
+        self.parts.append((t[front:], v[:, front:]) if front else (t, v))
+        self.bounds.append(start + t.shape[0] - front)
         return start
 
     def take(self, start: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,6 +129,15 @@ class StreamMerge:
     def sensor(self, idx: int) -> str:
         return self._streams[idx].sensor
 
+    def fronts(self, ahead: bool = False) -> dict[int, int]:
+        """Room to leave before each stream's samples of the next run of records decoded
+        (:func:`replay.mcap_scan.digest`): the samples each holds now, or, for a run decoded
+        ahead (before the release of the current one), those the latest release held back
+        (the next one holds back about as many: one reorder window), with a margin."""
+        if ahead:
+            return {i: s.held + s.held // 4 + 64 for i, s in enumerate(self._streams) if s.held}
+        return {i: s.length for i, s in enumerate(self._streams) if s.length}
+
     def records(self, d: Digest, ctx: FileContext, st: FileStats) -> int:
         """Take the messages of a run of records (its channel definitions already in ``ctx``);
         return their number."""
@@ -137,6 +157,7 @@ class StreamMerge:
                 continue
             sidx, numbers = target
             decoded = d.decoded.get(c)  # else defined in this very run of records
+            front = d.fronts.get(c, 0) if decoded is not None else 0
             status, n, t, vals = (decoded if decoded is not None
                                   else codec.decode_many(buf, doff[sel], dlen[sel], numbers))
             good = status == codec.OK
@@ -145,7 +166,7 @@ class StreamMerge:
                 st.bad_payloads += bad
                 sel, n = sel[good], n[good]
             stream = self._streams[sidx]
-            start = stream.add(t, vals) + np.cumsum(n) - n
+            start = stream.add(t, vals, front) + np.cumsum(n) - n
             topic = stream.topic
             st.messages_by_topic[topic] = st.messages_by_topic.get(topic, 0) + sel.shape[0]
             st.messages += sel.shape[0]
@@ -202,6 +223,8 @@ class StreamMerge:
             keep["start"][mine] = self._streams[s].keep_only(keep["start"][mine],
                                                              keep["n"][mine])
         self._pending = [keep] if held.shape[0] else []
+        for s in self._streams:
+            s.held = s.length
         yield from blocks
 
     def _blocks(self, tab: dict, rel: np.ndarray) -> list[SampleBlock]:

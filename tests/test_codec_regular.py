@@ -33,7 +33,7 @@ def _batch(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _general(buf, offs, lens, numbers):
     fn_t0, fn_period, fn_off, fn_vals, sub = numbers
     return codec._decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off,
-                                np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64))
+                                np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64), 0)
 
 
 def _same(a: tuple, b: tuple) -> bool:
