@@ -3,6 +3,8 @@ and declines every payload it does not fully understand."""
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from models._jit import uncompiled
@@ -174,3 +176,21 @@ def test_lengths_whose_varint_starts_with_0x80_take_the_one_pass_path():
     fast = decode_regular(buf, offs, lens, codec.DEFAULT_FIELD_NUMBERS["tension"])
     assert fast is not None and fast[1].tolist() == [128, 244]
     assert fast[3].tobytes() == np.concatenate(want)[None].tobytes()
+
+
+def test_room_in_front_leaves_the_decoded_samples_as_they_are():
+    """``front`` unset samples before the decoded ones, on the one-pass path (one field: a
+    view of a larger array; several: sized exactly) and the general kernel's (a raw sample),
+    compiled and as plain Python: behind them, the bits of a decode without room."""
+    for sensor, nan_at in (("tension", None), ("imu", None), ("imu", 3)):
+        numbers = codec.DEFAULT_FIELD_NUMBERS[sensor]
+        buf, offs, lens = _batch([_payload(sensor, n, seed, nan_at=nan_at if seed == 1 else None)
+                                  for seed, n in enumerate((20, 7, 33))])
+        plain = codec.decode_many(buf, offs, lens, numbers)
+        assert plain[2].shape == (60,) and plain[3].shape[1] == 60
+        for front in (1, 1200):
+            for mode in (contextlib.nullcontext, uncompiled):
+                with mode():
+                    status, nsamp, t, vals = codec.decode_many(buf, offs, lens, numbers, front)
+                assert vals.flags.c_contiguous and vals.shape[1] == t.shape[0] == front + 60
+                assert _same((status, nsamp, t[front:], vals[:, front:]), plain)
