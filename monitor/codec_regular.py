@@ -127,17 +127,21 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
             s = np.uint64(a)
             end_u = np.uint64(body_end)
             last = end_u - one
-            while s < end_u:
+            # while two bytes are left, the second is read unconditionally (used only when
+            # the first continues); the run's last byte, when it starts a varint, after
+            while s < last:
                 if i >= stop:
                     return False, nsamp, t, vals
                 # one- and two-byte varints without a branch on the length (their mix is
                 # the data's: a branch on it mispredicts); longer ones in a loop
                 b0 = np.int64(buf[s])
-                b1 = np.int64(buf[min(s + one, last)])
+                b1 = np.int64(buf[s + one])
                 c0 = b0 >> 7
-                z = (b0 & 0x7F) | (((b1 & 0x7F) << 7) * c0)
+                # b0 | b1 << 7 without b0's continuation bit, when b0 continues
+                z = b0 + (((b1 << 7) - 0x80) * c0)
                 s += np.uint64(1 + c0)
                 if c0 & (b1 >> 7):
+                    z &= 0x3FFF  # (b1's continuation bit) the first two bytes' 14 bits
                     shift = 14
                     while True:
                         byte = np.int64(buf[s])
@@ -149,6 +153,12 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
                         if shift >= 63:  # overlong: let the general kernel say so
                             return False, nsamp, t, vals
                 acc += unzigzag(z)
+                out[i] = acc * q
+                i += one
+            if s == last:
+                if i >= stop:
+                    return False, nsamp, t, vals
+                acc += unzigzag(np.int64(buf[s]))
                 out[i] = acc * q
                 i += one
             got = np.int64(i) - pos
