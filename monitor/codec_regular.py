@@ -200,10 +200,24 @@ def decode_regular(buf: np.ndarray, offs: np.ndarray, lens: np.ndarray, numbers:
     tags = np.array([_tag(f, 2) for f in fn_vals], np.int64)
     tag_t0, tag_period, tag_q, tag_delta = (_tag(fn_t0, 1), _tag(fn_period, 0), _tag(sub[0], 1),
                                             _tag(sub[1], 2))
-    # one field: room from the payloads' sizes, and the values a view of its start (the
-    # pages of its unused end are never touched); several: counted first, sized exactly
-    total = (-1 if len(fn_vals) == 1 else
-             _first_field_samples(buf, offs, lens, tag_t0, tag_period, tags[0], tag_q, tag_delta))
-    ok, nsamp, t, vals = _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q,
-                                         tag_delta, front, total)
+    args = (buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta, front)
+    if len(fn_vals) == 1:
+        # room from the payloads' sizes, and the values a view of its start (the pages of
+        # its unused end are never touched)
+        ok, nsamp, t, vals = _decode_regular(*args, -1)
+    else:
+        # sized exactly: first as if every payload had the first one's count (a stream's
+        # blocks usually have one size; counting every payload cost 16 % of the decode in
+        # the fleet replay), counted when the decoder finds more
+        first = _first_field_samples(buf, offs[:1], lens[:1], tag_t0, tag_period, tags[0],
+                                     tag_q, tag_delta)
+        ok, nsamp, t, vals = _decode_regular(*args, max(first, 0) * offs.shape[0])
+        if not ok:
+            total = _first_field_samples(buf, offs, lens, tag_t0, tag_period, tags[0], tag_q,
+                                         tag_delta)
+            if total < 0:
+                return None
+            ok, nsamp, t, vals = _decode_regular(*args, total)
+        elif not vals.flags.c_contiguous:  # fewer samples than that: (rare) a copy
+            vals = np.ascontiguousarray(vals)
     return (np.zeros(offs.shape[0], np.int8), nsamp, t, vals) if ok else None

@@ -194,3 +194,16 @@ def test_room_in_front_leaves_the_decoded_samples_as_they_are():
                     status, nsamp, t, vals = codec.decode_many(buf, offs, lens, numbers, front)
                 assert vals.flags.c_contiguous and vals.shape[1] == t.shape[0] == front + 60
                 assert _same((status, nsamp, t[front:], vals[:, front:]), plain)
+
+
+def test_several_fields_sized_exactly_whatever_the_payloads_counts():
+    """IMU payloads are decoded into exactly sized values (room guessed from the first
+    payload's count, counted when a later one has more, copied when fewer): every mix gives
+    the general kernel's bits, C-contiguous."""
+    numbers = codec.DEFAULT_FIELD_NUMBERS["imu"]
+    for counts in ((10, 10, 10), (10, 12, 10), (10, 4, 9), (3, 30), (2,)):
+        buf, offs, lens = _batch([_payload("imu", n, s) for s, n in enumerate(counts)])
+        fast = decode_regular(buf, offs, lens, numbers)
+        assert fast is not None and fast[1].tolist() == list(counts)
+        assert fast[3].flags.c_contiguous and fast[3].shape == (3, sum(counts))
+        assert _same(fast, _general(buf, offs, lens, numbers))
