@@ -232,15 +232,15 @@ class StreamMerge:
         blocks = self._blocks(tab, rel)
         keep = tab[:, held]
         # compact: keep only the held-back samples
-        for s in distinct(tab[STREAM]):
-            mine = keep[STREAM] == s
-            keep[START][mine] = self._streams[s].keep_only(keep[START][mine], keep[N][mine])
+        for i in distinct(tab[STREAM]):
+            mine = keep[STREAM] == i
+            keep[START][mine] = self._streams[i].keep_only(keep[START][mine], keep[N][mine])
         self._pending = [keep] if held.shape[0] else []
         for s in self._streams:
             s.held = s.length
         yield from blocks
 
-    def _blocks(self, tab: dict, rel: np.ndarray) -> list[SampleBlock]:
+    def _blocks(self, tab: np.ndarray, rel: np.ndarray) -> list[SampleBlock]:
         """The messages ``tab[rel]`` (in canonical order) as blocks."""
         if not self.coalesce:
             return [self._message_block(*m) for m in zip(
