@@ -11,12 +11,13 @@ regular block of finite samples::
     t0_ns (fixed64) | period_ns (varint > 0) | per value field, in field order:
         Quantized { quantum (double) | delta (packed sint64) }
 
-:func:`decode_regular` decodes a batch of such payloads in ONE pass over their bytes (with
-several value fields, a count of the first field's varints first sizes the values exactly),
-and gives up (returns None) at the first payload of any other shape (offsets, raw samples, one
-sample, other field order, unknown fields, a malformed varint ...): the caller then decodes the
-whole batch with the general kernel. The values are computed exactly as the general kernel
-computes them (``float64(sum of deltas) * quantum``, ``t0 + i * period``), so the output is the same to the last bit.
+:func:`decode_regular` decodes a batch of such payloads in ONE pass over their bytes (into
+room for as many samples per payload as the first one has: exact for a stream of one block
+size, so the values need no copy), and gives up (returns None) at the first payload of any
+other shape (offsets, raw samples, one sample, other field order, unknown fields, a malformed
+varint ...): the caller then decodes the whole batch with the general kernel. The values are
+computed exactly as the general kernel computes them (``float64(sum of deltas) * quantum``,
+``t0 + i * period``), so the output is the same to the last bit.
 """
 
 from __future__ import annotations
@@ -25,6 +26,11 @@ import numpy as np
 
 from models._jit import bits_float, kernel
 from monitor.varint import read_varint, unzigzag
+
+
+# how _decode_regular ends: decoded; declined (not the regular layout); out of room (more
+# samples than the room it was given)
+_DONE, _DECLINED, _NO_ROOM = 1, 0, 2
 
 
 @kernel(nogil=True)
@@ -82,7 +88,7 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
         p = offs[k]
         end = p + lens[k]
         if p + 10 > end or buf[p] != tag_t0:
-            return False, nsamp, t, vals
+            return _DECLINED, nsamp, t, vals
         t0 = 0
         for i in range(8):
             t0 |= np.int64(buf[p + 1 + i]) << (8 * i)
@@ -91,33 +97,33 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
         # costs a reference count of ``buf`` each (26 % of the decode with four per field);
         # a tag of two bytes is never the byte compared, so its payloads go the general way
         if buf[p] != tag_period:
-            return False, nsamp, t, vals
+            return _DECLINED, nsamp, t, vals
         period, p = read_varint(buf, p + 1, end)
         if p < 0 or period <= 0:
-            return False, nsamp, t, vals
+            return _DECLINED, nsamp, t, vals
         n = -1
         for j in range(nf):
             if p + 2 > end or buf[p] != tags[j]:
-                return False, nsamp, t, vals
+                return _DECLINED, nsamp, t, vals
             ln = np.int64(buf[p + 1])
             p += 2
             if ln >= 0x80:
                 ln, p = read_varint(buf, p - 1, end)
             body_end = p + ln
             if p < 0 or body_end > end or p + 11 > body_end or buf[p] != tag_q:
-                return False, nsamp, t, vals
+                return _DECLINED, nsamp, t, vals
             qi = 0  # the quantum's bits, as t0's: a slice copy cost 13 % of the decode
             for r in range(8):
                 qi |= np.int64(buf[p + 1 + r]) << (8 * r)
             q = bits_float(qi)
             if not (q > 0 and q < np.inf) or buf[p + 9] != tag_delta:
-                return False, nsamp, t, vals
+                return _DECLINED, nsamp, t, vals
             dl = np.int64(buf[p + 10])
             a = p + 11
             if dl >= 0x80:
                 dl, a = read_varint(buf, p + 10, body_end)
             if a < 0 or a + dl != body_end or dl == 0 or buf[body_end - 1] >= 0x80:
-                return False, nsamp, t, vals
+                return _DECLINED, nsamp, t, vals
             # the hot loop: the deltas of one field, straight to values. Unsigned positions:
             # numba then adds no wrap-around of negative indices to each access (14 % of it)
             out = vals[j]
@@ -131,7 +137,7 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
             # the first continues); the run's last byte, when it starts a varint, after
             while s < last:
                 if i >= stop:
-                    return False, nsamp, t, vals
+                    return _NO_ROOM, nsamp, t, vals
                 # one- and two-byte varints without a branch on the length (their mix is
                 # the data's: a branch on it mispredicts); longer ones in a loop
                 b0 = np.int64(buf[s])
@@ -151,13 +157,13 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
                             break
                         shift += 7
                         if shift >= 63:  # overlong: let the general kernel say so
-                            return False, nsamp, t, vals
+                            return _DECLINED, nsamp, t, vals
                 acc += unzigzag(z)
                 out[i] = acc * q
                 i += one
             if s == last:
                 if i >= stop:
-                    return False, nsamp, t, vals
+                    return _NO_ROOM, nsamp, t, vals
                 acc += unzigzag(np.int64(buf[s]))
                 out[i] = acc * q
                 i += one
@@ -165,10 +171,10 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
             if n < 0:
                 n = got
             elif got != n:
-                return False, nsamp, t, vals
+                return _DECLINED, nsamp, t, vals
             p = body_end
         if p != end or n < 2:
-            return False, nsamp, t, vals
+            return _DECLINED, nsamp, t, vals
         t0s[k] = t0
         periods[k] = period
         nsamp[k] = n
@@ -180,7 +186,7 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
         for i in range(nsamp[k]):
             t[at + i] = t0 + i * period
         at += nsamp[k]
-    return True, nsamp, t, vals[:, :pos]
+    return _DONE, nsamp, t, vals[:, :pos]
 
 
 def _tag(field: int, wire_type: int) -> int:
@@ -201,23 +207,25 @@ def decode_regular(buf: np.ndarray, offs: np.ndarray, lens: np.ndarray, numbers:
     tag_t0, tag_period, tag_q, tag_delta = (_tag(fn_t0, 1), _tag(fn_period, 0), _tag(sub[0], 1),
                                             _tag(sub[1], 2))
     args = (buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta, front)
-    if len(fn_vals) == 1:
-        # room from the payloads' sizes, and the values a view of its start (the pages of
-        # its unused end are never touched)
-        ok, nsamp, t, vals = _decode_regular(*args, -1)
-    else:
-        # sized exactly: first as if every payload had the first one's count (a stream's
-        # blocks usually have one size; counting every payload cost 16 % of the decode in
-        # the fleet replay), counted when the decoder finds more
-        first = _first_field_samples(buf, offs[:1], lens[:1], tag_t0, tag_period, tags[0],
-                                     tag_q, tag_delta)
-        ok, nsamp, t, vals = _decode_regular(*args, max(first, 0) * offs.shape[0])
-        if not ok:
+    # room: as many samples per payload as the first one has (a stream's blocks usually have
+    # one size). Where a later one has more: one field, room from the payloads' sizes (every
+    # varint takes a byte; the values a view of its start); several, the counted samples
+    # (counting every payload cost 16 % of the decode in the fleet replay)
+    first = _first_field_samples(buf, offs[:1], lens[:1], tag_t0, tag_period, tags[0], tag_q,
+                                 tag_delta)
+    if first < 0:
+        return None
+    how, nsamp, t, vals = _decode_regular(*args, first * offs.shape[0])
+    if how == _NO_ROOM:
+        total = -1
+        if len(fn_vals) > 1:
             total = _first_field_samples(buf, offs, lens, tag_t0, tag_period, tags[0], tag_q,
                                          tag_delta)
             if total < 0:
                 return None
-            ok, nsamp, t, vals = _decode_regular(*args, total)
-        elif not vals.flags.c_contiguous:  # fewer samples than that: (rare) a copy
-            vals = np.ascontiguousarray(vals)
-    return (np.zeros(offs.shape[0], np.int8), nsamp, t, vals) if ok else None
+        how, nsamp, t, vals = _decode_regular(*args, total)
+    if how != _DONE:
+        return None
+    if not vals.flags.c_contiguous:  # several fields, fewer samples than room: (rare) a copy
+        vals = np.ascontiguousarray(vals)
+    return np.zeros(offs.shape[0], np.int8), nsamp, t, vals
