@@ -566,7 +566,7 @@ def _fill_quantized(buf, p, end, sub, out, vb, pos, scratch, idx):
 
 
 @kernel(nogil=True)  # runs in the read-ahead thread
-def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
+def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub, front):
     m = offs.shape[0]
     nf = fn_vals.shape[0]
     quantized = sub[0] >= 0
@@ -662,13 +662,13 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
     total = 0
     for k in range(m):
         total += nsamp[k]
-    t = np.empty(total, np.int64)
-    vals = np.empty((nf, total), np.float64)
+    t = np.empty(front + total, np.int64)
+    vals = np.empty((nf, front + total), np.float64)
     vb = vals.view(np.uint8)
     fill = np.zeros(nf, np.int64)
     idx = np.empty(nsamp.max() if m else 0, np.int64)
     # pass 2: fill times and values (messages already validated)
-    pos = 0
+    pos = front
     for k in range(m):
         n = nsamp[k]
         if status[k] != 0 or n == 0:
@@ -716,7 +716,7 @@ def _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off, fn_vals, sub):
 
 def decode_many(
     buf: np.ndarray, offs: np.ndarray, lens: np.ndarray,
-    numbers: FieldNumbers,
+    numbers: FieldNumbers, front: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Decode many block payloads lying in one byte buffer.
 
@@ -724,19 +724,22 @@ def decode_many(
         buf: uint8 buffer holding the payloads.
         offs, lens: int64 start and length of each payload in ``buf``.
         numbers: field numbers and value encoding (see :func:`field_numbers_from_schema`).
+        front: room for this many samples (left unset) before the decoded ones in ``t_ns``
+            and ``values``: a caller that puts samples it holds there gets one array of
+            both without a copy of the decoded ones.
 
     Returns:
         ``(status, n_samples, t_ns, values)``: per-message status (:data:`OK` or an error code
         of :data:`STATUS_TEXT`) and sample count (0 for bad messages), then the samples of all
-        good messages concatenated in message order: ``t_ns`` int64 (N,) and ``values``
-        float64 (n_fields, N).
+        good messages concatenated in message order: ``t_ns`` int64 (front + N,) and
+        ``values`` float64 (n_fields, front + N), C-contiguous rows.
     """
-    fast = decode_regular(buf, offs, lens, numbers)  # what buoymon writes, in one pass
+    fast = decode_regular(buf, offs, lens, numbers, front)  # what buoymon writes
     if fast is not None:
         return fast
     fn_t0, fn_period, fn_off, fn_vals, sub = numbers
     return _decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off,
-                          np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64))
+                          np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64), front)
 
 
 def decode_block(buoy_id: str, sensor: str, payload: bytes, recv_ns: int = 0,

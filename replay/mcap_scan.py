@@ -19,6 +19,16 @@ from models._jit import kernel
 from monitor import codec
 from monitor.mcap_file import MAGIC, OP_CHUNK, OP_FOOTER
 
+@kernel(inline="always")
+def _u64_at(buf, p):
+    """The little-endian uint64 at ``buf[p]`` (``p`` unsigned: numba then adds no wrap-around
+    of negative indices to each byte's access, and LLVM joins the eight loads into one)."""
+    v = np.uint64(0)
+    for i in range(8):
+        v |= np.uint64(buf[p + np.uint64(i)]) << np.uint64(8 * i)
+    return v
+
+
 @kernel(nogil=True)  # runs in the read-ahead thread
 def scan_records(buf):
     """Locate records in a decompressed chunk (or any record sequence).
@@ -28,54 +38,45 @@ def scan_records(buf):
     complete, 1 the buffer ends inside a record, 2 an impossible record (opcode 0).
     """
     n = buf.shape[0]
-    cap = n // 31 + 1
-    ch = np.empty(cap, np.int64)
-    log = np.empty(cap, np.int64)
-    pub = np.empty(cap, np.int64)
-    doff = np.empty(cap, np.int64)
-    dlen = np.empty(cap, np.int64)
-    ocap = n // 9 + 1
-    oop = np.empty(ocap, np.int64)
-    ooff = np.empty(ocap, np.int64)
-    olen = np.empty(ocap, np.int64)
+    # room for the most records the bytes can hold, in two allocations (each large one is
+    # an mmap and munmap: eight cost 40 us a chunk)
+    msg = np.empty((5, n // 31 + 1), np.int64)
+    ch, log, pub, doff, dlen = msg[0], msg[1], msg[2], msg[3], msg[4]
+    other = np.empty((3, n // 9 + 1), np.int64)
+    oop, ooff, olen = other[0], other[1], other[2]
     m = 0
     o = 0
-    p = 0
+    p = np.uint64(0)
+    nu = np.uint64(n)
     status = 0
-    while p < n:
-        if p + 9 > n:
+    while p < nu:
+        if p + np.uint64(9) > nu:
             status = 1
             break
         op = buf[p]
-        ln = np.uint64(0)
-        for i in range(8):
-            ln |= np.uint64(buf[p + 1 + i]) << np.uint64(8 * i)
+        ln = _u64_at(buf, p + np.uint64(1))
         if op == 0:
             status = 2
             break
-        if ln > np.uint64(n - p - 9):
+        if ln > nu - p - np.uint64(9):
             status = 1
             break
-        c = p + 9
-        if op == 5 and ln >= 22:
-            ch[m] = np.int64(buf[c]) | (np.int64(buf[c + 1]) << 8)
-            lt = np.uint64(0)
-            pt = np.uint64(0)
-            for i in range(8):
-                lt |= np.uint64(buf[c + 6 + i]) << np.uint64(8 * i)
-                pt |= np.uint64(buf[c + 14 + i]) << np.uint64(8 * i)
-            log[m] = np.int64(lt)
-            pub[m] = np.int64(pt)
-            doff[m] = c + 22
+        c = p + np.uint64(9)
+        if op == 5 and ln >= np.uint64(22):
+            ch[m] = np.int64(buf[c]) | (np.int64(buf[c + np.uint64(1)]) << 8)
+            log[m] = np.int64(_u64_at(buf, c + np.uint64(6)))
+            pub[m] = np.int64(_u64_at(buf, c + np.uint64(14)))
+            doff[m] = np.int64(c) + 22
             dlen[m] = np.int64(ln) - 22
             m += 1
         else:
             oop[o] = op
-            ooff[o] = c
+            ooff[o] = np.int64(c)
             olen[o] = np.int64(ln)
             o += 1
-        p = c + np.int64(ln)
-    return ch[:m], log[:m], pub[:m], doff[:m], dlen[:m], oop[:o], ooff[:o], olen[:o], p, status
+        p = c + ln
+    return (ch[:m], log[:m], pub[:m], doff[:m], dlen[:m], oop[:o], ooff[:o], olen[:o],
+            np.int64(p), status)
 
 
 def distinct(ids: np.ndarray) -> list[int]:
@@ -88,28 +89,35 @@ def distinct(ids: np.ndarray) -> list[int]:
 @dataclass(slots=True)
 class Digest:
     """A run of records located by :func:`scan_records`, its messages grouped by channel
-    (indices in record order) and the payloads of the channels already known decoded."""
+    (indices in record order) and the payloads of the channels already known decoded
+    (with ``fronts[channel]`` unset samples first, see :func:`digest`)."""
 
     buf: np.ndarray
     scan: tuple
     groups: dict[int, np.ndarray]
     decoded: dict[int, tuple]
+    fronts: dict[int, int]
 
 
-def digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str]) -> Digest:
-    """Scan ``raw`` and decode the messages of the sensor channels in ``channels``. A pure
-    function of its inputs, so the read-ahead thread can run it (channel definitions never
-    change once read, so a copy of them taken earlier decodes the same)."""
+def digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str],
+           fronts: Mapping[int, int] | None = None) -> Digest:
+    """Scan ``raw`` and decode the messages of the sensor channels in ``channels``, leaving
+    room for ``fronts[stream]`` samples before those of each stream (for the samples the
+    merge still holds of it: :meth:`replay.merge.StreamMerge.fronts`). A pure function of its
+    inputs, so the read-ahead thread can run it (channel definitions never change once read,
+    so a copy of them taken earlier decodes the same)."""
     buf = np.frombuffer(raw, np.uint8)
     scan = scan_records(buf)
     ch, doff, dlen = scan[0], scan[3], scan[4]
     groups = {c: np.flatnonzero(ch == c) for c in distinct(ch)}
     decoded = {}
+    used = {}
     for c, sel in groups.items():
         target = channels.get(c)
         if isinstance(target, tuple):
-            decoded[c] = codec.decode_many(buf, doff[sel], dlen[sel], target[1])
-    return Digest(buf, scan, groups, decoded)
+            used[c] = fronts.get(target[0], 0) if fronts else 0
+            decoded[c] = codec.decode_many(buf, doff[sel], dlen[sel], target[1], used[c])
+    return Digest(buf, scan, groups, decoded, used)
 
 
 MAX_CUT_CHUNK = 64 << 20  # bytes read for a chunk whose length runs past the end of file

@@ -28,16 +28,27 @@ class _Stream:
         self.nf = len(SENSOR_FIELDS[sensor])
         self.parts: list[tuple[np.ndarray, np.ndarray]] = []
         self.bounds = [0]  # start index of each part, then the end of the last one
+        self.held = 0  # samples held back by the latest release
 
     @property
     def length(self) -> int:
         return self.bounds[-1]
 
-    def add(self, t: np.ndarray, v: np.ndarray) -> int:
-        """Append samples; return their start index in the stream's pending samples."""
+    def add(self, t: np.ndarray, v: np.ndarray, front: int = 0) -> int:
+        """Append the samples of ``t[front:]``, ``v[:, front:]``; return their start index in
+        the stream's pending samples. When the samples pending so far fit in the ``front``
+        unset ones, they are copied there: the stream is then one part, so the release's
+        first block of it is a view too, not a join of the two parts (it spans the latest
+        reorder window of the previous release and most of a new run of records)."""
         start = self.length
-        self.parts.append((t, v))
-        self.bounds.append(start + t.shape[0])
+        if 0 < start <= front:
+            a = front - start
+            t[a:front], v[:, a:front] = self._span(0, start)
+            self.parts = [(t[a:], v[:, a:])]
+            self.bounds = [0, start + t.shape[0] - front]
+            return start
+        self.parts.append((t[front:], v[:, front:]) if front else (t, v))
+        self.bounds.append(start + t.shape[0] - front)
         return start
 
     def take(self, start: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,11 +96,15 @@ def order_times(pub: np.ndarray, log: np.ndarray, max_ahead_ns: int) -> np.ndarr
     """The times messages are ordered by: the publish time, or the log (receive) time of a
     message published more than ``max_ahead_ns`` after it (:func:`monitor.time_ahead.is_ahead`,
     a log time 0 being unknown; the ordering guarantees in :mod:`replay.reader`)."""
-    ahead = (pub - log > max_ahead_ns) & (log > 0)
+    lead = pub - log
+    if lead.shape[0] == 0 or lead.max() <= max_ahead_ns:  # (usual) none ahead
+        return pub
+    ahead = (lead > max_ahead_ns) & (log > 0)
     return np.where(ahead, log, pub) if ahead.any() else pub
 
 
-_COLS = ("stream", "pub", "log", "start", "n", "seq")
+# the rows of the table of pending messages (one column per message)
+STREAM, PUB, LOG, START, N, SEQ = range(6)
 # Longest stretch of sensor time (by publish time) one coalesced block covers. The replay's
 # ordering passes by a stream lagging the newest data by more than [ordering]
 # replay_horizon_s (1 h) and rejects what then arrives as late: a chunk of compact samples
@@ -110,13 +125,23 @@ class StreamMerge:
         self.max_ahead_ns = max_ahead_ns
         self._streams: list[_Stream] = []
         self._stream_of: dict[str, int] = {}
-        self._pending: list[dict[str, np.ndarray]] = []
+        self._pending: list[np.ndarray] = []  # tables of messages, see STREAM ... SEQ
+        self._rank = np.empty(0, np.int64)  # each stream's rank in topic order
         self._max_pub = np.iinfo(np.int64).min
         self._released_to = np.iinfo(np.int64).min
         self._seq = 0
 
     def sensor(self, idx: int) -> str:
         return self._streams[idx].sensor
+
+    def fronts(self, ahead: bool = False) -> dict[int, int]:
+        """Room to leave before each stream's samples of the next run of records decoded
+        (:func:`replay.mcap_scan.digest`): the samples each holds now, or, for a run decoded
+        ahead (before the release of the current one), those the latest release held back
+        (the next one holds back about as many: one reorder window), with a margin."""
+        if ahead:
+            return {i: s.held + s.held // 4 + 64 for i, s in enumerate(self._streams) if s.held}
+        return {i: s.length for i, s in enumerate(self._streams) if s.length}
 
     def records(self, d: Digest, ctx: FileContext, st: FileStats) -> int:
         """Take the messages of a run of records (its channel definitions already in ``ctx``);
@@ -127,7 +152,7 @@ class StreamMerge:
             return 0
         pub = order_times(pub, log, self.max_ahead_ns)
         ctx.last_log = int(log[-1])
-        seq = self._seq + np.arange(ch.shape[0], dtype=np.int64)
+        seq0 = self._seq  # read order: the message's index in the run, from here
         self._seq += ch.shape[0]
         for c, sel in d.groups.items():
             target = ctx.channels.get(c)
@@ -137,19 +162,20 @@ class StreamMerge:
                 continue
             sidx, numbers = target
             decoded = d.decoded.get(c)  # else defined in this very run of records
+            front = d.fronts.get(c, 0) if decoded is not None else 0
             status, n, t, vals = (decoded if decoded is not None
                                   else codec.decode_many(buf, doff[sel], dlen[sel], numbers))
-            good = status == codec.OK
-            bad = sel.shape[0] - int(np.count_nonzero(good))
-            if bad:  # (usually none: no copies then)
+            bad = int(np.count_nonzero(status))  # (usually none: no copies then)
+            if bad:
+                good = status == codec.OK
                 st.bad_payloads += bad
                 sel, n = sel[good], n[good]
             stream = self._streams[sidx]
-            start = stream.add(t, vals) + np.cumsum(n) - n
+            start = stream.add(t, vals, front) + np.cumsum(n) - n
             topic = stream.topic
             st.messages_by_topic[topic] = st.messages_by_topic.get(topic, 0) + sel.shape[0]
             st.messages += sel.shape[0]
-            st.samples += int(n.sum())
+            st.samples += t.shape[0] - front
             p_sel = pub[sel]
             if sel.shape[0]:
                 lo, hi = int(p_sel.min()), int(p_sel.max())
@@ -158,9 +184,14 @@ class StreamMerge:
                 if lo <= self._released_to:
                     st.late += int(np.count_nonzero(p_sel <= self._released_to))
                 self._max_pub = max(self._max_pub, hi)
-            self._pending.append({"stream": np.full(sel.shape[0], sidx, np.int64),
-                                  "pub": p_sel, "log": log[sel], "start": start, "n": n,
-                                  "seq": seq[sel]})
+            rows = np.empty((6, sel.shape[0]), np.int64)
+            rows[STREAM] = sidx
+            rows[PUB] = p_sel
+            np.take(log, sel, out=rows[LOG])
+            rows[START] = start
+            rows[N] = n
+            np.add(sel, seq0, out=rows[SEQ])
+            self._pending.append(rows)
         return int(ch.shape[0])
 
     def stream_index(self, topic: str) -> int | None:
@@ -175,6 +206,7 @@ class StreamMerge:
                 return None
             idx = self._stream_of[topic] = len(self._streams)
             self._streams.append(_Stream(topic, buoy, sensor))
+            self._rank = np.argsort(np.argsort([s.topic for s in self._streams]))
         return idx
 
     def release(self, final: bool) -> Iterator[SampleBlock]:
@@ -182,35 +214,39 @@ class StreamMerge:
             return
         if not final and self._max_pub - self.window_ns <= self._released_to:
             return
-        tab = {k: np.concatenate([p[k] for p in self._pending]) for k in _COLS}
+        tab = (self._pending[0] if len(self._pending) == 1
+               else np.concatenate(self._pending, axis=1))
         cut = np.iinfo(np.int64).max if final else self._max_pub - self.window_ns
-        n_out = int(np.count_nonzero(tab["pub"] <= cut))
+        n_out = int(np.count_nonzero(tab[PUB] <= cut))
         if not n_out:
             return
         # canonical order: publish time, topic, read order (topic rank and read order in one
-        # key, exact while streams x messages read < 2**63). The messages released (publish
-        # time <= cut) come first, those held back after them.
-        rank = np.argsort(np.argsort([s.topic for s in self._streams]))
-        order = np.lexsort((rank[tab["stream"]] * self._seq + tab["seq"], tab["pub"]))
+        # key, exact while streams x messages read < 2**63; every key distinct, so the
+        # order is unique: stable sorts by the second key, then by publish time, give
+        # lexsort's, in a fifth of its time on these nearly sorted runs). The messages
+        # released (publish time <= cut) come first, those held back after them.
+        by_topic = np.argsort(self._rank[tab[STREAM]] * self._seq + tab[SEQ], kind="stable")
+        order = by_topic[np.argsort(tab[PUB][by_topic], kind="stable")]
         rel, held = order[:n_out], order[n_out:]
-        self._released_to = max(self._released_to, int(tab["pub"][rel[-1]]))
+        self._released_to = max(self._released_to, int(tab[PUB][rel[-1]]))
         blocks = self._blocks(tab, rel)
-        keep = {k: v[held] for k, v in tab.items()}
+        keep = tab[:, held]
         # compact: keep only the held-back samples
-        for s in distinct(tab["stream"]):
-            mine = keep["stream"] == s
-            keep["start"][mine] = self._streams[s].keep_only(keep["start"][mine],
-                                                             keep["n"][mine])
+        for i in distinct(tab[STREAM]):
+            mine = keep[STREAM] == i
+            keep[START][mine] = self._streams[i].keep_only(keep[START][mine], keep[N][mine])
         self._pending = [keep] if held.shape[0] else []
+        for s in self._streams:
+            s.held = s.length
         yield from blocks
 
-    def _blocks(self, tab: dict, rel: np.ndarray) -> list[SampleBlock]:
+    def _blocks(self, tab: np.ndarray, rel: np.ndarray) -> list[SampleBlock]:
         """The messages ``tab[rel]`` (in canonical order) as blocks."""
         if not self.coalesce:
             return [self._message_block(*m) for m in zip(
-                *(tab[k][rel].tolist() for k in ("stream", "start", "n", "log")))]
-        count, *per_block, member = _groups(rel, tab["stream"], tab["pub"], tab["log"],
-                                            tab["start"], tab["n"], COALESCE_NS,
+                *(tab[k][rel].tolist() for k in (STREAM, START, N, LOG)))]
+        count, *per_block, member = _groups(rel, tab[STREAM], tab[PUB], tab[LOG],
+                                            tab[START], tab[N], COALESCE_NS,
                                             len(self._streams))
         sid, lo, hi, log, apart = (x.tolist() for x in per_block)
         out = []
@@ -218,7 +254,7 @@ class StreamMerge:
             stream = self._streams[sid[g]]
             if apart[g]:  # (rare) messages not back to back in their stream
                 mine = rel[member == g]
-                tt, vv = stream.take(tab["start"][mine], tab["n"][mine])
+                tt, vv = stream.take(tab[START][mine], tab[N][mine])
             else:
                 tt, vv = stream._span(lo[g], hi[g])
             out.append(SampleBlock(stream.buoy_id, stream.sensor, tt, {

@@ -126,6 +126,10 @@ class RecordSink(Protocol):
     def records(self, d: Digest, ctx: FileContext, st: FileStats) -> int:
         """Take a run of records; return the number of messages found in it."""
 
+    def fronts(self, ahead: bool = False) -> dict[int, int]:
+        """Room to leave before each stream's samples when decoding (see
+        :func:`replay.mcap_scan.digest`); ``ahead``: for a run decoded ahead."""
+
 
 class FileSalvage:
     """Reads files record by record with salvage, handing their messages to ``sink``; with
@@ -153,7 +157,7 @@ class FileSalvage:
             ctx = FileContext()
             self._summary_definitions(f, size, ctx)
             f.seek(8)
-            ahead = ReadAhead(f.fileno(), size, digest) if self.read_ahead else None
+            ahead = ReadAhead(f.fileno(), size, _digest_ahead) if self.read_ahead else None
             try:
                 yield from self._read_records(f, size, ctx, st, ahead)
             finally:
@@ -224,7 +228,7 @@ class FileSalvage:
                 awaiting = self._chunk(got[0], got[1], pos, ctx, st)
                 if ahead is not None and not cut:
                     # the next chunk is inflated and digested while the caller works
-                    ahead.schedule(pos + 9 + ln, dict(ctx.channels))
+                    ahead.schedule(pos + 9 + ln, (dict(ctx.channels), self.sink.fronts(True)))
                 yield
                 if cut:  # a truncated file, or a corrupt length: look for a next chunk
                     nxt = find_chunk(f, pos + 1, size)
@@ -288,11 +292,17 @@ class FileSalvage:
             st.bad_chunks += 1
             st.lost.append(LostRange(c.error or "chunk lost", pos, c.t_lo, c.t_hi))
             return [st.lost[-1], len(st.lost) - 1] if c.indexed else None
-        n = self._deliver(scanned if scanned is not None else digest(c.raw, ctx.channels),
-                          ctx, st)
+        n = self._deliver(scanned if scanned is not None
+                          else digest(c.raw, ctx.channels, self.sink.fronts()), ctx, st)
         if c.cut:
             st.bad_chunks += 1
             st.lost.append(LostRange(
                 f"file cut inside a chunk: {n} messages of it recovered", pos,
                 ctx.last_log if n else c.t_lo, c.t_hi))
         return None
+
+
+def _digest_ahead(raw: bytes, arg: tuple) -> Digest:
+    """:func:`replay.mcap_scan.digest` in the read-ahead thread: ``arg`` is the channels and
+    fronts taken when the chunk was scheduled."""
+    return digest(raw, *arg)

@@ -3,6 +3,8 @@ and declines every payload it does not fully understand."""
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from models._jit import uncompiled
@@ -33,7 +35,7 @@ def _batch(payloads: list[bytes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _general(buf, offs, lens, numbers):
     fn_t0, fn_period, fn_off, fn_vals, sub = numbers
     return codec._decode_kernel(buf, offs, lens, fn_t0, fn_period, fn_off,
-                                np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64))
+                                np.asarray(fn_vals, np.int64), np.asarray(sub, np.int64), 0)
 
 
 def _same(a: tuple, b: tuple) -> bool:
@@ -174,3 +176,34 @@ def test_lengths_whose_varint_starts_with_0x80_take_the_one_pass_path():
     fast = decode_regular(buf, offs, lens, codec.DEFAULT_FIELD_NUMBERS["tension"])
     assert fast is not None and fast[1].tolist() == [128, 244]
     assert fast[3].tobytes() == np.concatenate(want)[None].tobytes()
+
+
+def test_room_in_front_leaves_the_decoded_samples_as_they_are():
+    """``front`` unset samples before the decoded ones, on the one-pass path (one field: a
+    view of a larger array; several: sized exactly) and the general kernel's (a raw sample),
+    compiled and as plain Python: behind them, the bits of a decode without room."""
+    for sensor, nan_at in (("tension", None), ("imu", None), ("imu", 3)):
+        numbers = codec.DEFAULT_FIELD_NUMBERS[sensor]
+        buf, offs, lens = _batch([_payload(sensor, n, seed, nan_at=nan_at if seed == 1 else None)
+                                  for seed, n in enumerate((20, 7, 33))])
+        plain = codec.decode_many(buf, offs, lens, numbers)
+        assert plain[2].shape == (60,) and plain[3].shape[1] == 60
+        for front in (1, 1200):
+            for mode in (contextlib.nullcontext, uncompiled):
+                with mode():
+                    status, nsamp, t, vals = codec.decode_many(buf, offs, lens, numbers, front)
+                assert vals.flags.c_contiguous and vals.shape[1] == t.shape[0] == front + 60
+                assert _same((status, nsamp, t[front:], vals[:, front:]), plain)
+
+
+def test_several_fields_sized_exactly_whatever_the_payloads_counts():
+    """IMU payloads are decoded into exactly sized values (room guessed from the first
+    payload's count, counted when a later one has more, copied when fewer): every mix gives
+    the general kernel's bits, C-contiguous."""
+    numbers = codec.DEFAULT_FIELD_NUMBERS["imu"]
+    for counts in ((10, 10, 10), (10, 12, 10), (10, 4, 9), (3, 30), (2,)):
+        buf, offs, lens = _batch([_payload("imu", n, s) for s, n in enumerate(counts)])
+        fast = decode_regular(buf, offs, lens, numbers)
+        assert fast is not None and fast[1].tolist() == list(counts)
+        assert fast[3].flags.c_contiguous and fast[3].shape == (3, sum(counts))
+        assert _same(fast, _general(buf, offs, lens, numbers))
