@@ -279,6 +279,7 @@ _NO_ACCEL, _NO_SOS, _NO_ZI = np.empty(0), np.zeros((2, 6)), np.zeros((3, 2, 2))
 
 
 _CHUNK = 256  # samples whose chords are taken in one vectorised pass
+_KEEP = 1 << 17  # samples of a block whose working memory an estimator keeps for the next
 
 
 @kernel(inline="always")
@@ -319,11 +320,10 @@ def _chords(p, a, b, span, height, out):
 
 @kernel()
 def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
-             total, qs, axial, drag, angle, flags):
-    """The stream over a block: every sample's position and drag increment, the other
-    outputs as for a sample not wanted (NaN tension, quasi-static and angle, no axial
-    increment, no flags; :func:`_wanted` then fills the wanted ones). Returns (ok, jerk
-    state); ok False, nothing changed, if an acceleration is NaN or infinite.
+             drag):
+    """The stream over a block: every sample's position (into ``p``) and drag increment
+    (into ``drag``, n samples; :func:`_wanted` then estimates the wanted samples). Returns
+    (ok, jerk state); ok False, nothing changed, if an acceleration is NaN or infinite.
 
     p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
     ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
@@ -337,7 +337,7 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
     the next chunk's integration (independent of them). Every value is computed by the same
     operations from the same inputs as one sample after the other: the same bits.
     """
-    n = total.size
+    n = drag.size
     integrate = az.size == n
     if integrate:
         bad = False
@@ -345,12 +345,6 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
             bad |= ((ax[i] - ax[i]) != 0.0) | ((ay[i] - ay[i]) != 0.0) | ((az[i] - az[i]) != 0.0)
         if bad:
             return False, y0
-    for i in range(n):
-        total[i] = math.nan
-        qs[i] = math.nan
-        axial[i] = 0.0
-        angle[i] = math.nan
-        flags[i] = 0
     # the sections' coefficients and memory in registers (stores into ``p`` could alias them)
     c = (sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5],
          sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5])
@@ -398,9 +392,10 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
 
 @kernel()
 def _wanted(p, idx, t_qs, h, v, qflags, span, dt, axial_mode, axial_gain, drag_on, tan_flat,
-            total, qs, axial, drag, angle, flags):
+            drag, total, qs, axial, angle, flags):
     """The estimates of the samples ``idx`` (see the module docstring), whose quasi-static
-    ``t_qs, h, v, qflags`` are given in order, after :func:`_advance`."""
+    ``t_qs, h, v, qflags`` are given in order, after :func:`_advance`: the k-th wanted
+    sample's into ``total[k]``, ``qs[k]``, ``axial[k]``, ``angle[k]``, ``flags[k]``."""
     inv_dt = 1.0 / dt
     for k in range(idx.size):
         i = idx[k]
@@ -428,11 +423,11 @@ def _wanted(p, idx, t_qs, h, v, qflags, span, dt, axial_mode, axial_gain, drag_o
         if tot <= 0.0:
             tot = 0.0
             f |= 1  # Flag.SLACK
-        total[i] = tot
-        qs[i] = tq
-        axial[i] = a_i
-        angle[i] = math.atan2(vi, hi)
-        flags[i] = f
+        total[k] = tot
+        qs[k] = tq
+        axial[k] = a_i
+        angle[k] = math.atan2(vi, hi)
+        flags[k] = f
 
 
 class MotionTensionEstimator:
@@ -460,6 +455,7 @@ class MotionTensionEstimator:
         self._settling = int(st.settling)
         self._imu_saved = st.imu
         self._imu: DisplacementIntegrator | None = None
+        self._scratch = np.empty(0)  # working memory kept between blocks (_buffers)
         c = config
         self._axial_mode = _AXIAL_MODES[c.axial_model]
         if c.axial_model == "finite":
@@ -501,6 +497,7 @@ class MotionTensionEstimator:
         sway: ArrayLike,
         heading_deg: ArrayLike | None = None,
         want: NDArray[np.bool_] | None = None,
+        compact: bool = False,
     ) -> Estimate:
         """Estimate tension for a block of displacements (m) in the motion frame.
 
@@ -511,13 +508,16 @@ class MotionTensionEstimator:
         needed; the others come back as NaN. The stream state advances over every sample
         either way, so the wanted samples get exactly the values a full estimate gives (the
         quasi-static lookup, most of the cost, is skipped for the rest).
+        ``compact``: the wanted samples' estimates only, in order (arrays of as many values
+        as ``want`` holds True; their SETTLING flags as in the full estimate): for a caller
+        wanting few samples of a long block, no per-sample arrays for the others.
         """
         z = _as_block("heave", heave, None)
         x = _as_block("surge", surge, z.size)
         y = _as_block("sway", sway, z.size)
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, z.size)
-        return self._estimate(x, y, z, 0, _want_mask(want, z.size))
+        return self._estimate(x, y, z, 0, _want_mask(want, z.size), compact)
 
     def update_accel(
         self,
@@ -526,6 +526,7 @@ class MotionTensionEstimator:
         accel_z: ArrayLike,
         heading_deg: ArrayLike | None = None,
         want: NDArray[np.bool_] | None = None,
+        compact: bool = False,
     ) -> Estimate:
         """As :meth:`update` from IMU accelerations (m/s^2, gravity removed, motion frame),
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
@@ -542,7 +543,7 @@ class MotionTensionEstimator:
         want = _want_mask(want, az.size)
         try:
             if heading_deg is None:  # integrated in the estimator's loop
-                return self._estimate(None, None, None, settling, want, (a, self._imu))
+                return self._estimate(None, None, None, settling, want, compact, (a, self._imu))
             d = self._imu.update(np.stack(a))
         except ValueError:
             if all(np.all(np.isfinite(row)) for row in a):  # not the input's (the model's)
@@ -551,10 +552,25 @@ class MotionTensionEstimator:
                 _as_block(name, row, az.size)  # names the field
             raise
         x, y = _rotate(d[0], d[1], heading_deg, az.size)
-        return self._estimate(x, y, d[2], settling, want)
+        return self._estimate(x, y, d[2], settling, want, compact)
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling: int, want=None,
+    def _buffers(self, n: int, drag_too: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The block's positions (3, n + 2) in memory kept from block to block (for blocks of
+        up to :data:`_KEEP` samples: a block's fresh pages cost more than the loop writing
+        them, in page faults), and its drag increments (n): there too if ``drag_too``, else
+        new (returned)."""
+        size = 3 * (n + 2) + (n if drag_too else 0)
+        if n > _KEEP:
+            buf = np.empty(size)
+        else:
+            if self._scratch.shape[0] < size:
+                self._scratch = np.empty(4 * n + 6)  # room for both
+            buf = self._scratch
+        p = buf[:3 * (n + 2)].reshape(3, n + 2)
+        return p, (buf[3 * (n + 2):size] if drag_too else np.empty(n))
+
+    def _estimate(self, x, y, z, settling: int, want=None, compact: bool = False,
                   integrate: tuple[tuple[NDArray[np.float64], ...], DisplacementIntegrator]
                   | None = None) -> Estimate:
         """``settling``: how many of the first samples the IMU integrator still settles;
@@ -565,7 +581,8 @@ class MotionTensionEstimator:
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
-        p = np.empty((3, n + 2))
+        # the drag of every sample is returned unless only the wanted samples' are
+        p, drag = self._buffers(n, compact and want is not None)
         fresh = self._hist is None
         if not fresh:
             p[:, :2] = self._hist
@@ -578,26 +595,25 @@ class MotionTensionEstimator:
             sos, zi = imu.loop_state()
             if sos.shape[0] != 2:  # _advance holds the two sections' memory in registers
                 raise ValueError(f"the IMU integrator has {sos.shape[0]} sections, not 2")
-        total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                                         np.empty(n))
-        flags = np.empty(n, np.uint8)
         ok, jerk_y = _advance(p, fresh, *accel, sos, zi, c.span, c.height, c.dt,
-                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y,
-                              total, qs, axial, drag, angle, flags)
+                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y, drag)
         if not ok:
             raise ValueError("acceleration contains NaN or infinite values")
         # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
         idx = np.arange(n) if want is None else np.flatnonzero(want)
+        m = idx.shape[0]
         x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
-        if idx.shape[0] < n:  # (every sample wanted: the rows themselves, no copies)
+        if m < n:  # (every sample wanted: the rows themselves, no copies)
             x, y, z = x[idx], y[idx], z[idx]
         x_off = np.hypot(c.span + x, y) - c.span
         t_qs, h, v, qflags = self.quasi_static(x_off, z)
+        total, qs, axial, angle = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+        flags = np.empty(m, np.uint8)
         _wanted(p, idx, np.ascontiguousarray(t_qs, dtype=float),
                 np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(v, dtype=float),
                 np.ascontiguousarray(qflags, dtype=np.uint8), c.span, c.dt, self._axial_mode,
                 self._axial_gain, c.drag is not None, self._tan_flat,
-                total, qs, axial, drag, angle, flags)
+                drag, total, qs, axial, angle, flags)
         # the stream moves on only now (the quasi-static model may raise)
         if integrate is not None:
             integrate[1].advance(zi, n)
@@ -606,12 +622,23 @@ class MotionTensionEstimator:
             self._settling = 2
         # SETTLING marks a block's first samples only (callers may rely on it)
         settling = max(settling, self._settling)
-        if settling:
-            flags[:settling] |= np.uint8(Flag.SETTLING)
         self._settling = max(self._settling - n, 0)
         self._hist = p[:, -2:].copy()
         self._seen += n
-        return Estimate(total, qs, axial, drag, angle, flags)
+        if m == n:
+            flags[:settling] |= np.uint8(Flag.SETTLING)
+            return Estimate(total, qs, axial, drag, angle, flags)
+        if compact:
+            flags[:int(np.searchsorted(idx, settling))] |= np.uint8(Flag.SETTLING)
+            return Estimate(total, qs, axial, drag[idx], angle, flags)
+        # every sample, the unwanted ones as not estimated (no axial increment, no flags)
+        out = Estimate(np.full(n, np.nan), np.full(n, np.nan), np.zeros(n), drag,
+                       np.full(n, np.nan), np.zeros(n, np.uint8))
+        for full, part in ((out.tension, total), (out.quasi_static, qs), (out.axial, axial),
+                           (out.top_angle, angle), (out.flags, flags)):
+            full[idx] = part
+        out.flags[:settling] |= np.uint8(Flag.SETTLING)
+        return out
 
 
 def _want_mask(want, n: int) -> NDArray[np.bool_] | None:

@@ -203,6 +203,13 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         sl = slice(i, i + 40)
         want = rng.random(m.accel_z[sl].size) < 0.3
         a = full.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl])
+        if i % 80:  # every other block compact: the wanted samples' estimates only
+            c = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want,
+                                  compact=True)
+            for got, ref in zip(dataclasses.astuple(c), dataclasses.astuple(a)):
+                np.testing.assert_array_equal(got, ref[want])
+            assert c.flags.dtype == np.uint8
+            continue
         b = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want)
         np.testing.assert_array_equal(b.tension[want], a.tension[want])
         np.testing.assert_array_equal(b.flags[want], a.flags[want])
@@ -214,6 +221,15 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         assert np.isnan(b.top_angle[~want]).all() and (b.axial[~want] == 0).all()
         # the first samples settle, the others carry no flags
         assert ((b.flags[~want] & ~np.uint8(Flag.SETTLING)) == 0).all()
+    assert part.state.to_dict() == full.state.to_dict()
+    # displacements, compact, the first block settling (its first two samples SETTLING)
+    full, part = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    want = np.arange(40) % 3 == 1
+    for sl in (slice(0, 40), slice(40, 80)):
+        a = full.update(m.heave[sl], m.surge[sl], m.sway[sl])
+        c = part.update(m.heave[sl], m.surge[sl], m.sway[sl], want=want, compact=True)
+        for got, ref in zip(dataclasses.astuple(c), dataclasses.astuple(a)):
+            np.testing.assert_array_equal(got, ref[want])
     assert part.state.to_dict() == full.state.to_dict()
     with pytest.raises(ValueError, match="want must be a boolean mask of 3 samples"):
         part.update(np.zeros(3), np.zeros(3), np.zeros(3), want=np.ones(2, bool))
