@@ -147,17 +147,43 @@ class CatenaryQuasiStatic:
         self._box = (table.x[0], table.x[-1], table.z[0], table.z[-1])
 
     def __call__(self, x_offset: NDArray[np.float64], z_heave: NDArray[np.float64]):
-        x0, x1, z0, z1 = self._box
-        xs = self.span + x_offset
-        zs = self.height + z_heave
-        xc = np.clip(xs, x0, x1)
-        zc = np.clip(zs, z0, z1)
+        xs = self.span + np.asarray(x_offset, dtype=float)
+        zs = self.height + np.asarray(z_heave, dtype=float)
+        if xs.shape != zs.shape:
+            xs, zs = np.broadcast_arrays(xs, zs)
+        shape = xs.shape
+        xs, zs = xs.ravel(), zs.ravel()  # (a 1-D contiguous array itself, as the estimator's)
+        xc, zc, flags = np.empty(xs.shape), np.empty(xs.shape), np.empty(xs.shape, np.uint8)
+        _clamp_into(xs, zs, *self._box, xc, zc, flags)
         f = self.table.forces(xc, zc)
-        flags = ((xc != xs) | (zc != zs)).astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
-        flags |= (f.h <= 0.0).astype(np.uint8) * np.uint8(Flag.SLACK)
-        lifted = f.v - self._line_weight > self.anchor_uplift_limit_N
-        flags |= lifted.astype(np.uint8) * np.uint8(Flag.ANCHOR_LIFTED)
-        return f.t, f.h, f.v, flags
+        _force_flags(f.h, f.v, self._line_weight, self.anchor_uplift_limit_N, flags)
+        return (f.t.reshape(shape), f.h.reshape(shape), f.v.reshape(shape),
+                flags.reshape(shape))
+
+
+@kernel()
+def _clamp_into(xs, zs, x0, x1, z0, z1, xc, zc, flags):
+    """xc, zc: the points clamped into the box [x0, x1] x [z0, z1] as ``np.clip`` does (its
+    comparisons: NaN stays NaN); flags: OUT_OF_RANGE where a point moved, else 0."""
+    for i in range(xs.size):
+        x, z = xs[i], zs[i]
+        cx = x if x != x or x > x0 else x0
+        cx = cx if cx != cx or cx < x1 else x1
+        cz = z if z != z or z > z0 else z0
+        cz = cz if cz != cz or cz < z1 else z1
+        xc[i], zc[i] = cx, cz
+        flags[i] = 8 if cx != x or cz != z else 0  # Flag.OUT_OF_RANGE
+
+
+@kernel()
+def _force_flags(h, v, line_weight, uplift_limit, flags):
+    """Adds SLACK (no horizontal tension) and ANCHOR_LIFTED (the line pulls the anchor up by
+    more than ``uplift_limit``) to ``flags`` from the fairlead forces ``h, v``."""
+    for i in range(h.size):
+        if h[i] <= 0.0:
+            flags[i] |= 1  # Flag.SLACK
+        if v[i] - line_weight > uplift_limit:
+            flags[i] |= 2  # Flag.ANCHOR_LIFTED
 
 
 @dataclass(frozen=True)

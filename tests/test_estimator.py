@@ -1,5 +1,6 @@
 """Motion -> tension estimator: quasi-static limit, dynamic increments, flags, state, IMU path."""
 
+import contextlib
 import dataclasses
 import itertools
 import json
@@ -12,6 +13,7 @@ import pytest
 from models import waves
 from models.dynamics import ElasticDragCord, axial_impedance, drag_constant
 from models.estimator import (
+    CatenaryQuasiStatic,
     EstimatorConfig,
     EstimatorState,
     Flag,
@@ -21,6 +23,7 @@ from models.estimator import (
     seed004_estimator,
     simulate_tension,
 )
+from models.estimator import _force_flags
 from models.catenary import solve, vaps_mooring
 
 SHARED = next(
@@ -156,6 +159,58 @@ def test_slow_motion_reproduces_catenary_seed004(vaps):
     np.testing.assert_allclose(est.tension[2:], est.quasi_static[2:], rtol=0.01)
     # The floated VAPS line lifts its anchor by ~575 N at rest: below the 1000 N limit.
     assert not np.any(est.flags[2:] & (Flag.SLACK | Flag.OUT_OF_RANGE | Flag.ANCHOR_LIFTED))
+
+
+def _quasi_static_numpy(qs, x_offset, z_heave):
+    """CatenaryQuasiStatic as first written in numpy (the reference of its compiled flags)."""
+    x0, x1, z0, z1 = qs._box
+    xs, zs = qs.span + x_offset, qs.height + z_heave
+    xc, zc = np.clip(xs, x0, x1), np.clip(zs, z0, z1)
+    f = qs.table.forces(xc, zc)
+    flags = ((xc != xs) | (zc != zs)).astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
+    flags |= (f.h <= 0.0).astype(np.uint8) * np.uint8(Flag.SLACK)
+    lifted = f.v - qs._line_weight > qs.anchor_uplift_limit_N
+    flags |= lifted.astype(np.uint8) * np.uint8(Flag.ANCHOR_LIFTED)
+    return f.t, f.h, f.v, flags
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_catenary_quasi_static_equals_the_numpy_form(vaps, plain):
+    # inside, on and beyond every edge of the table (clamped, OUT_OF_RANGE), slack and
+    # anchor-lifting positions, broadcast shapes; NaN is outside (the table's error)
+    _, qs = vaps
+    from models import _jit
+
+    x0, x1, z0, z1 = qs._box
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(x0 - 2, x1 + 2, 3000) - qs.span,
+                        [x0 - qs.span, x1 - qs.span, -qs.span, np.inf, -np.inf]])
+    z = np.concatenate([rng.uniform(z0 - 2, z1 + 2, 3000) - qs.height,
+                        [z0 - qs.height, z1 - qs.height, 0.0, 0.0, 0.0]])
+    lifting = CatenaryQuasiStatic(qs.table, qs.span, qs.height, 300.0)  # lifts at rest
+    with _jit.uncompiled() if plain else contextlib.nullcontext():
+        for model in (qs, lifting):
+            got, ref = model(x, z), _quasi_static_numpy(model, x, z)
+            for a, b in zip(got, ref):
+                np.testing.assert_array_equal(a, b)
+            assert got[3].dtype == np.uint8 and got[3].shape == x.shape
+            assert np.any(got[3] == Flag.OUT_OF_RANGE | Flag.ANCHOR_LIFTED)
+        assert not np.all(qs(x, z)[3] & Flag.ANCHOR_LIFTED)  # (lifting: every sample)
+        # broadcast: one heave for every offset, and a 2-D block
+        for a, b in zip(qs(x[:50], 0.25), _quasi_static_numpy(qs, x[:50], 0.25)):
+            np.testing.assert_array_equal(a, b)
+        grid = (x[:60].reshape(6, 10), z[:60].reshape(6, 10))
+        for a, b in zip(qs(*grid), _quasi_static_numpy(qs, *grid)):
+            np.testing.assert_array_equal(a, b)
+        with pytest.raises(ValueError, match="NaN counts as outside"):
+            qs(np.array([0.0, np.nan]), np.zeros(2))
+        with pytest.raises(ValueError, match="NaN counts as outside"):
+            qs(np.zeros(2), np.array([np.nan, 0.0]))
+        # the slack column (H <= 0) lies outside this table: the flags by hand
+        flags = np.array([0, 8, 0, 0, 8], np.uint8)
+        _force_flags(np.array([-1.0, 0.0, 1e-300, 5.0, 5.0]),
+                     np.array([0.0, 0.0, 10.0, 10.0 + 300.0, 10.0 + 300.5]), 10.0, 300.0, flags)
+        np.testing.assert_array_equal(flags, [1, 9, 0, 0, 10])
 
 
 def test_seed004_flags_and_dynamics_in_waves(vaps):
