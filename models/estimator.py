@@ -36,7 +36,7 @@ from typing import Any, Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from models._jit import kernel
+from models._jit import float_bits, kernel
 from models.catenary import VAPS_DEPTH, Line, TensionTable, solve, vaps_mooring
 from models.dynamics import (
     ElasticDragCord,
@@ -304,7 +304,7 @@ _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 _NO_ACCEL, _NO_SOS, _NO_ZI = np.empty(0), np.zeros((2, 6)), np.zeros((3, 2, 2))
 
 
-_CHUNK = 256  # samples whose chords are taken in one vectorised pass
+_SIDE_BY_SIDE = 1024  # samples from which the jerk ODE runs in four stretches side by side
 _KEEP = 1 << 17  # samples of a block whose working memory an estimator keeps for the next
 
 
@@ -345,23 +345,65 @@ def _chords(p, a, b, span, height, out):
 
 
 @kernel()
+def _jerk_chain(vz, ys, b, y0):
+    """The jerk ODE's states over the support speeds ``vz`` into ``ys`` from ``y0``
+    (:func:`models.dynamics.jerk_step` one sample after the other); returns the last.
+
+    Speed: each step waits for the one before (a square root and a division: their latency
+    sets the pace, the core idles meanwhile), so a long block is cut in four stretches
+    stepped side by side, the later three from a guess (rest); then each is redone from the
+    true end of the one before until it meets its guessed run bit for bit (the ODE forgets
+    its start within some ten steps: each step scales a difference by 2 s / (2 s + b),
+    s = sqrt|y|), from where the guessed run is the true one (the same operations on the
+    same values). Should they never meet, the redone run goes on to the stretch's end: the
+    same bits always.
+    """
+    n = vz.size
+    q = n // 4 if n >= _SIDE_BY_SIDE else 0  # the stretches' length (0: one after the other)
+    y = y0
+    if q == 0:
+        for i in range(n):
+            y = jerk_step(y, vz[i], b)
+            ys[i] = y
+        return y
+    y1 = y2 = y3 = 0.0
+    for k in range(q):
+        y = jerk_step(y, vz[k], b)
+        ys[k] = y
+        y1 = jerk_step(y1, vz[q + k], b)
+        ys[q + k] = y1
+        y2 = jerk_step(y2, vz[2 * q + k], b)
+        ys[2 * q + k] = y2
+        y3 = jerk_step(y3, vz[3 * q + k], b)
+        ys[3 * q + k] = y3
+    for i in range(4 * q, n):
+        y3 = jerk_step(y3, vz[i], b)
+        ys[i] = y3
+    for start, end, guessed_end in ((q, 2 * q, y1), (2 * q, 3 * q, y2), (3 * q, n, y3)):
+        for i in range(start, end):
+            y = jerk_step(y, vz[i], b)
+            if float_bits(y) == float_bits(ys[i]):  # met: the guessed run from here on
+                y = guessed_end
+                break
+            ys[i] = y
+    return y
+
+
+@kernel()
 def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
-             drag):
+             drag, vz):
     """The stream over a block: every sample's position (into ``p``) and drag increment
-    (into ``drag``, n samples; :func:`_wanted` then estimates the wanted samples). Returns
-    (ok, jerk state); ok False, nothing changed, if an acceleration is NaN or infinite.
+    (into ``drag``, n samples; :func:`_wanted` then estimates the wanted samples); ``vz``:
+    n samples of working memory. Returns (ok, jerk state); ok False, nothing changed, if an
+    acceleration is NaN or infinite.
 
     p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
     ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
     ``ax, ay, az`` hold the block's n IMU accelerations, integrated here sample by sample
     through the integrator's two second-order sections ``sos`` (its fourth-order high-pass)
     with memory ``zi`` (:func:`models.imu.sos_step`'s operations, the memory in registers).
-
-    Speed: the jerk ODE is one chain of dependent operations (a square root and a division
-    per sample: its latency sets the pace), so the rest runs beside it: the samples go in
-    chunks, a chunk's chords in one vectorised pass, then its jerk steps in one loop with
-    the next chunk's integration (independent of them). Every value is computed by the same
-    operations from the same inputs as one sample after the other: the same bits.
+    Then the chords |anchor -> fairlead| in one vectorised pass, their differences (the
+    support speeds) and the jerk ODE over them (:func:`_jerk_chain`).
     """
     n = drag.size
     integrate = az.size == n
@@ -371,48 +413,39 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
             bad |= ((ax[i] - ax[i]) != 0.0) | ((ay[i] - ay[i]) != 0.0) | ((az[i] - az[i]) != 0.0)
         if bad:
             return False, y0
-    # the sections' coefficients and memory in registers (stores into ``p`` could alias them)
-    c = (sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5],
-         sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5])
-    m = (zi[0, 0, 0], zi[0, 0, 1], zi[0, 1, 0], zi[0, 1, 1],
-         zi[1, 0, 0], zi[1, 0, 1], zi[1, 1, 0], zi[1, 1, 1],
-         zi[2, 0, 0], zi[2, 0, 1], zi[2, 1, 0], zi[2, 1, 1])
-    ahead = min(_CHUNK, n) if integrate else 0  # samples integrated ahead of the jerk steps
-    for i in range(ahead):
-        m = _integrate(c, m, ax, ay, az, i, p)
-    if fresh:
-        for ch in range(3):
-            p[ch, 0] = p[ch, 2]
-            p[ch, 1] = p[ch, 2]
-    inv_dt = 1.0 / dt
-    y = y0
-    xs = span + p[0, 1]
-    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
-    chord = np.empty(min(_CHUNK, n))
-    for a in range(0, n, _CHUNK):
-        size = min(_CHUNK, n - a)
-        nxt = min(_CHUNK, n - ahead) if integrate else 0  # the next chunk's (at most size)
-        if drag_on:
-            _chords(p, a, a + size, span, height, chord)
-            for k in range(size):
-                y = jerk_step(y, (chord[k] - chord_prev) * inv_dt, drag_b)
-                chord_prev = chord[k]
-                drag[a + k] = drag_k * y
-                if k < nxt:
-                    m = _integrate(c, m, ax, ay, az, ahead + k, p)
-        else:
-            for k in range(size):
-                drag[a + k] = 0.0
-            for k in range(nxt):
-                m = _integrate(c, m, ax, ay, az, ahead + k, p)
-        ahead += nxt
-    if integrate:
+        # the sections' coefficients and memory in registers (stores into ``p`` could
+        # alias them)
+        c = (sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5],
+             sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5])
+        m = (zi[0, 0, 0], zi[0, 0, 1], zi[0, 1, 0], zi[0, 1, 1],
+             zi[1, 0, 0], zi[1, 0, 1], zi[1, 1, 0], zi[1, 1, 1],
+             zi[2, 0, 0], zi[2, 0, 1], zi[2, 1, 0], zi[2, 1, 1])
+        for i in range(n):
+            m = _integrate(c, m, ax, ay, az, i, p)
         k = 0
         for ch in range(3):
             for sec in range(2):
                 zi[ch, sec, 0] = m[k]
                 zi[ch, sec, 1] = m[k + 1]
                 k += 2
+    if fresh:
+        for ch in range(3):
+            p[ch, 0] = p[ch, 2]
+            p[ch, 1] = p[ch, 2]
+    if not drag_on:
+        for i in range(n):
+            drag[i] = 0.0
+        return True, y0
+    inv_dt = 1.0 / dt
+    xs = span + p[0, 1]
+    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
+    _chords(p, 0, n, span, height, drag)  # (the chords, for now)
+    vz[0] = (drag[0] - chord_prev) * inv_dt
+    for i in range(1, n):
+        vz[i] = (drag[i] - drag[i - 1]) * inv_dt
+    y = _jerk_chain(vz, drag, drag_b, y0)
+    for i in range(n):
+        drag[i] = drag_k * drag[i]
     return True, y
 
 
@@ -581,20 +614,21 @@ class MotionTensionEstimator:
         return self._estimate(x, y, d[2], settling, want, compact)
 
     # ------------------------------------------------------------------ core
-    def _buffers(self, n: int, drag_too: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The block's positions (3, n + 2) in memory kept from block to block (for blocks of
-        up to :data:`_KEEP` samples: a block's fresh pages cost more than the loop writing
-        them, in page faults), and its drag increments (n): there too if ``drag_too``, else
-        new (returned)."""
-        size = 3 * (n + 2) + (n if drag_too else 0)
+    def _buffers(self, n: int, drag_too: bool) -> tuple[NDArray[np.float64], ...]:
+        """The block's positions (3, n + 2) and n samples of working memory in memory kept
+        from block to block (for blocks of up to :data:`_KEEP` samples: a block's fresh
+        pages cost more than the loop writing them, in page faults), and its drag increments
+        (n): there too if ``drag_too``, else new (returned)."""
+        size = 3 * (n + 2) + n + (n if drag_too else 0)
         if n > _KEEP:
             buf = np.empty(size)
         else:
             if self._scratch.shape[0] < size:
-                self._scratch = np.empty(4 * n + 6)  # room for both
+                self._scratch = np.empty(5 * n + 6)  # room for all three
             buf = self._scratch
-        p = buf[:3 * (n + 2)].reshape(3, n + 2)
-        return p, (buf[3 * (n + 2):size] if drag_too else np.empty(n))
+        at = 3 * (n + 2)
+        return (buf[:at].reshape(3, n + 2), buf[at:at + n],
+                buf[at + n:size] if drag_too else np.empty(n))
 
     def _estimate(self, x, y, z, settling: int, want=None, compact: bool = False,
                   integrate: tuple[tuple[NDArray[np.float64], ...], DisplacementIntegrator]
@@ -608,7 +642,7 @@ class MotionTensionEstimator:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
         # the drag of every sample is returned unless only the wanted samples' are
-        p, drag = self._buffers(n, compact and want is not None)
+        p, work, drag = self._buffers(n, compact and want is not None)
         fresh = self._hist is None
         if not fresh:
             p[:, :2] = self._hist
@@ -622,7 +656,8 @@ class MotionTensionEstimator:
             if sos.shape[0] != 2:  # _advance holds the two sections' memory in registers
                 raise ValueError(f"the IMU integrator has {sos.shape[0]} sections, not 2")
         ok, jerk_y = _advance(p, fresh, *accel, sos, zi, c.span, c.height, c.dt,
-                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y, drag)
+                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y, drag,
+                              work)
         if not ok:
             raise ValueError("acceleration contains NaN or infinite values")
         # the quasi-static lookup (most of the cost of an estimate) of the wanted samples

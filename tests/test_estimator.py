@@ -359,3 +359,48 @@ def test_imu_integrated_in_the_estimator_loop_equals_the_integrator(vaps, jerk):
     with pytest.raises(ValueError, match="accel_y contains NaN"):
         fused.update_accel(m.accel_x[:50], bad, m.accel_z[:50])
     assert fused.state.to_dict() == before
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_jerk_ode_side_by_side_equals_one_step_after_the_other(plain):
+    # _jerk_chain runs a long block's ODE in four stretches side by side, the later three
+    # from a guess, redone until they meet the guessed runs: the same bits as
+    # models.dynamics' one-step-after-the-other loop, whether they meet at once (b = 30),
+    # late or never (b tiny: the ODE barely forgets its start), or trivially (b = inf)
+    from models import _jit
+    from models.dynamics import _jerk_steps
+    from models.estimator import _SIDE_BY_SIDE, _jerk_chain
+
+    rng = np.random.default_rng(3)
+    with _jit.uncompiled() if plain else contextlib.nullcontext():
+        for n in (_SIDE_BY_SIDE - 1, _SIDE_BY_SIDE, 4099):
+            t = np.arange(n) * 0.1
+            vz = 0.4 * np.sin(2 * np.pi * t / 6.0) + 0.05 * rng.normal(size=n)
+            for b, y0 in ((30.36, 0.02), (1e-9, -0.3), (math.inf, 0.0), (2.0, 0.0)):
+                ys, ref = np.empty(n), np.empty(n)
+                last = _jerk_chain(vz, ys, b, y0)
+                ref_last = _jerk_steps(vz, b, y0, ref)
+                np.testing.assert_array_equal(ys.view(np.int64), ref.view(np.int64))
+                assert np.float64(last).view(np.int64) == np.float64(ref_last).view(np.int64)
+
+
+def test_a_long_block_equals_the_same_samples_in_short_blocks(vaps):
+    # one 6000-sample block (the jerk ODE side by side) against 30 blocks of 200 (one step
+    # after the other), IMU and displacement inputs: every output and the state to the bit
+    cfg, qs = vaps
+    m = waves.buoy_motion(1.5, 5.25, 300.0, DT, seed=6, depth=23.0)
+    one, many = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    whole = one.update_accel(m.accel_x, m.accel_y, m.accel_z)
+    parts = [many.update_accel(m.accel_x[i:i + 200], m.accel_y[i:i + 200], m.accel_z[i:i + 200])
+             for i in range(0, m.t.size, 200)]
+    for a, b in zip(dataclasses.astuple(whole), zip(*map(dataclasses.astuple, parts))):
+        np.testing.assert_array_equal(a, np.concatenate(b))
+    assert one.state.to_dict() == many.state.to_dict()
+    assert np.std(whole.drag) > 0
+    one, many = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    whole = one.update(m.heave, m.surge, m.sway)
+    parts = [many.update(m.heave[i:i + 200], m.surge[i:i + 200], m.sway[i:i + 200])
+             for i in range(0, m.t.size, 200)]
+    np.testing.assert_array_equal(whole.tension, np.concatenate([p.tension for p in parts]))
+    np.testing.assert_array_equal(whole.drag, np.concatenate([p.drag for p in parts]))
+    assert one.state.to_dict() == many.state.to_dict()
