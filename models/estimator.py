@@ -690,7 +690,8 @@ class MotionTensionEstimator:
             flags[:settling] |= np.uint8(Flag.SETTLING)
             return Estimate(total, qs, axial, drag, angle, flags)
         if compact:
-            flags[:int(np.searchsorted(idx, settling))] |= np.uint8(Flag.SETTLING)
+            if settling:  # (the usual block settles nothing: no search)
+                flags[:int(np.searchsorted(idx, settling))] |= np.uint8(Flag.SETTLING)
             return Estimate(total, qs, axial, drag[idx], angle, flags)
         # every sample, the unwanted ones as not estimated (no axial increment, no flags)
         out = Estimate(np.full(n, np.nan), np.full(n, np.nan), np.zeros(n), drag,
