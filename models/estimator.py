@@ -36,7 +36,7 @@ from typing import Any, Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from models._jit import kernel
+from models._jit import float_bits, kernel
 from models.catenary import VAPS_DEPTH, Line, TensionTable, solve, vaps_mooring
 from models.dynamics import (
     ElasticDragCord,
@@ -147,17 +147,43 @@ class CatenaryQuasiStatic:
         self._box = (table.x[0], table.x[-1], table.z[0], table.z[-1])
 
     def __call__(self, x_offset: NDArray[np.float64], z_heave: NDArray[np.float64]):
-        x0, x1, z0, z1 = self._box
-        xs = self.span + x_offset
-        zs = self.height + z_heave
-        xc = np.clip(xs, x0, x1)
-        zc = np.clip(zs, z0, z1)
+        xs = self.span + np.asarray(x_offset, dtype=float)
+        zs = self.height + np.asarray(z_heave, dtype=float)
+        if xs.shape != zs.shape:
+            xs, zs = np.broadcast_arrays(xs, zs)
+        shape = xs.shape
+        xs, zs = xs.ravel(), zs.ravel()  # (a 1-D contiguous array itself, as the estimator's)
+        xc, zc, flags = np.empty(xs.shape), np.empty(xs.shape), np.empty(xs.shape, np.uint8)
+        _clamp_into(xs, zs, *self._box, xc, zc, flags)
         f = self.table.forces(xc, zc)
-        flags = ((xc != xs) | (zc != zs)).astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
-        flags |= (f.h <= 0.0).astype(np.uint8) * np.uint8(Flag.SLACK)
-        lifted = f.v - self._line_weight > self.anchor_uplift_limit_N
-        flags |= lifted.astype(np.uint8) * np.uint8(Flag.ANCHOR_LIFTED)
-        return f.t, f.h, f.v, flags
+        _force_flags(f.h, f.v, self._line_weight, self.anchor_uplift_limit_N, flags)
+        return (f.t.reshape(shape), f.h.reshape(shape), f.v.reshape(shape),
+                flags.reshape(shape))
+
+
+@kernel()
+def _clamp_into(xs, zs, x0, x1, z0, z1, xc, zc, flags):
+    """xc, zc: the points clamped into the box [x0, x1] x [z0, z1] as ``np.clip`` does (its
+    comparisons: NaN stays NaN); flags: OUT_OF_RANGE where a point moved, else 0."""
+    for i in range(xs.size):
+        x, z = xs[i], zs[i]
+        cx = x if x != x or x > x0 else x0
+        cx = cx if cx != cx or cx < x1 else x1
+        cz = z if z != z or z > z0 else z0
+        cz = cz if cz != cz or cz < z1 else z1
+        xc[i], zc[i] = cx, cz
+        flags[i] = 8 if cx != x or cz != z else 0  # Flag.OUT_OF_RANGE
+
+
+@kernel()
+def _force_flags(h, v, line_weight, uplift_limit, flags):
+    """Adds SLACK (no horizontal tension) and ANCHOR_LIFTED (the line pulls the anchor up by
+    more than ``uplift_limit``) to ``flags`` from the fairlead forces ``h, v``."""
+    for i in range(h.size):
+        if h[i] <= 0.0:
+            flags[i] |= 1  # Flag.SLACK
+        if v[i] - line_weight > uplift_limit:
+            flags[i] |= 2  # Flag.ANCHOR_LIFTED
 
 
 @dataclass(frozen=True)
@@ -278,7 +304,8 @@ _AXIAL_MODES = {"none": 0, "finite": 1, "infinite": 2}
 _NO_ACCEL, _NO_SOS, _NO_ZI = np.empty(0), np.zeros((2, 6)), np.zeros((3, 2, 2))
 
 
-_CHUNK = 256  # samples whose chords are taken in one vectorised pass
+_SIDE_BY_SIDE = 1024  # samples from which the jerk ODE runs in four stretches side by side
+_KEEP = 1 << 17  # samples of a block whose working memory an estimator keeps for the next
 
 
 @kernel(inline="always")
@@ -318,26 +345,67 @@ def _chords(p, a, b, span, height, out):
 
 
 @kernel()
+def _jerk_chain(vz, ys, b, y0):
+    """The jerk ODE's states over the support speeds ``vz`` into ``ys`` from ``y0``
+    (:func:`models.dynamics.jerk_step` one sample after the other); returns the last.
+
+    Speed: each step waits for the one before (a square root and a division: their latency
+    sets the pace, the core idles meanwhile), so a long block is cut in four stretches
+    stepped side by side, the later three from a guess (rest); then each is redone from the
+    true end of the one before until it meets its guessed run bit for bit (the ODE forgets
+    its start within some ten steps: each step scales a difference by 2 s / (2 s + b),
+    s = sqrt|y|), from where the guessed run is the true one (the same operations on the
+    same values). Should they never meet, the redone run goes on to the stretch's end: the
+    same bits always.
+    """
+    n = vz.size
+    q = n // 4 if n >= _SIDE_BY_SIDE else 0  # the stretches' length (0: one after the other)
+    y = y0
+    if q == 0:
+        for i in range(n):
+            y = jerk_step(y, vz[i], b)
+            ys[i] = y
+        return y
+    y1 = y2 = y3 = 0.0
+    for k in range(q):
+        y = jerk_step(y, vz[k], b)
+        ys[k] = y
+        y1 = jerk_step(y1, vz[q + k], b)
+        ys[q + k] = y1
+        y2 = jerk_step(y2, vz[2 * q + k], b)
+        ys[2 * q + k] = y2
+        y3 = jerk_step(y3, vz[3 * q + k], b)
+        ys[3 * q + k] = y3
+    for i in range(4 * q, n):
+        y3 = jerk_step(y3, vz[i], b)
+        ys[i] = y3
+    for start, end, guessed_end in ((q, 2 * q, y1), (2 * q, 3 * q, y2), (3 * q, n, y3)):
+        for i in range(start, end):
+            y = jerk_step(y, vz[i], b)
+            if float_bits(y) == float_bits(ys[i]):  # met: the guessed run from here on
+                y = guessed_end
+                break
+            ys[i] = y
+    return y
+
+
+@kernel()
 def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, drag_b, y0,
-             total, qs, axial, drag, angle, flags):
-    """The stream over a block: every sample's position and drag increment, the other
-    outputs as for a sample not wanted (NaN tension, quasi-static and angle, no axial
-    increment, no flags; :func:`_wanted` then fills the wanted ones). Returns (ok, jerk
-    state); ok False, nothing changed, if an acceleration is NaN or infinite.
+             drag, vz):
+    """The stream over a block: every sample's position (into ``p``) and drag increment
+    (into ``drag``, n samples; :func:`_wanted` then estimates the wanted samples); ``vz``:
+    n samples of working memory. Returns (ok, jerk state); ok False, nothing changed, if an
+    acceleration is NaN or infinite.
 
     p: (3, n + 2) surge, sway, heave with the two previous samples first (set here for a
     ``fresh`` stream, which starts at rest). The positions are given in ``p``, or, when
     ``ax, ay, az`` hold the block's n IMU accelerations, integrated here sample by sample
     through the integrator's two second-order sections ``sos`` (its fourth-order high-pass)
     with memory ``zi`` (:func:`models.imu.sos_step`'s operations, the memory in registers).
-
-    Speed: the jerk ODE is one chain of dependent operations (a square root and a division
-    per sample: its latency sets the pace), so the rest runs beside it: the samples go in
-    chunks, a chunk's chords in one vectorised pass, then its jerk steps in one loop with
-    the next chunk's integration (independent of them). Every value is computed by the same
-    operations from the same inputs as one sample after the other: the same bits.
+    Then the chords |anchor -> fairlead| in one vectorised pass, their differences (the
+    support speeds) and the jerk ODE over them (:func:`_jerk_chain`).
     """
-    n = total.size
+    n = drag.size
     integrate = az.size == n
     if integrate:
         bad = False
@@ -345,62 +413,48 @@ def _advance(p, fresh, ax, ay, az, sos, zi, span, height, dt, drag_on, drag_k, d
             bad |= ((ax[i] - ax[i]) != 0.0) | ((ay[i] - ay[i]) != 0.0) | ((az[i] - az[i]) != 0.0)
         if bad:
             return False, y0
-    for i in range(n):
-        total[i] = math.nan
-        qs[i] = math.nan
-        axial[i] = 0.0
-        angle[i] = math.nan
-        flags[i] = 0
-    # the sections' coefficients and memory in registers (stores into ``p`` could alias them)
-    c = (sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5],
-         sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5])
-    m = (zi[0, 0, 0], zi[0, 0, 1], zi[0, 1, 0], zi[0, 1, 1],
-         zi[1, 0, 0], zi[1, 0, 1], zi[1, 1, 0], zi[1, 1, 1],
-         zi[2, 0, 0], zi[2, 0, 1], zi[2, 1, 0], zi[2, 1, 1])
-    ahead = min(_CHUNK, n) if integrate else 0  # samples integrated ahead of the jerk steps
-    for i in range(ahead):
-        m = _integrate(c, m, ax, ay, az, i, p)
-    if fresh:
-        for ch in range(3):
-            p[ch, 0] = p[ch, 2]
-            p[ch, 1] = p[ch, 2]
-    inv_dt = 1.0 / dt
-    y = y0
-    xs = span + p[0, 1]
-    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
-    chord = np.empty(min(_CHUNK, n))
-    for a in range(0, n, _CHUNK):
-        size = min(_CHUNK, n - a)
-        nxt = min(_CHUNK, n - ahead) if integrate else 0  # the next chunk's (at most size)
-        if drag_on:
-            _chords(p, a, a + size, span, height, chord)
-            for k in range(size):
-                y = jerk_step(y, (chord[k] - chord_prev) * inv_dt, drag_b)
-                chord_prev = chord[k]
-                drag[a + k] = drag_k * y
-                if k < nxt:
-                    m = _integrate(c, m, ax, ay, az, ahead + k, p)
-        else:
-            for k in range(size):
-                drag[a + k] = 0.0
-            for k in range(nxt):
-                m = _integrate(c, m, ax, ay, az, ahead + k, p)
-        ahead += nxt
-    if integrate:
+        # the sections' coefficients and memory in registers (stores into ``p`` could
+        # alias them)
+        c = (sos[0, 0], sos[0, 1], sos[0, 2], sos[0, 4], sos[0, 5],
+             sos[1, 0], sos[1, 1], sos[1, 2], sos[1, 4], sos[1, 5])
+        m = (zi[0, 0, 0], zi[0, 0, 1], zi[0, 1, 0], zi[0, 1, 1],
+             zi[1, 0, 0], zi[1, 0, 1], zi[1, 1, 0], zi[1, 1, 1],
+             zi[2, 0, 0], zi[2, 0, 1], zi[2, 1, 0], zi[2, 1, 1])
+        for i in range(n):
+            m = _integrate(c, m, ax, ay, az, i, p)
         k = 0
         for ch in range(3):
             for sec in range(2):
                 zi[ch, sec, 0] = m[k]
                 zi[ch, sec, 1] = m[k + 1]
                 k += 2
+    if fresh:
+        for ch in range(3):
+            p[ch, 0] = p[ch, 2]
+            p[ch, 1] = p[ch, 2]
+    if not drag_on:
+        for i in range(n):
+            drag[i] = 0.0
+        return True, y0
+    inv_dt = 1.0 / dt
+    xs = span + p[0, 1]
+    chord_prev = math.sqrt(xs * xs + p[1, 1] ** 2 + (height + p[2, 1]) ** 2)
+    _chords(p, 0, n, span, height, drag)  # (the chords, for now)
+    vz[0] = (drag[0] - chord_prev) * inv_dt
+    for i in range(1, n):
+        vz[i] = (drag[i] - drag[i - 1]) * inv_dt
+    y = _jerk_chain(vz, drag, drag_b, y0)
+    for i in range(n):
+        drag[i] = drag_k * drag[i]
     return True, y
 
 
 @kernel()
 def _wanted(p, idx, t_qs, h, v, qflags, span, dt, axial_mode, axial_gain, drag_on, tan_flat,
-            total, qs, axial, drag, angle, flags):
+            drag, total, qs, axial, angle, flags):
     """The estimates of the samples ``idx`` (see the module docstring), whose quasi-static
-    ``t_qs, h, v, qflags`` are given in order, after :func:`_advance`."""
+    ``t_qs, h, v, qflags`` are given in order, after :func:`_advance`: the k-th wanted
+    sample's into ``total[k]``, ``qs[k]``, ``axial[k]``, ``angle[k]``, ``flags[k]``."""
     inv_dt = 1.0 / dt
     for k in range(idx.size):
         i = idx[k]
@@ -428,11 +482,11 @@ def _wanted(p, idx, t_qs, h, v, qflags, span, dt, axial_mode, axial_gain, drag_o
         if tot <= 0.0:
             tot = 0.0
             f |= 1  # Flag.SLACK
-        total[i] = tot
-        qs[i] = tq
-        axial[i] = a_i
-        angle[i] = math.atan2(vi, hi)
-        flags[i] = f
+        total[k] = tot
+        qs[k] = tq
+        axial[k] = a_i
+        angle[k] = math.atan2(vi, hi)
+        flags[k] = f
 
 
 class MotionTensionEstimator:
@@ -460,6 +514,7 @@ class MotionTensionEstimator:
         self._settling = int(st.settling)
         self._imu_saved = st.imu
         self._imu: DisplacementIntegrator | None = None
+        self._scratch = np.empty(0)  # working memory kept between blocks (_buffers)
         c = config
         self._axial_mode = _AXIAL_MODES[c.axial_model]
         if c.axial_model == "finite":
@@ -501,6 +556,7 @@ class MotionTensionEstimator:
         sway: ArrayLike,
         heading_deg: ArrayLike | None = None,
         want: NDArray[np.bool_] | None = None,
+        compact: bool = False,
     ) -> Estimate:
         """Estimate tension for a block of displacements (m) in the motion frame.
 
@@ -511,13 +567,16 @@ class MotionTensionEstimator:
         needed; the others come back as NaN. The stream state advances over every sample
         either way, so the wanted samples get exactly the values a full estimate gives (the
         quasi-static lookup, most of the cost, is skipped for the rest).
+        ``compact``: the wanted samples' estimates only, in order (arrays of as many values
+        as ``want`` holds True; their SETTLING flags as in the full estimate): for a caller
+        wanting few samples of a long block, no per-sample arrays for the others.
         """
         z = _as_block("heave", heave, None)
         x = _as_block("surge", surge, z.size)
         y = _as_block("sway", sway, z.size)
         if heading_deg is not None:
             x, y = _rotate(x, y, heading_deg, z.size)
-        return self._estimate(x, y, z, 0, _want_mask(want, z.size))
+        return self._estimate(x, y, z, 0, _want_mask(want, z.size), compact)
 
     def update_accel(
         self,
@@ -526,6 +585,7 @@ class MotionTensionEstimator:
         accel_z: ArrayLike,
         heading_deg: ArrayLike | None = None,
         want: NDArray[np.bool_] | None = None,
+        compact: bool = False,
     ) -> Estimate:
         """As :meth:`update` from IMU accelerations (m/s^2, gravity removed, motion frame),
         double-integrated without drift by :class:`models.imu.DisplacementIntegrator`.
@@ -542,7 +602,7 @@ class MotionTensionEstimator:
         want = _want_mask(want, az.size)
         try:
             if heading_deg is None:  # integrated in the estimator's loop
-                return self._estimate(None, None, None, settling, want, (a, self._imu))
+                return self._estimate(None, None, None, settling, want, compact, (a, self._imu))
             d = self._imu.update(np.stack(a))
         except ValueError:
             if all(np.all(np.isfinite(row)) for row in a):  # not the input's (the model's)
@@ -551,10 +611,26 @@ class MotionTensionEstimator:
                 _as_block(name, row, az.size)  # names the field
             raise
         x, y = _rotate(d[0], d[1], heading_deg, az.size)
-        return self._estimate(x, y, d[2], settling, want)
+        return self._estimate(x, y, d[2], settling, want, compact)
 
     # ------------------------------------------------------------------ core
-    def _estimate(self, x, y, z, settling: int, want=None,
+    def _buffers(self, n: int, drag_too: bool) -> tuple[NDArray[np.float64], ...]:
+        """The block's positions (3, n + 2) and n samples of working memory in memory kept
+        from block to block (for blocks of up to :data:`_KEEP` samples: a block's fresh
+        pages cost more than the loop writing them, in page faults), and its drag increments
+        (n): there too if ``drag_too``, else new (returned)."""
+        size = 3 * (n + 2) + n + (n if drag_too else 0)
+        if n > _KEEP:
+            buf = np.empty(size)
+        else:
+            if self._scratch.shape[0] < size:
+                self._scratch = np.empty(5 * n + 6)  # room for all three
+            buf = self._scratch
+        at = 3 * (n + 2)
+        return (buf[:at].reshape(3, n + 2), buf[at:at + n],
+                buf[at + n:size] if drag_too else np.empty(n))
+
+    def _estimate(self, x, y, z, settling: int, want=None, compact: bool = False,
                   integrate: tuple[tuple[NDArray[np.float64], ...], DisplacementIntegrator]
                   | None = None) -> Estimate:
         """``settling``: how many of the first samples the IMU integrator still settles;
@@ -565,7 +641,8 @@ class MotionTensionEstimator:
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
-        p = np.empty((3, n + 2))
+        # the drag of every sample is returned unless only the wanted samples' are
+        p, work, drag = self._buffers(n, compact and want is not None)
         fresh = self._hist is None
         if not fresh:
             p[:, :2] = self._hist
@@ -578,26 +655,26 @@ class MotionTensionEstimator:
             sos, zi = imu.loop_state()
             if sos.shape[0] != 2:  # _advance holds the two sections' memory in registers
                 raise ValueError(f"the IMU integrator has {sos.shape[0]} sections, not 2")
-        total, qs, axial, drag, angle = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                                         np.empty(n))
-        flags = np.empty(n, np.uint8)
         ok, jerk_y = _advance(p, fresh, *accel, sos, zi, c.span, c.height, c.dt,
-                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y,
-                              total, qs, axial, drag, angle, flags)
+                              c.drag is not None, self._drag_k, self._drag_b, self._jerk_y, drag,
+                              work)
         if not ok:
             raise ValueError("acceleration contains NaN or infinite values")
         # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
         idx = np.arange(n) if want is None else np.flatnonzero(want)
+        m = idx.shape[0]
         x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
-        if idx.shape[0] < n:  # (every sample wanted: the rows themselves, no copies)
+        if m < n:  # (every sample wanted: the rows themselves, no copies)
             x, y, z = x[idx], y[idx], z[idx]
         x_off = np.hypot(c.span + x, y) - c.span
         t_qs, h, v, qflags = self.quasi_static(x_off, z)
+        total, qs, axial, angle = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+        flags = np.empty(m, np.uint8)
         _wanted(p, idx, np.ascontiguousarray(t_qs, dtype=float),
                 np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(v, dtype=float),
                 np.ascontiguousarray(qflags, dtype=np.uint8), c.span, c.dt, self._axial_mode,
                 self._axial_gain, c.drag is not None, self._tan_flat,
-                total, qs, axial, drag, angle, flags)
+                drag, total, qs, axial, angle, flags)
         # the stream moves on only now (the quasi-static model may raise)
         if integrate is not None:
             integrate[1].advance(zi, n)
@@ -606,12 +683,24 @@ class MotionTensionEstimator:
             self._settling = 2
         # SETTLING marks a block's first samples only (callers may rely on it)
         settling = max(settling, self._settling)
-        if settling:
-            flags[:settling] |= np.uint8(Flag.SETTLING)
         self._settling = max(self._settling - n, 0)
         self._hist = p[:, -2:].copy()
         self._seen += n
-        return Estimate(total, qs, axial, drag, angle, flags)
+        if m == n:
+            flags[:settling] |= np.uint8(Flag.SETTLING)
+            return Estimate(total, qs, axial, drag, angle, flags)
+        if compact:
+            if settling:  # (the usual block settles nothing: no search)
+                flags[:int(np.searchsorted(idx, settling))] |= np.uint8(Flag.SETTLING)
+            return Estimate(total, qs, axial, drag[idx], angle, flags)
+        # every sample, the unwanted ones as not estimated (no axial increment, no flags)
+        out = Estimate(np.full(n, np.nan), np.full(n, np.nan), np.zeros(n), drag,
+                       np.full(n, np.nan), np.zeros(n, np.uint8))
+        for full, part in ((out.tension, total), (out.quasi_static, qs), (out.axial, axial),
+                           (out.top_angle, angle), (out.flags, flags)):
+            full[idx] = part
+        out.flags[:settling] |= np.uint8(Flag.SETTLING)
+        return out
 
 
 def _want_mask(want, n: int) -> NDArray[np.bool_] | None:

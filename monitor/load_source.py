@@ -38,9 +38,11 @@ class MotionEstimator(Protocol):
     def feed(self, t_ns: np.ndarray, fields: Mapping[str, np.ndarray],
              want: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Accepted motion samples in time order -> ``(t_ns, tension_N, clamped)`` of the
-        estimate; only the samples in the boolean mask ``want`` (all if None) get a value, the
-        others are NaN. ``clamped`` marks estimates of motion outside the model's range, held
-        at the value at its edge."""
+        estimate of the samples in the boolean mask ``want`` (all if None) and, NaN if not
+        wanted, of the newest sample of each run between the stream's rate events (the
+        block's newest dates the stream's newest estimate); settling samples give none.
+        ``clamped`` marks estimates of motion outside the model's range, held at the value at
+        its edge."""
         ...
 
     def state(self) -> dict[str, Any]: ...
@@ -169,22 +171,32 @@ class _ModelsEstimator:
             if self.waiting:  # the step is not known yet: the samples wait for it
                 self.pending += np.column_stack([fields[k] for k in self._fields]).tolist()
             return _EMPTY  # (else withheld: the stream is not at the configured rate)
+        newest_unwanted = False
+        if want is not None and not want[-1]:  # estimated all the same, returned as NaN
+            want, newest_unwanted = want.copy(), True
+            want[-1] = True
+        # the wanted samples' estimates only (compact), in order
         flags, tension = self._update(fields, want)
+        if want is not None:
+            t_ns = t_ns[want]
         # the model flags a block's first samples only as SETTLING
         settled = 0
         if flags.shape[0] and flags[0] & self._est.Flag.SETTLING:
             settled = int(np.count_nonzero(flags & np.uint8(self._est.Flag.SETTLING)))
         clamped = (flags[settled:] & np.uint8(self._est.Flag.OUT_OF_RANGE)) != 0
+        if newest_unwanted and flags.shape[0] > settled:
+            tension[-1], clamped[-1] = np.nan, False
         return t_ns[settled:], tension[settled:], clamped
 
     def _update(self, fields: Mapping[str, np.ndarray],
                 want: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """(flags, tension) of the wanted samples (all if ``want`` is None)."""
         if self.sensor == "imu":
             e = self.model.update_accel(fields["accel_x_mps2"], fields["accel_y_mps2"],
-                                        fields["accel_z_mps2"], want=want)
+                                        fields["accel_z_mps2"], want=want, compact=True)
         else:
             e = self.model.update(fields["heave_m"], fields["surge_m"], fields["sway_m"],
-                                  want=want)
+                                  want=want, compact=True)
         return e.flags, e.tension
 
     def rate_figures(self) -> dict[str, Any]:

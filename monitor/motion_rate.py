@@ -47,8 +47,12 @@ GAP, STEP, WITHHOLD, RESUME = "gap", "step", "withhold", "resume"
 def _intervals(t_ns: np.ndarray, prev: np.int64 | int, first: bool) -> np.ndarray:
     """Intervals (ns) before each sample of ``t_ns``, the first from ``prev``, or without it
     (``first``: the stream's first sample has none)."""
-    d = np.diff(t_ns, prepend=prev)
-    return d[1:] if first else d
+    if first:
+        return t_ns[1:] - t_ns[:-1]
+    d = np.empty_like(t_ns)
+    d[0] = t_ns[0] - prev
+    np.subtract(t_ns[1:], t_ns[:-1], out=d[1:])
+    return d
 
 
 @kernel(nogil=True)

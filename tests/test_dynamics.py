@@ -177,3 +177,46 @@ def test_seed004_line_resonates_in_its_wave_band():
     assert scr.natural_periods[0] == pytest.approx(7.35, abs=0.01)
     np.testing.assert_array_equal(periods[scr.near], [3.6, 6.9, 7.45])  # 3.6 s: mode 2 (3.67 s)
     assert scr.nearest_mode[0] == 2 and np.all(scr.nearest_mode[6:8] == 1)
+
+
+def _jerk_step_full_form(y, vz, b):
+    """jerk_step as first written (the reference its halved form must equal to the bit)."""
+    if math.isinf(b):
+        return vz * abs(vz)
+    c = y + b * vz
+    ac = abs(c)
+    s = 2.0 * ac / (b + math.sqrt(b * b + 4.0 * ac))
+    return s * s if c >= 0.0 else -s * s
+
+
+def _steps(ys, vs, b, out):  # jerk_step on each (y, vz) pair (compiled in the test below)
+    for i in range(ys.size):
+        out[i] = dyn.jerk_step(ys[i], vs[i], b)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_jerk_step_equals_its_full_form_to_the_bit(compiled):
+    # the halved form (one multiplication less in the ODE's chain) must round exactly as the
+    # full form: physical steps, and magnitudes from subnormal to near overflow, both signs,
+    # zeros, at b inside and just outside the halved form's bounds
+    from models import _jit
+
+    rng = np.random.default_rng(11)
+    mags = 10.0 ** rng.uniform(-320, 308, 4000) * rng.choice([-1.0, 1.0], 4000)
+    special = np.array([0.0, -0.0, 5e-324, -5e-324, 2.0 ** -1022, 1.7e308, -1.7e308, 2.0 ** 1000,
+                        2.0 ** 1001, -(2.0 ** 1000)])
+    ys = np.concatenate([rng.normal(0.0, 0.5, 4000), mags, np.repeat(special, special.size)])
+    vs = np.concatenate([rng.normal(0.0, 0.5, 4000), rng.permutation(mags),
+                         np.tile(special, special.size)])
+    run = _jit.numba_module().njit(_steps) if compiled else _steps
+    tiny = 1.3 * 2.0 ** -520  # b^2 subnormal: the halved form would round otherwise
+    ys = np.concatenate([ys, rng.uniform(-4.0, 4.0, 2000) * tiny * tiny])
+    vs = np.concatenate([vs, np.zeros(2000)])
+    for b in (30.36, 0.5, 3e-3, 2.0 ** -500, 2.0 ** 500, 2.0 ** -501, 2.0 ** 501, tiny,
+              1.3 * 2.0 ** 512, 1e-300, 1e300, math.inf):
+        out = np.empty(ys.size)
+        with np.errstate(all="ignore"):
+            run(ys, vs, b, out)
+            ref = np.array([_jerk_step_full_form(float(y), float(v), b) for y, v in zip(ys, vs)])
+        same = (out.view(np.int64) == ref.view(np.int64)) | (np.isnan(out) & np.isnan(ref))
+        assert same.all(), (b, ys[~same][:3], vs[~same][:3])

@@ -1,5 +1,6 @@
 """Motion -> tension estimator: quasi-static limit, dynamic increments, flags, state, IMU path."""
 
+import contextlib
 import dataclasses
 import itertools
 import json
@@ -12,6 +13,7 @@ import pytest
 from models import waves
 from models.dynamics import ElasticDragCord, axial_impedance, drag_constant
 from models.estimator import (
+    CatenaryQuasiStatic,
     EstimatorConfig,
     EstimatorState,
     Flag,
@@ -21,6 +23,7 @@ from models.estimator import (
     seed004_estimator,
     simulate_tension,
 )
+from models.estimator import _force_flags
 from models.catenary import solve, vaps_mooring
 
 SHARED = next(
@@ -158,6 +161,58 @@ def test_slow_motion_reproduces_catenary_seed004(vaps):
     assert not np.any(est.flags[2:] & (Flag.SLACK | Flag.OUT_OF_RANGE | Flag.ANCHOR_LIFTED))
 
 
+def _quasi_static_numpy(qs, x_offset, z_heave):
+    """CatenaryQuasiStatic as first written in numpy (the reference of its compiled flags)."""
+    x0, x1, z0, z1 = qs._box
+    xs, zs = qs.span + x_offset, qs.height + z_heave
+    xc, zc = np.clip(xs, x0, x1), np.clip(zs, z0, z1)
+    f = qs.table.forces(xc, zc)
+    flags = ((xc != xs) | (zc != zs)).astype(np.uint8) * np.uint8(Flag.OUT_OF_RANGE)
+    flags |= (f.h <= 0.0).astype(np.uint8) * np.uint8(Flag.SLACK)
+    lifted = f.v - qs._line_weight > qs.anchor_uplift_limit_N
+    flags |= lifted.astype(np.uint8) * np.uint8(Flag.ANCHOR_LIFTED)
+    return f.t, f.h, f.v, flags
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_catenary_quasi_static_equals_the_numpy_form(vaps, plain):
+    # inside, on and beyond every edge of the table (clamped, OUT_OF_RANGE), slack and
+    # anchor-lifting positions, broadcast shapes; NaN is outside (the table's error)
+    _, qs = vaps
+    from models import _jit
+
+    x0, x1, z0, z1 = qs._box
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(x0 - 2, x1 + 2, 3000) - qs.span,
+                        [x0 - qs.span, x1 - qs.span, -qs.span, np.inf, -np.inf]])
+    z = np.concatenate([rng.uniform(z0 - 2, z1 + 2, 3000) - qs.height,
+                        [z0 - qs.height, z1 - qs.height, 0.0, 0.0, 0.0]])
+    lifting = CatenaryQuasiStatic(qs.table, qs.span, qs.height, 300.0)  # lifts at rest
+    with _jit.uncompiled() if plain else contextlib.nullcontext():
+        for model in (qs, lifting):
+            got, ref = model(x, z), _quasi_static_numpy(model, x, z)
+            for a, b in zip(got, ref):
+                np.testing.assert_array_equal(a, b)
+            assert got[3].dtype == np.uint8 and got[3].shape == x.shape
+            assert np.any(got[3] == Flag.OUT_OF_RANGE | Flag.ANCHOR_LIFTED)
+        assert not np.all(qs(x, z)[3] & Flag.ANCHOR_LIFTED)  # (lifting: every sample)
+        # broadcast: one heave for every offset, and a 2-D block
+        for a, b in zip(qs(x[:50], 0.25), _quasi_static_numpy(qs, x[:50], 0.25)):
+            np.testing.assert_array_equal(a, b)
+        grid = (x[:60].reshape(6, 10), z[:60].reshape(6, 10))
+        for a, b in zip(qs(*grid), _quasi_static_numpy(qs, *grid)):
+            np.testing.assert_array_equal(a, b)
+        with pytest.raises(ValueError, match="NaN counts as outside"):
+            qs(np.array([0.0, np.nan]), np.zeros(2))
+        with pytest.raises(ValueError, match="NaN counts as outside"):
+            qs(np.zeros(2), np.array([np.nan, 0.0]))
+        # the slack column (H <= 0) lies outside this table: the flags by hand
+        flags = np.array([0, 8, 0, 0, 8], np.uint8)
+        _force_flags(np.array([-1.0, 0.0, 1e-300, 5.0, 5.0]),
+                     np.array([0.0, 0.0, 10.0, 10.0 + 300.0, 10.0 + 300.5]), 10.0, 300.0, flags)
+        np.testing.assert_array_equal(flags, [1, 9, 0, 0, 10])
+
+
 def test_seed004_flags_and_dynamics_in_waves(vaps):
     cfg, qs = vaps
     # Off the table: clamped and flagged.
@@ -203,6 +258,13 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         sl = slice(i, i + 40)
         want = rng.random(m.accel_z[sl].size) < 0.3
         a = full.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl])
+        if i % 80:  # every other block compact: the wanted samples' estimates only
+            c = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want,
+                                  compact=True)
+            for got, ref in zip(dataclasses.astuple(c), dataclasses.astuple(a)):
+                np.testing.assert_array_equal(got, ref[want])
+            assert c.flags.dtype == np.uint8
+            continue
         b = part.update_accel(m.accel_x[sl], m.accel_y[sl], m.accel_z[sl], want=want)
         np.testing.assert_array_equal(b.tension[want], a.tension[want])
         np.testing.assert_array_equal(b.flags[want], a.flags[want])
@@ -214,6 +276,15 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         assert np.isnan(b.top_angle[~want]).all() and (b.axial[~want] == 0).all()
         # the first samples settle, the others carry no flags
         assert ((b.flags[~want] & ~np.uint8(Flag.SETTLING)) == 0).all()
+    assert part.state.to_dict() == full.state.to_dict()
+    # displacements, compact, the first block settling (its first two samples SETTLING)
+    full, part = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    want = np.arange(40) % 3 == 1
+    for sl in (slice(0, 40), slice(40, 80)):
+        a = full.update(m.heave[sl], m.surge[sl], m.sway[sl])
+        c = part.update(m.heave[sl], m.surge[sl], m.sway[sl], want=want, compact=True)
+        for got, ref in zip(dataclasses.astuple(c), dataclasses.astuple(a)):
+            np.testing.assert_array_equal(got, ref[want])
     assert part.state.to_dict() == full.state.to_dict()
     with pytest.raises(ValueError, match="want must be a boolean mask of 3 samples"):
         part.update(np.zeros(3), np.zeros(3), np.zeros(3), want=np.ones(2, bool))
@@ -288,3 +359,48 @@ def test_imu_integrated_in_the_estimator_loop_equals_the_integrator(vaps, jerk):
     with pytest.raises(ValueError, match="accel_y contains NaN"):
         fused.update_accel(m.accel_x[:50], bad, m.accel_z[:50])
     assert fused.state.to_dict() == before
+
+
+@pytest.mark.parametrize("plain", [False, True])
+def test_jerk_ode_side_by_side_equals_one_step_after_the_other(plain):
+    # _jerk_chain runs a long block's ODE in four stretches side by side, the later three
+    # from a guess, redone until they meet the guessed runs: the same bits as
+    # models.dynamics' one-step-after-the-other loop, whether they meet at once (b = 30),
+    # late or never (b tiny: the ODE barely forgets its start), or trivially (b = inf)
+    from models import _jit
+    from models.dynamics import _jerk_steps
+    from models.estimator import _SIDE_BY_SIDE, _jerk_chain
+
+    rng = np.random.default_rng(3)
+    with _jit.uncompiled() if plain else contextlib.nullcontext():
+        for n in (_SIDE_BY_SIDE - 1, _SIDE_BY_SIDE, 4099):
+            t = np.arange(n) * 0.1
+            vz = 0.4 * np.sin(2 * np.pi * t / 6.0) + 0.05 * rng.normal(size=n)
+            for b, y0 in ((30.36, 0.02), (1e-9, -0.3), (math.inf, 0.0), (2.0, 0.0)):
+                ys, ref = np.empty(n), np.empty(n)
+                last = _jerk_chain(vz, ys, b, y0)
+                ref_last = _jerk_steps(vz, b, y0, ref)
+                np.testing.assert_array_equal(ys.view(np.int64), ref.view(np.int64))
+                assert np.float64(last).view(np.int64) == np.float64(ref_last).view(np.int64)
+
+
+def test_a_long_block_equals_the_same_samples_in_short_blocks(vaps):
+    # one 6000-sample block (the jerk ODE side by side) against 30 blocks of 200 (one step
+    # after the other), IMU and displacement inputs: every output and the state to the bit
+    cfg, qs = vaps
+    m = waves.buoy_motion(1.5, 5.25, 300.0, DT, seed=6, depth=23.0)
+    one, many = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    whole = one.update_accel(m.accel_x, m.accel_y, m.accel_z)
+    parts = [many.update_accel(m.accel_x[i:i + 200], m.accel_y[i:i + 200], m.accel_z[i:i + 200])
+             for i in range(0, m.t.size, 200)]
+    for a, b in zip(dataclasses.astuple(whole), zip(*map(dataclasses.astuple, parts))):
+        np.testing.assert_array_equal(a, np.concatenate(b))
+    assert one.state.to_dict() == many.state.to_dict()
+    assert np.std(whole.drag) > 0
+    one, many = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    whole = one.update(m.heave, m.surge, m.sway)
+    parts = [many.update(m.heave[i:i + 200], m.surge[i:i + 200], m.sway[i:i + 200])
+             for i in range(0, m.t.size, 200)]
+    np.testing.assert_array_equal(whole.tension, np.concatenate([p.tension for p in parts]))
+    np.testing.assert_array_equal(whole.drag, np.concatenate([p.drag for p in parts]))
+    assert one.state.to_dict() == many.state.to_dict()

@@ -144,3 +144,36 @@ def test_a_gap_longer_than_stale_restarts_the_estimator():
         out_b = b.feed(t[cut:], {k: v[cut:] for k, v in f.items()})
         assert np.array_equal(np.concatenate([out_a[0], out_b[0]]), e_t)
         assert np.array_equal(np.concatenate([out_a[1], out_b[1]]), e_v)
+
+
+def test_feed_returns_the_wanted_estimates_and_the_newest_sample():
+    """With a ``want`` mask the estimator returns the wanted samples' estimates, bit for bit
+    those of a feed wanting every sample, and the newest sample of the block (NaN when not
+    wanted: the status dates the stream's newest estimate by it); the stream state is the
+    same either way. The settling samples (a stream's first two) give none."""
+    cfg = default_config()
+    t, f = _displacement(300, 0.0, 0.0)
+    every = build_estimator(cfg, sensor="motion")
+    ref_t, ref_v, ref_c = every.feed(t, f)
+    some = build_estimator(cfg, sensor="motion")
+    rng = np.random.default_rng(7)
+    got = []
+    for a, b in ((0, 100), (100, 220), (220, 300)):
+        want = rng.random(b - a) < 0.2
+        want[0] = True  # the block's first (settling in the first block: no estimate)
+        want[-1] = b == 300  # the last block's newest is wanted, the others' not
+        e_t, e_v, e_c = some.feed(t[a:b], {k: v[a:b] for k, v in f.items()}, want)
+        first = 2 if a == 0 else 0
+        expected = np.flatnonzero(want)
+        expected = np.append(expected[expected >= first], b - a - 1) if b < 300 else \
+            expected[expected >= first]
+        np.testing.assert_array_equal(e_t, t[a:b][expected])
+        ref = np.searchsorted(ref_t, e_t)
+        np.testing.assert_array_equal(e_v[:-1], ref_v[ref[:-1]])
+        np.testing.assert_array_equal(e_c, ref_c[ref] & ~np.isnan(e_v))
+        if b < 300:
+            assert np.isnan(e_v[-1]) and not e_c[-1]
+        else:
+            assert e_v[-1] == ref_v[-1]
+        got.append(e_v)
+    assert every.state() == some.state()
