@@ -242,6 +242,73 @@ def _fail_codes(flags):  # pragma: no cover - compiled
 # samples per pass of _check_usual: its scratch (about 30 bytes a sample) stays in the L1
 # cache, and no array as long as the block is made but the verdicts
 _SPAN = 1024
+# (1 - 2^-49): a rate bound shrunk by it is surely not exceeded (see _screen_limits)
+_SHRINK = 1.0 - 2.0 ** -49
+_NORMAL = 1e-280  # a product this large is a normal number with 2^-53 relative rounding
+
+
+@kernel(nogil=True, inline="always")
+def _screen_limits(p, lo, hi, rate):  # pragma: no cover
+    """Per field, the bounds of :func:`_clear`: the range within both the QC's gross range
+    spans and the validator's, the validator's rate, the QC rate bound shrunk by
+    :data:`_SHRINK` (inf: no rate test), the spike bound (inf: no spike test), the
+    flat-line tolerance, its step bound in seconds and window in ns (0, inf, inf: no
+    flat-line test), as :func:`monitor.qartod.qc_span` reads ``p``.
+
+    The rate-of-change test divides: ``|d| / dt > r``. With ``rp = fl(fl(r * (1 - 2^-49))
+    * dt)`` a normal number, ``rp <= r * dt * (1 - 2^-49) * (1 + 2^-53)^2 < r * dt * (1 -
+    2^-50)``, so ``|d| <= rp`` gives ``|d| / dt < r`` exactly and, rounding being monotonic
+    and ``r`` a float, ``fl(|d| / dt) <= r``: no flag, without the division."""
+    nf = p.shape[0]
+    lim = np.empty((nf, 8))
+    for f in range(nf):
+        lim[f, 0] = max(max(p[f, 0], p[f, 2]), lo[f])
+        lim[f, 1] = min(min(p[f, 1], p[f, 3]), hi[f])
+        lim[f, 2] = rate[f]
+        lim[f, 3] = (min(p[f, 6], p[f, 7]) * _SHRINK
+                     if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]) else np.inf)
+        lim[f, 4] = min(p[f, 4], p[f, 5]) if np.isfinite(p[f, 4]) or np.isfinite(p[f, 5]) else np.inf
+        if p[f, 8] > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
+            sw = p[f, 9] * 1e9
+            fw = p[f, 10] * 1e9
+            lim[f, 5] = p[f, 8]
+            lim[f, 6] = min(sw, fw) * 1e-9
+            lim[f, 7] = min(sw, fw)
+        else:
+            lim[f, 5] = 0.0
+            lim[f, 6] = np.inf
+            lim[f, 7] = np.inf
+    return lim
+
+
+@kernel(nogil=True, inline="always")
+def _clear(t, values, a, dt, lim):  # pragma: no cover
+    """Every sample ``a .. a + m - 1`` (``a >= 2``; ``dt``: their steps, length m) of a usual
+    block surely gets QC flags pass or not evaluated and passes every rule of :func:`_runs`
+    (``lim``: :func:`_screen_limits`), judged in one loop per field the compiler vectorises:
+    within the ranges, the step under both rate bounds, the spike under its bound, and not
+    flat: the step at least the tolerance within both windows (the flat-line pass of
+    :func:`monitor.qartod.qc_span`), or the last three values spanning it within both
+    windows (where its scan would stop, at the second sample back). False: some sample may
+    be flagged or rejected (the general pass decides)."""
+    m = dt.shape[0]
+    tp = t[a - 2:a + m]  # (views indexed from 0: the loops vectorise)
+    bad = False
+    for f in range(values.shape[0]):
+        w = values[f, a - 2:a + m]
+        lo_f, hi_f, rate_f, r_lo = lim[f, 0], lim[f, 1], lim[f, 2], lim[f, 3]
+        s_max, tol, near, win = lim[f, 4], lim[f, 5], lim[f, 6], lim[f, 7]
+        for i in range(m):
+            v0 = w[i]
+            v1 = w[i + 1]
+            v = w[i + 2]
+            d = abs(v - v1)
+            rp = r_lo * dt[i]
+            flat = ((d >= tol) & (dt[i] <= near)) | (
+                (max(max(v, v1), v0) - min(min(v, v1), v0) >= tol) & (tp[i + 2] - tp[i] <= win))
+            bad |= not ((v >= lo_f) & (v <= hi_f) & (d <= rate_f * dt[i]) & (d <= rp)
+                        & (rp >= _NORMAL) & (abs(v1 - (v0 + v) / 2.0) <= s_max) & flat)
+    return not bad
 
 
 @kernel(nogil=True, error_model="numpy")
@@ -253,8 +320,9 @@ def _check_usual(t, values, floor_t, p, prev_t, prev, prev2, ring_t, ring_x, rin
     ``p`` .. ``first_t``; no location or check-factor test). Then the QC flags
     (:func:`monitor.qartod._qc_fast`'s pieces), the QC fails that reject (:func:`_fail_code`)
     and the verdicts (:func:`_validate`'s pieces, no repeated times): the general path's
-    results, in one pass over spans of the block. Returns (ok, QC counts, ring head, ring
-    count, codes, counts, last_t, has_last); ok False: not such a block, nothing changed."""
+    results, in one pass over spans of the block; a span :func:`_clear` finds clear (nearly
+    all) needs no flags. Returns (ok, QC counts, ring head, ring count, codes, counts,
+    last_t, has_last); ok False: not such a block, nothing changed."""
     n = t.shape[0]
     usual = n > 0 and t[0] > prev_t and t[0] > floor_t
     for i in range(1, n):
@@ -264,6 +332,7 @@ def _check_usual(t, values, floor_t, p, prev_t, prev, prev2, ring_t, ring_x, rin
     if not (usual and fast_finite(values, prev, prev2)):  # (nothing changed)
         return False, qc_counts, ring_head, ring_n, np.zeros(0, np.int8), counts, last_t, has_last
     codes = np.zeros(n, np.int8)
+    lim = _screen_limits(p, lo, hi, rate)
     span = min(n, _SPAN)
     dt = np.empty(span)
     z = np.empty(span + 2)
@@ -273,19 +342,27 @@ def _check_usual(t, values, floor_t, p, prev_t, prev, prev2, ring_t, ring_x, rin
     repeat = np.zeros(span, np.bool_)
     run = np.empty(span, np.bool_)
     accepted = False
-    for a in range(0, n, span):
-        m = min(span, n - a)
+    a = 0
+    while a < n:
+        # the first two samples alone (the screen reads two samples back), then spans
+        m = min(span, n - a) if a else min(2, n)
         steps(t, prev_t, a, dt[:m])
-        gr, sp, rt, ft = flags[0, :m], flags[1, :m], flags[2, :m], flags[3, :m]
-        qc_span(t, values, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t,
-                a, dt[:m], z[:m + 2], quick[:m], gr, sp, rt, ft)
-        tally(gr, sp, rt, ft, qc_counts)
-        for k in range(m):
-            qc_code[k] = _fail_code(ft[k], NOT_EVALUATED)
-        _runs(t, values, lo, hi, rate, floor_t, qc_code[:m], repeat[:m], a, dt[:m], run[:m])
+        if a and _clear(t, values, a, dt[:m], lim):
+            run[:m] = True  # no flag to count, no fail to reject, every rule passes
+            qc_code[:m] = 0
+        else:
+            gr, sp, rt, ft = flags[0, :m], flags[1, :m], flags[2, :m], flags[3, :m]
+            qc_span(t, values, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n,
+                    first_t, a, dt[:m], z[:m + 2], quick[:m], gr, sp, rt, ft)
+            tally(gr, sp, rt, ft, qc_counts)
+            for k in range(m):
+                qc_code[k] = _fail_code(ft[k], NOT_EVALUATED)
+            _runs(t, values, lo, hi, rate, floor_t, qc_code[:m], repeat[:m], a, dt[:m],
+                  run[:m])
         last_t, has_last, accepted = _verdicts(t, values, lo, hi, rate, last_t, last_v,
                                                has_last, floor_t, qc_code[:m], repeat[:m], a,
                                                run[:m], accepted, codes, counts)
+        a += m
     ring_head, ring_n = remember(t, values, ring_t, ring_x, ring_head, ring_n)
     return True, qc_counts, ring_head, ring_n, codes, counts, last_t, has_last
 
