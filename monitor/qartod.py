@@ -545,6 +545,8 @@ class StreamQC:
     def add_counts(self, counts: np.ndarray) -> None:
         """Add a kernel's flag counts (tests x suspect, fail, missing) of this stream's tests."""
         rows = counts.tolist()
+        if not any(map(any, rows)):  # (nearly always: nothing flagged)
+            return
         for name in self.tests():
             suspect, fail, missing = rows[TESTS.index(name)]
             if suspect or fail or missing:

@@ -458,10 +458,11 @@ class StreamValidator:
         """Adopt :func:`_validate`'s verdict counts and last accepted sample; returns the
         verdicts."""
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
-        counts = counts.tolist()
-        self.accepted += counts[0]
-        for i, reason in enumerate(REASONS, start=1):
-            self.rejected[reason] += counts[i]
+        accepted, *rejected = counts.tolist()
+        self.accepted += accepted
+        if any(rejected):  # (rarely: a slab is nearly always all accepted)
+            for reason, n in zip(REASONS, rejected):
+                self.rejected[reason] += n
         return codes
 
     def _outside_watch_circle(self, values: np.ndarray) -> np.ndarray:
