@@ -261,50 +261,82 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
     the flag rows in place: every value finite, two finite samples before it, no location
     test. Returns ``(ok, flags, spike_prev, counts, ring_head, ring_n)``; ``ok`` False
     (nothing changed) means: use :func:`_qc`. Same flags as :func:`_qc` for such a block."""
-    nf, n = x.shape
-    cap = ring_t.shape[0]
+    n = x.shape[1]
     flags = np.full((_N_TESTS, n), 2, np.uint8)
     spike_prev = np.full(n, 2, np.uint8)
     counts = np.zeros((_N_TESTS, 3), np.int64)
-    bad = False  # x - x is 0 for finite x, NaN otherwise: the OR vectorises
-    for f in range(nf):
-        bad |= not (np.isfinite(prev[f]) and np.isfinite(prev2[f]))
-        for i in range(n):
-            bad |= (x[f, i] - x[f, i]) != 0.0
-    if bad:
+    if not fast_finite(x, prev, prev2):
         return False, flags, spike_prev, counts, ring_head, ring_n
     dt = np.empty(n)
-    dt[0] = (t[0] - prev_t) * 1e-9
-    for i in range(1, n):
-        dt[i] = (t[i] - t[i - 1]) * 1e-9
-    z = np.empty(n + 2)  # a field's values with the two before the block
-    gr = flags[0]
-    rt = flags[2]
-    ft = flags[3]
-    sp = spike_prev
+    steps(t, prev_t, 0, dt)
+    qc_span(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t, 0, dt,
+            np.empty(n + 2), np.empty(n, np.bool_), flags[0], spike_prev, flags[2], flags[3])
+    tally(flags[0], spike_prev, flags[2], flags[3], counts)
+    ring_head, ring_n = remember(t, x, ring_t, ring_x, ring_head, ring_n)
+    return True, flags, spike_prev, counts, ring_head, ring_n
+
+
+# The pieces of _qc_fast, public for monitor.validate's one pass over a block (which runs
+# them span by span: its scratch then stays in the cache, and no flag rows are kept).
+
+@kernel(nogil=True, inline="always")
+def fast_finite(x, prev, prev2):  # pragma: no cover - compiled
+    """Every value of ``x`` and the two samples before it finite (:func:`_qc_fast`'s
+    block)."""
+    bad = False  # x - x is 0 for finite x, NaN otherwise: the OR vectorises
+    for f in range(x.shape[0]):
+        bad |= not (np.isfinite(prev[f]) and np.isfinite(prev2[f]))
+        for i in range(x.shape[1]):
+            bad |= (x[f, i] - x[f, i]) != 0.0
+    return not bad
+
+
+@kernel(nogil=True, inline="always")
+def steps(t, prev_t, a, dt):  # pragma: no cover - compiled
+    """``dt[k]``: the time step in seconds before sample ``a + k`` (from ``prev_t`` to the
+    first sample)."""
+    tt = t[a:a + dt.shape[0]]  # (indices from 0: the loop vectorises)
+    dt[0] = (tt[0] - (t[a - 1] if a else prev_t)) * 1e-9
+    for k in range(1, dt.shape[0]):
+        dt[k] = (tt[k] - tt[k - 1]) * 1e-9
+
+
+@kernel(nogil=True, error_model="numpy", inline="always")
+def qc_span(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, first_t, a, dt,
+            z, quick, gr, sp, rt, ft):  # pragma: no cover - compiled
+    """:func:`_qc_fast`'s flags of the samples ``a .. a + m - 1`` of its block (``dt``: their
+    :func:`steps`, length m) into ``gr, sp, rt, ft`` (length m: gross range, the spike flag
+    of each sample's predecessor, rate of change, flat line). ``z`` (m + 2) and ``quick``
+    (m) are scratch. The memory (``prev*``, ``ring_*``) is the stream's before the block."""
+    nf = x.shape[0]
+    m = dt.shape[0]
+    cap = ring_t.shape[0]
     gr[:] = 1
-    quick = np.empty(n, np.bool_)
+    sp[:] = 2
+    rt[:] = 2
+    ft[:] = 2
     for f in range(nf):
         xf = x[f]
-        z[0] = prev2[f]
-        z[1] = prev[f]
-        z[2:] = xf
+        # the field's values from two before the span
+        z[0] = xf[a - 2] if a >= 2 else (prev[f] if a else prev2[f])
+        z[1] = xf[a - 1] if a else prev[f]
+        z[2:] = xf[a:a + m]
         # thresholds in locals: the loops below then vectorise
         fmin, fmax, smin, smax = p[f, 0], p[f, 1], p[f, 2], p[f, 3]
-        for i in range(n):
-            v = xf[i]
+        for i in range(m):
+            v = z[i + 2]
             g = np.uint8(4) if (v < fmin or v > fmax) else (
                 np.uint8(3) if (v < smin or v > smax) else np.uint8(1))
             gr[i] = max(gr[i], g)
         if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]):
             rs, rf = p[f, 6], p[f, 7]
-            for i in range(n):
+            for i in range(m):
                 roc = abs(z[i + 2] - z[i + 1]) / dt[i]
                 r = np.uint8(4) if roc > rf else (np.uint8(3) if roc > rs else np.uint8(1))
                 rt[i] = r if rt[i] == 2 else max(rt[i], r)
         if np.isfinite(p[f, 4]) or np.isfinite(p[f, 5]):
             ss, sf = p[f, 4], p[f, 5]
-            for i in range(n):
+            for i in range(m):
                 d = abs(z[i + 1] - (z[i] + z[i + 2]) / 2.0)
                 s = np.uint8(4) if d > sf else (np.uint8(3) if d > ss else np.uint8(1))
                 sp[i] = s if sp[i] == 2 else max(sp[i], s)
@@ -314,35 +346,41 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
             fw = p[f, 10] * 1e9
             near = min(sw, fw) * 1e-9
             # a sample whose predecessor lies within both windows and differs by tol or more
-            # is not flat: decided here in a loop the compiler vectorises
-            for i in range(n):
-                quick[i] = (abs(z[i + 2] - z[i + 1]) >= tol) & (dt[i] <= near)
-            for i in range(n):
+            # is not flat: decided here in a loop the compiler vectorises; the few others
+            # take the scan below
+            slow = 0
+            for i in range(m):
+                q = (abs(z[i + 2] - z[i + 1]) >= tol) & (dt[i] <= near)
+                quick[i] = q
+                ft[i] = np.uint8(1) if q & (ft[i] == 2) else ft[i]
+                slow += not q
+            i = -1
+            while slow:
+                i += 1
                 if quick[i]:
-                    if ft[i] == 2:
-                        ft[i] = 1
                     continue
+                slow -= 1
                 # the flat-line scan of _qc (newest first, stop at the first value out of
                 # tolerance), over this block's earlier samples, then the memory
-                ti = t[i]
-                v = xf[i]
+                ti = t[a + i]
+                v = z[i + 2]
                 lo = v
                 hi = v
                 flat_s = True
                 flat_f = True
-                k = i - 1
-                m = 0
+                k = a + i - 1
+                back = 0
                 while True:
                     if k >= 0:
                         tj = t[k]
                         w = xf[k]
-                    elif m < ring_n:
-                        j = ring_head - 1 - m
+                    elif back < ring_n:
+                        j = ring_head - 1 - back
                         if j < 0:
                             j += cap
                         tj = ring_t[j]
                         w = ring_x[f, j]
-                        m += 1
+                        back += 1
                     else:
                         break
                     k -= 1
@@ -352,16 +390,27 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
                     lo, hi, flat_s, flat_f, done = _flat_widen(w, age, lo, hi, tol, sw, fw, flat_s, flat_f)
                     if done:
                         break
-                span = (ti - first_t) + (ti - (t[i - 1] if i else prev_t))
+                span = (ti - first_t) + (ti - (t[a + i - 1] if a + i else prev_t))
                 fl = np.uint8(1)
                 if flat_s and span > sw:
                     fl = np.uint8(3)
                 if flat_f and span > fw:
                     fl = np.uint8(4)
                 ft[i] = fl if ft[i] == 2 else max(ft[i], fl)
+
+
+@kernel(nogil=True, inline="always")
+def tally(gr, sp, rt, ft, counts):  # pragma: no cover - compiled
+    """Add the suspect and fail flags of :func:`qc_span`'s rows to ``counts`` (tests x
+    suspect, fail, missing)."""
+    worst = np.uint8(0)  # nearly always a pass: then nothing to count
+    for i in range(gr.shape[0]):
+        worst = max(worst, max(max(gr[i], sp[i]), max(rt[i], ft[i])))
+    if worst < 3:
+        return
     # tallies in locals (stores into ``counts`` each sample would not vectorise)
     g3 = g4 = s3 = s4 = r3 = r4 = f3 = f4 = 0
-    for i in range(n):
+    for i in range(gr.shape[0]):
         g3 += gr[i] == 3
         g4 += gr[i] == 4
         s3 += sp[i] == 3
@@ -370,18 +419,29 @@ def _qc_fast(t, x, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n, fi
         r4 += rt[i] == 4
         f3 += ft[i] == 3
         f4 += ft[i] == 4
-    counts[0, 0], counts[0, 1], counts[1, 0], counts[1, 1] = g3, g4, s3, s4
-    counts[2, 0], counts[2, 1], counts[3, 0], counts[3, 1] = r3, r4, f3, f4
-    # the newest samples into the memory: up to its end, then on from its start (copies)
+    counts[0, 0] += g3
+    counts[0, 1] += g4
+    counts[1, 0] += s3
+    counts[1, 1] += s4
+    counts[2, 0] += r3
+    counts[2, 1] += r4
+    counts[3, 0] += f3
+    counts[3, 1] += f4
+
+
+@kernel(nogil=True, inline="always")
+def remember(t, x, ring_t, ring_x, ring_head, ring_n):  # pragma: no cover - compiled
+    """The block's newest samples into the flat-line memory; returns (ring_head, ring_n)."""
+    n = t.shape[0]
+    cap = ring_t.shape[0]
+    # up to the memory's end, then on from its start (copies)
     a = max(0, n - cap)
     first = min(n - a, cap - ring_head)
     ring_t[ring_head:ring_head + first] = t[a:a + first]
     ring_x[:, ring_head:ring_head + first] = x[:, a:a + first]
     ring_t[:n - a - first] = t[a + first:]
     ring_x[:, :n - a - first] = x[:, a + first:]
-    ring_head = (ring_head + n - a) % cap
-    ring_n = min(ring_n + n - a, cap)
-    return True, flags, spike_prev, counts, ring_head, ring_n
+    return (ring_head + n - a) % cap, min(ring_n + n - a, cap)
 
 
 class StreamQC:
@@ -485,6 +545,8 @@ class StreamQC:
     def add_counts(self, counts: np.ndarray) -> None:
         """Add a kernel's flag counts (tests x suspect, fail, missing) of this stream's tests."""
         rows = counts.tolist()
+        if not any(map(any, rows)):  # (nearly always: nothing flagged)
+            return
         for name in self.tests():
             suspect, fail, missing = rows[TESTS.index(name)]
             if suspect or fail or missing:

@@ -65,7 +65,8 @@ import numpy as np
 from models._jit import kernel
 from monitor.blocks import SENSOR_FIELDS
 from monitor.config import SensorLimits
-from monitor.qartod import CHECK, FAIL, FLAT, StreamQC, _qc_fast
+from monitor.qartod import (CHECK, FAIL, FLAT, NOT_EVALUATED, StreamQC, _N_TESTS, fast_finite,
+                            qc_span, remember, steps, tally)
 
 ACCEPTED = 0
 # time_ahead last: the pipeline counts it at intake (monitor.time_ahead), no code of _validate
@@ -77,36 +78,54 @@ _NAN, _RANGE, _SPIKE, _DUP, _BACK, _FLAT, _CHECK = 1, 2, 3, 4, 5, 6, 7
 @kernel(nogil=True)
 def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
               qc_code, repeat):  # pragma: no cover
-    # Sequential by nature: each verdict depends on the last ACCEPTED sample before it. But
-    # nearly every sample is accepted, and a sample after an accepted one is judged against
-    # its predecessor: ``run[i]`` (computed in loops the compiler vectorises) says sample i
-    # passes every rule if sample i - 1 was accepted. A run of such samples after an
-    # accepted one is accepted at once; the others take the rules one by one below.
+    """The verdicts (codes, counts per code, last_t, has_last) of a block: its QC fail codes
+    ``qc_code`` and repeated times ``repeat`` given; ``last_v`` is updated in place."""
     n = t.shape[0]
-    nf = values.shape[0]
     codes = np.zeros(n, dtype=np.int8)
     counts = np.zeros(len(REASONS) + 1, np.int64)
-    run = _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat)
-    prev_accepted = False
-    i = 0
-    while i < n:
-        if prev_accepted and run[i]:
-            j = i + 1
-            while j < n and run[j]:
-                j += 1
-            counts[ACCEPTED] += j - i
-            last_t = t[j - 1]
+    if n == 0:
+        return codes, counts, last_t, has_last
+    dt = np.empty(n)
+    steps(t, t[0], 0, dt)
+    run = np.empty(n, np.bool_)
+    _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat, 0, dt, run)
+    last_t, has_last, _ = _verdicts(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
+                                    qc_code, repeat, 0, run, False, codes, counts)
+    return codes, counts, last_t, has_last
+
+
+@kernel(nogil=True, inline="always")
+def _verdicts(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t, qc_code, repeat, a,
+              run, prev_accepted, codes, counts):  # pragma: no cover
+    """The verdicts of samples ``a .. a + m - 1`` (m = ``run.shape[0]``; ``qc_code``,
+    ``repeat`` and ``run`` (:func:`_runs`) of them) into ``codes`` (the block's) and
+    ``counts``; ``prev_accepted``: the sample before was. Returns (last_t, has_last,
+    prev_accepted)."""
+    # Sequential by nature: each verdict depends on the last ACCEPTED sample before it. But
+    # nearly every sample is accepted, and a sample after an accepted one is judged against
+    # its predecessor: ``run[k]`` (computed in loops the compiler vectorises) says it passes
+    # every rule if the sample before was accepted. A run of such samples after an
+    # accepted one is accepted at once; the others take the rules one by one below.
+    m = run.shape[0]
+    nf = values.shape[0]
+    k = 0
+    while k < m:
+        if prev_accepted and run[k]:
+            j = _run_end(run, k + 1)
+            counts[ACCEPTED] += j - k
+            last_t = t[a + j - 1]
             for f in range(nf):
-                last_v[f] = values[f, j - 1]
-            i = j
+                last_v[f] = values[f, a + j - 1]
+            k = j
             continue
+        i = a + k
         ti = t[i]
         code = ACCEPTED
         if has_last and ti == last_t:
             code = _DUP
         elif (has_last and ti < last_t) or ti <= floor_t:
             code = _BACK
-        elif repeat[i]:
+        elif repeat[k]:
             code = _DUP
         else:
             for f in range(nf):
@@ -126,8 +145,8 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
                     if abs(values[f, i] - last_v[f]) > rate[f] * dt:
                         code = _SPIKE
                         break
-            if code == ACCEPTED and qc_code[i]:
-                code = qc_code[i]
+            if code == ACCEPTED and qc_code[k]:
+                code = qc_code[k]
         codes[i] = code
         counts[code] += 1
         prev_accepted = code == ACCEPTED
@@ -136,28 +155,59 @@ def _validate(t, values, lo, hi, rate, last_t, last_v, has_last, floor_t,
             has_last = True
             for f in range(nf):
                 last_v[f] = values[f, i]
-        i += 1
-    return codes, counts, last_t, has_last
+        k += 1
+    return last_t, has_last, prev_accepted
 
 
-@kernel(nogil=True)
-def _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat):  # pragma: no cover
-    """``run[i]`` (i >= 1): sample i passes every rule of :func:`_validate` when sample
-    i - 1 was its last accepted one (the same comparisons, branch-free; run[0] is False)."""
-    n = t.shape[0]
-    run = np.zeros(n, np.bool_)
-    dt = np.empty(n)
-    for i in range(1, n):
-        run[i] = (t[i] > t[i - 1]) & (t[i] > floor_t) & (qc_code[i] == 0) & (not repeat[i])
-        dt[i] = (t[i] - t[i - 1]) * 1e-9
+@kernel(nogil=True, inline="always")
+def _run_end(run, k):  # pragma: no cover
+    """The first index from ``k`` on where ``run`` is False, or its length."""
+    m = run.shape[0]
+    while k + 64 <= m:  # 64 at a time: a sum the compiler vectorises
+        w = run[k:k + 64]
+        s = 0
+        for q in range(64):
+            s += w[q]
+        if s < 64:
+            break
+        k += 64
+    while k < m and run[k]:
+        k += 1
+    return k
+
+
+@kernel(nogil=True, inline="always")
+def _runs(t, values, lo, hi, rate, floor_t, qc_code, repeat, a, dt, run):  # pragma: no cover
+    """``run[k]``: sample ``a + k`` passes every rule of :func:`_verdicts` when the sample
+    before it was its last accepted one (the same comparisons, branch-free; False for the
+    block's first sample). ``qc_code``, ``repeat``, ``dt`` (:func:`monitor.qartod.steps`)
+    and ``run`` are the samples' from ``a`` on."""
+    m = run.shape[0]
+    if a == 0:
+        run[0] = False
+        _run_pairs(t[:m], values, 0, lo, hi, rate, floor_t, qc_code[1:], repeat[1:], dt[1:],
+                   run[1:])
+    else:
+        _run_pairs(t[a - 1:a + m], values, a - 1, lo, hi, rate, floor_t, qc_code, repeat, dt,
+                   run)
+
+
+@kernel(nogil=True, inline="always")
+def _run_pairs(tp, values, s, lo, hi, rate, floor_t, qc_code, repeat, dt, run):
+    # pragma: no cover
+    """:func:`_runs` of the samples ``s + 1 .. s + m`` (m = ``run.shape[0]``) after sample
+    ``s``; ``tp`` the times from ``s`` on. (Indices from 0 in views: the compiler then
+    vectorises the loops, which a possibly negative index would stop.)"""
+    m = run.shape[0]
+    for k in range(m):
+        run[k] = (tp[k + 1] > tp[k]) & (tp[k + 1] > floor_t) & (qc_code[k] == 0) & (not repeat[k])
     for f in range(values.shape[0]):
-        x = values[f]
+        x = values[f, s:s + m + 1]
         lo_f, hi_f, rate_f = lo[f], hi[f], rate[f]
-        for i in range(1, n):
-            v = x[i]
-            run[i] &= (((v - v) == 0.0) & (not ((v < lo_f) | (v > hi_f)))
-                       & (not (abs(v - x[i - 1]) > rate_f * dt[i])))
-    return run
+        for k in range(m):
+            v = x[k + 1]
+            run[k] &= (((v - v) == 0.0) & (not ((v < lo_f) | (v > hi_f)))
+                       & (not (abs(v - x[k]) > rate_f * dt[k])))
 
 
 @kernel(nogil=True)
@@ -173,44 +223,147 @@ def _scan(t, values):  # pragma: no cover - compiled
     return not bad, increasing
 
 
+@kernel(nogil=True, inline="always")
+def _fail_code(flat, check):  # pragma: no cover - compiled
+    """The QC fails that reject a sample: flat line (_FLAT) over check factor (_CHECK)."""
+    return _FLAT if flat == FAIL else (_CHECK if check == FAIL else 0)
+
+
 @kernel(nogil=True)
 def _fail_codes(flags):  # pragma: no cover - compiled
-    """The QC fails that reject a sample: flat line (_FLAT) over check factor (_CHECK)."""
+    """:func:`_fail_code` of every sample's flags."""
     n = flags.shape[1]
     code = np.empty(n, np.int8)
     for i in range(n):
-        code[i] = _FLAT if flags[FLAT, i] == FAIL else (_CHECK if flags[CHECK, i] == FAIL else 0)
+        code[i] = _fail_code(flags[FLAT, i], flags[CHECK, i])
     return code
 
 
-@kernel(nogil=True)
+# samples per pass of _check_usual: its scratch (about 30 bytes a sample) stays in the L1
+# cache, and no array as long as the block is made but the verdicts
+_SPAN = 1024
+# (1 - 2^-49): a rate bound shrunk by it is surely not exceeded (see _screen_limits)
+_SHRINK = 1.0 - 2.0 ** -49
+_NORMAL = 1e-280  # a product this large is a normal number with 2^-53 relative rounding
+
+
+@kernel(nogil=True, inline="always")
+def _screen_limits(p, lo, hi, rate):  # pragma: no cover
+    """Per field, the bounds of :func:`_clear`: the range within both the QC's gross range
+    spans and the validator's, the validator's rate, the QC rate bound shrunk by
+    :data:`_SHRINK` (inf: no rate test), the spike bound (inf: no spike test), the
+    flat-line tolerance, its step bound in seconds and window in ns (0, inf, inf: no
+    flat-line test), as :func:`monitor.qartod.qc_span` reads ``p``.
+
+    The rate-of-change test divides: ``|d| / dt > r``. With ``rp = fl(fl(r * (1 - 2^-49))
+    * dt)`` a normal number, ``rp <= r * dt * (1 - 2^-49) * (1 + 2^-53)^2 < r * dt * (1 -
+    2^-50)``, so ``|d| <= rp`` gives ``|d| / dt < r`` exactly and, rounding being monotonic
+    and ``r`` a float, ``fl(|d| / dt) <= r``: no flag, without the division."""
+    nf = p.shape[0]
+    lim = np.empty((nf, 8))
+    for f in range(nf):
+        lim[f, 0] = max(max(p[f, 0], p[f, 2]), lo[f])
+        lim[f, 1] = min(min(p[f, 1], p[f, 3]), hi[f])
+        lim[f, 2] = rate[f]
+        lim[f, 3] = (min(p[f, 6], p[f, 7]) * _SHRINK
+                     if np.isfinite(p[f, 6]) or np.isfinite(p[f, 7]) else np.inf)
+        lim[f, 4] = min(p[f, 4], p[f, 5]) if np.isfinite(p[f, 4]) or np.isfinite(p[f, 5]) else np.inf
+        if p[f, 8] > 0 and (np.isfinite(p[f, 9]) or np.isfinite(p[f, 10])):
+            sw = p[f, 9] * 1e9
+            fw = p[f, 10] * 1e9
+            lim[f, 5] = p[f, 8]
+            lim[f, 6] = min(sw, fw) * 1e-9
+            lim[f, 7] = min(sw, fw)
+        else:
+            lim[f, 5] = 0.0
+            lim[f, 6] = np.inf
+            lim[f, 7] = np.inf
+    return lim
+
+
+@kernel(nogil=True, inline="always")
+def _clear(t, values, a, dt, lim):  # pragma: no cover
+    """Every sample ``a .. a + m - 1`` (``a >= 2``; ``dt``: their steps, length m) of a usual
+    block surely gets QC flags pass or not evaluated and passes every rule of :func:`_runs`
+    (``lim``: :func:`_screen_limits`), judged in one loop per field the compiler vectorises:
+    within the ranges, the step under both rate bounds, the spike under its bound, and not
+    flat: the step at least the tolerance within both windows (the flat-line pass of
+    :func:`monitor.qartod.qc_span`), or the last three values spanning it within both
+    windows (where its scan would stop, at the second sample back). False: some sample may
+    be flagged or rejected (the general pass decides)."""
+    m = dt.shape[0]
+    tp = t[a - 2:a + m]  # (views indexed from 0: the loops vectorise)
+    bad = False
+    for f in range(values.shape[0]):
+        w = values[f, a - 2:a + m]
+        lo_f, hi_f, rate_f, r_lo = lim[f, 0], lim[f, 1], lim[f, 2], lim[f, 3]
+        s_max, tol, near, win = lim[f, 4], lim[f, 5], lim[f, 6], lim[f, 7]
+        for i in range(m):
+            v0 = w[i]
+            v1 = w[i + 1]
+            v = w[i + 2]
+            d = abs(v - v1)
+            rp = r_lo * dt[i]
+            flat = ((d >= tol) & (dt[i] <= near)) | (
+                (max(max(v, v1), v0) - min(min(v, v1), v0) >= tol) & (tp[i + 2] - tp[i] <= win))
+            bad |= not ((v >= lo_f) & (v <= hi_f) & (d <= rate_f * dt[i]) & (d <= rp)
+                        & (rp >= _NORMAL) & (abs(v1 - (v0 + v) / 2.0) <= s_max) & flat)
+    return not bad
+
+
+@kernel(nogil=True, error_model="numpy")
 def _check_usual(t, values, floor_t, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n,
                  first_t, lo, hi, rate, last_t, last_v, has_last):  # pragma: no cover
     """:meth:`StreamValidator.check` of the usual block in one call: every value finite, the
     times increasing and later than both the stream's last QC'd sample ``prev_t`` and
     ``floor_t``, the QC memory ready for :func:`monitor.qartod._qc_fast` (its arguments
     ``p`` .. ``first_t``; no location or check-factor test). Then the QC flags
-    (``_qc_fast``), the QC fails that reject (``_fail_codes``) and the verdicts
-    (``_validate``, no repeated times): the same calls as the general path, without three
-    dispatches and a pass over the values. Returns (ok, QC counts, ring head, ring count,
-    codes, counts, last_t, has_last); ok False: not such a block, nothing changed."""
+    (:func:`monitor.qartod._qc_fast`'s pieces), the QC fails that reject (:func:`_fail_code`)
+    and the verdicts (:func:`_validate`'s pieces, no repeated times): the general path's
+    results, in one pass over spans of the block; a span :func:`_clear` finds clear (nearly
+    all) needs no flags. Returns (ok, QC counts, ring head, ring count, codes, counts,
+    last_t, has_last); ok False: not such a block, nothing changed."""
     n = t.shape[0]
     usual = n > 0 and t[0] > prev_t and t[0] > floor_t
     for i in range(1, n):
         usual &= t[i] > t[i - 1]
-    none = np.zeros(0, np.int8)
-    if not usual:
-        return (False, np.zeros((1, 3), np.int64), ring_head, ring_n, none,
-                np.zeros(0, np.int64), last_t, has_last)
-    ok, flags, _, qc_counts, ring_head, ring_n = _qc_fast(t, values, p, prev_t, prev, prev2,
-                                                         ring_t, ring_x, ring_head, ring_n,
-                                                         first_t)
-    if not ok:  # a value is not finite (nothing changed)
-        return (False, qc_counts, ring_head, ring_n, none, np.zeros(0, np.int64), last_t,
-                has_last)
-    codes, counts, last_t, has_last = _validate(t, values, lo, hi, rate, last_t, last_v,
-                                                has_last, floor_t, _fail_codes(flags),
-                                                np.zeros(n, np.bool_))
+    qc_counts = np.zeros((_N_TESTS, 3), np.int64)
+    counts = np.zeros(len(REASONS) + 1, np.int64)
+    if not (usual and fast_finite(values, prev, prev2)):  # (nothing changed)
+        return False, qc_counts, ring_head, ring_n, np.zeros(0, np.int8), counts, last_t, has_last
+    codes = np.zeros(n, np.int8)
+    lim = _screen_limits(p, lo, hi, rate)
+    span = min(n, _SPAN)
+    dt = np.empty(span)
+    z = np.empty(span + 2)
+    quick = np.empty(span, np.bool_)
+    flags = np.empty((4, span), np.uint8)
+    qc_code = np.empty(span, np.int8)
+    repeat = np.zeros(span, np.bool_)
+    run = np.empty(span, np.bool_)
+    accepted = False
+    a = 0
+    while a < n:
+        # the first two samples alone (the screen reads two samples back), then spans
+        m = min(span, n - a) if a else min(2, n)
+        steps(t, prev_t, a, dt[:m])
+        if a and _clear(t, values, a, dt[:m], lim):
+            run[:m] = True  # no flag to count, no fail to reject, every rule passes
+            qc_code[:m] = 0
+        else:
+            gr, sp, rt, ft = flags[0, :m], flags[1, :m], flags[2, :m], flags[3, :m]
+            qc_span(t, values, p, prev_t, prev, prev2, ring_t, ring_x, ring_head, ring_n,
+                    first_t, a, dt[:m], z[:m + 2], quick[:m], gr, sp, rt, ft)
+            tally(gr, sp, rt, ft, qc_counts)
+            for k in range(m):
+                qc_code[k] = _fail_code(ft[k], NOT_EVALUATED)
+            _runs(t, values, lo, hi, rate, floor_t, qc_code[:m], repeat[:m], a, dt[:m],
+                  run[:m])
+        last_t, has_last, accepted = _verdicts(t, values, lo, hi, rate, last_t, last_v,
+                                               has_last, floor_t, qc_code[:m], repeat[:m], a,
+                                               run[:m], accepted, codes, counts)
+        a += m
+    ring_head, ring_n = remember(t, values, ring_t, ring_x, ring_head, ring_n)
     return True, qc_counts, ring_head, ring_n, codes, counts, last_t, has_last
 
 
@@ -305,10 +458,11 @@ class StreamValidator:
         """Adopt :func:`_validate`'s verdict counts and last accepted sample; returns the
         verdicts."""
         self.last_t_ns, self.has_last = int(last_t), bool(has_last)
-        counts = counts.tolist()
-        self.accepted += counts[0]
-        for i, reason in enumerate(REASONS, start=1):
-            self.rejected[reason] += counts[i]
+        accepted, *rejected = counts.tolist()
+        self.accepted += accepted
+        if any(rejected):  # (rarely: a slab is nearly always all accepted)
+            for reason, n in zip(REASONS, rejected):
+                self.rejected[reason] += n
         return codes
 
     def _outside_watch_circle(self, values: np.ndarray) -> np.ndarray:

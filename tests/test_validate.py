@@ -1,5 +1,6 @@
 """Sample validation: one test per rejection reason, split invariance, spike recovery."""
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -195,10 +196,10 @@ SHARED = next((p / "shared" for p in Path(__file__).resolve().parents
                if (p / "shared/realdata").is_dir()), None)
 
 
-def _blocks_through(sensor, t, values, cuts, monkeypatch, general):
-    """Verdicts of a stream cut into blocks at ``cuts`` (the default limits of ``sensor``),
-    the usual blocks through the one-call path, or (``general``) every block through the
-    separate QC and validation calls; and how many took the one call."""
+def _blocks_through(sensor, t, values, cuts, monkeypatch, general, limits=None):
+    """Verdicts of a stream cut into blocks at ``cuts`` (``limits``, default: the default
+    limits of ``sensor``), the usual blocks through the one-call path, or (``general``) every
+    block through the separate QC and validation calls; and how many took the one call."""
     import monitor.validate as validate
 
     usual = validate._check_usual
@@ -210,16 +211,16 @@ def _blocks_through(sensor, t, values, cuts, monkeypatch, general):
         return (False,) + (None,) * 7 if general else out
 
     monkeypatch.setattr(validate, "_check_usual", spy)
-    val = StreamValidator(sensor, default_config().validate[sensor])
+    val = StreamValidator(sensor, limits or default_config().validate[sensor])
     codes = [val.check(t[a:b], values[:, a:b], NEVER).tolist()
              for a, b in zip(cuts[:-1], cuts[1:])]
     monkeypatch.setattr(validate, "_check_usual", usual)
     return codes, json.dumps(val.state()), val.qc_counts(), took[0]
 
 
-def _one_call_equals_separate(sensor, t, values, cuts, monkeypatch):
-    fused = _blocks_through(sensor, t, values, cuts, monkeypatch, general=False)
-    separate = _blocks_through(sensor, t, values, cuts, monkeypatch, general=True)
+def _one_call_equals_separate(sensor, t, values, cuts, monkeypatch, limits=None):
+    fused = _blocks_through(sensor, t, values, cuts, monkeypatch, False, limits)
+    separate = _blocks_through(sensor, t, values, cuts, monkeypatch, True, limits)
     assert fused[:3] == separate[:3]
     assert separate[3] == 0 and fused[3] >= len(cuts) // 2  # the one call did most blocks
     return fused
@@ -244,6 +245,129 @@ def test_the_usual_block_in_one_call_equals_the_separate_qc_and_validation(monke
     codes, _, qc, _ = _one_call_equals_separate("tension", t, v[None, :], cuts, monkeypatch)
     flat = [c for block in codes for c in block].count(REASONS.index("flat_line") + 1)
     assert flat > 0 and qc["flat_line"]["suspect"] > 0 and qc["spike"]["fail"] > 0
+
+
+EDGE = FieldLimits(-1e4, 1e4, 1000.0, suspect_min=-9000.0, suspect_max=9000.0,
+                   spike_suspect=1.75, spike_fail=2.5, rate_suspect_per_s=100.0,
+                   flat_tolerance=0.125, flat_suspect_s=0.1, flat_fail_s=0.3)
+STEP = 50_000_000  # 20 Hz
+
+
+def _edge_ramp(c, n=3000, field=EDGE, values=None, steps=None):
+    """A ramp of 2 N a step through 0 at sample ``c - 1`` (nothing flagged: 40 N/s, spikes
+    0, steps past the flat-line tolerance), edited at ``values`` ({index: value}) and the
+    time ``steps`` ({index: ns since the sample before}), through the one-call path and the
+    separate calls in three blocks: their QC counts (equal)."""
+    x = 2.0 * (np.arange(n) - (c - 1))
+    for i, v in (values or {}).items():
+        x[i] = v
+    dt = np.full(n, STEP, np.int64)
+    for i, d in (steps or {}).items():
+        dt[i] = d
+    t = np.cumsum(dt)
+    limits = SensorLimits({"tension_N": field}, stale_after_s=5.0)
+    _, _, qc, took = _one_call_equals_separate("tension", t, x[None, :], [0, 100, 1500, n],
+                                               pytest.MonkeyPatch(), limits)
+    assert took == 2
+    return {k: (c["suspect"], c["fail"]) for k, c in qc.items() if c["suspect"] or c["fail"]}
+
+
+def _rate_step(dt_ns, r, flagged):
+    """The step after 0 whose rate is just at ``r`` (``flagged`` False) or just past it."""
+    dt = dt_ns * 1e-9
+    d = r * dt
+    while d / dt > r:
+        d = np.nextafter(d, 0.0)
+    while d / dt <= r:
+        if not flagged:
+            return d
+        d = np.nextafter(d, np.inf)
+    return d
+
+
+def test_the_one_call_screen_is_exact_at_every_threshold():
+    """Spans of a usual block the one-call path finds clear take no QC flags: samples at
+    each threshold's edge and one float past it, inside a ramp that is otherwise clear,
+    give the separate calls' flags and verdicts (a screen a float too loose or too tight
+    on any test differs from them)."""
+    c = 700  # mid-span of the second block (spans from 102, 1126)
+    ramp = {k: 2.0 * (k - c + 1) + 4.0 for k in range(c + 1, 3000)}  # after a 5 N step
+    assert _edge_ramp(c) == {}
+    # rate of change: a 5 N step exactly at 100 N/s, a float more, and a step whose rate
+    # rounds past 100 N/s though the step is within fl(100 * dt)
+    assert _edge_ramp(c, values={c: _rate_step(STEP, 100.0, False), **ramp}) == {}
+    assert _edge_ramp(c, values={c: _rate_step(STEP, 100.0, True), **ramp}) == {
+        "rate_of_change": (1, 0)}
+    odd = next(ns for ns in range(STEP, STEP + 1000) if (100.0 * (ns * 1e-9)) / (ns * 1e-9) > 100.0)
+    assert _edge_ramp(c, values={c: 100.0 * (odd * 1e-9), **ramp}, steps={c: odd}) == {
+        "rate_of_change": (1, 0)}
+    # spike: 1.75 N off the line through its neighbours, and a float more
+    assert _edge_ramp(c, values={c - 1: 1.75}) == {}
+    assert _edge_ramp(c, values={c - 1: np.nextafter(1.75, 2.0)}) == {"spike": (1, 0)}
+    # gross range: the suspect span starting at the first screened sample (102; every
+    # sample before is below it), or a float above it
+    x102 = 2.0 * (102 - (c - 1))
+    edge = dict(suspect_min=x102)
+    assert _edge_ramp(c, field=dataclasses.replace(EDGE, **edge)) == {"gross_range": (102, 0)}
+    edge = dict(suspect_min=np.nextafter(x102, np.inf))
+    assert _edge_ramp(c, field=dataclasses.replace(EDGE, **edge)) == {"gross_range": (103, 0)}
+    top = 2.0 * (2999 - (c - 1))  # the last sample, screened
+    assert _edge_ramp(c, field=dataclasses.replace(EDGE, suspect_max=top)) == {}
+    edge = dict(suspect_max=np.nextafter(top, 0.0))
+    assert _edge_ramp(c, field=dataclasses.replace(EDGE, **edge)) == {"gross_range": (1, 0)}
+    # a subnormal rate bound: its product with the step rounds up to the step
+    tiny = FieldLimits(-1e4, 1e4, 1000.0, rate_suspect_per_s=5e-323)
+    bump = {**{k: 0.0 for k in range(3000)}, c: 5e-324}
+    assert _edge_ramp(c, field=tiny, values=bump) == {"rate_of_change": (2, 0)}
+    # flat line: two steps of 0.0625 N (under the 0.125 N tolerance) span it exactly, over
+    # exactly the 0.1 s window: a pass; over a nanosecond more (both small steps then reach
+    # back past the window), or spanning less: suspect
+    flat = {c - 1: -1.9375, c: -1.875,
+            **{k: -1.875 + 2.0 * (k - c) for k in range(c + 1, 3000)}}
+    assert _edge_ramp(c, values=flat) == {}
+    assert _edge_ramp(c, values=flat, steps={c - 1: STEP + 1}) == {"flat_line": (2, 0)}
+    assert _edge_ramp(c, values={**flat, c: -1.8828125}) == {"flat_line": (1, 0)}
+    # a 0.15 s gap: the step is past the tolerance but not within the window
+    assert _edge_ramp(c, steps={c: 150_000_000}) == {"flat_line": (1, 0)}
+
+
+def test_the_one_call_kernel_keeps_the_validators_own_limits():
+    """The one-call kernel given a validator span and rate narrower than the QC's fail
+    thresholds (which they equal in a StreamValidator): its verdicts, QC counts and memory
+    are those of the separate QC and validation kernels."""
+    from monitor import validate
+    from monitor.qartod import FLAT_MEMORY, _params, _qc_fast
+
+    n = 5000
+    t = np.arange(1, n + 1, dtype=np.int64) * STEP
+    # down 2 N a step through the validator's floor and back up through its ceiling
+    x = 2.0 * np.abs(np.arange(n) - 2000.0) - 2000.0
+    x[3200:] += 1.0  # a 3 N step: past the validator's 2.5 N a step, not the QC's 5 N
+    x[[3500, 3700]] += 0.75  # ... and two small spikes (crossings and these in other spans)
+    p = _params((EDGE,))
+    lo, hi, rate = np.array([0.0]), np.array([3000.0]), np.array([50.0])
+    outs = []
+    for fused in (True, False):
+        ring_t, ring_x = np.zeros(FLAT_MEMORY, np.int64), np.full((1, FLAT_MEMORY), np.nan)
+        prev, prev2, last_v = np.array([2002.0]), np.array([2004.0]), np.array([2002.0])
+        args = (np.int64(0), prev, prev2, ring_t, ring_x, np.int64(0), np.int64(0),
+                np.int64(-STEP))
+        if fused:
+            ok, qc_counts, head, ring_n, codes, counts, last_t, has = validate._check_usual(
+                t, x[None, :], np.int64(-1), p, *args, lo, hi, rate, np.int64(0), last_v,
+                True)
+        else:
+            ok, flags, _, qc_counts, head, ring_n = _qc_fast(t, x[None, :], p, *args)
+            codes, counts, last_t, has = validate._validate(
+                t, x[None, :], lo, hi, rate, np.int64(0), last_v, True, np.int64(-1),
+                validate._fail_codes(flags), np.zeros(n, np.bool_))
+        assert ok
+        outs.append((codes.tolist(), counts.tolist(), qc_counts.tolist(), int(head),
+                     int(ring_n), int(last_t), bool(has), last_v.tolist(), ring_t.tolist()))
+    assert outs[0] == outs[1]
+    codes = np.array(outs[0][0])
+    assert (codes == REASONS.index("out_of_range") + 1).sum() == 1999 + 500  # under, over
+    assert (codes == REASONS.index("spike") + 1).sum() == 3  # the step, a spike and back
 
 
 @pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
