@@ -192,7 +192,7 @@ def test_pending_by_channel_counts_undelivered_messages_of_every_channel(tmp_pat
 def test_pending_age_is_monotonic_within_a_process_across_a_wall_clock_step(tmp_path):
     """alert_delivery_stalled's age (oldest_pending_age_s): a logger's RTC stepped an hour
     forward (GNSS/NTP at boot) does not age the messages of this process; one from before
-    it is as old as its wall-clock age at the outbox's opening plus the monotonic time since."""
+    it is as old as its wall-clock age now."""
     wall, mono = [1_000.0], [50.0]
 
     def down(payload, key):
@@ -217,13 +217,48 @@ def test_pending_age_is_monotonic_within_a_process_across_a_wall_clock_step(tmp_
     assert stats["webhook"]["oldest_pending_age_s"] == 20.0
     box.close()
     # a new process (its monotonic clock from elsewhere), 100 s of wall clock later: the
-    # messages of the last one are as old as the wall clock says at opening (only it spans
-    # processes: the step counts now), then monotonic
+    # messages of the last one are as old as the wall clock says (only it spans processes:
+    # the step counts now)
     wall[0] += 100.0
     mono[0] = 7.0
     box = open_box()
     mono[0] += 5.0
+    wall[0] += 5.0
     assert box.stats()["webhook"]["oldest_pending_age_s"] == 3600.0 + 100.0 + 5.0
+    box.close()
+
+
+def test_pending_age_of_an_earlier_process_counts_after_a_late_rtc_step(tmp_path):
+    """A message left pending by the last process, the outbox opened while the wall clock is
+    still the logger's RTC (3 h behind), then stepped by GNSS/NTP: the old message's age is
+    its wall-clock age at each look (not frozen near 0 from the opening), and this process's
+    own stuck message counts too (the channel reports the older of the two)."""
+    true_t = 1_790_000_000.0  # when the last process enqueued
+    wall, mono = [true_t], [100.0]
+
+    def down(payload, key):
+        raise ConnectionError("receiver down")
+
+    def open_box() -> Outbox:
+        return Outbox(str(tmp_path / "o.sqlite"), {"webhook": down},
+                      clock=lambda: wall[0], monotonic=lambda: mono[0])
+
+    box = open_box()
+    box.enqueue("webhook", "old", b"A")
+    box.close()
+    # power off 1 h; boot: the RTC (fake-hwclock saved 2 h before) is 3 h behind true time
+    wall[0], mono[0] = true_t - 7200.0, 5.0
+    box = open_box()
+    mono[0] += 10.0
+    assert box.stats()["webhook"]["oldest_pending_age_s"] == 0.0  # the RTC says the future
+    box.enqueue("webhook", "new", b"B")  # this life's message, receiver still down
+    mono[0] += 1800.0
+    wall[0] += 1810.0
+    # still behind: the old one's wall age is negative, this process's own one is 1800 s old
+    assert box.stats()["webhook"]["oldest_pending_age_s"] == 1800.0
+    wall[0] = true_t + 3600.0 + 1810.0 + 60.0  # NTP/GNSS steps the clock
+    mono[0] += 60.0
+    assert box.stats()["webhook"]["oldest_pending_age_s"] == 3600.0 + 1810.0 + 60.0
     box.close()
 
 

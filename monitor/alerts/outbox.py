@@ -24,8 +24,9 @@ Retry timing is the only place in the alert path that uses the wall clock: senso
 not advance while a receiver is down. A pending message's age (``oldest_pending_age_s``, the
 live rule ``alert_delivery_stalled``) is on the monotonic clock for the messages enqueued by
 this process: a wall-clock step (a logger's RTC set from GNSS/NTP at boot) would age them by
-the step. A message from before it is as old as its wall-clock age when the outbox was opened,
-plus the monotonic time since.
+the step. A message from before it is as old as its wall-clock age now (only the wall clock
+spans processes; read at each look, so an RTC still behind at opening and stepped later does
+not freeze it near 0), and a channel's age is the older of the two.
 """
 
 from __future__ import annotations
@@ -108,10 +109,9 @@ class Outbox:
         self.retry_max_s = float(retry_max_s)
         self.clock = clock
         self.monotonic = monotonic
-        self._opened = (clock(), monotonic())  # (wall, monotonic): the ages of older messages
-        # row id -> monotonic time of its enqueue, for the messages of this process still
-        # pending (under the lock; delivered, dead and dropped ones are removed)
-        self._enqueued: dict[int, float] = {}
+        # row id -> (channel, monotonic time of its enqueue), for the messages of this process
+        # still pending, oldest first (under the lock; delivered, dead and dropped ones removed)
+        self._enqueued: dict[int, tuple[str, float]] = {}
         # one connection shared by the enqueuing thread and the sender thread, serialised by
         # a lock; the lock is never held while a sender talks to the network
         os.makedirs(os.path.dirname(os.path.abspath(self.path)), exist_ok=True)  # as the state
@@ -149,7 +149,7 @@ class Outbox:
             dropped = 0
             if added:
                 if cur.lastrowid is not None:  # the row inserted (always, with rowcount 1)
-                    self._enqueued[cur.lastrowid] = mono
+                    self._enqueued[cur.lastrowid] = (channel, mono)
                 for (row_id,) in self._db.execute(
                         f"DELETE FROM outbox WHERE id IN (SELECT id FROM outbox WHERE channel = ? "
                         f"AND {_PENDING} ORDER BY id DESC LIMIT -1 OFFSET ?) RETURNING id",
@@ -283,14 +283,17 @@ class Outbox:
         """Per channel: ``pending``, ``dead_letters`` (held now), ``oldest_pending_age_s``
         and the persistent counters of :data:`COUNTERS` (status["delivery"]["channels"])."""
         with self._lock:
-            # the oldest pending message: the first enqueued (ids increase)
+            # the oldest pending message: the first enqueued (ids increase); when an earlier
+            # process left it, this process's own oldest one may still be older by now
             pend = self._db.execute(
                 f"SELECT o.channel, h.n, o.id, o.created_s FROM outbox o JOIN (SELECT "
                 f"channel, COUNT(*) AS n, MIN(id) AS id FROM outbox WHERE {_PENDING} GROUP BY "
                 "channel) h ON o.id = h.id").fetchall()
-            mono = self.monotonic()
-            ages = {ch: mono - self._enqueued[i] if i in self._enqueued else
-                    self._opened[0] - created + mono - self._opened[1]
+            wall, mono = self.clock(), self.monotonic()
+            mine: dict[str, float] = {}
+            for ch, t in self._enqueued.values():
+                mine.setdefault(ch, mono - t)
+            ages = {ch: max(mine.get(ch, 0.0), 0.0 if i in self._enqueued else wall - created)
                     for ch, _, i, created in pend}
             dead = dict(self._db.execute(
                 "SELECT channel, COUNT(*) FROM outbox WHERE dead_s IS NOT NULL "
