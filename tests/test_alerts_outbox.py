@@ -4,7 +4,9 @@ and the e-mail rendering."""
 from __future__ import annotations
 
 import json
+import re
 import socket
+import sqlite3
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
@@ -411,6 +413,35 @@ def test_full_outbox_drops_the_oldest_and_counts_them(tmp_path):
         assert [m["dedup_key"] for m in box.messages()] == ["k2", "k3", "k4"]
         assert box.stats()["webhook"]["dropped_total"] == 2
         # the dropped ones' enqueue times are forgotten with them (memory stays bounded)
+        assert sorted(box._enqueued) == [m["id"] for m in box.messages()]
+    finally:
+        box.close()
+
+
+class _Sqlite334:
+    """The outbox's connection as SQLite 3.34 (Debian 11) would parse it: ``RETURNING`` (3.35)
+    is a syntax error there. A stand-in: the venv's SQLite is newer."""
+
+    def __init__(self, db: sqlite3.Connection) -> None:
+        self._db = db
+
+    def execute(self, sql: str, *args):
+        if re.search(r"\bRETURNING\b", sql, re.IGNORECASE):
+            raise sqlite3.OperationalError('near "RETURNING": syntax error')
+        return self._db.execute(sql, *args)
+
+    def __getattr__(self, name: str):
+        return getattr(self._db, name)
+
+
+def test_full_outbox_drops_the_oldest_on_sqlite_3_34(tmp_path):
+    box = Outbox(str(tmp_path / "o.sqlite"), {"webhook": lambda p, k: None}, max_pending=2)
+    box._db = _Sqlite334(box._db)
+    try:
+        for i in range(4):
+            box.enqueue("webhook", f"k{i}", b"x")
+        assert [m["dedup_key"] for m in box.messages()] == ["k2", "k3"]
+        assert box.stats()["webhook"]["dropped_total"] == 2
         assert sorted(box._enqueued) == [m["id"] for m in box.messages()]
     finally:
         box.close()

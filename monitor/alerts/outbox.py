@@ -150,14 +150,24 @@ class Outbox:
             if added:
                 if cur.lastrowid is not None:  # the row inserted (always, with rowcount 1)
                     self._enqueued[cur.lastrowid] = (channel, mono)
-                for (row_id,) in self._db.execute(
-                        f"DELETE FROM outbox WHERE id IN (SELECT id FROM outbox WHERE channel = ? "
-                        f"AND {_PENDING} ORDER BY id DESC LIMIT -1 OFFSET ?) RETURNING id",
-                        (channel, self.max_pending)).fetchall():
+                # select then delete in one transaction, not DELETE ... RETURNING: that needs
+                # SQLite >= 3.35 (Debian 11 has 3.34)
+                self._db.execute("BEGIN IMMEDIATE")
+                try:
+                    ids = self._db.execute(
+                        f"SELECT id FROM outbox WHERE channel = ? AND {_PENDING} "
+                        "ORDER BY id DESC LIMIT -1 OFFSET ?", (channel, self.max_pending)
+                    ).fetchall()
+                    self._db.executemany("DELETE FROM outbox WHERE id = ?", ids)
+                    dropped = len(ids)
+                    if dropped:
+                        self._count(channel, "dropped_total", dropped)
+                    self._db.execute("COMMIT")
+                except BaseException:
+                    self._db.execute("ROLLBACK")
+                    raise
+                for (row_id,) in ids:
                     self._enqueued.pop(row_id, None)
-                    dropped += 1
-            if dropped:
-                self._count(channel, "dropped_total", dropped)
         if dropped:
             log.error("alert outbox full: oldest undelivered messages dropped",
                       extra={"fields": {"channel": channel, "dropped": dropped,
