@@ -641,8 +641,11 @@ class MotionTensionEstimator:
         if n == 0:
             e = np.empty(0)
             return Estimate(e, e, e, e, e, np.empty(0, np.uint8))
-        # the drag of every sample is returned unless only the wanted samples' are
-        p, work, drag = self._buffers(n, compact and want is not None)
+        idx = np.arange(n) if want is None else np.flatnonzero(want)
+        m = idx.shape[0]
+        # the drag of every sample is returned (so not in the kept memory, which the next
+        # block overwrites) unless only some wanted samples' are (copied out by drag[idx])
+        p, work, drag = self._buffers(n, compact and m < n)
         fresh = self._hist is None
         if not fresh:
             p[:, :2] = self._hist
@@ -661,8 +664,6 @@ class MotionTensionEstimator:
         if not ok:
             raise ValueError("acceleration contains NaN or infinite values")
         # the quasi-static lookup (most of the cost of an estimate) of the wanted samples
-        idx = np.arange(n) if want is None else np.flatnonzero(want)
-        m = idx.shape[0]
         x, y, z = p[0, 2:], p[1, 2:], p[2, 2:]
         if m < n:  # (every sample wanted: the rows themselves, no copies)
             x, y, z = x[idx], y[idx], z[idx]

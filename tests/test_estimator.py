@@ -290,6 +290,23 @@ def test_wanted_samples_only_are_estimated_exactly(vaps):
         part.update(np.zeros(3), np.zeros(3), np.zeros(3), want=np.ones(2, bool))
 
 
+def test_a_compact_estimate_of_every_sample_survives_the_next_update(vaps):
+    # every sample wanted: the returned drag must not be the memory kept for the next block
+    cfg, qs = vaps
+    m = waves.buoy_motion(1.5, 5.25, 120.0, DT, seed=2, depth=23.0)
+    full, part = MotionTensionEstimator(cfg, qs), MotionTensionEstimator(cfg, qs)
+    want = np.ones(40, bool)
+    held = []
+    for sl in (slice(0, 40), slice(40, 80), slice(80, 120)):
+        ref = full.update(m.heave[sl], m.surge[sl], m.sway[sl])
+        held.append((ref, part.update(m.heave[sl], m.surge[sl], m.sway[sl], want=want,
+                                      compact=True)))
+    for ref, got in held:
+        assert np.abs(ref.drag).max() > 0  # (the drag model is on)
+        for g, r in zip(dataclasses.astuple(got), dataclasses.astuple(ref)):
+            np.testing.assert_array_equal(g, r)
+
+
 @pytest.mark.skipif(SHARED is None, reason="../shared/realdata absent")
 def test_real_spotter_record_through_seed004(vaps):
     """Measured motion of a moored Spotter (2.5 Hz, mm): one hour of the clean window gives a
