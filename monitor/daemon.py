@@ -303,7 +303,9 @@ class Daemon:
         self._next_release_mono = 0.0
         self._dirty_status = False
         self._last_watchdog = 0.0
-        self._last_data_mono: float | None = None  # the newest samples' delivery, this life
+        # the newest samples' delivery in this life, or its start: a silence from the start
+        # releases the horizon a restored ordering holds (_silence) as any other silence
+        self._last_data_mono = self._started_mono
 
     # ---- lifecycle -------------------------------------------------------------------------
 
@@ -428,7 +430,7 @@ class Daemon:
         loaded machine's late beats, left out as stalls, would hold the release back, and a
         real stall taken for silence costs at most the grace of a stream not seen (or dead)."""
         silence = getattr(self.pipeline, "silence", None)
-        if silence is None or self._last_data_mono is None:
+        if silence is None:
             return
         waiting = self._q.oldest_put()
         now = time.monotonic() if waiting is None else waiting
@@ -602,7 +604,7 @@ class Daemon:
         at_mono = time.monotonic() if delivered_mono is None else delivered_mono
         self._stream(block.sensor).arrived(self.listening.at(at_mono), at_mono, len(block))
         if len(block):
-            self._last_data_mono = max(at_mono, self._last_data_mono or at_mono)
+            self._last_data_mono = max(at_mono, self._last_data_mono)
             # ahead of the block's receive time, as the pipeline judges time_ahead; behind its
             # publication (a message from a publisher's cache arrives late by design)
             sent_ns = origin.sent_ns if origin is not None and origin.sent_ns else None

@@ -196,6 +196,37 @@ def test_a_motion_stream_arriving_with_the_load_cell_still_gates():
     assert not any(p.validators["imu"].rejected.values())
 
 
+def test_a_silence_after_a_restart_releases_the_restored_horizon(tmp_path):
+    """The daemon restarted (checkpoint restored) within the horizon after a burst of data, and
+    no data comes: the horizon the restored ordering holds is released once the daemon has
+    heard nothing for the horizon since its start, not with the next data (before: the
+    silence counted only from data of this life, so nothing was released)."""
+    from monitor.cmd_run import build_daemon  # noqa: PLC0415 (the daemon `buoymon run` builds)
+
+    cfg = tmp_path / "buoymon.toml"
+    cfg.write_text(SHIPPED.read_text().replace("\nhorizon_s = 10.0 ", "\nhorizon_s = 0.5 ", 1)
+                   + f'\n[state]\npath = "{tmp_path / "st.sqlite"}"\n'
+                   '[metrics]\nenabled = false\n')
+    first = build_daemon(str(cfg))
+    for s in range(53):
+        first.pipeline.process(second(s))
+    held = first.pipeline.processed_ns
+    assert held == T0_NS + 52_450_000_000  # newest 52.95 s - the horizon
+    first._store.save(first.checkpoint_state())
+    first._store.close()
+    again = build_daemon(str(cfg))  # the restart
+    try:
+        assert again.pipeline.processed_ns == held
+        again._silence()  # at once: no silence yet
+        assert again.pipeline.processed_ns == held
+        time.sleep(0.6)
+        again._silence()
+        assert again.pipeline.processed_ns == T0_NS + 52_950_000_000
+        assert again._dirty_status  # the status tells of it at once
+    finally:
+        again._store.close()
+
+
 def _stale_on(status: dict) -> list[int]:
     """``since_ns`` of the active sensor-time ``stale`` alert of tension ([] when none)."""
     return [a["since_ns"] for a in status["status"]["alerts"]["active"]
