@@ -19,7 +19,20 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Latest, quiet, 2026-11-26 04:33-04:34 UTC (load 1.1, no other job), main 8077ae8,
+Latest, 2026-11-26 07:18-07:31 UTC, the 2-core machine quiet (load average 0.8-1.2 before each
+run; its speed drifts 10-20 % between identical runs), main 7373d50 (this stop's cuts: stretches
+joined into slabs of up to an hour, the decoder writing in place, the validation screen, the
+estimator's side-by-side ODE, the learner's compiled sea state and Dirlik sum, the batch's packed
+rule arrays), ``--buoys 4 --days 15 --repeat 2``, three runs: serial 9.6 / 10.4, 10.3 / 13.8,
+11.1 / 12.1 CPU-s = **59**, 63 and 67 CPU-s per buoy-year at best (target under 60: met in the
+best run only, not with a margin); 2 workers 6.2-7.4 s wall, worker CPU-s 6.0-7.5 each: each
+worker pays ~0.7 CPU-s of start-up (importing numba, loading the cached kernels), so on this
+small archive the speed-up is 1.5 x (contention-free 1.6 x); on the default archive
+(``--buoys 12 --days 30``, 07:20-07:24 UTC, load 1.9-2.2 from another job): serial 74.6 CPU-s
+= 76 CPU-s per buoy-year, 2 workers 35.5 s wall, **2.11 x** (contention-free 2.23 x); reading
+alone 23-33 % of the serial CPU.
+
+Before, quiet, 2026-11-26 04:33-04:34 UTC (load 1.1, no other job), main 8077ae8,
 ``--buoys 4 --days 15``: serial 17.8 s wall, 17.1 CPU-s = 104 CPU-s per buoy-year; 2 workers
 9.4 s wall (1.88 x); reading alone 3.5 CPU-s (20 %). Target under 60: NOT reached.
 

@@ -17,7 +17,18 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, quiet: 2026-11-26 04:32-04:33 UTC, the 2-core development machine with no other job
+Latest, quiet: 2026-11-26 07:18-07:30 UTC, the 2-core development machine (load average
+0.5-0.9 before each run), main 7373d50 (this stop's cuts: an hour of log per slab, the decoder
+writing in place, the validation screen, the estimator's side-by-side ODE, the learner's and
+the alert batch's; bytecode compiled first), three full runs on the 30-day log: one core
+5.60 / 8.05 / 5.47 CPU-s = 9.17 / 6.30 / 9.43 M tension samples/s, **15.6 / 11.6 / 15.7 x**
+the naive baseline of the same run (0.587 / 0.544 / 0.603 M/s; target 10 x; the middle run
+was disturbed: its rule-free replay took 5.48 CPU-s as in the others); 2 cores **3.67 / 4.13
+/ 3.58 s wall = 14.13 / 12.55 / 14.49 M tension samples/s** (target 10 M/s), 3.02 + 3.19 /
+3.60 + 3.34 / 3.09 + 2.94 CPU-s; peak RSS one process 1 / 30 days 205 / 219, 206 / 219, 205 /
+218 MB (+6.4-6.6 %), two processes 199 + 134-135 / 205 + 136 MB (+2.7-2.9 %, +1.3-1.9 %).
+
+Before, quiet: 2026-11-26 04:32-04:33 UTC, the 2-core development machine with no other job
 (load average 0.8-1.1), main 8077ae8 (this round's slab joining, strict_json and decoder
 cuts; bytecode compiled first), two full runs of this script on the 30-day log: one core
 8.04 / 7.69 CPU-s = 6.45 / 6.74 M tension samples/s, **11.6 / 11.7 x** the naive baseline
