@@ -39,7 +39,12 @@ numba's disk cache only tracks the source file of the compiled function, so a ``
 building block must live in the same file as the loops that call it (else editing it
 would leave their cached machine code stale). The three scalar overloads below are the
 exception: they are compiled into callers elsewhere, so change them only together with a
-change to those files (or clear the ``__pycache__`` caches).
+change to those files (or clear the ``__pycache__`` caches). The same holds for a kernel
+called from a kernel of another file (numba inlines or links it into the caller's cached
+code): ``models.dynamics.jerk_step`` in ``models.estimator``'s loops, ``monitor.qartod``'s
+kernels in ``monitor.validate``'s. Editing the callee alone leaves the caller's cached code
+stale until the caller's file changes: touch it (or clear the caches). An install or a fresh
+checkout is never affected (every file is new to the cache).
 """
 
 from __future__ import annotations
