@@ -274,20 +274,16 @@ def _parse_mooring(r: SectionReader) -> MooringConfig:
     else:
         if not tables:
             raise ConfigError("config error: mooring: needs preset or [[mooring.segment]] tables")
-        for i, t in enumerate(tables):
-            s = SectionReader(t, f"mooring.segment[{i}]")
-            segments.append(SegmentConfig(
-                s.str("name"), s.float("length_m", gt=0), s.float("weight_N_per_m"),
-                s.float("ea_N", gt=0, allow_inf=True), s.float("diameter_m", gt=0),
-            ))
-            s.done()
+        read = [r.part(_parse_segment, t, f"mooring.segment[{i}]") for i, t in enumerate(tables)]
+        segments = [seg for seg in read if seg is not None]
         length = sum(seg.length_m for seg in segments)
         depth = r.float("depth_m", gt=0)
         span = r.float("span_m", gt=0)
-    if length < depth:
-        raise r.error("depth_m", depth, f"deeper than the line is long ({length:g} m)")
-    if span >= length:
-        raise r.error("span_m", span, f"must be shorter than the line ({length:g} m)")
+    if r.ok():  # (a stand-in is no length to check against)
+        if length < depth:
+            r.reject("depth_m", depth, f"deeper than the line is long ({length:g} m)")
+        elif span >= length:
+            r.reject("span_m", span, f"must be shorter than the line ({length:g} m)")
     out = MooringConfig(
         depth_m=depth,
         span_m=span,
@@ -299,6 +295,13 @@ def _parse_mooring(r: SectionReader) -> MooringConfig:
         length_m=length,
     )
     r.done()
+    return out
+
+
+def _parse_segment(s: SectionReader) -> SegmentConfig:
+    out = SegmentConfig(s.str("name"), s.float("length_m", gt=0), s.float("weight_N_per_m"),
+                        s.float("ea_N", gt=0, allow_inf=True), s.float("diameter_m", gt=0))
+    s.done()
     return out
 
 
@@ -319,8 +322,9 @@ def _parse_cable(r: SectionReader) -> CableConfig:
         overrides["twist_length_m"] = r.float("twist_length_m", gt=0)
     else:
         for key in _TWIST_KEYS[1:]:
-            if r.has(key):
-                raise r.error(key, r.raw(key), 'only with twist = "limited"')
+            if r.has(key) and r.ok("twist"):  # (with twist itself bad, no telling)
+                r.reject(key, r.raw(key), 'only with twist = "limited"')
+            r.raw(key)
     if twist != "free":
         overrides["twist_restraint"] = twist
     r.done()
@@ -350,7 +354,8 @@ def _parse_component(r: SectionReader) -> ComponentConfig:
         kind=kind,
         lay=lay,
         area_m2=area,
-        sn_curve=_parse_sn(sn_raw, f"{r.path}.sn_curve"),
+        sn_curve=r.checked("sn_curve", lambda: _parse_sn(sn_raw, f"{r.path}.sn_curve"),
+                           SNCurveConfig(preset="vaps_copper")),
         mean_stress=r.str("mean_stress", "none",
                           choices=("none", "goodman", "gerber", "walker", "swt")),
         ultimate_Pa=r.float("ultimate_Pa", gt=0) if r.has("ultimate_Pa") else None,
@@ -360,8 +365,8 @@ def _parse_component(r: SectionReader) -> ComponentConfig:
         hysteresis_Pa=r.float("hysteresis_Pa", 0.0, ge=0),
         **_parse_location(r, kind),
     )
-    if out.mean_stress != "none" and out.ultimate_Pa is None:
-        raise r.error("mean_stress", out.mean_stress, "needs ultimate_Pa")
+    if out.mean_stress != "none" and out.ultimate_Pa is None and r.ok("ultimate_Pa"):
+        r.reject("mean_stress", out.mean_stress, "needs ultimate_Pa")
     r.done()
     return out
 
@@ -376,7 +381,7 @@ def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
     if location == "free_span":
         for key in _BEND_KEYS:
             if r.has(key):
-                raise r.error(key, r.raw(key), 'only with location = "termination"')
+                r.reject(key, r.raw(key), 'only with location = "termination"')
         return {"location": location}
     if not any(r.has(key) for key in _BEND_KEYS):
         # bend not measured: no bend strain (an assumed one would put the locked copper
@@ -440,6 +445,8 @@ def _parse_field(f: SectionReader, lo: float, hi: float, rate: float,
               for k in _QC_KEYS}
     limits = FieldLimits(lo, hi, f.float("max_rate_per_s", qc.get("max_rate_per_s", rate),
                                          gt=0, allow_inf=True), **values)
+    if not f.ok():  # (a stand-in is no bound to check against)
+        f.done()
     if not limits.max > limits.min:
         raise f.error("max", limits.max, f"must be > min ({limits.min:g})")
     # the operator (suspect) span lies inside the sensor (fail) span, as QARTOD has it
@@ -457,38 +464,58 @@ def _parse_validate(r: SectionReader, load: LoadConfig,
     out: dict[str, SensorLimits] = {}
     for key in r.table:
         if key not in SENSOR_FIELDS:
-            raise r.error(key, r.table[key], f"unknown sensor; expected one of {sorted(SENSOR_FIELDS)}")
+            r.reject(key, r.table[key], f"unknown sensor; expected one of {sorted(SENSOR_FIELDS)}")
     derived = qc_defaults(mooring, load)
     for sensor, defaults in DEFAULT_LIMITS.items():
-        s = SectionReader(r.raw(sensor, {}), f"validate.{sensor}")
-        fields = {}
-        for name, (lo, hi, rate) in defaults.items():
-            f = SectionReader(s.raw(name, {}), f"validate.{sensor}.{name}")
-            fields[name] = _parse_field(f, lo, hi, rate, derived[sensor].get(name, {}))
-        stale_default = load.stale_after_s if sensor == "tension" else DEFAULT_STALE_S[sensor]
-        stale = s.float("stale_after_s", stale_default, gt=0, le=MAX_DURATION_S)
-        if sensor == "tension" and s.has("stale_after_s") and stale != load.stale_after_s:
-            raise s.error("stale_after_s", stale, "tension staleness is set by load.stale_after_s")
-        location = 0.0
-        if sensor == "gnss":
-            # consecutive fixes further apart than the watch circle's diameter (line straight)
-            # plus two 50 m GNSS errors are suspect
-            location = s.float("location_range_max_m", 2 * mooring.length_m + 100.0, ge=0)
-        watch = None
-        if sensor == "motion" and s.bool("watch_circle", True):
-            # 2 % stretch: about a steel-cored cable's elongation near its breaking load
-            watch = (mooring.span_m, 1.02 * mooring.length_m, mooring.depth_m)
-        check = None
-        if sensor == "motion" and s.bool("check_factor", True):
-            check = (mooring.depth_m, LONGEST_WAVE_S)
-        s.done()
-        out[sensor] = SensorLimits(fields, stale, location, watch, check)
+        limits = r.part(_parse_sensor, r.raw(sensor, {}), f"validate.{sensor}", sensor, defaults,
+                        derived[sensor], load, mooring)
+        if limits is not None:
+            out[sensor] = limits
     return out
 
 
+def _parse_sensor(s: SectionReader, sensor: str,
+                  defaults: Mapping[str, tuple[float, float, float]],
+                  derived: Mapping[str, Mapping[str, float]], load: LoadConfig,
+                  mooring: MooringConfig) -> SensorLimits:
+    """One sensor's ``[validate.<sensor>]`` table (see :func:`_parse_validate`)."""
+    fields = {}
+    for name, (lo, hi, rate) in defaults.items():
+        field = s.part(_parse_field, s.raw(name, {}), f"validate.{sensor}.{name}", lo, hi,
+                       rate, derived.get(name, {}))
+        if field is not None:
+            fields[name] = field
+    stale_default = load.stale_after_s if sensor == "tension" else DEFAULT_STALE_S[sensor]
+    stale = s.float("stale_after_s", stale_default, gt=0, le=MAX_DURATION_S)
+    if sensor == "tension" and s.has("stale_after_s") and stale != load.stale_after_s and \
+            s.ok("stale_after_s"):
+        s.reject("stale_after_s", stale, "tension staleness is set by load.stale_after_s")
+    location = 0.0
+    if sensor == "gnss":
+        # consecutive fixes further apart than the watch circle's diameter (line straight)
+        # plus two 50 m GNSS errors are suspect
+        location = s.float("location_range_max_m", 2 * mooring.length_m + 100.0, ge=0)
+    watch = None
+    if sensor == "motion" and s.bool("watch_circle", True):
+        # 2 % stretch: about a steel-cored cable's elongation near its breaking load
+        watch = (mooring.span_m, 1.02 * mooring.length_m, mooring.depth_m)
+    check = None
+    if sensor == "motion" and s.bool("check_factor", True):
+        check = (mooring.depth_m, LONGEST_WAVE_S)
+    s.done()
+    return SensorLimits(fields, stale, location, watch, check)
+
+
 def _read(parse: Callable[..., Any], table: Any, path: str, *args: Any) -> Any:
-    """``parse(SectionReader(table, path), *args)``: a table that is no table is its error."""
-    return parse(SectionReader(table, path), *args)
+    """``parse(SectionReader(table, path), *args)``: a table that is no table is its error;
+    every error of the table (and of the tables in it) is raised at once."""
+    r = SectionReader(table, path, gather=True)
+    try:
+        out = parse(r, *args)
+    except ConfigError as exc:  # a structural error the parser cannot read past
+        r.errors.add(exc)
+    r.errors.raise_any()
+    return out
 
 
 def _parse_components(top: SectionReader) -> tuple[ComponentConfig, ...]:

@@ -244,18 +244,50 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
 
     ``r = SectionReader(table, "alerts.rule[2]")``; ``r.float("threshold", gt=0)``;
     ``r.done()`` raises if the table holds a key nobody read (a typo, usually).
+
+    With ``gather=True`` a bad value does not stop the reading: its error is kept, the getter
+    returns a stand-in (the default, or a neutral value) and ``done()`` raises every error of
+    the table at once, so one run names them all. A check across keys asks :meth:`ok` first
+    (a stand-in is no value to check against) and reports through :meth:`reject`; the caller
+    must reach ``done()`` or raise ``errors`` itself, so no stand-in is ever used.
     """
 
-    def __init__(self, table: Any, path: str) -> None:
+    def __init__(self, table: Any, path: str, gather: builtins.bool = False) -> None:
         if not isinstance(table, Mapping):
             raise ConfigError(f"config error: {path} = {_show(table)}: must be a table")
         self.table = table
         self.path = path
+        self.gather = gather
+        self.errors = Errors()
+        self._failed: set[str] = set()
         self._seen: set[str] = set()
         self._known: set[str] = set()
 
     def error(self, key: str, value: Any, why: str) -> ConfigError:
         return error(self.path, key, value, why)
+
+    def reject(self, key: str, value: Any, why: str) -> None:
+        """The error of ``key``: kept when gathering, raised otherwise."""
+        self._keep(key, self.error(key, value, why))
+
+    def _keep(self, key: str, exc: ConfigError) -> None:
+        if not self.gather:
+            raise exc
+        self.errors.add(exc)
+        self._failed.add(key)
+
+    def ok(self, *keys: str) -> builtins.bool:
+        """No error was kept for any of ``keys`` (nor for the table, with no keys given)."""
+        return not (self._failed.intersection(keys) if keys else self._failed)
+
+    def part(self, fn: Callable[..., T], table: Any, path: str, *args: Any) -> T | None:
+        """``fn(SectionReader(table, path), *args)`` for a table inside this one, read the same
+        way; when gathering, its errors are kept here and the result is None."""
+        try:
+            return fn(SectionReader(table, path, self.gather), *args)
+        except ConfigError as exc:
+            self._keep(path, exc)
+            return None
 
     def has(self, key: str) -> bool:
         self._known.add(key)
@@ -273,12 +305,23 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
                               "is missing")
         return self.table.get(key, default)
 
+    def checked(self, key: str, read: Callable[[], T], stand_in: T) -> T:
+        """``read()``; when gathering, ``stand_in`` if it raises (its error kept)."""
+        try:
+            return read()
+        except ConfigError as exc:
+            self._keep(key, exc)
+            return stand_in
+
     def str(self, key: str, default: str | None = None, choices: Sequence[str] | None = None
             ) -> str:
-        value = convert(self.path, key, self._value(key, default), str)
-        if choices is not None and value not in choices:
-            raise self.error(key, value, f"must be one of {list(choices)}")
-        return value
+        def read() -> builtins.str:
+            value = convert(self.path, key, self._value(key, default), builtins.str)
+            if choices is not None and value not in choices:
+                raise self.error(key, value, f"must be one of {list(choices)}")
+            return value
+        return self.checked(key, read, default if default is not None else
+                          choices[0] if choices else "")
 
     def float(self, key: builtins.str, default: float | None = None, *,
               gt: float | None = None, ge: float | None = None, le: float | None = None,
@@ -286,24 +329,31 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
         bounds = {k: v for k, v in (("gt", gt), ("ge", ge), ("le", le)) if v is not None}
         # msgspec's stubs list the bound combinations one by one; any of them is valid here
         meta = msgspec.Meta(**bounds, extra={"nonfinite": allow_inf})  # type: ignore[call-overload]
-        return convert(self.path, key, self._value(key, default), Annotated[float, meta])
+        return self.checked(key, lambda: convert(self.path, key, self._value(key, default),
+                                               Annotated[float, meta]),
+                          default if default is not None else 1.0)
 
     def bool(self, key: builtins.str, default: bool | None = None) -> bool:
-        return convert(self.path, key, self._value(key, default), bool)
+        return self.checked(key, lambda: convert(self.path, key, self._value(key, default), bool),
+                          bool(default))
 
     def floats(self, key: builtins.str, default: Sequence[builtins.float] | None = None, *,
                increasing: builtins.bool = False, min_len: int = 1
                ) -> tuple[builtins.float, ...]:
-        value = self._value(key, default)
-        if not isinstance(value, (list, tuple)) or len(value) < min_len or any(
-            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-            for v in value
-        ):
-            raise self.error(key, value, f"must be a list of at least {min_len} finite numbers")
-        out = tuple(float(v) for v in value)
-        if increasing and any(b <= a for a, b in zip(out, out[1:])):
-            raise self.error(key, value, "must be strictly increasing")
-        return out
+        def read() -> tuple[builtins.float, ...]:
+            value = self._value(key, default)
+            if not isinstance(value, (list, tuple)) or len(value) < min_len or any(
+                isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+                for v in value
+            ):
+                raise self.error(key, value, f"must be a list of at least {min_len} finite "
+                                 "numbers")
+            out = tuple(builtins.float(v) for v in value)
+            if increasing and any(b <= a for a, b in zip(out, out[1:])):
+                raise self.error(key, value, "must be strictly increasing")
+            return out
+        return self.checked(key, read, tuple(default) if default is not None else
+                          tuple(builtins.float(i + 1) for i in range(min_len)))
 
     def table_list(self, key: builtins.str) -> list[Mapping[builtins.str, Any]]:
         value = self.raw(key, [])
@@ -312,8 +362,11 @@ class SectionReader:  # its methods str, float, bool shadow the builtins: builti
         return value
 
     def done(self) -> None:
-        """Raise on the keys nobody read, each naming the nearest one that is read."""
+        """Raise the errors kept (when gathering) and those of the keys nobody read, each
+        naming the nearest one that is read."""
         errors = Errors()
+        for exc in self.errors.found:
+            errors.add(exc)
         for key in self.table:
             if key not in self._seen:
                 errors.add(unknown(self.path, key, self.table[key], self._seen | self._known))

@@ -191,3 +191,62 @@ def test_an_alert_rule_kind_that_is_no_name_is_a_config_error_beside_the_others(
     lines = str(exc.value).splitlines()
     assert [line.split(": unknown rule kind")[0] for line in lines] == [
         "config error: alerts.rule[0].kind = []", "config error: alerts.rule[1].kind = 'nope'"]
+
+
+def test_every_mistake_within_one_mooring_cable_component_or_validate_table():
+    """[mooring], [cable], each [[component]] and [validate] gathered the errors of their tables
+    but stopped at the first bad value inside one: two typos in one component took two runs."""
+    doc = {"buoy": {"id": "b1"},
+           "mooring": {"segment": [{"name": "a", "length_m": -1, "weight_N_per_m": 1.0,
+                                    "ea_N": 1e9, "diameter_m": 0.02},
+                                   {"name": "b", "length_m": 30.0, "weight_N_per_m": "x",
+                                    "ea_N": 1e9, "diameter_m": 0}],
+                       "depth_m": 20.0, "span_m": -3, "bearing_deg": 400},
+           "cable": {"helix_radius_m": -1, "twist": "loose", "twist_limit_deg": 5},
+           "component": [{"name": "c", "lay": "up", "scf": 0, "dff": "two",
+                          "mean_stress": "goodman", "bend_radius_m": 0.1, "scff": 1}],
+           "validate": {"tension": {"tension_N": {"min": "low", "spike_fail": -1},
+                                    "stale_after_s": -2},
+                        "imu": {"accel_x_mps2": {"flat_fail_s": -5}}, "wind": {}}}
+    with pytest.raises(ConfigErrors) as exc:
+        parse_config(doc)
+    lines = str(exc.value).splitlines()
+    assert [line.split(":")[1].strip().split(" = ")[0] for line in lines] == [
+        "mooring.segment[0].length_m", "mooring.segment[1].weight_N_per_m",
+        "mooring.segment[1].diameter_m", "mooring.span_m", "mooring.bearing_deg",
+        "cable.helix_radius_m", "cable.twist", "component[0].lay", "component[0].scf",
+        "component[0].dff", "component[0].bend_radius_m", "component[0].mean_stress",
+        "component[0].scff"]
+    assert lines[2] == ("config error: mooring.segment[1].diameter_m = 0: must be a finite "
+                        "number > 0")
+    assert lines[-1].startswith("config error: component[0].scff = 1: unknown key (did you mean "
+                                "'scf'?)")
+    # mean_stress = "goodman" without ultimate_Pa is named once the values it reads are valid
+    doc["component"] = [{"name": "c", "lay": "left", "mean_stress": "goodman"}]
+    doc["mooring"] = {"preset": "vaps_seed004"}
+    doc["cable"] = {}
+    with pytest.raises(ConfigErrors) as exc:
+        parse_config(doc)
+    assert [line.split(" = ")[0] for line in str(exc.value).splitlines()] == [
+        "config error: component[0].mean_stress", "config error: validate.wind",
+        "config error: validate.tension.tension_N.min",
+        "config error: validate.tension.tension_N.spike_fail",
+        "config error: validate.tension.stale_after_s",
+        "config error: validate.imu.accel_x_mps2.flat_fail_s"]
+
+
+def test_a_check_across_keys_waits_for_the_values_it_reads():
+    """A stand-in for a bad value is never checked against: span_m bad and depth_m deeper than
+    the line: two errors, each about its own key, none made up from the stand-in."""
+    doc = {"buoy": {"id": "b1"}, "component": [{"name": "c", "lay": "left"}],
+           "mooring": {"segment": [{"name": "a", "length_m": 10.0, "weight_N_per_m": 1.0,
+                                    "ea_N": 1e9, "diameter_m": 0.02}],
+                       "depth_m": "deep", "span_m": 5.0}}
+    with pytest.raises(ConfigError) as exc:
+        parse_config(doc)
+    assert str(exc.value) == "config error: mooring.depth_m = 'deep': must be a finite number > 0"
+    doc["mooring"]["depth_m"] = 12.0
+    with pytest.raises(ConfigError) as exc:
+        parse_config(doc)
+    assert str(exc.value) == ("config error: mooring.depth_m = 12.0: deeper than the line is long "
+                              "(10 m)")
