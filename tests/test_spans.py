@@ -6,12 +6,15 @@ sink, one slab per block as before."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import types
 
 import numpy as np
 import pytest
 
 from monitor.blocks import SENSOR_FIELDS, SampleBlock
+from monitor.config import default_config
 from monitor.pipeline import Pipeline
 from replay.runner import replay_pipeline, run_blocks
 from replay.spans import spans
@@ -54,19 +57,80 @@ def test_stretches_after_all_before_them_join_while_within_the_horizon():
               _block("imu", 31, 40), _block("tension", 30, 40),  # not after all before
               _block("gnss", 41, 45), _block("gnss", 46, 50),  # 30 to 50 s: join
               _block("gnss", 51, 59)]
+    # a horizon of 20 s: runs of 20 s, and beyond once the samples leave no gap of an hour
+    # for 20 s back (here from the start)
     runs = [[(b.sensor, b.t_first_ns // S) for b in run] for run in spans(blocks, True, 20 * S)]
-    assert runs == [[("tension", 0), ("imu", 0), ("tension", 11), ("imu", 11)],
-                    [("tension", 21), ("imu", 21)],
-                    [("imu", 31), ("tension", 30), ("gnss", 41), ("gnss", 46)], [("gnss", 51)]]
+    assert runs == [[("tension", 0), ("imu", 0), ("tension", 11), ("imu", 11),
+                     ("tension", 21), ("imu", 21)],
+                    [("imu", 31), ("tension", 30), ("gnss", 41), ("gnss", 46), ("gnss", 51)]]
     # a run up to exactly the span joins; empty blocks join whatever run is open
     empty = SampleBlock("b", "gnss", np.zeros(0, np.int64),
                         {f: np.zeros(0) for f in SENSOR_FIELDS["gnss"]})
     runs = [[(b.sensor, len(b)) for b in run]
             for run in spans([_block("imu", 0, 9), empty, _block("imu", 10, 19)], True, 19 * S)]
     assert runs == [[("imu", 10), ("gnss", 0), ("imu", 10)]]
-    assert len(list(spans(blocks))) == 7  # (no span given: stretches alone)
+    assert len(list(spans(blocks))) == 7  # (no horizon given: stretches alone)
     hours = [_block("tension", 3600 * h, 3600 * h + 1799) for h in range(4)]
     assert [len(run) for run in spans(hours, True, 10**6 * S)] == [1, 1, 1, 1]  # (an hour)
+
+
+def _starts(runs: list[list[SampleBlock]]) -> list[list[int]]:
+    return [[b.t_first_ns // 1800 // S for b in run if b.sensor == "tension"] for run in runs]
+
+
+def test_runs_join_beyond_the_horizon_where_no_boundary_can_fall_into_a_long_gap():
+    """Half-hour stretches (tension and IMU), a horizon of an hour: within the first hour
+    the watermark may lie before the first sample (runs of an hour, as within the
+    horizon), then runs of up to LONGEST_RUN_NS (3 h); after a gap of more than an hour
+    (two), again an hour of runs within the horizon. A block whose samples run ahead of
+    its receive time may lose some (time_ahead): its end opens a gap."""
+    H = 3600 * S
+
+    def stretch(i: int, recv: int = 0) -> list[SampleBlock]:
+        return [dataclasses.replace(_block(s, 1800 * i, 1800 * i + 1799), recv_ns=recv)
+                for s in ("tension", "imu")]
+
+    feed = [b for i in [*range(14), *range(18, 30)] for b in stretch(i)]
+    assert _starts(list(spans(feed, True, H))) == [
+        [0, 1], [2, 3, 4, 5, 6, 7], [8, 9, 10, 11, 12, 13],  # (a gap from 7 h to 9 h)
+        [18, 19], [20, 21, 22, 23, 24, 25], [26, 27, 28, 29]]
+    # a gap of an hour and a second is one; of an hour, not
+    feed = [b for i in [*range(8), *range(10, 14)] for b in stretch(i)]
+    assert _starts(list(spans(feed, True, H))) == [
+        [0, 1], [2, 3, 4, 5, 6, 7], [10, 11], [12, 13]]
+    feed[16:] = [_block(s, 1800 * i - 1, 1800 * i + 1798) for i in range(10, 14)
+                 for s in ("tension", "imu")]
+    assert _starts(list(spans(feed, True, H))) == [[0, 1], [2, 3, 4, 5, 6, 7], [9, 10, 11, 12]]
+    # stretch 5's samples may be ahead of their receive time: its end may open a gap, up to
+    # stretch 6's start, and the boundaries of the hour after that stay
+    feed = [b for i in range(14) for b in stretch(i, (1800 * i + 1000) * S if i == 5 else 0)]
+    assert _starts(list(spans(feed, True, H))) == [
+        [0, 1], [2, 3, 4, 5], [6, 7], [8, 9, 10, 11, 12, 13]]
+    assert [len(r) for r in spans(feed, True, 10 * H)] == [4] * 7  # (a 10-h horizon: an hour)
+
+
+def test_dense_slabs_take_the_usual_tick_path_with_the_same_ticks():
+    """Pipeline._tick_ends leaves out all but the first ticks of a long run of ticks
+    without samples; its check that no run is long (every 64th sample's tick) takes the
+    usual path for a dense slab of hours, and gives the general path's ticks always."""
+    pipeline = Pipeline(default_config(), warm=False)
+    tick, most = pipeline.tick_ns, pipeline._max_empty_ticks
+    assert most * tick == 3610 * S  # (an hour of 10-s ticks, and the last sample's)
+    first, k = 10**18, 4 * most  # 4 h of ticks
+    rng = np.random.default_rng(3)
+    dense = first - tick + np.cumsum(rng.integers(1, 5 * tick, 20_000))
+    dense = dense[dense <= first + k * tick]
+    gap = dense[(dense < first + most * tick) | (dense > first + (2 * most + 9) * tick)]
+    cases = [([dense], True), ([gap], False), ([gap[:10], dense], True),
+             ([dense[dense > first + (most + 1) * tick]], False),  # no sample first
+             ([dense[dense <= first + (k + 1 - most) * tick]], True)]  # `most` after the last
+    for times, usual in cases:
+        assert any(pipeline._dense(first, k, x) for x in times) is usual
+        general = Pipeline._tick_ends(
+            types.SimpleNamespace(tick_ns=tick, _max_empty_ticks=most,
+                                  _dense=lambda *a: False), first, k, times)
+        assert np.array_equal(pipeline._tick_ends(first, k, times), general)
+        assert (general.shape[0] == k + 1) is usual
 
 
 @pytest.mark.parametrize("child", [False, True], ids=["one-process", "child"])
