@@ -18,30 +18,36 @@ Stretches in turn: a reader's release of a chunk (~73 min of the default streams
 stretches of at most 30 min (replay.merge.COALESCE_S: 30, 30 and 13 min), and each slab
 costs about a millisecond whatever its length (the fleet benchmark's buoy: 297 slabs in 5
 days). A stretch whose samples all start after every sample before it joins the run before
-it, exactly: the pushes are those of the stretches one by one, and the slab taken at the
-run's end holds what their slabs would have taken, with the same verdicts (no sample of a
-later stretch is at or before a watermark taken before it, so none is ``time_backwards``,
-none is a copy of an earlier one, and the validators' floors are below all of them); the
-ordering's release (``W = min`` of the gating streams' marks) is a function of what was
-pushed, so the run's last watermark is theirs. Nothing downstream depends on where the
-slabs were cut, but for one rule: the ticks of a gap without samples are evaluated only up
-to ``monitor.pipeline._EMPTY_SPAN_S`` after its last sample (``Pipeline._tick_ends``: after
-a clock jump, memory and time depend on the data, not on the jump), counted from a slab's
-first tick when the gap began before it. Such a gap cut by a slab boundary is walked
-further than whole. So a boundary is left out only where no watermark can fall into a gap
-longer than that: the watermark after the stretch before it lies within the replay's
-horizon of the newest sample (every stream gates in replay: ``newest - horizon <= W <=
-newest``), and the samples since at least that far back leave no such gap
-(:func:`spans` keeps the start of that gap-free data). The boundaries the rule keeps are
-those of the runs before it (within the horizon and an hour, what the results were made
-with): every run is one or more of those, the slab at its end the same as theirs.
+it, exactly, however long the run (the horizon plays no part): the pushes are those of the
+stretches one by one, and the slab taken at the run's end holds what their slabs would
+have taken, with the same verdicts (no sample of a later stretch is at or before a
+watermark taken before it, so none is ``time_backwards``, none is a copy of an earlier
+one, and the validators' floors are below all of them); the ordering's release (``W =
+min`` of the gating streams' marks) is a function of what was pushed, so the run's last
+watermark is theirs. Nothing downstream depends on where the slabs were cut but one rule:
+the ticks of a gap without samples are evaluated only up to ``monitor.pipeline.
+_EMPTY_SPAN_S`` (or the damage-rate window) after its last sample (``Pipeline._tick_ends``:
+after a clock jump, memory and time depend on the data, not on the jump), counted from a
+slab's first tick when the gap began before it, so a longer gap cut by a slab boundary is
+walked further than whole. A boundary is therefore left out only where no watermark can
+fall into such a gap: in replay every stream gates, so the watermark after the stretch
+before it lies within the horizon of the newest sample (``newest - horizon <= W <=
+newest``; a restored ordering's newest may be later: then none is left out), and
+:func:`spans` keeps the time since which the samples leave no gap longer than
+``_EMPTY_SPAN_S`` (a block that may lose samples ``time_ahead`` of its receive time
+restarts it at the next stretch). The runs within the horizon and an hour, which the
+results were made with, were joined without that check (a long gap with a stream silent
+may fall across one): they are kept, and joined to each other only where the rule allows,
+so every slab is the last of one or more of theirs, with the same results.
 
-The horizon then bounds nothing (the ordering holds a horizon of samples besides the
-run): a run spans at most :data:`LONGEST_RUN_NS` of sensor time, for memory (a slab's
-arrays: ~1.9 MB an hour of the default streams in the two-process replay's hand-over,
-replay.stage_process.SLOT_BYTES) and the cache (fleet buoy002, 5 days, CPU best-of-4, load
-~3, 2026-11-26 08:42 UTC: runs of at most 1 h 148 slabs, 0.89-1.00 s; 2 h 67 slabs, 0.76-0.77
-s; 3 h 44 slabs, 0.75-0.77 s; 4 h 34 slabs, 0.74-0.77 s).
+That leaves memory and the cache as the bounds: a run spans at most :data:`LONGEST_RUN_NS`
+of sensor time (a slab's arrays: ~2.2 MB an hour of the default streams in the two-process
+replay's hand-over, replay.stage_process.SLOT_BYTES; peak RSS of a one-process replay of
+the 1-day bench log 232 / 250 / 259 / 264 MB for runs of at most 1 / 2 / 3 / 4 h). Fleet
+buoy002, 5 days, CPU best of 4, load ~3, 2026-11-26 08:42 UTC (with the horizon ignored):
+1 h 148 slabs, 0.89-1.00 s; 2 h 67 slabs, 0.76-0.77 s; 3 h 44 slabs, 0.75-0.77 s; 4 h 34
+slabs, 0.74-0.77 s; with this rule at 3 h, 39 slabs (2 h against 3 h at 08:49, load 2.6:
+0.815-0.826 s against 0.787-0.819 s).
 """
 
 from __future__ import annotations
@@ -73,8 +79,8 @@ _BASE_RUN_NS = 3600 * 1_000_000_000
 _DENSE_GAP_NS = int(_EMPTY_SPAN_S * 1e9)
 
 
-def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | None = None
-          ) -> Iterator[list[SampleBlock]]:
+def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | None = None, *,
+          after_ns: int | None = None) -> Iterator[list[SampleBlock]]:
     """``blocks`` in runs of consecutive blocks, in order, each block alone unless ``join``:
     a stretch is a run of blocks where a block joins the one before it when the run has no
     block of its stream and the block starts at or before the run's latest end (so it holds
@@ -83,7 +89,9 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | No
     while the run's samples span at most ``horizon_ns`` (the ordering's horizon in replay,
     where every stream gates) and an hour, and beyond that while they span at most
     :data:`LONGEST_RUN_NS` if no slab boundary of the horizon before can fall into a gap
-    of the samples longer than :data:`_DENSE_GAP_NS` (module docstring). No horizon given:
+    of the samples longer than :data:`_DENSE_GAP_NS` (module docstring), and the run
+    before has a sample later than ``after_ns`` (the newest time a restored ordering has
+    received, ReorderBuffer.newest_ns: the watermark may lie up to it). No horizon given:
     stretches alone."""
     if not join:
         for block in blocks:
@@ -103,7 +111,8 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | No
             if first is not None and base is not None and newest is not None and (
                     lo <= newest or max(hi, newest) - base > base_ns):
                 if (lo <= newest or dense is None or dense > newest - horizon
-                        or max(hi, newest) - first > longest):
+                        or max(hi, newest) - first > longest
+                        or (after_ns is not None and newest <= after_ns)):
                     yield run
                     run, first = [], None
                 base = None

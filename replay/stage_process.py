@@ -553,7 +553,8 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
             # stresses for the tick stage anyway, and the peaks of them (intake_of)
             pipeline.components = {}
             own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
-            for run in spans(own, join_spans, pipeline.reorder.horizon_ns):
+            for run in spans(own, join_spans, pipeline.reorder.horizon_ns,
+                             after_ns=pipeline.reorder.newest_ns):
                 done = (len(run), sum(len(b) for b in run), run[-1].t_last_ns)
                 slots.send("slab", (pipeline.ingest(*run), done), pickler)
             slots.send("slab", (pipeline.ingest_end(), None), pickler)

@@ -107,6 +107,10 @@ def test_runs_join_beyond_the_horizon_where_no_boundary_can_fall_into_a_long_gap
     assert _starts(list(spans(feed, True, H))) == [
         [0, 1], [2, 3, 4, 5], [6, 7], [8, 9, 10, 11, 12, 13]]
     assert [len(r) for r in spans(feed, True, 10 * H)] == [4] * 7  # (a 10-h horizon: an hour)
+    # a restored ordering has received up to 4 h 59 min 59 s: its watermark may be there
+    feed = [b for i in range(14) for b in stretch(i)]
+    assert _starts(list(spans(feed, True, H, after_ns=(5 * 3600 - 1) * S))) == [
+        [0, 1], [2, 3], [4, 5], [6, 7], [8, 9], [10, 11, 12, 13]]
 
 
 def test_dense_slabs_take_the_usual_tick_path_with_the_same_ticks():
