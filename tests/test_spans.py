@@ -17,7 +17,9 @@ from monitor.blocks import SENSOR_FIELDS, SampleBlock
 from monitor.config import default_config
 from monitor.pipeline import Pipeline
 from replay.runner import replay_pipeline, run_blocks
+import replay.spans
 from replay.spans import spans
+from synthetic_buoy import T0, blocks_interleaved, sea
 from test_stages import CONFIG, Recorder, faulty_blocks
 
 S = 1_000_000_000
@@ -111,6 +113,30 @@ def test_runs_join_beyond_the_horizon_where_no_boundary_can_fall_into_a_long_gap
     feed = [b for i in range(14) for b in stretch(i)]
     assert _starts(list(spans(feed, True, H, after_ns=(5 * 3600 - 1) * S))) == [
         [0, 1], [2, 3], [4, 5], [6, 7], [8, 9], [10, 11, 12, 13]]
+
+
+def test_runs_beyond_the_horizon_give_the_bits_of_the_runs_within_it(monkeypatch):
+    """8 h of tension and IMU (no GNSS: the watermark lags the newest sample by the 1-h
+    horizon) in 25-min blocks, with all data out from 3 h to 5.5 h: runs of up to 3 h give
+    the report and state of the runs within the horizon and an hour (LONGEST_RUN_NS 0),
+    in fewer slabs; one of those ends 10 min into the gap, where a run across the gap
+    would give other alerts (the gap's ticks are walked from where a slab begins inside
+    it; the runs within the horizon differ from a slab per block here for that reason)."""
+    data = sea(8 * 3600, seed=5)
+    del data["gnss"]
+    for s, (t, v) in list(data.items()):
+        keep = (t < T0 + 3 * 3600 * S) | (t >= T0 + 19800 * S)
+        data[s] = (t[keep], {k: a[keep] for k, a in v.items()})
+    feed = blocks_interleaved(data, 1500)
+    out, slabs = [], []
+    ingest = Pipeline.ingest
+    monkeypatch.setattr(Pipeline, "ingest", lambda self, *b: slabs.append(1) or ingest(self, *b))
+    for longest in (replay.spans.LONGEST_RUN_NS, 0):
+        monkeypatch.setattr(replay.spans, "LONGEST_RUN_NS", longest)
+        out.append((_bits(run_blocks(default_config(), iter(feed))[0]), len(slabs)))
+        slabs.clear()
+    assert out[0][0] == out[1][0]
+    assert (out[0][1], out[1][1]) == (4, 7)  # slabs besides the flush's
 
 
 def test_dense_slabs_take_the_usual_tick_path_with_the_same_ticks():
