@@ -35,10 +35,11 @@ before it lies within the horizon of the newest sample (``newest - horizon <= W 
 newest``; a restored ordering's newest may be later: then none is left out), and
 :func:`spans` keeps the time since which the samples leave no gap longer than
 ``_EMPTY_SPAN_S`` (a block that may lose samples ``time_ahead`` of its receive time
-restarts it at the next stretch). The runs within the horizon and an hour, which the
-results were made with, were joined without that check (a long gap with a stream silent
-may fall across one): they are kept, and joined to each other only where the rule allows,
-so every slab is the last of one or more of theirs, with the same results.
+restarts it at the next stretch). Every boundary is checked so: the runs of up to an hour
+within the horizon that replays took before (main f01117f to 2026-11-26) were joined without
+the check, and after a gap of over an hour with a stream silent they gave other alerts than
+a slab per block (tests/test_spans.py); so the first horizon of a log, and of the data after
+such a gap, goes stretch by stretch.
 
 That leaves memory and the cache as the bounds: a run spans at most :data:`LONGEST_RUN_NS`
 of sensor time (a slab's arrays: ~2.2 MB an hour of the default streams in the two-process
@@ -71,9 +72,6 @@ def of_buoy(blocks: Iterable[SampleBlock], buoy_id: str, ignored: dict[str, int]
 # The longest run of stretches (see the module docstring): for memory and the cache, whatever
 # the horizon
 LONGEST_RUN_NS = 3 * 3600 * 1_000_000_000
-# The runs the results were made with: stretches within the ordering's horizon and an hour.
-# A later stretch joins them only where the boundary is left out exactly (module docstring).
-_BASE_RUN_NS = 3600 * 1_000_000_000
 # A gap of at most this much sensor time without samples is evaluated tick by tick whatever
 # the slabs' cut: Pipeline._tick_ends walks at least _EMPTY_SPAN_S of ticks after a sample.
 _DENSE_GAP_NS = int(_EMPTY_SPAN_S * 1e9)
@@ -86,42 +84,36 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | No
     block of its stream and the block starts at or before the run's latest end (so it holds
     at most one block per stream, of overlapping spans: what the ordering buffers anyway);
     a stretch whose samples all come after every sample before it joins the run before it
-    while the run's samples span at most ``horizon_ns`` (the ordering's horizon in replay,
-    where every stream gates) and an hour, and beyond that while they span at most
-    :data:`LONGEST_RUN_NS` if no slab boundary of the horizon before can fall into a gap
-    of the samples longer than :data:`_DENSE_GAP_NS` (module docstring), and the run
-    before has a sample later than ``after_ns`` (the newest time a restored ordering has
-    received, ReorderBuffer.newest_ns: the watermark may lie up to it). No horizon given:
-    stretches alone."""
+    while the run's samples span at most :data:`LONGEST_RUN_NS`, if no watermark within
+    ``horizon_ns`` (the ordering's horizon in replay, where every stream gates) before it
+    can fall into a gap of the samples longer than :data:`_DENSE_GAP_NS` (module
+    docstring), and the run before has a sample later than ``after_ns`` (the newest time a
+    restored ordering has received, ReorderBuffer.newest_ns: the watermark may lie up to
+    it). No horizon given: stretches alone."""
     if not join:
         for block in blocks:
             yield [block]
         return
     horizon, longest = (0, 0) if horizon_ns is None else (horizon_ns, LONGEST_RUN_NS)
-    base_ns = min(horizon, _BASE_RUN_NS)
     run: list[SampleBlock] = []
-    first: int | None = None  # the earliest sample of the run, and of its run within base_ns
-    base: int | None = None
+    first: int | None = None  # the earliest sample of the run
     newest: int | None = None  # the latest sample so far
     dense: int | None = None  # since when the samples leave no gap longer than _DENSE_GAP_NS
     reset = False  # the next stretch's start opens a gap (the last one's end is not sure)
     for stretch in _stretches(blocks):
         lo, hi, gaps, sure = _bounds(stretch)
         if lo is not None and hi is not None:
-            if first is not None and base is not None and newest is not None and (
-                    lo <= newest or max(hi, newest) - base > base_ns):
-                if (lo <= newest or dense is None or dense > newest - horizon
-                        or max(hi, newest) - first > longest
-                        or (after_ns is not None and newest <= after_ns)):
-                    yield run
-                    run, first = [], None
-                base = None
+            if first is not None and newest is not None and (
+                    lo <= newest or dense is None or dense > newest - horizon
+                    or max(hi, newest) - first > longest
+                    or (after_ns is not None and newest <= after_ns)):
+                yield run
+                run, first = [], None
             since = (lo if newest is None or dense is None or reset
                      or lo - newest > _DENSE_GAP_NS else dense)
             dense = since if gaps is None else max(since, gaps)
             reset = not sure
             first = lo if first is None else first
-            base = lo if base is None else base
             newest = hi if newest is None else max(newest, hi)
         run.extend(stretch)
     if run:
