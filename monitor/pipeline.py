@@ -61,7 +61,9 @@ STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
 _T = TypeVar("_T")
 _NEVER = np.iinfo(np.int64).min
-_EMPTY_SPAN_S = 3600.0  # at least this much of a gap without samples is evaluated tick by tick
+# at least this much of a gap without samples is evaluated tick by tick (replay.spans leaves
+# out a slab boundary only where none can fall into a longer gap: Pipeline._tick_ends)
+_EMPTY_SPAN_S = 3600.0
 # slabs of fewer ticks (live ingest: one or two) are evaluated tick by tick: the alert batch
 # costs about 0.3 ms a slab to set up, some 20 ticks' worth of the per-tick path
 BATCH_MIN_TICKS = 16
@@ -857,7 +859,8 @@ class Pipeline:
         """Ends of the ticks to evaluate, ``first_end + tick * i`` for i in 0..k, leaving out
         all but the first ``_max_empty_ticks`` of a run of ticks without any sample of
         ``times``: memory and time then depend on the data, not on how far the clock jumped."""
-        if k < self._max_empty_ticks:  # the usual slab: every tick
+        if k < self._max_empty_ticks or any(self._dense(first_end, k, x) for x in times
+                                            if x.shape[0]):  # the usual slab: every tick
             return first_end + self.tick_ns * np.arange(k + 1, dtype=np.int64)
         # index of the tick each sample falls in (its end at or after the sample)
         starts = np.unique(np.concatenate([np.zeros(1, np.int64)] + [
@@ -868,6 +871,18 @@ class Pipeline:
         keep = (np.arange(int(lengths.sum()), dtype=np.int64)
                 + np.repeat(starts - offsets, lengths))
         return first_end + self.tick_ns * keep
+
+    def _dense(self, first_end: int, k: int, x: np.ndarray) -> bool:
+        """Whether the sorted sample times ``x`` alone leave no run of ticks :meth:`_tick_ends`
+        would cut short (then no run is, whatever the other streams'): with the slab's
+        first tick and the tick after its last, every ``len(x) // 64``-th sample and the last
+        are at most ``_max_empty_ticks`` ticks apart (so are the samples between them). A
+        slab of hours (replay.spans) takes the usual path without a pass over its samples."""
+        idx = np.clip(-((first_end - np.concatenate((x[::max(1, x.shape[0] // 64)], x[-1:])))
+                        // self.tick_ns), 0, k)
+        most = self._max_empty_ticks
+        return bool(idx[0] <= most and k + 1 - idx[-1] <= most
+                    and (idx[1:] - idx[:-1]).max(initial=0) <= most)
 
     def _source_at(self, now: int) -> str:
         """The load source of the newest load sample, "none" once it is older than stale_after_s."""

@@ -244,8 +244,9 @@ def run_blocks(config: Config, blocks: Iterable[SampleBlock], *, state: dict | N
     else:
         origin: list[float] = []
         # unpaced and with no sink to see the steps: one slab per stretch, or per run of
-        # stretches within the ordering's horizon (replay.spans)
-        for run in spans(own, speed is None and not sinks, pipeline.reorder.horizon_ns):
+        # stretches (replay.spans)
+        for run in spans(own, speed is None and not sinks, pipeline.reorder.horizon_ns,
+                         after_ns=pipeline.reorder.newest_ns):
             if speed is not None:
                 _pace(run[0], speed, origin)
             pipeline.advance_unread(pipeline.ingest(*run))

@@ -80,12 +80,13 @@ IDLE_CPUS = 1.5  # one for each process, less half of one another job may take
 _PIPE_BYTES = 1 << 20  # Linux's default ceiling for an unprivileged pipe
 # The hand-overs' arrays go through slots of memory shared by the two processes (mapped once
 # before the fork, reused: no page faults, no copies through the pipe). A slab of the default
-# streams needs up to ~1 MB (half an hour of tension and IMU samples; more with a sink's
-# block hook); a larger one (or one with every slot still in use here) goes through the
-# pipe. Six slots let the child work up to five slabs ahead. After the replay, arrays a sink
-# kept stay valid: their slot stays mapped while they refer to it, and nothing writes it.
-SLOTS = 6
-SLOT_BYTES = 4 << 20
+# streams needs up to ~6.5 MB (a run of replay.spans.LONGEST_RUN_NS, 3 h, of tension, IMU,
+# GNSS and wave samples on the 1-day bench log; more with a sink's block hook); a larger one
+# (or one with every slot still in use here) goes through the pipe. Four slots let the child
+# work up to three slabs (some 9 h of the log) ahead. After the replay, arrays a sink kept
+# stay valid: their slot stays mapped while they refer to it, and nothing writes it.
+SLOTS = 4
+SLOT_BYTES = 8 << 20
 BATCH = 2  # hand-overs and answers written together: each write may wake the other process
 _ALIGN = 64  # each array starts on a cache line (the compiled kernels want aligned arrays)
 _HELD = 0x80  # a slot's release message: its number, or'ed with this while still in use
@@ -552,7 +553,8 @@ def _child(fd: int, other_fds: Sequence[int], release_fd: int, maps: Sequence[mm
             # stresses for the tick stage anyway, and the peaks of them (intake_of)
             pipeline.components = {}
             own = of_buoy(itertools.chain([first], source), pipeline.buoy_id, ignored)
-            for run in spans(own, join_spans, pipeline.reorder.horizon_ns):
+            for run in spans(own, join_spans, pipeline.reorder.horizon_ns,
+                             after_ns=pipeline.reorder.newest_ns):
                 done = (len(run), sum(len(b) for b in run), run[-1].t_last_ns)
                 slots.send("slab", (pipeline.ingest(*run), done), pickler)
             slots.send("slab", (pipeline.ingest_end(), None), pickler)
