@@ -50,7 +50,6 @@ from monitor.ordering import SENSOR_ORDER, ReorderBuffer
 from monitor.qartod import StreamQC
 from monitor.sea_state_learner import SeaStateLearner
 from monitor.stats_kernel import load_stats_pass
-from monitor.tick_health import tick_health
 from monitor.time_ahead import drop_ahead
 from monitor.validate import REASONS, StreamValidator
 
@@ -315,16 +314,22 @@ class _StreamSlab:
         """Per prepared tick end: samples received and rejected in the tick, whether a sample
         was ever accepted, the last accepted time (vectorised)."""
         if self._arrays is None:
-            received, rejected, k, last = tick_health(self.rx_t, self.rej_t, self.acc_t,
-                                                      self._ends)
+            ends = self._ends
+            cut = np.searchsorted(self.rx_t, ends, side="right")
+            if self.rej_t.shape[0]:
+                rejected = _counts(np.searchsorted(self.rej_t, ends, side="right"))
+                k = np.searchsorted(self.acc_t, ends, side="right")
+            else:  # the usual case: every sample accepted (and so rx_t is t)
+                rejected, k = np.zeros(ends.shape[0], np.int64), cut
             # (k rises: the usual slab has accepted samples by its first tick end)
             self.has_all = bool(k[0] > 0) if k.shape[0] else True
             if self.has_all:
-                has = np.ones(k.shape[0], bool)
+                has, last = np.ones(k.shape[0], bool), self.acc_t[k - 1]
             else:
                 has = (k > 0) | self._before[2]
-                last = np.where(k > 0, last, self._before[3])
-            self._arrays = (received, rejected, has, last)
+                last = np.where(k > 0, self.acc_t[np.maximum(k - 1, 0)] if self.acc_t.shape[0]
+                                else 0, self._before[3])
+            self._arrays = (_counts(cut), rejected, has, last)
             self._accepted_upto = k
         return self._arrays
 
@@ -353,6 +358,14 @@ class _StreamSlab:
         # positional (the fields' order): keywords cost 60 % more per call, at every tick
         return StreamObs(last_t, not has_last[k] or now - last_t > stale_ns, accepted[k],
                          rejected, rejected_tick[k], received[k])
+
+
+def _counts(cut: np.ndarray) -> np.ndarray:
+    """Each tick's count from the cumulative counts at the tick ends (``np.diff`` with
+    ``prepend=0``, at a fraction of its cost)."""
+    out = cut.copy()
+    np.subtract(cut[1:], cut[:-1], out=out[1:])
+    return out
 
 
 @dataclasses.dataclass(slots=True)
@@ -583,8 +596,6 @@ class Pipeline:
         if self.sea_states is not None:
             self.sea_states.warm_up()
         alert_batch_warm_up()
-        none = np.zeros(0, np.int64)
-        tick_health(none, none, none, none)
 
     # ------------------------------------------------------------------ driving
     @classmethod
