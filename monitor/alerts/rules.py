@@ -30,6 +30,7 @@ from monitor.alerts.records import decode_float, encode_float
 from monitor.events import Observation
 
 NS = 1_000_000_000
+_NO_ENTRIES = np.zeros((0, 3), np.int64)  # an empty window (RejectedRate.window): read only
 
 
 class TickStats:
@@ -470,6 +471,8 @@ class RejectedRate(Rule):
         """The window's entries as rows of an int64 array."""
         if self._ticks is None:
             return self._held
+        if not self._ticks:  # (an idle stream's, every slab)
+            return _NO_ENTRIES
         return np.array(self._ticks, np.int64).reshape(len(self._ticks), 3)
 
     def set_window(self, entries: np.ndarray, rejected: int, received: int) -> None:
