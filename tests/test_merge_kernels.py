@@ -1,6 +1,6 @@
-"""replay.merge's kernels against the numpy formulation they replace (compiled and as plain
-Python): the pending table's columns of a run of records, and where a release's held-back
-messages lie in their streams."""
+"""replay.merge's kernels against the formulation they replace (compiled and as plain
+Python): the pending table's columns of a run of records, where a release's held-back
+messages lie in their streams, and the coalesced blocks of a release."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from models import _jit
-from replay.merge import LOG, N, PUB, SEQ, START, STREAM, _fill_rows, _held_runs
+from replay.merge import LOG, N, PUB, SEQ, START, STREAM, _fill_rows, _groups, _held_runs
 
 
 @pytest.mark.parametrize("plain", [False, True])
@@ -49,3 +49,47 @@ def test_held_runs_finds_each_streams_run_or_says_it_is_broken(plain):
         assert _held_runs(stream, start, n, 3)[2] is None
         start[3], start[5] = 9, 49  # stream 0's last message overlaps the one before
         assert _held_runs(stream, start, n, 3)[2] is None
+
+
+def _groups_by_division(order, stream, pub, log, start, n, span_ns, n_streams):
+    """The coalesced blocks as first written: each message's span by a division."""
+    blocks, member, open_block, span = [], [], {}, 0
+    for k in order:
+        sp = (pub[k] - pub[order[0]]) // span_ns
+        if sp != span:
+            open_block, span = {}, sp
+        b = open_block.get(stream[k])
+        if b is None:
+            b = open_block[stream[k]] = len(blocks)
+            blocks.append([stream[k], start[k], start[k] + n[k], log[k], False])
+        else:
+            blocks[b][4] |= start[k] != blocks[b][2]
+            blocks[b][3] = max(blocks[b][3], log[k])
+            blocks[b][2] = start[k] + n[k]
+        member.append(b)
+    return blocks, member
+
+
+@pytest.mark.parametrize("plain", [False, True])
+@pytest.mark.parametrize("sorted_pub", [True, False])
+def test_groups_cut_spans_as_a_division_per_message_does(plain, sorted_pub):
+    rng = np.random.default_rng(11 + sorted_pub)
+    m = 400
+    pub = np.cumsum(rng.integers(0, 40, m)) if sorted_pub else rng.integers(-300, 900, m)
+    stream = rng.integers(0, 3, m)
+    n = rng.integers(1, 5, m)
+    start = np.zeros(m, np.int64)
+    for s in range(3):  # back to back in each stream, but for a few gaps
+        mine = stream == s
+        start[mine] = np.cumsum(n[mine]) - n[mine] + (rng.random(mine.sum()) < 0.05)
+    log = pub + rng.integers(0, 50, m)
+    order = np.arange(m)
+    with _jit.uncompiled() if plain else contextlib.nullcontext():
+        count, sid, lo, hi, latest, apart, member = _groups(order, stream, pub, log, start, n,
+                                                             100, 3)
+    blocks, want_member = _groups_by_division(order, stream, pub, log, start, n, 100, 3)
+    assert count == len(blocks) > 20
+    got = [list(x) for x in zip(sid.tolist(), lo.tolist(), hi.tolist(), latest.tolist(),
+                                apart.tolist())]
+    assert got == [[int(a), int(b), int(c), int(d), bool(e)] for a, b, c, d, e in blocks]
+    assert member.tolist() == want_member
