@@ -180,12 +180,12 @@ def _decode_regular(buf, offs, lens, tag_t0, tag_period, tags, tag_q, tag_delta,
         nsamp[k] = n
         pos += n
     t = np.empty(pos, np.int64)
-    at = front
+    at = np.uint64(front)  # unsigned: no wrap-around of negative indices, so LLVM vectorizes
     for k in range(m):
         t0, period = t0s[k], periods[k]
         for i in range(nsamp[k]):
-            t[at + i] = t0 + i * period
-        at += nsamp[k]
+            t[at + np.uint64(i)] = t0 + i * period
+        at += np.uint64(nsamp[k])
     return _DONE, nsamp, t, vals[:, :pos]
 
 

@@ -75,6 +75,12 @@ class _Stream:
         return (np.concatenate([p[0] for p in pieces]),
                 np.concatenate([p[1] for p in pieces], axis=1))
 
+    def keep_span(self, a: int, b: int) -> None:
+        """Drop every sample but ``a .. b - 1`` (none when ``a >= b``)."""
+        t, v = self._span(a, b)
+        self.parts = [(t, v)] if t.shape[0] else []
+        self.bounds = [0, t.shape[0]] if t.shape[0] else [0]
+
     def keep_only(self, start: np.ndarray, n: np.ndarray) -> np.ndarray:
         """Drop every sample but those of messages (start, n); return their new starts."""
         t, v = self.take(start, n)
@@ -125,7 +131,11 @@ class StreamMerge:
         self.max_ahead_ns = max_ahead_ns
         self._streams: list[_Stream] = []
         self._stream_of: dict[str, int] = {}
-        self._pending: list[np.ndarray] = []  # tables of messages, see STREAM ... SEQ
+        # the pending messages, one column each (rows STREAM ... SEQ), in the first ``_n``
+        # columns of a table that grows as needed: records fill it in place, a release reads
+        # it without joining parts and puts the held-back messages back at its start
+        self._tab = np.empty((6, 0), np.int64)
+        self._n = 0
         self._rank = np.empty(0, np.int64)  # each stream's rank in topic order
         self._max_pub = np.iinfo(np.int64).min
         self._released_to = np.iinfo(np.int64).min
@@ -171,28 +181,30 @@ class StreamMerge:
                 st.bad_payloads += bad
                 sel, n = sel[good], n[good]
             stream = self._streams[sidx]
-            start = stream.add(t, vals, front) + np.cumsum(n) - n
+            start0 = stream.add(t, vals, front)
             topic = stream.topic
             st.messages_by_topic[topic] = st.messages_by_topic.get(topic, 0) + sel.shape[0]
             st.messages += sel.shape[0]
             st.samples += t.shape[0] - front
-            p_sel = pub[sel]
             if sel.shape[0]:
-                lo, hi = int(p_sel.min()), int(p_sel.max())
+                lo, hi, late = (int(x) for x in _fill_rows(
+                    self._room(sel.shape[0]), sidx, pub, log, sel, n, start0, seq0,
+                    self._released_to))
                 st.first_ns = lo if st.first_ns is None else min(st.first_ns, lo)
                 st.last_ns = hi if st.last_ns is None else max(st.last_ns, hi)
-                if lo <= self._released_to:
-                    st.late += int(np.count_nonzero(p_sel <= self._released_to))
+                st.late += late
                 self._max_pub = max(self._max_pub, hi)
-            rows = np.empty((6, sel.shape[0]), np.int64)
-            rows[STREAM] = sidx
-            rows[PUB] = p_sel
-            np.take(log, sel, out=rows[LOG])
-            rows[START] = start
-            rows[N] = n
-            np.add(sel, seq0, out=rows[SEQ])
-            self._pending.append(rows)
         return int(ch.shape[0])
+
+    def _room(self, k: int) -> np.ndarray:
+        """The next ``k`` columns of the pending table, to fill (growing it if needed)."""
+        n = self._n
+        if n + k > self._tab.shape[1]:
+            grown = np.empty((6, max(2 * self._tab.shape[1], n + k)), np.int64)
+            grown[:, :n] = self._tab[:, :n]
+            self._tab = grown
+        self._n = n + k
+        return self._tab[:, n:n + k]
 
     def stream_index(self, topic: str) -> int | None:
         """Index of a sensor topic's stream, creating it (None if not a sensor topic)."""
@@ -210,12 +222,11 @@ class StreamMerge:
         return idx
 
     def release(self, final: bool) -> Iterator[SampleBlock]:
-        if not self._pending:
+        if not self._n:
             return
         if not final and self._max_pub - self.window_ns <= self._released_to:
             return
-        tab = (self._pending[0] if len(self._pending) == 1
-               else np.concatenate(self._pending, axis=1))
+        tab = self._tab[:, :self._n]
         cut = np.iinfo(np.int64).max if final else self._max_pub - self.window_ns
         n_out = int(np.count_nonzero(tab[PUB] <= cut))
         if not n_out:
@@ -231,11 +242,18 @@ class StreamMerge:
         self._released_to = max(self._released_to, int(tab[PUB][rel[-1]]))
         blocks = self._blocks(tab, rel)
         keep = tab[:, held]
-        # compact: keep only the held-back samples
-        for i in distinct(tab[STREAM]):
-            mine = keep[STREAM] == i
-            keep[START][mine] = self._streams[i].keep_only(keep[START][mine], keep[N][mine])
-        self._pending = [keep] if held.shape[0] else []
+        # compact: keep only the held-back samples (usually each stream's are one run)
+        lo, hi, starts = _held_runs(keep[STREAM], keep[START], keep[N], len(self._streams))
+        if starts is not None:
+            for s, a, b in zip(self._streams, lo.tolist(), hi.tolist()):
+                s.keep_span(a, b)
+            keep[START] = starts
+        else:
+            for i in distinct(tab[STREAM]):
+                mine = keep[STREAM] == i
+                keep[START][mine] = self._streams[i].keep_only(keep[START][mine], keep[N][mine])
+        self._tab[:, :held.shape[0]] = keep
+        self._n = held.shape[0]
         for s in self._streams:
             s.held = s.length
         yield from blocks
@@ -291,12 +309,20 @@ def _groups(order, stream, pub, log, start, n, span_ns, n_streams):
     count = 0
     first_pub = pub[order[0]]
     span = 0
+    # the span's range of pub - first_pub: a message inside it needs no division (a 64-bit
+    # one per message was a third of this loop)
+    span_lo = 0
+    span_hi = span_ns
     for i in range(m):
         k = order[i]
-        sp = (pub[k] - first_pub) // span_ns
-        if sp != span:
-            open_block[:] = -1
-            span = sp
+        d = pub[k] - first_pub
+        if d < span_lo or d >= span_hi:
+            sp = d // span_ns
+            span_lo = sp * span_ns
+            span_hi = span_lo + span_ns
+            if sp != span:
+                open_block[:] = -1
+                span = sp
         s = stream[k]
         b = open_block[s]
         if b < 0:
@@ -309,3 +335,53 @@ def _groups(order, stream, pub, log, start, n, span_ns, n_streams):
         hi[b] = start[k] + n[k]
         member[i] = b
     return count, sid[:count], lo[:count], hi[:count], latest[:count], apart[:count], member
+
+
+@kernel()
+def _held_runs(stream, start, n, n_streams):
+    """Where the messages held back by a release (in canonical order: ``stream``, ``start``,
+    ``n``) lie in their streams, when each stream's are back to back (usual): per stream the
+    first and end sample (``lo >= hi``: none held), and each message's start once only those
+    are kept (``start - lo``: :meth:`_Stream.keep_only`'s). ``None`` for the starts when some
+    stream's are not: the caller then gathers them."""
+    lo = np.zeros(n_streams, np.int64)
+    hi = np.zeros(n_streams, np.int64)
+    seen = np.zeros(n_streams, np.bool_)
+    for k in range(stream.shape[0]):
+        s = stream[k]
+        if not seen[s]:
+            seen[s] = True
+            lo[s] = start[k]
+        elif start[k] != hi[s]:
+            return lo, hi, None
+        hi[s] = start[k] + n[k]
+    starts = np.empty(stream.shape[0], np.int64)
+    for k in range(stream.shape[0]):
+        starts[k] = start[k] - lo[stream[k]]
+    return lo, hi, starts
+
+
+@kernel()
+def _fill_rows(rows, stream, pub, log, sel, n, start0, seq0, released_to):
+    """Fill the pending table's columns ``rows`` (rows STREAM ... SEQ) with the messages
+    ``sel`` of a run of records (``n`` samples each, the first at ``start0`` of ``stream``'s
+    pending samples; ``seq0``: the run's first read order); return their earliest and latest
+    order time and how many are at or before ``released_to`` (late)."""
+    lo = pub[sel[0]]
+    hi = lo
+    late = 0
+    at = start0
+    for k in range(sel.shape[0]):
+        j = sel[k]
+        p = pub[j]
+        lo = min(lo, p)
+        hi = max(hi, p)
+        late += p <= released_to
+        rows[STREAM, k] = stream
+        rows[PUB, k] = p
+        rows[LOG, k] = log[j]
+        rows[START, k] = at
+        rows[N, k] = n[k]
+        rows[SEQ, k] = j + seq0
+        at += n[k]
+    return lo, hi, late

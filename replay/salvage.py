@@ -13,14 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Iterator, Protocol
 
-import zstandard
-
 from monitor import codec
 from monitor.mcap_file import (
     MAGIC, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_MESSAGE, OP_MESSAGE_INDEX,
     OP_SCHEMA,
 )
-from replay.chunks import Inflated, ReadAhead, inflate
+from replay.chunks import Inflated, Inflater, ReadAhead
 from replay.mcap_scan import (
     MAX_CUT_CHUNK, Digest, digest, end_of_log, find_chunk, str_at, summary_records,
 )
@@ -138,7 +136,7 @@ class FileSalvage:
     def __init__(self, sink: RecordSink, read_ahead: bool = True) -> None:
         self.sink = sink
         self.read_ahead = read_ahead
-        self._dctx = zstandard.ZstdDecompressor()
+        self._inflater = Inflater()
 
     def read_file(self, path: Path, st: FileStats) -> Iterator[None]:
         """Read one file record by record; yield after each batch of messages."""
@@ -221,10 +219,12 @@ class FileSalvage:
             if op == OP_CHUNK:
                 got = ahead.take(pos) if ahead is not None else None
                 if got is None:
-                    content = f.read(min(ln, MAX_CUT_CHUNK) if cut else ln)
-                    got = inflate(content, cut, self._dctx), None
-                else:
-                    f.seek(ln, 1)
+                    # (whole: into the inflater's reused buffer; the file position moves on)
+                    content = (f.read(min(ln, MAX_CUT_CHUNK)) if cut
+                               else self._inflater.read(f.fileno(), ln, pos + 9))
+                    got = self._inflater.inflate(content, cut), None
+                if not cut:
+                    f.seek(pos + 9 + ln)
                 awaiting = self._chunk(got[0], got[1], pos, ctx, st)
                 if ahead is not None and not cut:
                     # the next chunk is inflated and digested while the caller works
