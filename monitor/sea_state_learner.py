@@ -39,8 +39,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
-from models.fatigue._spectral_loops import steady_segments
-from models.fatigue.spectral import Periodograms, damage_rate_from_psd
+from models.fatigue._spectral_loops import steady_segments, window_segments
+from models.fatigue.spectral import Periodograms, damage_rate_from_psd, hann
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
 
@@ -55,7 +55,8 @@ _BATCH_ROWS = 128  # segments transformed per batch (buffers of about 2.6 MB per
 class _Spectra:
     """Welch PSD sums of one window's stress, per component, segment by segment.
 
-    Feeding keeps each whole segment (``rows``: signal x segment x sample); the
+    Feeding keeps each whole segment, its mean removed and the Hann window applied
+    (``rows``: signal x segment x sample, ready for the FFT); the
     periodograms are added to the sums (``acc``) when the window's spectrum is asked for
     (:meth:`summed`), all the kept segments in a few large batches rather than a small one
     per slab; the additions are the same, one segment after another in time order.
@@ -110,8 +111,9 @@ class _Spectra:
         if kept:
             rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
-                if self.same[i] == i:
-                    _segments(rows[i], taken, self.x[n], stresses[n])
+                if self.same[i] == i:  # kept detrended and windowed, ready for the FFT
+                    window_segments(rows[i], taken, self.x[n],
+                                    np.asarray(stresses[n], np.float64), _window())
             self.filled += taken.shape[0]
         self.segments += taken.shape[0]
         self.t = t[full - nc:].astype(np.int64)
@@ -221,6 +223,14 @@ def _frequencies(fs: float) -> np.ndarray:
     return f
 
 
+@functools.lru_cache(maxsize=1)
+def _window() -> np.ndarray:
+    """The segments' Hann window (read-only)."""
+    w = hann(SEGMENT)
+    w.flags.writeable = False
+    return w
+
+
 @functools.lru_cache(maxsize=8)
 def _omega4(fs: float) -> np.ndarray:
     """``(2 pi f)^4`` of :func:`_frequencies` (read-only)."""
@@ -248,25 +258,6 @@ def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
         else:
             out.append((i, i + 1))
     return out
-
-
-def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray) -> None:
-    """Segments ``js`` (increasing) of the open samples ``open_x`` followed by ``x`` into
-    the rows of ``out``: segment j is samples [j S, (j + 1) S), only the first can start
-    among the open ones."""
-    nc = open_x.shape[0]
-    if nc and js[0] == 0:
-        out[0, :nc] = open_x
-        out[0, nc:] = x[:SEGMENT - nc]
-        out, js = out[1:], js[1:]
-    if not js.shape[0]:
-        return
-    first = js[0] * SEGMENT - nc  # in x
-    if js[-1] - js[0] + 1 == js.shape[0]:  # consecutive: the usual case
-        out[:] = x[first:first + js.shape[0] * SEGMENT].reshape(-1, SEGMENT)
-    else:
-        body = x[first:(js[-1] + 1) * SEGMENT - nc].reshape(-1, SEGMENT)
-        out[:] = body[js - js[0]]
 
 
 class _WindowSpectra:
@@ -306,7 +297,10 @@ class _WindowSpectra:
         bounds = [0, *cuts.tolist(), t_ns.shape[0]]
         for k, a, b in zip(range(first, last + 1), bounds[:-1], bounds[1:]):
             if b > a:
-                self._feed(k, t_ns[a:b], {n: s[a:b] for n, s in values.items()})
+                # one view of each array: signals sharing one stay one (_Spectra._part)
+                views: dict[int, np.ndarray] = {}
+                self._feed(k, t_ns[a:b], {n: views.setdefault(id(s), s[a:b])
+                                          for n, s in values.items()})
 
     def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         if self.current.index != k:
