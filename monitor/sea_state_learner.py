@@ -50,6 +50,7 @@ _RATE_TOLERANCE = 0.02
 _WAVE_F_MAX_HZ = 0.5  # the wave band's top for Hs and Tp from motion (models.waves)
 _COMPARE_FLOOR = 1e-12  # both damages below this: nothing to compare (a calm window)
 _BATCH_ROWS = 128  # segments transformed per batch (buffers of about 2.6 MB per signal set)
+_SPARE_BUFFERS = 2  # closed windows' segment buffers kept for new windows
 
 
 class _Spectra:
@@ -67,7 +68,7 @@ class _Spectra:
     """
 
     def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None,
-                 room: int = 0) -> None:
+                 room: int = 0, rows: np.ndarray | None = None) -> None:
         st = state or {}
         self.names = tuple(names)
         self.index: int | None = st.get("index")
@@ -82,8 +83,10 @@ class _Spectra:
         if psd:
             self.acc[:] = [psd[n] for n in self.names]
         # segments kept, rows[:, added:filled] not yet added; a snapshot shares the buffer
-        # (feeding only writes rows past its own ``filled``; a full buffer is replaced)
-        self.rows = np.empty((len(self.names), room, SEGMENT))
+        # (feeding only writes rows past its own ``filled``; a full buffer is replaced);
+        # ``rows``: a closed window's buffer to reuse (no new pages to fault in)
+        self.rows = (rows if rows is not None and rows.shape[1] >= room
+                     else np.empty((len(self.names), room, SEGMENT)))
         self.added = self.filled = 0
         # a new window's signals are taken as one until their samples differ; a restored
         # one's as different (replaced, never changed in place: a snapshot shares it)
@@ -276,6 +279,9 @@ class _WindowSpectra:
         # room for a batch of at least one segment of every signal
         self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
         self._room = 0  # segments a window kept at most so far: a new one's first buffer
+        # buffers of closed windows for new ones (appended by taking, popped by feeding:
+        # each a single atomic step, so the two sides may run in two threads)
+        self._spare: list[np.ndarray] = []
         self._finished: list[tuple[int, _Spectra]] = []
         self._copy: _Spectra | None = None  # the open window as last handed over
         self.done: dict[int, _Spectra] = {
@@ -307,7 +313,8 @@ class _WindowSpectra:
             if self.current.index is not None:
                 self._finished.append((self.current.index, self.current))
                 self._room = max(self._room, self.current.filled)
-            self.current = _Spectra(self.names, room=self._room)
+            self.current = _Spectra(self.names, room=self._room,
+                                    rows=self._spare.pop() if self._spare else None)
             self.current.index = k
         self.current.feed(t_ns, values)
 
@@ -337,6 +344,13 @@ class _WindowSpectra:
     def summed(self, spectra: _Spectra) -> _Spectra:
         """A taken window's spectra with its periodograms added (in :attr:`work`)."""
         return spectra.summed(self.work)
+
+    def release(self, spectra: _Spectra) -> None:
+        """A taken window is closed: its buffer serves a new window, unless the window is
+        the open one (still fed). Fresh buffers cost a page fault every 4 kB, about as much
+        as the rest of the feed."""
+        if spectra is not self._open and len(self._spare) < _SPARE_BUFFERS:
+            self._spare.append(spectra.rows)
 
     def drop_before(self, k: int) -> None:
         """Forget the finished windows before window ``k`` (closed, or never to be): one
@@ -506,6 +520,15 @@ class SeaStateLearner:
         ``motion`` heave spectrum, else the ``imu`` acceleration spectrum."""
         k = end // self.window_ns
         heave, accel = self.heave.take(k), self.accel.take(k)
+        out = self._sea_state_of(start, end, heave, accel)
+        for taken, spectra in ((heave, self.heave), (accel, self.accel)):
+            if taken is not None:
+                spectra.release(taken)
+        return out
+
+    def _sea_state_of(self, start: int, end: int, heave: _Spectra | None,
+                      accel: _Spectra | None) -> tuple[tuple[float, float] | None, str | None]:
+        """:meth:`_sea_state` of the window's taken heave and acceleration spectra."""
         inside = [v for t, v in zip(self.waves_t, self.waves_v) if start < t <= end]
         if inside:
             return (math.fsum(v[0] for v in inside) / len(inside),
@@ -565,6 +588,8 @@ class SeaStateLearner:
         self.new_windows.append(window)
         self.history.append(window)
         del self.history[:-WINDOW_HISTORY]
+        if spectra is not None:
+            self.stress.release(spectra)
         # keep the newest waves sample at or before this window's end for the next one
         keep = max((i for i, t in enumerate(self.waves_t) if t <= end), default=0)
         del self.waves_t[:keep], self.waves_v[:keep]
