@@ -39,8 +39,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from models.sea_state_table import HS_EDGES_M, TP_EDGES_S, DamageRateTable
-from models.fatigue._spectral_loops import steady_segments
-from models.fatigue.spectral import Periodograms, damage_rate_from_psd
+from models.fatigue._spectral_loops import steady_segments, window_segments
+from models.fatigue.spectral import Periodograms, damage_rate_from_psd, hann
 from models.waves import sea_state_from_psd
 from monitor.forecast_config import ForecastConfig
 
@@ -50,12 +50,14 @@ _RATE_TOLERANCE = 0.02
 _WAVE_F_MAX_HZ = 0.5  # the wave band's top for Hs and Tp from motion (models.waves)
 _COMPARE_FLOOR = 1e-12  # both damages below this: nothing to compare (a calm window)
 _BATCH_ROWS = 128  # segments transformed per batch (buffers of about 2.6 MB per signal set)
+_SPARE_BUFFERS = 2  # closed windows' segment buffers kept for new windows
 
 
 class _Spectra:
     """Welch PSD sums of one window's stress, per component, segment by segment.
 
-    Feeding keeps each whole segment (``rows``: signal x segment x sample); the
+    Feeding keeps each whole segment, its mean removed and the Hann window applied
+    (``rows``: signal x segment x sample, ready for the FFT); the
     periodograms are added to the sums (``acc``) when the window's spectrum is asked for
     (:meth:`summed`), all the kept segments in a few large batches rather than a small one
     per slab; the additions are the same, one segment after another in time order.
@@ -66,7 +68,7 @@ class _Spectra:
     """
 
     def __init__(self, names: Sequence[str], state: Mapping[str, Any] | None = None,
-                 room: int = 0) -> None:
+                 room: int = 0, rows: np.ndarray | None = None) -> None:
         st = state or {}
         self.names = tuple(names)
         self.index: int | None = st.get("index")
@@ -81,8 +83,10 @@ class _Spectra:
         if psd:
             self.acc[:] = [psd[n] for n in self.names]
         # segments kept, rows[:, added:filled] not yet added; a snapshot shares the buffer
-        # (feeding only writes rows past its own ``filled``; a full buffer is replaced)
-        self.rows = np.empty((len(self.names), room, SEGMENT))
+        # (feeding only writes rows past its own ``filled``; a full buffer is replaced);
+        # ``rows``: a closed window's buffer to reuse (no new pages to fault in)
+        self.rows = (rows if rows is not None and rows.shape[1] >= room
+                     else np.empty((len(self.names), room, SEGMENT)))
         self.added = self.filled = 0
         # a new window's signals are taken as one until their samples differ; a restored
         # one's as different (replaced, never changed in place: a snapshot shares it)
@@ -110,8 +114,9 @@ class _Spectra:
         if kept:
             rows = self._room(taken.shape[0])
             for i, n in enumerate(self.names):
-                if self.same[i] == i:
-                    _segments(rows[i], taken, self.x[n], stresses[n])
+                if self.same[i] == i:  # kept detrended and windowed, ready for the FFT
+                    window_segments(rows[i], taken, self.x[n],
+                                    np.asarray(stresses[n], np.float64), _window())
             self.filled += taken.shape[0]
         self.segments += taken.shape[0]
         self.t = t[full - nc:].astype(np.int64)
@@ -221,6 +226,14 @@ def _frequencies(fs: float) -> np.ndarray:
     return f
 
 
+@functools.lru_cache(maxsize=1)
+def _window() -> np.ndarray:
+    """The segments' Hann window (read-only)."""
+    w = hann(SEGMENT)
+    w.flags.writeable = False
+    return w
+
+
 @functools.lru_cache(maxsize=8)
 def _omega4(fs: float) -> np.ndarray:
     """``(2 pi f)^4`` of :func:`_frequencies` (read-only)."""
@@ -250,25 +263,6 @@ def _runs(indices: Sequence[int]) -> list[tuple[int, int]]:
     return out
 
 
-def _segments(out: np.ndarray, js: np.ndarray, open_x: np.ndarray, x: np.ndarray) -> None:
-    """Segments ``js`` (increasing) of the open samples ``open_x`` followed by ``x`` into
-    the rows of ``out``: segment j is samples [j S, (j + 1) S), only the first can start
-    among the open ones."""
-    nc = open_x.shape[0]
-    if nc and js[0] == 0:
-        out[0, :nc] = open_x
-        out[0, nc:] = x[:SEGMENT - nc]
-        out, js = out[1:], js[1:]
-    if not js.shape[0]:
-        return
-    first = js[0] * SEGMENT - nc  # in x
-    if js[-1] - js[0] + 1 == js.shape[0]:  # consecutive: the usual case
-        out[:] = x[first:first + js.shape[0] * SEGMENT].reshape(-1, SEGMENT)
-    else:
-        body = x[first:(js[-1] + 1) * SEGMENT - nc].reshape(-1, SEGMENT)
-        out[:] = body[js - js[0]]
-
-
 class _WindowSpectra:
     """:class:`_Spectra` of each learning window for one set of signals fed together.
 
@@ -285,6 +279,9 @@ class _WindowSpectra:
         # room for a batch of at least one segment of every signal
         self.work = Periodograms(SEGMENT, max(_BATCH_ROWS, len(self.names)))
         self._room = 0  # segments a window kept at most so far: a new one's first buffer
+        # buffers of closed windows for new ones (appended by taking, popped by feeding:
+        # each a single atomic step, so the two sides may run in two threads)
+        self._spare: list[np.ndarray] = []
         self._finished: list[tuple[int, _Spectra]] = []
         self._copy: _Spectra | None = None  # the open window as last handed over
         self.done: dict[int, _Spectra] = {
@@ -306,14 +303,18 @@ class _WindowSpectra:
         bounds = [0, *cuts.tolist(), t_ns.shape[0]]
         for k, a, b in zip(range(first, last + 1), bounds[:-1], bounds[1:]):
             if b > a:
-                self._feed(k, t_ns[a:b], {n: s[a:b] for n, s in values.items()})
+                # one view of each array: signals sharing one stay one (_Spectra._part)
+                views: dict[int, np.ndarray] = {}
+                self._feed(k, t_ns[a:b], {n: views.setdefault(id(s), s[a:b])
+                                          for n, s in values.items()})
 
     def _feed(self, k: int, t_ns: np.ndarray, values: Mapping[str, np.ndarray]) -> None:
         if self.current.index != k:
             if self.current.index is not None:
                 self._finished.append((self.current.index, self.current))
                 self._room = max(self._room, self.current.filled)
-            self.current = _Spectra(self.names, room=self._room)
+            self.current = _Spectra(self.names, room=self._room,
+                                    rows=self._spare.pop() if self._spare else None)
             self.current.index = k
         self.current.feed(t_ns, values)
 
@@ -343,6 +344,13 @@ class _WindowSpectra:
     def summed(self, spectra: _Spectra) -> _Spectra:
         """A taken window's spectra with its periodograms added (in :attr:`work`)."""
         return spectra.summed(self.work)
+
+    def release(self, spectra: _Spectra) -> None:
+        """A taken window is closed: its buffer serves a new window, unless the window is
+        the open one (still fed). Fresh buffers cost a page fault every 4 kB, about as much
+        as the rest of the feed."""
+        if spectra is not self._open and len(self._spare) < _SPARE_BUFFERS:
+            self._spare.append(spectra.rows)
 
     def drop_before(self, k: int) -> None:
         """Forget the finished windows before window ``k`` (closed, or never to be): one
@@ -512,6 +520,15 @@ class SeaStateLearner:
         ``motion`` heave spectrum, else the ``imu`` acceleration spectrum."""
         k = end // self.window_ns
         heave, accel = self.heave.take(k), self.accel.take(k)
+        out = self._sea_state_of(start, end, heave, accel)
+        for taken, spectra in ((heave, self.heave), (accel, self.accel)):
+            if taken is not None:
+                spectra.release(taken)
+        return out
+
+    def _sea_state_of(self, start: int, end: int, heave: _Spectra | None,
+                      accel: _Spectra | None) -> tuple[tuple[float, float] | None, str | None]:
+        """:meth:`_sea_state` of the window's taken heave and acceleration spectra."""
         inside = [v for t, v in zip(self.waves_t, self.waves_v) if start < t <= end]
         if inside:
             return (math.fsum(v[0] for v in inside) / len(inside),
@@ -571,6 +588,8 @@ class SeaStateLearner:
         self.new_windows.append(window)
         self.history.append(window)
         del self.history[:-WINDOW_HISTORY]
+        if spectra is not None:
+            self.stress.release(spectra)
         # keep the newest waves sample at or before this window's end for the next one
         keep = max((i for i, t in enumerate(self.waves_t) if t <= end), default=0)
         del self.waves_t[:keep], self.waves_v[:keep]

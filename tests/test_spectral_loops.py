@@ -1,8 +1,9 @@
 """The spectral loops (models.fatigue._spectral_loops) give the bits of the numpy expressions
 they replace, compiled and as plain Python (models._jit.uncompiled), on random data spanning
 ten decades and on edge cases (sums of 0 to 20,000 values, zero rows, a segment's DC only);
-and Periodograms.add of a batch is compute() followed by one addition per row, for any batch
-split."""
+window_segments is a copy then detrend_window's expression; and Periodograms.add of a batch
+of windowed segments is compute() of the raw ones followed by one addition per row, for any
+batch split."""
 
 from __future__ import annotations
 
@@ -68,10 +69,34 @@ def test_detrend_window_is_numpys_mean_subtract_and_window(plain, rows):
 
 
 @MODES
+@pytest.mark.parametrize("nc", [0, 1, 300, 1023])
+def test_window_segments_is_the_segments_copied_then_detrended_and_windowed(plain, nc):
+    """Segments of open samples followed by new ones (the first joined across them or not,
+    a gap in the indices) into rows: the bits of the numpy copy then detrend_window's
+    numpy expression."""
+    rng = np.random.default_rng(5)
+    n = 1024 if not plain else 64
+    open_x = wide(rng, nc % n) + 1e3
+    x = wide(rng, 6 * n) + 1e3
+    for js in ([0, 1, 2], [1, 2, 5], [0, 3], [4]):
+        js = np.array(js, np.int64)
+        joined = np.concatenate([open_x, x])
+        want = np.stack([joined[j * n:(j + 1) * n] for j in js])
+        np.subtract(want, want.mean(axis=1, keepdims=True), out=want)
+        np.multiply(want, hann(n), out=want)
+        out = np.full((js.shape[0] + 1, n), np.nan)
+        with mode(plain):
+            loops.window_segments(out, js, open_x, x, hann(n))
+        assert np.array_equal(bits(out[:-1]), bits(want)), js
+        assert np.isnan(out[-1]).all()  # nothing written past the segments
+
+
+@MODES
 @pytest.mark.parametrize("n", [1024, 15])
 def test_periodograms_add_is_compute_then_a_row_at_a_time(plain, n):
-    """Segments of two signals added in batches of 1, 3 and all: the same sums, and the same
-    as compute()'s rows added one by one (numpy's +=) from 0.0; odd and even lengths."""
+    """Windowed segments of two signals added in batches of 1, 3 and all: the same sums,
+    and the same as compute()'s rows (the raw segments) added one by one (numpy's +=) from
+    0.0; odd and even lengths."""
     rng = np.random.default_rng(3)
     segs = wide(rng, 2, 9, n)
     fs = 19.987
@@ -82,16 +107,18 @@ def test_periodograms_add_is_compute_then_a_row_at_a_time(plain, n):
             work.rows(9)[:] = segs[c]
             for row in work.compute(9, fs):
                 ref[c] += row
+        windowed = np.empty_like(segs)
+        loops.detrend_window(segs, 0, 9, hann(n), windowed.reshape(18, n))
         for per in (1, 3, 9):
             got = np.zeros_like(ref)
             for a in range(0, 9, per):
-                work.add(segs, a, min(a + per, 9), fs, got)
+                work.add(windowed, a, min(a + per, 9), fs, got)
             assert np.array_equal(bits(got), bits(ref)), per
     assert np.all(ref[:, 1:] > 0)
     with pytest.raises(ValueError, match="max_rows"):
-        Periodograms(n, 4).add(segs, 0, 3, fs, ref)
+        Periodograms(n, 4).add(windowed, 0, 3, fs, ref)
     with pytest.raises(ValueError, match="fs"):
-        Periodograms(n, 4).add(segs, 0, 1, float("nan"), ref)
+        Periodograms(n, 4).add(windowed, 0, 1, float("nan"), ref)
 
 
 def _numpy_moments(f: np.ndarray, g: np.ndarray) -> list[float]:

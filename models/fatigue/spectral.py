@@ -324,39 +324,48 @@ class Periodograms:
     def compute(self, m: int, fs_hz: float) -> NDArray[np.float64]:
         """The PSD of each of the first ``m`` rows filled (a view of a buffer the next call
         overwrites; the input rows are overwritten too)."""
+        _check_fs(fs_hz)
         x = self.rows(m)
-        psd = self._magnitudes(x[None], 0, m, fs_hz)
+        loops.detrend_window(x[None], 0, m, self.window, x)  # row by row: in place
+        psd = self._magnitudes(x[None], 0, m)
         np.square(psd, out=psd)
         psd /= fs_hz * self.window_power
         n = self.n
         psd[:, 1:n // 2 + (n % 2)] *= 2.0  # one-sided: every bin but DC (and Nyquist, even n)
         return psd
 
-    def add(self, segments: NDArray[np.float64], first: int, last: int, fs_hz: float,
+    def add(self, windowed: NDArray[np.float64], first: int, last: int, fs_hz: float,
             sums: NDArray[np.float64]) -> None:
-        """Add the PSD of each segment ``segments[c, first:last]`` (``c`` a signal; at most
-        ``max_rows`` segments in all) to ``sums[c]``, one segment after another in order:
-        the bits of :meth:`compute` on those rows followed by ``sums[c] += psd`` per row."""
-        m = segments.shape[0] * (last - first)
+        """Add the PSD of each segment ``windowed[c, first:last]`` (``c`` a signal; at most
+        ``max_rows`` segments in all), its mean already removed and the window applied
+        (``models.fatigue._spectral_loops.window_segments`` or ``detrend_window``), to
+        ``sums[c]``, one segment after another in order: the bits of :meth:`compute` on those
+        segments followed by ``sums[c] += psd`` per row."""
+        m = windowed.shape[0] * (last - first)
         if not 1 <= m <= self.max_rows:
             raise ValueError(f"Periodograms.add: {m} segments: need 1 <= m <= max_rows = "
                              f"{self.max_rows}")
-        mags = self._magnitudes(segments, first, last, fs_hz)
+        _check_fs(fs_hz)
+        self.rows(m)  # buffers for m rows
+        mags = self._magnitudes(windowed, first, last)
         # doubled bins 1 .. top - 1: an even segment's last (Nyquist) bin is not doubled
         top = mags.shape[1] - 1 if self.n % 2 == 0 else mags.shape[1]
         loops.add_power(sums, mags, fs_hz * self.window_power, last - first, top)
 
-    def _magnitudes(self, segments: NDArray[np.float64], first: int, last: int,
-                    fs_hz: float) -> NDArray[np.float64]:
-        """``|rfft|`` of each segment ``segments[c, first:last]`` (signal by signal), its
-        mean removed and the window applied (numpy's transform and complex ``abs``, in the
-        buffers)."""
-        if not (math.isfinite(fs_hz) and fs_hz > 0):
-            raise ValueError(f"Periodograms: fs = {fs_hz!r}: must be finite and > 0")
-        m = segments.shape[0] * (last - first)
-        x = self.rows(m)
-        loops.detrend_window(segments, first, last, self.window, x)
-        return np.abs(np.fft.rfft(x, axis=1, out=self._spectrum[:m]), out=self._psd[:m])
+    def _magnitudes(self, windowed: NDArray[np.float64], first: int, last: int
+                    ) -> NDArray[np.float64]:
+        """``|rfft|`` of each windowed segment ``windowed[c, first:last]`` (signal by signal,
+        rows ``[c (last - first), (c + 1) (last - first))`` of the result): numpy's transform,
+        one row at a time whatever the rows' layout, and complex ``abs``, in the buffers."""
+        c, r = windowed.shape[0], last - first
+        spectrum = self._spectrum[:c * r]
+        np.fft.rfft(windowed[:, first:last], axis=2, out=spectrum.reshape(c, r, -1))
+        return np.abs(spectrum, out=self._psd[:c * r])
+
+
+def _check_fs(fs_hz: float) -> None:
+    if not (math.isfinite(fs_hz) and fs_hz > 0):
+        raise ValueError(f"Periodograms: fs = {fs_hz!r}: must be finite and > 0")
 
 
 def segment_psds(segments: ArrayLike, fs_hz: float
