@@ -99,7 +99,7 @@ class Digest:
     fronts: dict[int, int]
 
 
-def digest(raw: bytes, channels: Mapping[int, tuple[int, tuple] | str],
+def digest(raw: bytes | memoryview, channels: Mapping[int, tuple[int, tuple] | str],
            fronts: Mapping[int, int] | None = None) -> Digest:
     """Scan ``raw`` and decode the messages of the sensor channels in ``channels``, leaving
     room for ``fronts[stream]`` samples before those of each stream (for the samples the

@@ -302,7 +302,7 @@ class FileSalvage:
         return None
 
 
-def _digest_ahead(raw: bytes, arg: tuple) -> Digest:
+def _digest_ahead(raw: bytes | memoryview, arg: tuple) -> Digest:
     """:func:`replay.mcap_scan.digest` in the read-ahead thread: ``arg`` is the channels and
     fronts taken when the chunk was scheduled."""
     return digest(raw, *arg)
