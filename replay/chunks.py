@@ -128,6 +128,11 @@ class Inflater:
         general path, errors and all."""
         if len(data) < 5 or data[:4] != _ZSTD_MAGIC or data[4] & 0x04:
             return None
+        try:  # the size the frame says (as decompress allocates), not the chunk header's
+            if zstandard.frame_content_size(data) != usize:
+                return None
+        except zstandard.ZstdError:
+            return None
         if len(self._out) <= usize:
             self._out = bytearray(usize + 1)  # one more: a longer frame shows
         out = memoryview(self._out)[:usize + 1]

@@ -64,6 +64,22 @@ def test_chunks_the_buffer_cannot_vouch_for_read_as_before():
     assert both(plain, len(RECORDS), 0)[0] == RECORDS
 
 
+def test_a_damaged_declared_size_is_refused_before_any_buffer_is_sized_by_it():
+    """A chunk header whose size has a high bit flipped: the old error, not 8 GB claimed (bit
+    33) or a MemoryError that ended the salvage (bits 45, 62; review of 2026-11-26)."""
+    frame = zstandard.ZstdCompressor().compress(RECORDS)
+    inflater = Inflater()
+    for bit in (33, 45, 62):
+        usize = len(RECORDS) | (1 << bit)
+        got = inflater.inflate(content(frame, usize, crc32(RECORDS)), False)
+        assert (got.raw, got.error) == (None, f"chunk size {len(RECORDS)} != {usize} declared")
+        assert len(inflater._out) < 1 << 20
+    # a frame that does not say its size takes the general path, with the same records
+    streamed = zstandard.ZstdCompressor(write_content_size=False).compress(RECORDS)
+    got = inflater.inflate(content(streamed, len(RECORDS), crc32(RECORDS)), False)
+    assert bytes(got.raw) == RECORDS and not isinstance(got.raw, memoryview)
+
+
 def test_read_puts_a_file_range_in_the_content_buffer(tmp_path):
     path = tmp_path / "f"
     path.write_bytes(RECORDS)
