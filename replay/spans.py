@@ -30,7 +30,10 @@ _EMPTY_SPAN_S`` (or the damage-rate window) after its last sample (``Pipeline._t
 after a clock jump, memory and time depend on the data, not on the jump), counted from a
 slab's first tick when the gap began before it, so a longer gap cut by a slab boundary is
 walked further than whole. A boundary is therefore left out only where no watermark can
-fall into such a gap: in replay every stream gates, so the watermark after the stretch
+fall into such a gap, nor start one (a stretch after a gap over ``_EMPTY_SPAN_S`` never
+joins: with every stream's last sample on a tick end the watermark is that sample, and the
+slab after it walks the gap from the next tick, one later than a run across it would;
+tests/test_spans.py): in replay every stream gates, so the watermark after the stretch
 before it lies within the horizon of the newest sample (``newest - horizon <= W <=
 newest``; a restored ordering's newest may be later: then none is left out), and
 :func:`spans` keeps the time since which the samples leave no gap longer than
@@ -87,7 +90,7 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | No
     while the run's samples span at most :data:`LONGEST_RUN_NS`, if no watermark within
     ``horizon_ns`` (the ordering's horizon in replay, where every stream gates) before it
     can fall into a gap of the samples longer than :data:`_DENSE_GAP_NS` (module
-    docstring), and the run before has a sample later than ``after_ns`` (the newest time a
+    docstring), it does not start after such a gap, and the run before has a sample later than ``after_ns`` (the newest time a
     restored ordering has received, ReorderBuffer.newest_ns: the watermark may lie up to
     it). No horizon given: stretches alone."""
     if not join:
@@ -104,7 +107,8 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | No
         lo, hi, gaps, sure = _bounds(stretch)
         if lo is not None and hi is not None:
             if first is not None and newest is not None and (
-                    lo <= newest or dense is None or dense > newest - horizon
+                    lo <= newest or lo - newest > _DENSE_GAP_NS
+                    or dense is None or dense > newest - horizon
                     or max(hi, newest) - first > longest
                     or (after_ns is not None and newest <= after_ns)):
                 yield run

@@ -11,6 +11,7 @@ import functools
 import json
 import types
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -216,3 +217,35 @@ def test_blocks_given_together_to_a_pipeline_with_block_hooks_are_refused(feed):
     pipeline = replay_pipeline(CONFIG, [Recorder()])
     with pytest.raises(ValueError, match="block hooks"):
         pipeline.ingest(feed[0], feed[1])
+
+
+def test_no_run_joins_across_a_gap_longer_than_the_walk_of_empty_ticks():
+    """Every stream's last sample before a gap of over an hour on a tick end (3 h of all five
+    streams in 30-min stretches, the horizon 2 h): the watermark is that sample, so a slab
+    cut there walks the gap's empty ticks from the tick after it, a run across the gap from
+    its own tick: one tick fewer, and a re-sent alert moved (review of 2026-11-26). A run
+    never joins across such a gap: the bits of one slab per block."""
+    rng = np.random.default_rng(1)
+    level = {"tension_N": (2e5, 1e4), "heave_m": (0, 1), "surge_m": (0, 1), "sway_m": (0, 1),
+             "accel_x_mps2": (0, .5), "accel_y_mps2": (0, .5), "accel_z_mps2": (9.81, .5),
+             "lat_deg": (45, 1e-5), "lon_deg": (-30, 1e-5), "hs_m": (2, .1), "tp_s": (9, .2)}
+    step = {"tension": 0.5, "motion": 1, "imu": 0.5, "gnss": 10, "waves": 600}
+
+    def block(sensor: str, a: int, b: int) -> SampleBlock:
+        t = T0 + np.arange(a * S, b * S + 1, int(step[sensor] * S), dtype=np.int64)
+        return SampleBlock("vaps", sensor, t, {k: level[k][0] + level[k][1] * rng.standard_normal(
+            t.shape[0]) for k in SENSOR_FIELDS[sensor]})
+
+    spans_s = [(i * 1800, i * 1800 + (1800 if i == 5 else 1790)) for i in range(6)]
+    feed = [block(s, a, b) for a, b in [*spans_s, (14500, 14560)] for s in step]
+    config = default_config()
+    config = dataclasses.replace(config, ordering=msgspec.structs.replace(
+        config.ordering, replay_horizon_s=7200.0))
+    runs = [[(b.t_first_ns - T0) // S for b in run if b.sensor == "tension"]
+            for run in spans(feed, True, 7200 * S)]
+    assert runs == [[0], [1800], [3600], [5400], [7200, 9000], [14500]]
+    one_by_one = replay_pipeline(config)
+    for b in feed:
+        one_by_one.process(b)
+    one_by_one.flush()
+    assert _bits(run_blocks(config, iter(feed))[0]) == _bits(one_by_one)
