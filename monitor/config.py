@@ -346,8 +346,11 @@ def _parse_sn(value: Any, path: str) -> SNCurveConfig:
 
 def _parse_component(r: SectionReader) -> ComponentConfig:
     kind = r.str("kind", "conductor", choices=("conductor", "axial"))
-    lay = r.str("lay", choices=("left", "right")) if kind == "conductor" else None
-    area = r.float("area_m2", gt=0) if kind == "axial" else None
+    if r.ok("kind"):
+        lay = r.str("lay", choices=("left", "right")) if kind == "conductor" else None
+        area = r.float("area_m2", gt=0) if kind == "axial" else None
+    else:  # (which of them the kind needs is unknown: its own error says enough)
+        lay, area = r.raw("lay"), r.raw("area_m2")
     sn_raw = r.raw("sn_curve", "vaps_copper")
     out = ComponentConfig(
         name=r.str("name"),
@@ -380,8 +383,9 @@ def _parse_location(r: SectionReader, kind: str) -> dict[str, Any]:
     location = r.str("location", "free_span", choices=choices)
     if location == "free_span":
         for key in _BEND_KEYS:
-            if r.has(key):
+            if r.has(key) and r.ok("location"):  # (with location itself bad, no telling)
                 r.reject(key, r.raw(key), 'only with location = "termination"')
+            r.raw(key)
         return {"location": location}
     if not any(r.has(key) for key in _BEND_KEYS):
         # bend not measured: no bend strain (an assumed one would put the locked copper

@@ -250,3 +250,14 @@ def test_a_check_across_keys_waits_for_the_values_it_reads():
         parse_config(doc)
     assert str(exc.value) == ("config error: mooring.depth_m = 12.0: deeper than the line is long "
                               "(10 m)")
+    # a bad kind or location names itself alone, not the keys its stand-in would want
+    doc["mooring"]["depth_m"] = 5.0
+    for component, why in (
+            ({"name": "c", "lay": "left", "location": "terminaton", "bend_radius_m": 0.5,
+              "bend_angle_deg": 10.0}, "location = 'terminaton': must be one of"),
+            ({"name": "c", "kind": "axail", "area_m2": 1e-4}, "kind = 'axail': must be one of")):
+        doc["component"] = [component]
+        with pytest.raises(ConfigError) as exc:
+            parse_config(doc)
+        assert not isinstance(exc.value, ConfigErrors)
+        assert str(exc.value).startswith(f"config error: component[0].{why}")
