@@ -61,8 +61,8 @@ STATE_VERSION = 1
 ALERT_HISTORY_LIMIT = 10_000  # alert transitions kept for the report (oldest dropped first)
 _T = TypeVar("_T")
 _NEVER = np.iinfo(np.int64).min
-# at least this much of a gap without samples is evaluated tick by tick (replay.spans leaves
-# out a slab boundary only where none can fall into a longer gap: Pipeline._tick_ends)
+# at least this much of a gap without samples is evaluated tick by tick, from its last sample
+# in whatever slab (Pipeline._tick_ends)
 _EMPTY_SPAN_S = 3600.0
 # slabs of fewer ticks (live ingest: one or two) are evaluated tick by tick: the alert batch
 # costs about 0.3 ms a slab to set up, some 20 ticks' worth of the per-tick path
@@ -549,6 +549,9 @@ class Pipeline:
         self.stats = _TensionStats(lim.min, lim.max, st.get("stats"))
         self.taken_upto: dict[str, int] = {k: int(v) for k, v in st.get("taken_upto", {}).items()}
         self.next_tick_ns: int | None = st.get("next_tick_ns")
+        # the end of the tick holding the newest sample the tick stage has had: a run of
+        # ticks without samples counts from there, in whatever slab it began (_tick_ends)
+        self.sample_tick_ns: int | None = st.get("sample_tick_ns")
         # per-stream counts in the tick being filled: {sensor: [received, rejected]}
         self.tick_counts: dict[str, list[int]] = {s: list(v) for s, v in st.get("tick_counts", {}).items()}
         self.last = dict(st.get("last", {"measured_N": None, "estimated_N": None,
@@ -869,33 +872,42 @@ class Pipeline:
             sink.on_step(step)
         return step
 
-    def _tick_ends(self, first_end: int, k: int, times: Sequence[np.ndarray]) -> np.ndarray:
+    def _tick_ends(self, first_end: int, k: int, times: Sequence[np.ndarray],
+                   sample_tick: int | None = None) -> np.ndarray:
         """Ends of the ticks to evaluate, ``first_end + tick * i`` for i in 0..k, leaving out
         all but the first ``_max_empty_ticks`` of a run of ticks without any sample of
-        ``times``: memory and time then depend on the data, not on how far the clock jumped."""
-        if k < self._max_empty_ticks or any(self._dense(first_end, k, x) for x in times
-                                            if x.shape[0]):  # the usual slab: every tick
+        ``times``: memory and time then depend on the data, not on how far the clock jumped.
+        A run begun before the slab counts from ``sample_tick`` (the end of the tick of the
+        newest earlier sample, :attr:`sample_tick_ns`; None: from the slab's first tick), so
+        the ticks do not depend on where the slabs were cut."""
+        # the tick index of the newest earlier sample (0 if it is in this slab's first tick
+        # or later: its tick then starts a run here, as a sample of this slab's would)
+        s0 = 0 if sample_tick is None else min(0, (sample_tick - first_end) // self.tick_ns)
+        if k - s0 < self._max_empty_ticks or any(self._dense(first_end, k, x, s0) for x in times
+                                                 if x.shape[0]):  # the usual slab: every tick
             return first_end + self.tick_ns * np.arange(k + 1, dtype=np.int64)
         # index of the tick each sample falls in (its end at or after the sample)
-        starts = np.unique(np.concatenate([np.zeros(1, np.int64)] + [
+        starts = np.unique(np.concatenate([np.full(1, s0, np.int64)] + [
             np.clip(-((first_end - x) // self.tick_ns), 0, k) for x in times if x.shape[0]]))
         stops = np.minimum(starts + self._max_empty_ticks, np.append(starts[1:], k + 1))
-        lengths = stops - starts
+        lo = np.maximum(starts, 0)
+        lengths = np.maximum(stops - lo, 0)
         offsets = np.cumsum(lengths) - lengths
         keep = (np.arange(int(lengths.sum()), dtype=np.int64)
-                + np.repeat(starts - offsets, lengths))
+                + np.repeat(lo - offsets, lengths))
         return first_end + self.tick_ns * keep
 
-    def _dense(self, first_end: int, k: int, x: np.ndarray) -> bool:
+    def _dense(self, first_end: int, k: int, x: np.ndarray, s0: int = 0) -> bool:
         """Whether the sorted sample times ``x`` alone leave no run of ticks :meth:`_tick_ends`
-        would cut short (then no run is, whatever the other streams'): with the slab's
-        first tick and the tick after its last, every ``len(x) // 64``-th sample and the last
-        are at most ``_max_empty_ticks`` ticks apart (so are the samples between them). A
-        slab of hours (replay.spans) takes the usual path without a pass over its samples."""
+        would cut short (then no run is, whatever the other streams'): with the tick ``s0``
+        (of the newest earlier sample, <= 0) and the tick after the slab's last, every
+        ``len(x) // 64``-th sample and the last are at most ``_max_empty_ticks`` ticks apart
+        (so are the samples between them). A slab of hours (replay.spans) takes the usual
+        path without a pass over its samples."""
         idx = np.clip(-((first_end - np.concatenate((x[::max(1, x.shape[0] // 64)], x[-1:])))
                         // self.tick_ns), 0, k)
         most = self._max_empty_ticks
-        return bool(idx[0] <= most and k + 1 - idx[-1] <= most
+        return bool(idx[0] - s0 <= most and k + 1 - idx[-1] <= most
                     and (idx[1:] - idx[:-1]).max(initial=0) <= most)
 
     def _source_at(self, now: int) -> str:
@@ -935,10 +947,16 @@ class Pipeline:
             self.next_tick_ns = -(-first // self.tick_ns) * self.tick_ns
         ends: np.ndarray = np.zeros(0, np.int64)
         next_tick = self.next_tick_ns
+        times = [t, *(x.t for x in streams.values())]
         if tick_limit is not None and next_tick is not None and tick_limit >= next_tick:
             k = (tick_limit - next_tick) // self.tick_ns
-            ends = self._tick_ends(next_tick, k, [t, *(x.t for x in streams.values())])
+            ends = self._tick_ends(next_tick, k, times, self.sample_tick_ns)
             next_tick += (k + 1) * self.tick_ns
+        newest = max((int(x[-1]) for x in times if x.shape[0]), default=None)
+        if newest is not None:
+            end = -(-newest // self.tick_ns) * self.tick_ns
+            self.sample_tick_ns = (end if self.sample_tick_ns is None
+                                   else max(self.sample_tick_ns, end))
         cuts = np.empty(ends.shape[0] + 1, np.int64)
         cuts[:-1] = np.searchsorted(t, ends, side="right")
         cuts[-1] = t.shape[0]
@@ -1373,6 +1391,7 @@ class Pipeline:
             "processed_ns": self.processed_ns,
             "late_copies": self.late_copies.state(),
             "next_tick_ns": self.next_tick_ns,
+            "sample_tick_ns": self.sample_tick_ns,
             "tick_counts": {s: list(c) for s, c in self.tick_counts.items()},
             "open_tick": [a.tolist() for a in self.open_tick],
             "open_estimate": [a.tolist() for a in self.open_estimate],

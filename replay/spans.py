@@ -27,13 +27,15 @@ min`` of the gating streams' marks) is a function of what was pushed, so the run
 watermark is theirs. Nothing downstream depends on where the slabs were cut but one rule:
 the ticks of a gap without samples are evaluated only up to ``monitor.pipeline.
 _EMPTY_SPAN_S`` (or the damage-rate window) after its last sample (``Pipeline._tick_ends``:
-after a clock jump, memory and time depend on the data, not on the jump), counted from a
-slab's first tick when the gap began before it, so a longer gap cut by a slab boundary is
-walked further than whole. A boundary is therefore left out only where no watermark can
-fall into such a gap, nor start one (a stretch after a gap over ``_EMPTY_SPAN_S`` never
-joins: with every stream's last sample on a tick end the watermark is that sample, and the
-slab after it walks the gap from the next tick, one later than a run across it would;
-tests/test_spans.py): in replay every stream gates, so the watermark after the stretch
+after a clock jump, memory and time depend on the data, not on the jump). Until
+2026-11-26 that walk counted from a slab's first tick when the gap began before it, so a
+longer gap cut by a slab boundary was walked further than whole; it now counts from the
+newest sample before the gap (``Pipeline.sample_tick_ns``), and the rule below, written
+for the old walk, is kept as a second guard. A boundary is left out only where no
+watermark can fall into such a gap, nor start one (a stretch after a gap over
+``_EMPTY_SPAN_S`` never joins: with every stream's last sample on a tick end the watermark
+is that sample, and the old walk went from the tick after it, one later than a run across
+it; tests/test_spans.py): in replay every stream gates, so the watermark after the stretch
 before it lies within the horizon of the newest sample (``newest - horizon <= W <=
 newest``; a restored ordering's newest may be later: then none is left out), and
 :func:`spans` keeps the time since which the samples leave no gap longer than
@@ -90,9 +92,10 @@ def spans(blocks: Iterable[SampleBlock], join: bool = True, horizon_ns: int | No
     while the run's samples span at most :data:`LONGEST_RUN_NS`, if no watermark within
     ``horizon_ns`` (the ordering's horizon in replay, where every stream gates) before it
     can fall into a gap of the samples longer than :data:`_DENSE_GAP_NS` (module
-    docstring), it does not start after such a gap, and the run before has a sample later than ``after_ns`` (the newest time a
-    restored ordering has received, ReorderBuffer.newest_ns: the watermark may lie up to
-    it). No horizon given: stretches alone."""
+    docstring), it does not start after such a gap, and the run before has a sample later
+    than ``after_ns`` (the newest time a restored ordering has received,
+    ReorderBuffer.newest_ns: the watermark may lie up to it). No horizon given: stretches
+    alone."""
     if not join:
         for block in blocks:
             yield [block]

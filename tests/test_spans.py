@@ -219,12 +219,17 @@ def test_blocks_given_together_to_a_pipeline_with_block_hooks_are_refused(feed):
         pipeline.ingest(feed[0], feed[1])
 
 
-def test_no_run_joins_across_a_gap_longer_than_the_walk_of_empty_ticks():
+@pytest.mark.parametrize("horizon_s, resume_s", [(7200, 14500), (3600, 18000)])
+def test_the_ticks_of_a_long_gap_do_not_depend_on_where_the_slabs_are_cut(horizon_s, resume_s):
     """Every stream's last sample before a gap of over an hour on a tick end (3 h of all five
-    streams in 30-min stretches, the horizon 2 h): the watermark is that sample, so a slab
-    cut there walks the gap's empty ticks from the tick after it, a run across the gap from
-    its own tick: one tick fewer, and a re-sent alert moved (review of 2026-11-26). A run
-    never joins across such a gap: the bits of one slab per block."""
+    streams in 30-min stretches): with a 2-h horizon the watermark is that sample, so a slab
+    cut there walked the gap's empty ticks from the tick after it, a run across the gap from
+    its own tick (one tick fewer, a re-sent alert moved); with a 1-h horizon the first
+    block after the gap put the watermark inside it, and the slab after that walked another
+    hour of ticks (660 against 482; review of 2026-11-26). A run never joins across such a
+    gap, and a gap's empty ticks count from the newest sample before it, in whatever slab
+    (Pipeline.sample_tick_ns): the same bits block by block, stretch by stretch and in
+    runs."""
     rng = np.random.default_rng(1)
     level = {"tension_N": (2e5, 1e4), "heave_m": (0, 1), "surge_m": (0, 1), "sway_m": (0, 1),
              "accel_x_mps2": (0, .5), "accel_y_mps2": (0, .5), "accel_z_mps2": (9.81, .5),
@@ -237,15 +242,20 @@ def test_no_run_joins_across_a_gap_longer_than_the_walk_of_empty_ticks():
             t.shape[0]) for k in SENSOR_FIELDS[sensor]})
 
     spans_s = [(i * 1800, i * 1800 + (1800 if i == 5 else 1790)) for i in range(6)]
-    feed = [block(s, a, b) for a, b in [*spans_s, (14500, 14560)] for s in step]
+    feed = [block(s, a, b) for a, b in [*spans_s, (resume_s, resume_s + 60)] for s in step]
     config = default_config()
     config = dataclasses.replace(config, ordering=msgspec.structs.replace(
-        config.ordering, replay_horizon_s=7200.0))
+        config.ordering, replay_horizon_s=float(horizon_s)))
     runs = [[(b.t_first_ns - T0) // S for b in run if b.sensor == "tension"]
-            for run in spans(feed, True, 7200 * S)]
-    assert runs == [[0], [1800], [3600], [5400], [7200, 9000], [14500]]
+            for run in spans(feed, True, horizon_s * S)]
+    assert runs == {7200: [[0], [1800], [3600], [5400], [7200, 9000], [14500]],
+                    3600: [[0], [1800], [3600, 5400, 7200, 9000], [18000]]}[horizon_s]
     one_by_one = replay_pipeline(config)
     for b in feed:
         one_by_one.process(b)
     one_by_one.flush()
-    assert _bits(run_blocks(config, iter(feed))[0]) == _bits(one_by_one)
+    by_stretch = replay_pipeline(config)
+    for run in spans(feed):
+        by_stretch.advance(by_stretch.ingest(*run))
+    by_stretch.flush()
+    assert _bits(run_blocks(config, iter(feed))[0]) == _bits(one_by_one) == _bits(by_stretch)
