@@ -19,7 +19,20 @@ The machine is shared: the load average before each run is printed so a low figu
 judged. It also prints where the CPU goes: the CPU time of reading the archive alone (inflate,
 decode, reorder and coalesce, all threads) against the serial run's.
 
-Latest, 2026-11-26 07:18-07:31 UTC, the 2-core machine quiet (load average 0.8-1.2 before each
+Latest, 2026-11-26 09:12-09:52 UTC, the 2-core machine quiet (load average 0.6-1.1 before each
+run), ``--buoys 4 --days 15 --repeat 2``, this stop's cuts (runs of stretches up to 3 h where
+exact: 148 -> 39 slabs per 5 buoy-days; the reader's reused zstd buffer and pending table;
+the learner's segments windowed as kept; per-slab Python trimmed): at 09:12 (main e039c2a)
+serial 9.7 / 9.1 CPU-s = **56 CPU-s per buoy-year**, 2 workers 6.1 / 5.5 s wall (1.64 x,
+contention-free 1.72 x), reading alone 2.6 CPU-s (28 %); at 09:51-09:52 (main e9aed3c, the
+same code but for two review fixes; the machine in a slower phase: an in-process replay of
+buoy002's 5 days took 0.83-0.87 CPU-s there against 0.73-0.77 at 09:11, with either build)
+12.2 / 11.1 and 11.2 / 10.1 CPU-s = **67 and 61**, reading alone 3.6-3.9 CPU-s. In-process
+A/B against the previous main (buoy002, 5 days, best of 3, alternated): 0.733-0.770 against
+0.832-0.915 CPU-s (-12 to -16 %). Target under 60: met in the machine's fast phase, not in
+its slow one.
+
+Before, 2026-11-26 07:18-07:31 UTC, the 2-core machine quiet (load average 0.8-1.2 before each
 run; its speed drifts 10-20 % between identical runs), main 7373d50 (this stop's cuts: stretches
 joined into slabs of up to an hour, the decoder writing in place, the validation screen, the
 estimator's side-by-side ODE, the learner's compiled sea state and Dirlik sum, the batch's packed

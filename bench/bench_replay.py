@@ -17,7 +17,19 @@ Writes a synthetic log (20 Hz tension, 10 Hz IMU, 1 s blocks, the seed 004 buoy 
   ``rainflow.extract_cycles`` over the whole tension series (on ``--baseline-days``, since
   it holds everything in memory), in tension samples per second on one core.
 
-Latest, quiet: 2026-11-26 07:18-07:30 UTC, the 2-core development machine (load average
+Latest, quiet: 2026-11-26 09:21 UTC, the 2-core development machine (load average 1.0),
+main 828b5b6 (this stop's cuts: runs of stretches up to 3 h where exact, the reader's reused
+zstd buffer and pending table, the learner's segments windowed as kept; kernels warmed up
+and bytecode compiled first), one full run on the 30-day log: one core 4.59 CPU-s = 11.25 M
+tension samples/s, **19.4 x** the naive baseline of the same run (0.580 M/s; 20.2 x without
+alert rules; target 10 x); 2 cores **3.24 s wall = 15.99 M tension samples/s** (target 10
+M/s), 2.54 + 2.67 CPU-s; peak RSS one process 1 / 30 days 226 / 241 MB (+6.6 %; runs of 3 h
+hold ~20 MB more than runs of an hour), two processes 213 + 163 / 222 + 167 MB (+4.2 %,
++2.6 %). A run right after kernels changed, before ``buoymon warmup``, compiles inside the
+replay: 17.8 s on one core and +50 % peak RSS (the LLVM compiler's), as a user's first
+replay after an upgrade would without the install's warm-up.
+
+Before, quiet: 2026-11-26 07:18-07:30 UTC, the 2-core development machine (load average
 0.5-0.9 before each run), main 7373d50 (this stop's cuts: an hour of log per slab, the decoder
 writing in place, the validation screen, the estimator's side-by-side ODE, the learner's and
 the alert batch's; bytecode compiled first), three full runs on the 30-day log: one core
