@@ -29,8 +29,14 @@ same code but for two review fixes; the machine in a slower phase: an in-process
 buoy002's 5 days took 0.83-0.87 CPU-s there against 0.73-0.77 at 09:11, with either build)
 12.2 / 11.1 and 11.2 / 10.1 CPU-s = **67 and 61**, reading alone 3.6-3.9 CPU-s. In-process
 A/B against the previous main (buoy002, 5 days, best of 3, alternated): 0.733-0.770 against
-0.832-0.915 CPU-s (-12 to -16 %). Target under 60: met in the machine's fast phase, not in
-its slow one.
+0.832-0.915 CPU-s (-12 to -16 %). Then, quiet again (load 0.2-1.3), main 5443b81 alone at
+10:13 (serial 8.8 / 8.6 CPU-s = **52**), and alternated with the previous main ae11272 (its
+kernels warmed up the same way) at 10:15-10:17: ae11272 **64**, this build **56**, ae11272
+**73**, this build **51**; 2 workers 5.4-6.1 s wall (1.45-1.59 x: each worker's ~0.7 CPU-s
+of start-up is now an eighth of its 2 buoy-months). Target under 60: met in 4 of the 6 runs
+of this stop (median 56); the two above it (67, 61) came in a phase where the machine ran
+the same build 15-30 % slower, and alternated runs put this build 13-30 % below the
+previous one.
 
 Before, 2026-11-26 07:18-07:31 UTC, the 2-core machine quiet (load average 0.8-1.2 before each
 run; its speed drifts 10-20 % between identical runs), main 7373d50 (this stop's cuts: stretches
