@@ -149,34 +149,22 @@ class CatenaryQuasiStatic:
     def __call__(self, x_offset: NDArray[np.float64], z_heave: NDArray[np.float64]):
         xs = self.span + np.asarray(x_offset, dtype=float)
         zs = self.height + np.asarray(z_heave, dtype=float)
-        if xs.ndim == 1 and xs.shape == zs.shape:  # the estimator's: nothing to reshape
-            return self._lookup(xs, zs)
         if xs.shape != zs.shape:
             xs, zs = np.broadcast_arrays(xs, zs)
         shape = xs.shape
-        t, h, v, flags = self._lookup(xs.ravel(), zs.ravel())
-        return t.reshape(shape), h.reshape(shape), v.reshape(shape), flags.reshape(shape)
-
-    def _lookup(self, xs: NDArray[np.float64], zs: NDArray[np.float64]):
-        """(T, H, V, flags) at the 1-D fairlead positions ``xs, zs``: the table's forces
-        (``TensionTable.forces``) at the clamped points, whose range check they pass by
-        construction unless a point is NaN (then ``forces`` raises its error). Once a slab
-        the estimator asks for a handful of samples: its few numpy calls are the cost."""
+        xs, zs = xs.ravel(), zs.ravel()  # (a 1-D contiguous array itself, as the estimator's)
         xc, zc, flags = np.empty(xs.shape), np.empty(xs.shape), np.empty(xs.shape, np.uint8)
-        if _clamp_into(xs, zs, *self._box, xc, zc, flags):
-            self.table.forces(xc, zc)  # raises: "NaN counts as outside"
-        out = self.table._eval(xc, zc, False)
-        h, v = out[:, 0, 0], out[:, 1, 0]
-        _force_flags(h, v, self._line_weight, self.anchor_uplift_limit_N, flags)
-        return np.hypot(h, v), h, v, flags
+        _clamp_into(xs, zs, *self._box, xc, zc, flags)
+        f = self.table.forces(xc, zc)
+        _force_flags(f.h, f.v, self._line_weight, self.anchor_uplift_limit_N, flags)
+        return (f.t.reshape(shape), f.h.reshape(shape), f.v.reshape(shape),
+                flags.reshape(shape))
 
 
 @kernel()
 def _clamp_into(xs, zs, x0, x1, z0, z1, xc, zc, flags):
     """xc, zc: the points clamped into the box [x0, x1] x [z0, z1] as ``np.clip`` does (its
-    comparisons: NaN stays NaN); flags: OUT_OF_RANGE where a point moved, else 0. Returns
-    whether a point is NaN."""
-    nan = False
+    comparisons: NaN stays NaN); flags: OUT_OF_RANGE where a point moved, else 0."""
     for i in range(xs.size):
         x, z = xs[i], zs[i]
         cx = x if x != x or x > x0 else x0
@@ -185,8 +173,6 @@ def _clamp_into(xs, zs, x0, x1, z0, z1, xc, zc, flags):
         cz = cz if cz != cz or cz < z1 else z1
         xc[i], zc[i] = cx, cz
         flags[i] = 8 if cx != x or cz != z else 0  # Flag.OUT_OF_RANGE
-        nan = nan or cx != cx or cz != cz
-    return nan
 
 
 @kernel()

@@ -250,9 +250,6 @@ class LoadSelector:
         # load samples used above the breaking load, by source: the line would have parted
         # (measured) or the estimate left the range where it means anything (estimated)
         self.above_break = {"measured": 0, "estimated": 0}
-        # the last answer of _alive: (measured times, last_measured_ns then, answer); a slab
-        # asks twice (needed, then select), for the same array
-        self._alive_for: tuple[np.ndarray, int | None, bool] | None = None
         if state is not None:
             if state["last_measured_ns"] is not None:
                 self.last_measured_ns = int(state["last_measured_ns"])
@@ -276,7 +273,9 @@ class LoadSelector:
             return 0
         if self.mode == "measured" or e_t.shape[0] == 0:
             return e_t.shape[0]
-        if self._alive(m_t):
+        prev = self.last_measured_ns
+        if (m_t.shape[0] and prev is not None and int(m_t[0]) - prev <= self.stale_ns
+                and _longest_step(m_t) <= self.stale_ns):
             # the usual case, the cell alive all along: only estimates more than stale_after_s
             # past its newest sample are needed (the general rule below gives the same)
             return int(np.searchsorted(e_t, m_t[-1] + np.int64(self.stale_ns), side="right"))
@@ -288,17 +287,6 @@ class LoadSelector:
             latest = np.where(never, np.int64(self.last_measured_ns), latest)
             never[:] = False
         return never | (e_t - latest > self.stale_ns)
-
-    def _alive(self, m_t: np.ndarray) -> bool:
-        """Whether the load cell was alive all along up to the measured times ``m_t``: no
-        gap longer than stale_after_s since the last measured sample, nor within ``m_t``."""
-        prev, memo = self.last_measured_ns, self._alive_for
-        if memo is not None and memo[0] is m_t and memo[1] == prev:
-            return memo[2]
-        alive = bool(m_t.shape[0] and prev is not None and int(m_t[0]) - prev <= self.stale_ns
-                     and _longest_step(m_t) <= self.stale_ns)
-        self._alive_for = (m_t, prev, alive)
-        return alive
 
     def select(self, m_t: np.ndarray, m_v: np.ndarray, e_t: np.ndarray, e_v: np.ndarray,
                e_clamped: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -126,61 +126,48 @@ class _TickLoad:
     ``np.add.reduceat`` segment: the first sample plus numpy's pairwise sum of the rest, the
     same bits wherever the segment starts), whichever slab it came in."""
 
-    def __init__(self, v: np.ndarray, src: np.ndarray,
-                 stresses: Mapping[str, np.ndarray] | Callable[[], Mapping[str, np.ndarray]],
+    def __init__(self, v: np.ndarray, src: np.ndarray, stresses: Mapping[str, np.ndarray],
                  starts: np.ndarray, stops: np.ndarray) -> None:
-        """``stresses``: the components' stresses under ``v``, or what makes them when the
-        peaks are first read."""
-        self.n = n = stops - starts  # samples, and of them measured (n_meas)
-        self._every = every = bool(n.all())  # (the usual slab: no tick without samples)
-        self._full = full = None if every else np.flatnonzero(n)
+        n = stops - starts
+        every = bool(n.all())  # (the usual slab: no tick without samples)
+        full = None if every else np.flatnonzero(n)
+
+        def per_tick(values: np.ndarray, empty: float = math.nan) -> np.ndarray:
+            """The non-empty ticks' values over all ticks."""
+            if every:
+                return values
+            out = np.full(n.shape[0], empty, dtype=values.dtype)
+            out[full] = values
+            return out
+
         # the non-empty ticks are back to back: reduce over their span in one call each
         at, count = (starts, n) if full is None else (starts[full], n[full])
         span = slice(0, int(stops[-1] if full is None else stops[full[-1]]) if at.shape[0] else 0)
-        self._v, self._stresses, self._span, self._at = v, stresses, span, at
-        self.vmax = self._per_tick(np.maximum.reduceat(v[span], at))
+        self.vmax = per_tick(np.maximum.reduceat(v[span], at))
+        self.vmin = per_tick(np.minimum.reduceat(v[span], at))
+        peaks: dict[int, np.ndarray] = {}  # per stress array (components may share one)
+        self.smax = {}
+        for name, s in stresses.items():
+            if id(s) not in peaks:
+                peaks[id(s)] = per_tick(np.maximum.reduceat(s[span], at))
+            self.smax[name] = peaks[id(s)]
         measured = src[span] == MEASURED
         mean = np.add.reduceat(v[span], at) / count
+        self.n = n  # samples, and of them measured (n_meas)
         if measured.all():  # one source, the load cell (the usual case)
-            self.n_meas, self.meas = self._per_tick(count, 0), self._per_tick(mean)
+            self.n_meas, self.meas = per_tick(count, 0), per_tick(mean)
             self.est = np.full(n.shape[0], math.nan)
             return
         n_meas = np.add.reduceat(measured, at, dtype=np.int64)
-        self.n_meas = self._per_tick(n_meas, 0)
+        self.n_meas = per_tick(n_meas, 0)
         # a tick of one source (the usual case): the mean of its samples is that source's
-        self.meas = self._per_tick(np.where(n_meas == count, mean, math.nan))
-        self.est = self._per_tick(np.where(n_meas == 0, mean, math.nan))
+        self.meas = per_tick(np.where(n_meas == count, mean, math.nan))
+        self.est = per_tick(np.where(n_meas == 0, mean, math.nan))
         mixed = np.flatnonzero((n_meas != count) & (n_meas != 0))
         for i in (mixed if full is None else full[mixed]).tolist():
             a, b = int(starts[i]), int(stops[i])
             self.meas[i] = _seq_mean(v[a:b][measured[a:b]])
             self.est[i] = _seq_mean(v[a:b][~measured[a:b]])
-
-    def _per_tick(self, values: np.ndarray, empty: float = math.nan) -> np.ndarray:
-        """The non-empty ticks' values over all ticks."""
-        if self._every:
-            return values
-        out = np.full(self.n.shape[0], empty, dtype=values.dtype)
-        out[self._full] = values
-        return out
-
-    # the minimum and the peak stresses are read only where a tick is evaluated the ordinary
-    # way or a rule asks for them (the batch path reads vmax, the means and the counts)
-    @functools.cached_property
-    def vmin(self) -> np.ndarray:
-        return self._per_tick(np.minimum.reduceat(self._v[self._span], self._at))
-
-    @functools.cached_property
-    def smax(self) -> dict[str, np.ndarray]:
-        """Each component's peak stress per tick (components may share one stress array)."""
-        peaks: dict[int, np.ndarray] = {}
-        out = {}
-        stresses = self._stresses() if callable(self._stresses) else self._stresses
-        for name, s in stresses.items():
-            if id(s) not in peaks:
-                peaks[id(s)] = self._per_tick(np.maximum.reduceat(s[self._span], self._at))
-            out[name] = peaks[id(s)]
-        return out
 
     @functools.cached_property
     def lists(self) -> _TickLists:
@@ -1136,8 +1123,7 @@ class Pipeline:
         tt, tv, ts = t[start:stop], v[start:stop], src[start:stop]
         if k == 0 and self.open_tick[0].shape[0]:  # the tick began in an earlier slab
             tt, tv, ts = (np.concatenate([o, x]) for o, x in zip(self.open_tick, (tt, tv, ts)))
-            tick = _TickLoad(tv, ts, lambda: self.stresses(tv), np.zeros(1, np.int64),
-                             np.full(1, tv.shape[0]))
+            tick = _TickLoad(tv, ts, self.stresses(tv), np.zeros(1, np.int64), np.full(1, tv.shape[0]))
             return tt, tv, ts, tick, 0
         return tt, tv, ts, ticks.load, k
 
